@@ -1,0 +1,191 @@
+"""Contact-force controllers for the E-Braille reader simulator.
+
+Every controller implements :class:`Controller` (see
+:mod:`controllers.base`). Controllers are built by name or from a config
+file with :func:`make`; new families are added with :func:`register`.
+
+Config files (``.toml`` or ``.json``) hold the registered controller name
+and its keyword arguments::
+
+    {"controller": "pid", "gains": {"kp_v_per_n": 1.5, "ki_v_per_ns": 30.0}}
+
+or in TOML::
+
+    controller = "pid"
+    [gains]
+    kp_v_per_n = 1.5
+    ki_v_per_ns = 30.0
+
+For ``"pid"`` the gains are :class:`PIDConfig` fields; omitted fields keep
+their :data:`controllers.pid.DEFAULT_PID` values.
+
+Examples
+--------
+>>> import controllers
+>>> controllers.available()
+['pid']
+>>> ctrl = controllers.make("pid", kp_v_per_n=1.0)
+>>> ctrl.config.kp_v_per_n
+1.0
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable
+from typing import Any
+
+from .base import Controller
+from .pid import DEFAULT_PID, PID, PIDConfig, pid_from_dict
+
+__all__ = ["Controller", "PID", "PIDConfig", "available", "make", "register"]
+
+_CONFIG_SUFFIXES = (".toml", ".json")
+_FILE_KEYS = ("controller", "gains")
+
+_REGISTRY: dict[str, Callable[..., Controller]] = {}
+
+
+def register(name: str, factory: Callable[..., Controller], *, replace: bool = False) -> None:
+    """Register a controller factory under ``name``.
+
+    Parameters
+    ----------
+    name : str
+        Registry name. Non-empty, without ``/``, ``\\`` or a ``.toml`` /
+        ``.json`` suffix (those denote config files in :func:`make`).
+    factory : callable
+        Called as ``factory(**kwargs)`` with the file's ``gains`` and the
+        keyword overrides of :func:`make`; returns a :class:`Controller`.
+    replace : bool, optional
+        Allow replacing an existing registration. Default False.
+
+    Raises
+    ------
+    ValueError
+        If the name is invalid or already registered and ``replace`` is
+        False.
+    TypeError
+        If ``factory`` is not callable.
+
+    Examples
+    --------
+    >>> def slow_pid(**gains):
+    ...     return make("pid", **{"kp_v_per_n": 0.5, **gains})
+    >>> register("pid_slow", slow_pid)  # doctest: +SKIP
+    >>> make("pid_slow").config.kp_v_per_n  # doctest: +SKIP
+    0.5
+    """
+    if not isinstance(name, str) or not name or "/" in name or "\\" in name:
+        raise ValueError(f"controller name must be a non-empty string without path separators, got {name!r}")
+    if name.lower().endswith(_CONFIG_SUFFIXES):
+        raise ValueError(f"controller name must not end in .toml or .json, got {name!r}")
+    if not callable(factory):
+        raise TypeError(f"factory for {name!r} must be callable, got {type(factory).__name__}")
+    if name in _REGISTRY and not replace:
+        raise ValueError(f"controller {name!r} is already registered; pass replace=True to override")
+    _REGISTRY[name] = factory
+
+
+def available() -> list[str]:
+    """Return the registered controller names, sorted.
+
+    Returns
+    -------
+    list of str
+    """
+    return sorted(_REGISTRY)
+
+
+def _load_config_file(path: str) -> dict[str, Any]:
+    """Read a ``.toml`` or ``.json`` controller config file."""
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"controller config file not found: {path}")
+    if path.lower().endswith(".toml"):
+        try:
+            import tomllib
+        except ModuleNotFoundError:  # Python < 3.11
+            import tomli as tomllib
+        with open(path, "rb") as fh:
+            try:
+                data = tomllib.load(fh)
+            except tomllib.TOMLDecodeError as exc:
+                raise ValueError(f"invalid TOML in {path}: {exc}") from None
+    else:
+        with open(path, encoding="utf-8") as fh:
+            try:
+                data = json.load(fh)
+            except json.JSONDecodeError as exc:
+                raise ValueError(f"invalid JSON in {path}: {exc}") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"controller config {path} must be a table/object, got {type(data).__name__}")
+    for key in data:
+        if key not in _FILE_KEYS:
+            raise ValueError(f"unknown key {key!r} in {path}; allowed keys: {', '.join(_FILE_KEYS)}")
+    if "controller" not in data:
+        raise ValueError(f"controller config {path} has no 'controller' key")
+    gains = data.get("gains", {})
+    if not isinstance(gains, dict):
+        raise ValueError(f"'gains' in {path} must be a table/object, got {type(gains).__name__}")
+    return data
+
+
+def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
+    """Build a controller from a registered name or a config file.
+
+    Parameters
+    ----------
+    name_or_path : str or path-like
+        A name from :func:`available`, or a path to a ``.toml`` / ``.json``
+        file holding ``{"controller": name, "gains": {...}}``.
+    **overrides
+        Keyword arguments passed to the factory; they take precedence over
+        the file's ``gains``. For ``"pid"`` these are :class:`PIDConfig`
+        fields.
+
+    Returns
+    -------
+    Controller
+
+    Raises
+    ------
+    FileNotFoundError
+        If a config path does not exist.
+    ValueError
+        If the name is not registered (the message lists the available
+        names), the file is malformed, or a gain is unknown or invalid.
+
+    Examples
+    --------
+    >>> make("pid").config == DEFAULT_PID
+    True
+    >>> make("lqr")
+    Traceback (most recent call last):
+    ...
+    ValueError: unknown controller 'lqr'; available: pid (or give a path to a .toml/.json config file)
+    """
+    spec = os.fspath(name_or_path)
+    if spec in _REGISTRY:
+        return _REGISTRY[spec](**overrides)
+    if spec.lower().endswith(_CONFIG_SUFFIXES):
+        data = _load_config_file(spec)
+        name = data["controller"]
+        if name not in _REGISTRY:
+            raise ValueError(
+                f"unknown controller {name!r} in {spec}; available: {', '.join(available())}"
+            )
+        kwargs = {**data.get("gains", {}), **overrides}
+        return _REGISTRY[name](**kwargs)
+    raise ValueError(
+        f"unknown controller {spec!r}; available: {', '.join(available())}"
+        " (or give a path to a .toml/.json config file)"
+    )
+
+
+def _make_pid(**gains: Any) -> PID:
+    """Factory for ``"pid"``: :data:`DEFAULT_PID` with ``gains`` applied."""
+    return pid_from_dict(gains, base=DEFAULT_PID)
+
+
+register("pid", _make_pid)

@@ -1,0 +1,12 @@
+"""ebraille-sim: closed-loop contact-force simulator for a finger-wearable E-Braille reader.
+
+Importing the package registers the Gymnasium environment id ``EBraille/ContactForce-v0``
+(when the environment module is present) and has no other side effect.
+"""
+from __future__ import annotations
+
+__version__ = "0.1.0"
+
+from .runner import RunResult, run_scenario  # noqa: E402
+
+__all__ = ["run_scenario", "RunResult", "__version__"]

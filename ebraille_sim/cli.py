@@ -1,0 +1,67 @@
+"""The ``ebraille-sim`` command line (also ``python -m ebraille_sim``).
+
+Sub-commands live in :mod:`ebraille_sim.commands`.  Every input problem (missing file,
+malformed TOML, unknown key, bad number) ends with one ``error: ...`` line on stderr and
+exit status 2, never a traceback; nothing is written half-way.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+
+from . import __version__
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        self.exit(2, f"error: {message}\n")
+
+
+def _commands():
+    from . import commands
+    mods = []
+    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
+        mod = importlib.import_module(f"{commands.__name__}.{info.name}")
+        if hasattr(mod, "NAME") and hasattr(mod, "main"):
+            mods.append(mod)
+    order = {"run": 0, "list": 1}
+    return sorted(mods, key=lambda m: (order.get(m.NAME, 9), m.NAME))
+
+
+def build_parser():
+    parser = _Parser(prog="ebraille-sim",
+                     description="Closed-loop contact-force simulator for a finger-wearable E-Braille reader.")
+    parser.add_argument("--version", action="version", version=f"ebraille-sim {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    table = {}
+    for mod in _commands():
+        p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP)
+        mod.add_arguments(p)
+        table[mod.NAME] = mod
+    return parser, table
+
+
+def main(argv=None) -> int:
+    from .commands import UserError
+    parser, table = build_parser()
+    args = parser.parse_args(argv)
+    if not args.command:
+        parser.print_help()
+        return 2
+    try:
+        return int(table[args.command].main(args) or 0)
+    except (UserError, ValueError, FileNotFoundError, KeyError, FloatingPointError) as exc:
+        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        if isinstance(exc, KeyError):
+            msg = msg.strip("'\"")
+        print(f"error: {msg}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,38 @@
+"""``ebraille-sim list``: the shipped scenarios, controllers, presets and estimator models."""
+from __future__ import annotations
+
+NAME = "list"
+HELP = "list scenarios, controllers, device presets and estimator models"
+
+
+def add_arguments(p):
+    pass
+
+
+def main(args) -> int:
+    import controllers
+
+    from .. import params
+    from ..paper_models import KINDS, ORDERS
+    from ..scenario import list_scenarios, load_scenario
+
+    print("scenarios:")
+    for name in list_scenarios():
+        try:
+            desc = load_scenario(name).description
+        except ValueError as exc:
+            desc = f"(invalid: {exc})"
+        print(f"  {name:<24} {desc}")
+    print("controllers:")
+    for name in controllers.available():
+        print(f"  {name}")
+    print("  (or a gains file: .toml/.json with controller = NAME and a [gains] table)")
+    print("device presets:")
+    print("  motor:      " + ", ".join(params.MOTORS))
+    print("  drivetrain: " + ", ".join(params.DRIVETRAINS))
+    print("  finger:     " + ", ".join(params.FINGERS))
+    print("  fsr:        " + ", ".join(params.FSRS))
+    print("estimator models:")
+    print("  " + ", ".join(f"paper:{k}:{o}" for k in KINDS for o in ORDERS))
+    print("  (or the path of a model saved as JSON)")
+    return 0

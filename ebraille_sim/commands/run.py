@@ -1,0 +1,40 @@
+"""``ebraille-sim run SCENARIO``: simulate a reading scenario in closed loop and report."""
+from __future__ import annotations
+
+NAME = "run"
+HELP = "simulate a scenario in closed loop; print the metrics, write metrics.json, trace.csv, force.png"
+
+
+def add_arguments(p):
+    p.add_argument("scenario", help="scenario file or the name of a shipped scenario (see 'list')")
+    p.add_argument("--controller", default=None,
+                   help="controller name (see 'list') or a gains file (.toml/.json); default: the scenario's")
+    p.add_argument("--seed", type=int, default=None, help="master seed (default: the scenario's)")
+    p.add_argument("--duration", type=float, default=None, metavar="S", help="override the duration, s")
+    p.add_argument("--out", default=None, metavar="DIR", help="output folder (default: runs/SCENARIO)")
+    p.add_argument("--backend", default="lumped", help="plant model (default: lumped)")
+    p.add_argument("--no-plot", action="store_true", help="skip force.png")
+    p.add_argument("--json", action="store_true", help="print the metrics as JSON instead of a table")
+
+
+def main(args) -> int:
+    import json
+    import pathlib
+
+    from ..report import metrics_document, summary_table, write_outputs
+    from ..runner import run_scenario
+    from ..scenario import load_scenario
+
+    spec = load_scenario(args.scenario)
+    if args.seed is not None and args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    result = run_scenario(spec, controller=args.controller, seed=args.seed, duration_s=args.duration,
+                          backend=args.backend)
+    out = pathlib.Path(args.out) if args.out else pathlib.Path("runs") / spec.name
+    write_outputs(result, out, plot=not args.no_plot)
+    if args.json:
+        print(json.dumps(metrics_document(result), indent=2))
+    else:
+        print(summary_table(result))
+        print(f"\nwrote {out / 'metrics.json'}, {out / 'trace.csv'}" + ("" if args.no_plot else f", {out / 'force.png'}"))
+    return 0
