@@ -74,7 +74,7 @@ _INX0 = P["est_in_x0"]; _INY0 = P["est_in_y0"]; _OUTX0 = P["est_out_x0"]; _OUTY0
 # input slots
 _UCMD = U["command_v"]; _UXF = U["finger_pos_m"]; _UG = U["gravity_along_m_per_s2"]
 _UTEMP = U["fsr_temp_offset_k"]; _USUP = U["driver_supply_v"]; _UFLT = U["fsr_fault"]
-_UFV = U["fsr_fault_value"]
+_UFV = U["fsr_fault_value"]; _UJAM = U["motor_jammed"]
 
 assert MAX_TF_LEN >= 2 and MAX_BREAKPOINTS >= 2
 
@@ -196,7 +196,10 @@ def mechanics_substep(s, p, u):
     load = p[_MU] * abs(f_mesh)
     fs_p = p[_PFS] + load
     fk_p = stribeck(abs(vp), p[_PFC] + load, fs_p, p[_VS])
-    vp_new = friction_velocity_update(vp, f_motor - f_mesh - p[_PFV] * vp, p[_MP], h, fk_p, p[_PFS] + load)
+    if u[_UJAM] > 0.0:
+        vp_new = 0.0
+    else:
+        vp_new = friction_velocity_update(vp, f_motor - f_mesh - p[_PFV] * vp, p[_MP], h, fk_p, fs_p)
     # board: mesh, contact, gravity, guide friction
     f_b = f_mesh - s[_FC] + p[_MB] * u[_UG] - p[_GFV] * vb
     fk_b = stribeck(abs(vb), p[_GFC], p[_GFS], p[_VS])

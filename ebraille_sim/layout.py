@@ -59,11 +59,11 @@ P = _index(PARAM_NAMES)
 N_PARAM = len(PARAM_NAMES)
 
 INPUT_NAMES = ["command_v", "finger_pos_m", "gravity_along_m_per_s2", "fsr_temp_offset_k",
-               "driver_supply_v", "fsr_fault", "fsr_fault_value"]
+               "driver_supply_v", "fsr_fault", "fsr_fault_value", "motor_jammed"]
 U = _index(INPUT_NAMES)
 N_INPUT = len(INPUT_NAMES)
 
 FAULT_NONE, FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE = 0, 1, 2, 3, 4
 """FSR fault codes for the ``fsr_fault`` input: open circuit (divider reads 0 V), short
 (reads the supply), stuck (the ADC repeats its last code), forced value (reads
-``fsr_fault_value`` volts)."""
+``fsr_fault_value`` volts).  ``motor_jammed`` > 0 locks the pinion (a stalled gearmotor)."""

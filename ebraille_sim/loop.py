@@ -34,7 +34,8 @@ from .layout import (MAX_BREAKPOINTS, MAX_TF_LEN, N_INPUT, N_PARAM, N_PLAYS, N_S
 from .motor import current_decay
 from .params import DeviceParams
 
-__all__ = ["Plant", "loop_step", "pack_params", "initial_state", "check_step", "load_estimator"]
+__all__ = ["Plant", "loop_step", "make_plant", "PLANT_BACKENDS", "pack_params", "initial_state",
+           "check_step", "load_estimator"]
 
 
 def load_estimator(spec: str, base_dir=None):
@@ -278,6 +279,28 @@ class Plant:
     def n(self) -> int:
         return self.state.shape[0]
 
+    def advance(self, command_v) -> None:
+        """Advance every device by one control period (see :func:`loop_step`)."""
+        inp = self.inputs
+        if self.state.shape[0] == 1:
+            c = float(command_v) if np.ndim(command_v) == 0 else float(command_v[0])
+            if not math.isfinite(c):
+                raise ValueError(f"command_v must be finite, got {c}")
+            inp[0, 0] = c
+            kernel.advance(self.state[0], self.params[0], inp[0], self.substeps)
+        else:
+            cmd = np.broadcast_to(np.asarray(command_v, dtype=float), (self.n,))
+            if not np.all(np.isfinite(cmd)):
+                raise ValueError("command_v must be finite for every device")
+            inp[:, U["command_v"]] = cmd
+            kernel.advance_batch(self.state, self.params, inp, self.substeps)
+
+    def set_input(self, name: str, value) -> None:
+        """Set a per-period input (see :data:`ebraille_sim.layout.INPUT_NAMES`) for all devices."""
+        if name not in U:
+            raise KeyError(f"unknown plant input {name!r}; allowed: {', '.join(U)}")
+        self.inputs[:, U[name]] = value
+
     def set_finger(self, finger_pos_m) -> None:
         """Pulp surface position(s) relative to the device frame, m (board travel axis)."""
         self.inputs[:, U["finger_pos_m"]] = finger_pos_m
@@ -316,26 +339,25 @@ class Plant:
         return self._col("time_s")
 
 
-def loop_step(plant: Plant, command_v) -> None:
+def loop_step(plant, command_v) -> None:
     """Advance every device of ``plant`` by one control period with ``command_v`` held.
 
     Parameters
     ----------
-    plant : Plant
+    plant : Plant or another backend with the same interface
         Modified in place.
     command_v : float or ndarray, shape (n,)
         Motor command, V (clipped to the driver supply inside the kernel).  Must be finite.
     """
-    inp = plant.inputs
-    if plant.state.shape[0] == 1:
-        c = float(command_v) if np.ndim(command_v) == 0 else float(command_v[0])
-        if not math.isfinite(c):
-            raise ValueError(f"command_v must be finite, got {c}")
-        inp[0, 0] = c
-        kernel.advance(plant.state[0], plant.params[0], inp[0], plant.substeps)
-    else:
-        cmd = np.broadcast_to(np.asarray(command_v, dtype=float), (plant.n,))
-        if not np.all(np.isfinite(cmd)):
-            raise ValueError("command_v must be finite for every device")
-        inp[:, U["command_v"]] = cmd
-        kernel.advance_batch(plant.state, plant.params, inp, plant.substeps)
+    plant.advance(command_v)
+
+
+PLANT_BACKENDS: dict = {"lumped": Plant.from_devices}
+"""Plant constructors by backend name: ``f(devices, seeds, board_pos_m=None, models=None)``."""
+
+
+def make_plant(devices, seeds, backend: str = "lumped", **kwargs):
+    """Build a plant of the named backend (``"lumped"``, or one registered in PLANT_BACKENDS)."""
+    if backend not in PLANT_BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; available: {', '.join(sorted(PLANT_BACKENDS))}")
+    return PLANT_BACKENDS[backend](devices, seeds, **kwargs)

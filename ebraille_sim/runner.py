@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .layout import S
-from .loop import Plant, loop_step
+from .layout import S, U
+from .loop import make_plant
 from .metrics import compute_metrics
 from .noise import seed_from
 from .scenario import ScenarioError, ScenarioSpec, load_scenario
@@ -120,6 +120,44 @@ def make_controller(spec: ScenarioSpec, controller=None):
     return controller
 
 
+def input_profiles(spec: ScenarioSpec, t_s: np.ndarray, rng: np.random.Generator, plant) -> dict:
+    """Per-period plant inputs from the scenario's delegate sections, as arrays over ``t_s``.
+
+    Each section's module returns ``{input_name: ("set" | "add", array)}``; "add" profiles
+    are added to the plant's constant input (e.g. finger motion around the gap).  Only
+    inputs that vary are returned.
+    """
+    import importlib
+
+    from .scenario import DELEGATES
+    base = {name: np.full(len(t_s), plant.inputs[0, j]) for name, j in U.items() if name != "command_v"}
+    touched = set()
+    for key, section in spec.sections.items():
+        mod = importlib.import_module(DELEGATES[key])
+        build = getattr(mod, "build_inputs", None)
+        if build is None:
+            continue
+        for name, (mode, arr) in build(section, t_s, rng, spec.device).items():
+            if name not in base:
+                raise ScenarioError(f"{spec.source}: [{key}] drives unknown input {name!r}")
+            base[name] = base[name] + arr if mode == "add" else np.broadcast_to(arr, t_s.shape).astype(float)
+            touched.add(name)
+    return {name: base[name] for name in sorted(touched)}
+
+
+def wrap_controller(spec: ScenarioSpec, ctrl, dt_s: float):
+    """Apply the scenario's controller wrappers (e.g. a safety supervisor)."""
+    import importlib
+
+    from .scenario import DELEGATES
+    for key, section in spec.sections.items():
+        mod = importlib.import_module(DELEGATES[key])
+        wrap = getattr(mod, "wrap_controller", None)
+        if wrap is not None:
+            ctrl = wrap(section, ctrl, dt_s)
+    return ctrl
+
+
 def run_scenario(scenario, controller=None, seed: int | None = None, duration_s: float | None = None,
                  backend: str = "lumped") -> RunResult:
     """Simulate a scenario in closed loop.
@@ -135,8 +173,8 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
         Overrides the scenario's master seed.  The same seed gives the same trace, exactly.
     duration_s : float, optional
         Overrides the scenario's duration.
-    backend : {"lumped"}
-        Plant model.
+    backend : str
+        Plant model: ``"lumped"`` or another name in :data:`ebraille_sim.loop.PLANT_BACKENDS`.
 
     Returns
     -------
@@ -148,12 +186,10 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
             raise ScenarioError(f"duration_s must be a positive finite number, got {duration_s}")
         import dataclasses
         spec = dataclasses.replace(spec, duration_s=float(duration_s))
-    if backend != "lumped":
-        raise ScenarioError(f"unknown backend {backend!r}; available: lumped")
     seed = spec.seed if seed is None else int(seed)
     if seed < 0:
         raise ScenarioError(f"seed must be >= 0, got {seed}")
-    ss_sensor, ss_reading = np.random.SeedSequence(seed).spawn(2)
+    ss_sensor, ss_reading, ss_inputs = np.random.SeedSequence(seed).spawn(3)
     schedule = build_schedule_for(spec, np.random.default_rng(ss_reading))
     ctrl = make_controller(spec, controller)
     dev = spec.device
@@ -165,10 +201,12 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     t = (np.arange(n) + 1) * dt
     sp = setpoint_profile(spec, t - dt)
     try:
-        plant = Plant.from_devices([dev], seeds=[seed_from(ss_sensor)])
+        plant = make_plant([dev], seeds=[seed_from(ss_sensor)], backend=backend)
     except (ValueError, FileNotFoundError) as exc:
         raise ScenarioError(f"{spec.source}: {exc}") from None
     plant.set_finger(spec.finger.gap_m)
+    profiles = input_profiles(spec, t - dt, np.random.default_rng(ss_inputs), plant)
+    ctrl = wrap_controller(spec, ctrl, dt)
     tr = {c: np.zeros(n) for c in TRACE_COLUMNS if c != "character"}
     st = plant.state[0]
     i_fc, i_fe, i_v, i_i, i_x, i_e = (S["contact_force_n"], S["force_est_n"], S["fsr_voltage_v"],
@@ -180,10 +218,15 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     fe = float(st[i_fe])
     i_a = 0.0
     update = ctrl.update
+    advance = plant.advance
+    inp = plant.inputs[0]
+    varying = [(U[name], arr) for name, arr in profiles.items()]
     wall0 = time.perf_counter()
     for k in range(n):
+        for j, arr in varying:
+            inp[j] = arr[k]
         c = update(fe, sp[k], dt, i_a)
-        loop_step(plant, c)
+        advance(c)
         fe = float(st[i_fe])
         i_a = float(st[i_i])
         cmd_v[k] = c

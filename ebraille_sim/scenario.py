@@ -59,6 +59,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "duration_s": _num(0, 3600, lo_open=True),
         "reading": "table", "setpoint": "table", "device": "table", "rates": "table",
         "estimator": "table", "finger": "table", "controller": "table", "criteria": "table",
+        **{k: "delegate" for k in ("disturbances", "faults", "supervisor")},
     },
     "reading": {
         "passage": _STR, "text": _STR, "file": _STR,
@@ -98,6 +99,18 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "onset_overshoot_max": _num(0, 10), "in_band_min": _num(0, 1), "peak_force_max_n": _num(0, 100),
     },
 }
+
+DELEGATES: dict[str, str] = {
+    "disturbances": "ebraille_sim.disturbances",
+    "faults": "ebraille_sim.faults",
+    "supervisor": "controllers.supervisor",
+}
+"""Top-level scenario sections validated and applied by their own module.
+
+Each module provides ``validate_section(source, value) -> object`` (raising
+:class:`ScenarioError` with a one-line message) and is used by the runner through
+``build_inputs(section, t_s, rng, device) -> dict`` (per-period plant inputs) and/or
+``wrap_controller(section, controller, dt_s) -> Controller``."""
 
 _OVERRIDE_TARGET = {
     "motor_overrides": _params.MotorParams, "drivetrain_overrides": _params.DriveTrainParams,
@@ -152,6 +165,7 @@ class ScenarioSpec:
     finger: FingerSpec
     controller: ControllerSpec
     criteria: dict
+    sections: dict = field(default_factory=dict)
     source: str = ""
     base_dir: str = "."
 
@@ -219,6 +233,13 @@ def _check_table(src, name, data):
             out[key] = _check_table(src, key, value)
         elif rule == "overrides":
             out[key] = _check_overrides(src, f"{name}.{key}", value, _OVERRIDE_TARGET[key])
+        elif rule == "delegate":
+            import importlib
+            try:
+                mod = importlib.import_module(DELEGATES[key])
+            except ModuleNotFoundError:
+                raise ScenarioError(f"{src}: section [{key}] is not available in this installation") from None
+            out[key] = mod.validate_section(src, value)
         elif rule == "free":
             if not isinstance(value, dict):
                 raise ScenarioError(f"{src}: [{name}.{key}] must be a table")
@@ -290,7 +311,8 @@ def parse_scenario(data: dict, source: str = "<scenario>", base_dir: str = ".") 
         duration_s=top.get("duration_s"), reading=reading, setpoint=sp, device=dev,
         finger=FingerSpec(**top.get("finger", {})),
         controller=ControllerSpec(name=ctl.get("name", "pid"), gains=ctl.get("gains", {})),
-        criteria=top.get("criteria", {}), source=source, base_dir=base_dir)
+        criteria=top.get("criteria", {}), sections={k: top[k] for k in DELEGATES if k in top},
+        source=source, base_dir=base_dir)
 
 
 def load_scenario(path) -> ScenarioSpec:
