@@ -352,12 +352,20 @@ def loop_step(plant, command_v) -> None:
     plant.advance(command_v)
 
 
-PLANT_BACKENDS: dict = {"lumped": Plant.from_devices}
-"""Plant constructors by backend name: ``f(devices, seeds, board_pos_m=None, models=None)``."""
+PLANT_BACKENDS: dict = {"lumped": "ebraille_sim.loop:Plant", "pymunk": "ebraille_sim.mechanism:PymunkPlant"}
+"""Plant classes by backend name, as ``"module:Class"``; each class provides
+``from_devices(devices, seeds, board_pos_m=None, models=None)`` and the :class:`Plant`
+interface (``advance``, ``set_finger``, ``set_input``, ``state``/``params``/``inputs``)."""
 
 
 def make_plant(devices, seeds, backend: str = "lumped", **kwargs):
-    """Build a plant of the named backend (``"lumped"``, or one registered in PLANT_BACKENDS)."""
+    """Build a plant of the named backend (a key of :data:`PLANT_BACKENDS`)."""
+    import importlib
     if backend not in PLANT_BACKENDS:
         raise ValueError(f"unknown backend {backend!r}; available: {', '.join(sorted(PLANT_BACKENDS))}")
-    return PLANT_BACKENDS[backend](devices, seeds, **kwargs)
+    mod_name, cls_name = PLANT_BACKENDS[backend].split(":")
+    try:
+        cls = getattr(importlib.import_module(mod_name), cls_name)
+    except (ModuleNotFoundError, AttributeError):
+        raise ValueError(f"backend {backend!r} is not available in this installation") from None
+    return cls.from_devices(devices, seeds, **kwargs)

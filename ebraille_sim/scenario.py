@@ -263,7 +263,7 @@ def _check_overrides(src, where, data, cls):
     return dict(data)
 
 
-def _build_device(src, dev: dict, rates: dict, est: dict) -> _params.DeviceParams:
+def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -> _params.DeviceParams:
     try:
         motor = _params.MOTORS[dev.get("motor", "faulhaber_0816_006sr")]
         drivetrain = _params.DRIVETRAINS[dev.get("drivetrain", "planetary_64")]
@@ -284,12 +284,21 @@ def _build_device(src, dev: dict, rates: dict, est: dict) -> _params.DeviceParam
                                        ("tare_at_start", "tare_at_start"),
                                        ("clamp_nonnegative", "clamp_nonnegative"),
                                        ("nyquist_average", "nyquist_average")) if k1 in est})
+        if "model" in est and not est["model"].startswith("paper:"):
+            mp = pathlib.Path(est["model"])
+            if not mp.is_absolute():
+                mp = pathlib.Path(base_dir) / mp
+            if not mp.exists():
+                raise ScenarioError(f"{src}: [estimator] model file {str(mp)!r} not found")
+            e = _params.replace_checked(e, model=str(mp))
         angle = math.radians(dev.get("hand_orientation_deg", 0.0))
         g = 9.81 * math.cos(angle)
         return _params.DeviceParams(motor=motor, drivetrain=drivetrain, finger=finger, fsr=fsr,
                                     circuit=circuit, estimator=e, rates=r,
                                     driver_supply_v=dev.get("driver_supply_v", motor.nominal_voltage_v),
                                     gravity_m_per_s2=g)
+    except ScenarioError:
+        raise
     except (ValueError, TypeError) as exc:
         raise ScenarioError(f"{src}: {exc}") from None
 
@@ -304,7 +313,7 @@ def parse_scenario(data: dict, source: str = "<scenario>", base_dir: str = ".") 
         raise ScenarioError(f"{source}: [reading] takes only one of passage, text, file")
     reading = ReadingSpec(**rd)
     sp = SetpointSpec(**top.get("setpoint", {}))
-    dev = _build_device(source, top.get("device", {}), top.get("rates", {}), top.get("estimator", {}))
+    dev = _build_device(source, top.get("device", {}), top.get("rates", {}), top.get("estimator", {}), base_dir)
     ctl = top.get("controller", {})
     return ScenarioSpec(
         name=top["name"], description=top.get("description", ""), seed=top.get("seed", 0),
