@@ -46,7 +46,10 @@ def build_parser():
 def main(argv=None) -> int:
     from .commands import UserError
     parser, table = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code or 0)
     if not args.command:
         parser.print_help()
         return 2

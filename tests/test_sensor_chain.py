@@ -1,0 +1,177 @@
+"""FSR forward model, ADC, anti-alias filter and the in-loop estimator against analytic cases."""
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import scipy.signal
+
+from ebraille_sim import kernel
+from ebraille_sim.estimator import calibrate_r2, loading_branch_factor, static_error_table
+from ebraille_sim.fsr import static_resistance, static_voltage
+from ebraille_sim.layout import FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE, N_INPUT, S, U
+from ebraille_sim.loop import initial_state, pack_params
+from ebraille_sim.paper_models import paper_model
+from ebraille_sim.params import FSRS, CircuitParams, DeviceParams, EstimatorParams, FSRParams, RateParams
+
+
+def _sensor(fsr=FSRParams(), circuit=CircuitParams(), estimator=EstimatorParams(), rates=RateParams(), seed=0):
+    dev = DeviceParams(fsr=fsr, circuit=circuit, estimator=estimator, rates=rates)
+    p = pack_params(dev, seed)
+    s = initial_state(dev, p)
+    u = np.zeros(N_INPUT)
+    u[U["driver_supply_v"]] = 6.0
+    return dev, s, p, u
+
+
+def _hold(s, p, u, force_n, seconds, rates=RateParams()):
+    n = int(round(seconds * rates.physics_rate_hz))
+    kernel.advance_sensor_only(s, p, u, force_n, n)
+
+
+def _resistance_from(v, circuit):
+    return circuit.r2_ohm * (circuit.supply_v - v) / v
+
+
+def test_divider_voltage_at_a_known_resistance():
+    c = CircuitParams(r2_ohm=10e3, supply_v=5.0)
+    assert c.divider_v(10e3) == pytest.approx(2.5, abs=1e-15)
+    assert c.divider_v(30e3) == pytest.approx(1.25, abs=1e-15)
+    # nominal FSR at 1 N is 10 kOhm (power law k at 1 N)
+    assert static_resistance(1.0, FSRS["nominal"]) == pytest.approx(1 / (1 / 10e3 + 1e-7), rel=1e-12)
+
+
+def test_adc_reads_the_static_divider_voltage_without_noise_or_memory_effects():
+    fsr = FSRParams(noise_v_rms=0.0, hysteresis_fraction=0.0, creep_fraction_30min=0.0)
+    c = CircuitParams()
+    dev, s, p, u = _sensor(fsr=fsr, circuit=c)
+    for f in (0.3, 1.0, 2.5):
+        _hold(s, p, u, f, 0.05)
+        v = static_voltage(f, fsr, c)
+        assert s[S["fsr_voltage_v"]] == pytest.approx(math.floor(v / c.adc_lsb_v) * c.adc_lsb_v, abs=1e-12)
+
+
+def test_hysteresis_loop_has_the_datasheet_width():
+    fsr = FSRParams(noise_v_rms=0.0, creep_fraction_30min=0.0, hysteresis_fraction=0.10)
+    c = CircuitParams(adc_bits=20)
+    dev, s, p, u = _sensor(fsr=fsr, circuit=c)
+    for f in np.linspace(0.0, 3.0, 61):          # load to 3 N
+        _hold(s, p, u, float(f), 0.02)
+    for f in np.linspace(3.0, 1.0, 41):          # unload to 1 N
+        _hold(s, p, u, float(f), 0.02)
+    r_down = _resistance_from(s[S["fsr_voltage_v"]], c)
+    dev, s, p, u = _sensor(fsr=fsr, circuit=c)
+    for f in np.linspace(0.0, 1.0, 21):          # fresh unit loaded to 1 N
+        _hold(s, p, u, float(f), 0.02)
+    r_up = _resistance_from(s[S["fsr_voltage_v"]], c)
+    assert (r_up - r_down) / r_up == pytest.approx(0.10, abs=0.003)
+    # loading branch factor: F_eff = F (1 - h)^(1/(2n))
+    assert loading_branch_factor(fsr) == pytest.approx(0.9 ** (1 / (2 * 0.9)), rel=1e-12)
+
+
+def test_creep_adds_six_percent_resistance_over_thirty_minutes():
+    fsr = FSRParams(noise_v_rms=0.0, hysteresis_fraction=0.0)
+    c = CircuitParams(adc_bits=24)
+    rates = RateParams(control_rate_hz=100, sensor_rate_hz=100, physics_rate_hz=10000)
+    dev, s, p, u = _sensor(fsr=fsr, circuit=c, rates=rates)
+    _hold(s, p, u, 1.0, 0.02, rates)
+    r0 = static_resistance(1.0, fsr)
+    _hold(s, p, u, 1.0, 1800.0, rates)
+    r30 = _resistance_from(s[S["fsr_voltage_v"]], c)
+    # conduction path creeps by 6 %; the 10 MOhm stand-off path in parallel does not
+    g_path = 1 / r30 - 1 / fsr.standoff_resistance_ohm
+    g_path0 = 1 / r0 - 1 / fsr.standoff_resistance_ohm
+    assert g_path0 / g_path - 1 == pytest.approx(0.06, abs=0.002)
+
+
+def test_temperature_offset_shifts_resistance_by_the_coefficient():
+    fsr = FSRParams(noise_v_rms=0.0, hysteresis_fraction=0.0, creep_fraction_30min=0.0)
+    c = CircuitParams(adc_bits=24)
+    dev, s, p, u = _sensor(fsr=fsr, circuit=c)
+    u[U["fsr_temp_offset_k"]] = 60.0             # 25 -> 85 C: datasheet -15 %
+    _hold(s, p, u, 1.0, 0.05)
+    r = _resistance_from(s[S["fsr_voltage_v"]], c)
+    g_path = 1 / r - 1 / fsr.standoff_resistance_ohm
+    assert 1 / g_path / 10e3 == pytest.approx(0.85, abs=1e-3)
+
+
+def test_sensor_noise_has_the_stated_rms_and_is_reproducible():
+    fsr = FSRParams(noise_v_rms=2e-3, hysteresis_fraction=0.0, creep_fraction_30min=0.0)
+    c = CircuitParams(adc_bits=24)
+    vals = []
+    dev, s, p, u = _sensor(fsr=fsr, circuit=c, seed=11)
+    _hold(s, p, u, 1.0, 0.05)
+    for _ in range(4000):
+        _hold(s, p, u, 1.0, 0.001)
+        vals.append(s[S["fsr_voltage_v"]])
+    vals = np.array(vals)
+    assert vals.std() == pytest.approx(2e-3, rel=0.05)
+    dev, s2, p2, u2 = _sensor(fsr=fsr, circuit=c, seed=11)
+    _hold(s2, p2, u2, 1.0, 0.05)
+    again = []
+    for _ in range(4000):
+        _hold(s2, p2, u2, 1.0, 0.001)
+        again.append(s2[S["fsr_voltage_v"]])
+    np.testing.assert_array_equal(vals, np.array(again))
+
+
+@pytest.mark.parametrize("fault,expected", [(FAULT_OPEN, 0.0), (FAULT_SHORT, 5.0 - 5.0 / 1024)])
+def test_open_and_short_faults_read_the_rails(fault, expected):
+    dev, s, p, u = _sensor(fsr=FSRParams(noise_v_rms=0.0))
+    u[U["fsr_fault"]] = fault
+    _hold(s, p, u, 1.0, 0.01)
+    assert s[S["fsr_voltage_v"]] == pytest.approx(expected, abs=1e-12)
+
+
+def test_stuck_fault_repeats_the_last_code():
+    dev, s, p, u = _sensor()
+    _hold(s, p, u, 1.0, 0.05)
+    v = s[S["fsr_voltage_v"]]
+    u[U["fsr_fault"]] = FAULT_STUCK
+    _hold(s, p, u, 2.5, 0.05)
+    assert s[S["fsr_voltage_v"]] == v
+
+
+def test_paper_wiener_estimator_at_a_steady_input():
+    """0.776 V held: the fifth-order Wiener reads its second breakpoint, 1.496 N."""
+    dev, s, p, u = _sensor(fsr=FSRParams(noise_v_rms=0.0), circuit=CircuitParams(adc_bits=24))
+    u[U["fsr_fault"]] = FAULT_VALUE
+    u[U["fsr_fault_value"]] = 0.776 + s[S["tare_v"]]
+    _hold(s, p, u, 0.0, 3.0)
+    assert s[S["force_est_n"]] == pytest.approx(1.496, abs=2e-3)
+    model = paper_model("wiener", 5)
+    assert s[S["force_est_n"]] == pytest.approx(float(model.steady_state(0.776)), abs=1e-4)
+
+
+def test_in_loop_estimator_equals_the_reference_pipeline():
+    """Anti-alias biquad at the sensor rate, decimation, BlockModel.simulate, two-sample mean."""
+    c = CircuitParams(adc_bits=24)
+    dev, s, p, u = _sensor(fsr=FSRParams(noise_v_rms=0.0), circuit=c)
+    rng = np.random.default_rng(5)
+    n = 3000
+    v_in = 0.6 + 0.3 * np.sin(np.arange(n) * 2 * np.pi * 2.0 / 1000) + 0.01 * rng.standard_normal(n)
+    u[U["fsr_fault"]] = FAULT_VALUE
+    est = []
+    for k in range(n):
+        u[U["fsr_fault_value"]] = v_in[k]
+        kernel.advance_sensor_only(s, p, u, 0.0, 10)    # one sensor sample per call
+        est.append(s[S["force_est_n"]])
+    est = np.array(est)
+    lsb = c.adc_lsb_v
+    vq = np.floor(v_in / lsb) * lsb - s[S["tare_v"]]
+    b, a = scipy.signal.butter(2, 20.0, fs=1000.0)
+    y_aa = scipy.signal.lfilter(b, a, vq)
+    dec = y_aa[9::10]
+    model = paper_model("wiener", 5)
+    f_model, _ = model.simulate(dec)
+    f_avg = 0.5 * (f_model + np.concatenate([[float(model.steady_state(0.0))], f_model[:-1]]))
+    f_avg = np.maximum(f_avg, 0.0)
+    np.testing.assert_allclose(est[9::10], f_avg, rtol=0, atol=1e-9)
+
+
+def test_divider_calibration_reproduces_the_default_r2():
+    r2 = calibrate_r2(paper_model("wiener", 5), FSRS["nominal"], CircuitParams())
+    assert r2 == pytest.approx(CircuitParams().r2_ohm, rel=0.01)
+    rows = static_error_table(paper_model("wiener", 5), FSRS["nominal"], CircuitParams())
+    at1 = next(r for r in rows if r["force_n"] == 1.0)
+    assert abs(at1["rel_error_at_60s"]) < 0.05
