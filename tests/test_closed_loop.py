@@ -79,7 +79,8 @@ def test_metrics_on_a_synthetic_trace():
     assert m["peak_force_n"] == pytest.approx(1.2)
     assert m["char_in_band_fraction"] == pytest.approx(10 / 11)  # only char 5 (out for 99 % of its dwell) fails
     assert m["onset_overshoot_fraction"] == 0.0
-    assert settling_time(t, f, sp, 0.1) == pytest.approx(0.45 - 0.01 + 0.001, abs=2e-3)
+    # first contact at t = 0.011 s (2t > 0.02 N), in band from t = 0.450 s (2t >= 0.9 N)
+    assert settling_time(t, f, sp, 0.1) == pytest.approx(0.450 - 0.011, abs=1e-9)
     assert m["energy_j"] == 1.0
 
 
