@@ -66,6 +66,10 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "wpm": _num(0, 1000, lo_open=True), "start_s": _num(0, 600),
         "jitter_fraction": _num(0, 0.5), "word_pause_s": _num(0, 5), "line_pause_s": _num(0, 10),
         "max_characters": _num(1, 10**6, integer=True),
+        # per-character refresh mode (see ebraille_sim.runner.refresh_phases)
+        "mode": {"type": "choice", "choices": ["continuous", "refresh"]},
+        "refresh_lift_fraction": _num(0, 1), "refresh_press_fraction": _num(0, 1),
+        "refresh_release_fraction": _num(0, 1), "refresh_lift_force_n": _num(0, 3.0),
     },
     "setpoint": {
         "force_n": _num(0, 3.0, lo_open=True), "band_fraction": _num(0, 1, lo_open=True),
@@ -130,6 +134,21 @@ class ReadingSpec:
     word_pause_s: float = 0.0
     line_pause_s: float = 0.0
     max_characters: int | None = None
+    # per-character refresh: each dwell is lift | press | hold | release, as fractions of
+    # the dwell; the setpoint is refresh_lift_force_n while lifted or released and the
+    # force setpoint from the press on; only the hold part counts as the character's window
+    mode: str = "continuous"
+    refresh_lift_fraction: float = 0.10
+    refresh_press_fraction: float = 0.30
+    refresh_release_fraction: float = 0.15
+    refresh_lift_force_n: float = 0.1
+
+    def __post_init__(self):
+        if self.mode == "refresh":
+            used = self.refresh_lift_fraction + self.refresh_press_fraction + self.refresh_release_fraction
+            if not used < 1.0:
+                raise ScenarioError(f"[reading] refresh_lift_fraction + refresh_press_fraction + "
+                                    f"refresh_release_fraction = {used:g} leaves no hold time; it must be < 1")
 
 
 @dataclass(frozen=True)
@@ -311,7 +330,10 @@ def parse_scenario(data: dict, source: str = "<scenario>", base_dir: str = ".") 
     rd = top.get("reading", {})
     if sum(k in rd for k in ("passage", "text", "file")) > 1:
         raise ScenarioError(f"{source}: [reading] takes only one of passage, text, file")
-    reading = ReadingSpec(**rd)
+    try:
+        reading = ReadingSpec(**rd)
+    except ScenarioError as exc:
+        raise ScenarioError(f"{source}: {exc}") from None
     sp = SetpointSpec(**top.get("setpoint", {}))
     dev = _build_device(source, top.get("device", {}), top.get("rates", {}), top.get("estimator", {}), base_dir)
     ctl = top.get("controller", {})
