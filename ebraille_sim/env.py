@@ -375,9 +375,9 @@ class EnvConfig:
                 "driver_supply_v": self.base_device.driver_supply_v}
 
 
-MAX_EPISODE_STEPS = EnvConfig.__dataclass_fields__ and 1400
-"""``max_episode_steps`` of the registered id: the longest default episode (1 s + 30 cells at
-60 wpm, 0.2 s each, at 200 Hz); checked against :meth:`EnvConfig.max_episode_steps` in tests."""
+MAX_EPISODE_STEPS = EnvConfig().max_episode_steps()
+"""``max_episode_steps`` of the registered id: the longest episode at the defaults (1 s of
+onset + 30 cells at 60 wpm, 0.2 s each, at 200 Hz: 1400 steps)."""
 
 
 @dataclass(frozen=True)
@@ -599,7 +599,6 @@ class ContactForceEnv(gym.Env):
             raise ValueError(f"unknown backend {backend!r}; available: {', '.join(sorted(PLANT_BACKENDS))}")
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         self.observation_space = spaces.Box(OBS_LOW.copy(), OBS_HIGH.copy(), dtype=np.float32)
-        self.metadata = dict(self.metadata, render_fps=min(25, int(self.config.control_rate_hz)))
         self._master: np.random.SeedSequence | None = None
         self.plant = None
         self.episode: Episode | None = None
@@ -686,8 +685,8 @@ class ContactForceEnv(gym.Env):
         from .render import Renderer, snapshot_from
         if self._renderer is None:
             self._renderer = Renderer()
-        snap = snapshot_from(self.plant.state[0], self.episode, self._k * self.config.dt_s,
-                             self.config.safe_force_n, self._history, row_inputs=self.plant.inputs[0])
+        snap = snapshot_from(self.plant.state[0], self.plant.inputs[0], self.episode, self._k,
+                             self.config.dt_s, self.config.safe_force_n, self._history)
         return self._renderer.draw(snap)
 
     def close(self):

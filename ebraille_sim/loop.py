@@ -272,8 +272,11 @@ class Plant:
         inputs = np.zeros((n, N_INPUT))
         inputs[:, U["gravity_along_m_per_s2"]] = [-d.gravity_m_per_s2 for d in devices]
         inputs[:, U["driver_supply_v"]] = [d.driver_supply_v for d in devices]
-        return cls(np.array(states), np.array(params), inputs, rates.substeps_per_control,
-                   1.0 / rates.control_rate_hz, devices)
+        plant = cls(np.array(states), np.array(params), inputs, rates.substeps_per_control,
+                    1.0 / rates.control_rate_hz, devices)
+        # compile (or load from the cache) before any timed loop: zero substeps change nothing
+        kernel.advance(plant.state[0], plant.params[0], plant.inputs[0], 0)
+        return plant
 
     @property
     def n(self) -> int:

@@ -92,8 +92,55 @@ def build_schedule_for(spec: ScenarioSpec, rng: np.random.Generator):
                           rng=rng if r.jitter_fraction > 0 else None)
 
 
-def setpoint_profile(spec: ScenarioSpec, t_s: np.ndarray) -> np.ndarray:
-    """Force setpoint at the times ``t_s`` (steps, optionally ramped over ``ramp_s``)."""
+def setpoint_profile(spec: ScenarioSpec, t_s: np.ndarray, schedule=None) -> np.ndarray:
+    """Force setpoint at the times ``t_s`` (steps, optionally ramped over ``ramp_s``).
+
+    In refresh mode (``[reading] mode = "refresh"``) the ``schedule`` is required and the
+    setpoint drops to ``refresh_lift_force_n`` while each character is lifted or
+    released (see :func:`refresh_phases`).
+    """
+    sp = _base_setpoint(spec, t_s)
+    if spec.reading.mode == "refresh":
+        if schedule is None:
+            raise ValueError("setpoint_profile: refresh mode needs the reading schedule")
+        pressed, _ = refresh_phases(spec, schedule, t_s)
+        lift = np.minimum(spec.reading.refresh_lift_force_n, sp)
+        sp = np.where(pressed, sp, lift)
+    return sp
+
+
+def refresh_phases(spec: ScenarioSpec, schedule, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-character refresh phases at the times ``t_s``.
+
+    Each dwell ``[s, s + d)`` is split into lift ``[0, l)``, press ``[l, l + p)``, hold
+    ``[l + p, 1 - r)`` and release ``[1 - r, 1)`` in units of ``d``, with ``l``, ``p``,
+    ``r`` the ``refresh_*_fraction`` keys of ``[reading]``: the display leaves the skin
+    (setpoint at the lift force) while the pattern changes at the character boundary,
+    presses during ``p`` (the time allowed to reach the band) and holds.
+
+    Returns
+    -------
+    pressed : ndarray of bool, shape t_s.shape
+        True during press and hold, and outside the schedule.
+    hold : ndarray of bool, shape t_s.shape
+        True during the hold part of a dwell (the character's in-band window).
+    """
+    r = spec.reading
+    k = np.asarray(schedule.index_at(t_s))
+    inside = k >= 0
+    kk = np.where(inside, k, 0)
+    start = np.asarray(schedule.start_s)[kk] if len(schedule) else np.zeros_like(t_s)
+    dwell = np.asarray(schedule.dwell_s)[kk] if len(schedule) else np.ones_like(t_s)
+    u = (t_s - start) / dwell
+    lo = r.refresh_lift_fraction
+    hold_lo = lo + r.refresh_press_fraction
+    hold_hi = 1.0 - r.refresh_release_fraction
+    pressed = ~inside | ((u >= lo) & (u < hold_hi))
+    hold = inside & (u >= hold_lo) & (u < hold_hi)
+    return pressed, hold
+
+
+def _base_setpoint(spec: ScenarioSpec, t_s: np.ndarray) -> np.ndarray:
     sp = np.full_like(t_s, spec.setpoint.force_n, dtype=float)
     prev = spec.setpoint.force_n
     ramp = spec.setpoint.ramp_s
@@ -159,7 +206,7 @@ def wrap_controller(spec: ScenarioSpec, ctrl, dt_s: float):
 
 
 def run_scenario(scenario, controller=None, seed: int | None = None, duration_s: float | None = None,
-                 backend: str = "lumped") -> RunResult:
+                 backend: str = "lumped", device=None) -> RunResult:
     """Simulate a scenario in closed loop.
 
     Parameters
@@ -175,12 +222,18 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
         Overrides the scenario's duration.
     backend : str
         Plant model: ``"lumped"`` or another name in :data:`ebraille_sim.loop.PLANT_BACKENDS`.
+    device : DeviceParams, optional
+        Replaces the scenario's device (e.g. a reader drawn by
+        :func:`ebraille_sim.population.sample_devices`).
 
     Returns
     -------
     RunResult
     """
     spec = scenario if isinstance(scenario, ScenarioSpec) else load_scenario(scenario)
+    if device is not None:
+        import dataclasses
+        spec = dataclasses.replace(spec, device=device)
     if duration_s is not None:
         if not (math.isfinite(duration_s) and duration_s > 0):
             raise ScenarioError(f"duration_s must be a positive finite number, got {duration_s}")
@@ -199,7 +252,7 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     if n < 1:
         raise ScenarioError(f"{spec.source}: duration {t_end:g} s is shorter than one control period")
     t = (np.arange(n) + 1) * dt
-    sp = setpoint_profile(spec, t - dt)
+    sp = setpoint_profile(spec, t - dt, schedule)
     try:
         plant = make_plant([dev], seeds=[seed_from(ss_sensor)], backend=backend)
     except (ValueError, FileNotFoundError) as exc:
@@ -245,5 +298,13 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     tr["char_index"] = ci
     cells = schedule.cells
     tr["character"] = np.array([cells[j].unicode if j >= 0 else "" for j in ci])
-    metrics = compute_metrics(tr, spec.reading.start_s, spec.setpoint.band_fraction, schedule, wall)
+    window = tr
+    if spec.reading.mode == "refresh":
+        # refresh mode: a character's in-band window is the hold part of its dwell only
+        _, hold = refresh_phases(spec, schedule, t)
+        window = dict(tr, char_index=np.where(hold, ci, -1))
+    metrics = compute_metrics(window, spec.reading.start_s, spec.setpoint.band_fraction, schedule, wall)
+    # electrotactile legibility beside the force metrics (stimulation during the same windows)
+    from .legibility import legibility_metrics
+    metrics.update(legibility_metrics(f_true, sp, window["char_index"], cells))
     return RunResult(spec, metrics, tr, schedule, getattr(ctrl, "name", type(ctrl).__name__), seed)
