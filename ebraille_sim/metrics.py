@@ -136,3 +136,25 @@ def compute_metrics(trace: dict, reading_start_s: float, band_fraction: float, s
         if isinstance(v, float) and not math.isfinite(v):
             raise FloatingPointError(f"metric {k} is not finite ({v}); the simulation diverged")
     return {k: m[k] for k in METRIC_NAMES}
+
+
+CRITERIA = {
+    "onset_overshoot_max": ("onset_overshoot_fraction", "le"),
+    "in_band_min": ("in_band_fraction", "ge"),
+    "peak_force_max_n": ("peak_force_n", "le"),
+}
+"""Scenario ``[criteria]`` keys: the metric each bounds and the direction of the bound."""
+
+
+def evaluate_criteria(criteria: dict, metrics: dict) -> dict:
+    """Check a scenario's ``[criteria]`` against its metrics.
+
+    Returns ``{key: {"metric", "limit", "value", "passed"}}``; a metric that is None fails.
+    """
+    out = {}
+    for key, limit in criteria.items():
+        metric, how = CRITERIA[key]
+        v = metrics.get(metric)
+        ok = v is not None and (v <= limit if how == "le" else v >= limit)
+        out[key] = {"metric": metric, "limit": limit, "value": v, "passed": bool(ok)}
+    return out

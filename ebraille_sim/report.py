@@ -14,6 +14,7 @@ import tempfile
 
 import numpy as np
 
+from .metrics import evaluate_criteria
 from .runner import TRACE_COLUMNS, RunResult
 
 _FMT = {"force_rmse_n": "{:.4f}", "force_mae_n": "{:.4f}", "in_band_fraction": "{:.3f}",
@@ -36,6 +37,9 @@ def summary_table(result: RunResult) -> str:
         else:
             s = str(v)
         lines.append(f"{k:<26} {s}")
+    for key, c in evaluate_criteria(result.spec.criteria, m).items():
+        op = "<=" if key.endswith("max") or key.endswith("max_n") else ">="
+        lines.append(f"criterion {c['metric']} {op} {c['limit']:g}: {'pass' if c['passed'] else 'FAIL'}")
     return "\n".join(lines)
 
 
@@ -43,7 +47,7 @@ def metrics_document(result: RunResult) -> dict:
     """The JSON document written as metrics.json."""
     return {"scenario": result.spec.name, "controller": result.controller_name, "seed": result.seed,
             "band_fraction": result.spec.setpoint.band_fraction, "reading_start_s": result.spec.reading.start_s,
-            "metrics": result.metrics}
+            "metrics": result.metrics, "criteria": evaluate_criteria(result.spec.criteria, result.metrics)}
 
 
 def write_trace_csv(path, trace: dict) -> None:

@@ -94,7 +94,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "clamp_nonnegative": _BOOL, "nyquist_average": _BOOL,
     },
     "finger": {
-        "gap_m": _num(-0.01, 0.01), "start_in_contact": _BOOL,
+        "gap_m": _num(-0.01, 0.01),
     },
     "controller": {
         "name": _STR, "gains": "free",
@@ -168,7 +168,6 @@ class ControllerSpec:
 @dataclass(frozen=True)
 class FingerSpec:
     gap_m: float = 1.0e-3
-    start_in_contact: bool = False
 
 
 @dataclass(frozen=True)
