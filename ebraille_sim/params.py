@@ -88,6 +88,8 @@ class MotorParams(_Checked):
     no-load current produces, ``kM * I0``.
     """
     name: str = "faulhaber_0816_006sr"
+    sources: tuple = ()
+    """Per-preset (field, source) pairs overriding the class-level source of those fields."""
     nominal_voltage_v: float = _pos(6.0, "V", FAULHABER)
     resistance_ohm: float = _pos(21.2, "ohm", FAULHABER)
     inductance_h: float = _pos(217e-6, "H", FAULHABER)
@@ -141,6 +143,16 @@ MOTORS: dict[str, MotorParams] = {
         no_load_speed_rpm=17500.0,
         no_load_current_a=17.1e-3,
         stall_torque_nm=0.524e-3,
+        sources=(
+            ("nominal_voltage_v", MAXON), ("no_load_speed_rpm", MAXON), ("no_load_current_a", MAXON),
+            ("stall_torque_nm", MAXON),
+            ("resistance_ohm", "[D] U/I_stall = 3 V/0.336 A from the maxon DCX 6 M 3 V datasheet"),
+            ("torque_constant_nm_per_a", "[D] M_H/I_H = 0.524 mN m/0.336 A (maxon DCX 6 M 3 V)"),
+            ("back_emf_v_s_per_rad", "[D] (U - I0 R)/w0 from the maxon no-load point"),
+            ("friction_torque_nm", "[D] kM x no-load current 17.1 mA"),
+            ("inductance_h", "[E] not in the excerpt; 20-60 uH for a 6 mm coreless motor"),
+            ("rotor_inertia_kg_m2", "[E] not in the excerpt; 0.01-0.02 g cm^2 for a 6 mm rotor"),
+        ),
     ),
     "pololu_lp_6v": MotorParams(
         name="pololu_lp_6v",
@@ -154,6 +166,17 @@ MOTORS: dict[str, MotorParams] = {
         no_load_speed_rpm=130.0 * 100.37,
         no_load_current_a=0.02,
         stall_torque_nm=72.6e-3 / (100.37 * 0.51),
+        sources=(
+            ("nominal_voltage_v", POLOLU), ("no_load_current_a", POLOLU),
+            ("no_load_speed_rpm", "[D] 130 rpm at the output x 100.37 (Pololu datasheet)"),
+            ("stall_torque_nm", "[D] 7.4 kg mm at the output / (100.37 x 0.51) (Pololu datasheet)"),
+            ("resistance_ohm", "[D] 6 V / 0.36 A stall current (Pololu datasheet)"),
+            ("torque_constant_nm_per_a", "[D] (U - I0 R)/w0 from the Pololu no-load point"),
+            ("back_emf_v_s_per_rad", "[D] equal to kt in SI units"),
+            ("friction_torque_nm", "[D] kt x no-load current 20 mA"),
+            ("inductance_h", "[E] iron-core 10 mm motor, 0.1-0.5 mH"),
+            ("rotor_inertia_kg_m2", "[E] 0.05-0.1 g cm^2"),
+        ),
     ),
 }
 """Motor presets.  Sources of the non-default presets (see docs/model.md):
@@ -174,6 +197,8 @@ class DriveTrainParams(_Checked):
     All forces and positions are expressed at the rack (board) line.
     """
     name: str = "planetary_64"
+    sources: tuple = ()
+    """Per-preset (field, source) pairs overriding the class-level source of those fields."""
     gear_ratio: float = _pos(64.0, "-", "[E] three-stage planetary head (4:1 per stage) for the "
                              "0816 series; catalogue ratios 4:1-1024:1 [R] Faulhaber")
     gear_efficiency: float = _pos(0.6, "-", "[R] 81 % per planetary stage (Citizen) gives 0.53 for "
@@ -204,9 +229,15 @@ class DriveTrainParams(_Checked):
 DRIVETRAINS: dict[str, DriveTrainParams] = {
     "planetary_64": DriveTrainParams(),
     "planetary_16": DriveTrainParams(name="planetary_16", gear_ratio=16.0, gear_efficiency=0.66,
-                                     backlash_m=0.08e-3),
+                                     backlash_m=0.08e-3, sources=(
+                                         ("gear_ratio", "[E] two planetary stages of 4:1"),
+                                         ("gear_efficiency", "[D] 0.81^2 from 81 % per stage [R] Citizen"),
+                                         ("backlash_m", "[E] fewer stages, less accumulated play"))),
     "pololu_100": DriveTrainParams(name="pololu_100", gear_ratio=100.37, gear_efficiency=0.51,
-                                   backlash_m=0.15e-3),
+                                   backlash_m=0.15e-3, sources=(
+                                       ("gear_ratio", POLOLU),
+                                       ("gear_efficiency", "[D] 72.6 mN m/(4.15 mN m/A x 0.34 A x 100.37) at stall"),
+                                       ("backlash_m", "[E] 2-5 deg at the output x r (not published)"))),
 }
 """Drive-train presets.  ``planetary_16``: two stages, 0.81^2 = 0.66 [D]; ``pololu_100``:
 [R] Pololu 100.37:1, efficiency at stall 0.51 [D], backlash 2-5 deg at the output [E]."""
@@ -222,6 +253,8 @@ class FingerParams(_Checked):
     ``G`` against ``dFe``, clipped at zero (the board can leave the pulp).
     """
     name: str = "nominal"
+    sources: tuple = ()
+    """Per-preset (field, source) pairs overriding the class-level source of those fields."""
     stiffness_b_n_per_m: float = _pos(264.0, "N/m", "[E] solved through 1.4 mm at 1 N and 2.4 mm at "
                                       "4 N, checked against Hertz E = 0.1 MPa (parameters table 1.2)")
     exponent_m_per_m: float = _pos(1246.0, "1/m", "[E] as stiffness_b_n_per_m")
@@ -254,9 +287,13 @@ class FingerParams(_Checked):
 
 
 FINGERS: dict[str, FingerParams] = {
-    "soft": FingerParams(name="soft", stiffness_b_n_per_m=141.0, exponent_m_per_m=1080.0),
+    "soft": FingerParams(name="soft", stiffness_b_n_per_m=141.0, exponent_m_per_m=1080.0, sources=(
+        ("stiffness_b_n_per_m", "[E] solved through 2.0 mm at 1 N and 3.2 mm at 4 N"),
+        ("exponent_m_per_m", "[E] as stiffness_b_n_per_m"))),
     "nominal": FingerParams(),
-    "stiff": FingerParams(name="stiff", stiffness_b_n_per_m=540.0, exponent_m_per_m=1448.0),
+    "stiff": FingerParams(name="stiff", stiffness_b_n_per_m=540.0, exponent_m_per_m=1448.0, sources=(
+        ("stiffness_b_n_per_m", "[E] solved through 0.9 mm at 1 N and 1.7 mm at 4 N"),
+        ("exponent_m_per_m", "[E] as stiffness_b_n_per_m"))),
 }
 """Reader presets [E]: soft 2.0 mm at 1 N, nominal 1.4 mm, stiff 0.9 mm (instantaneous law)."""
 
@@ -270,6 +307,8 @@ class FSRParams(_Checked):
     ``1 + creep_per_decade * log10(1 + t_load/t0)`` while loaded.
     """
     name: str = "fsr402_nominal"
+    sources: tuple = ()
+    """Per-preset (field, source) pairs overriding the class-level source of those fields."""
     resistance_at_1n_ohm: float = _pos(10e3, "ohm", "[D] power-law fit through Interlink/Adafruit "
                                        "points 0.2 N-30 k, 1 N-6 k, 10 N-1 k; spread 6-27 k")
     exponent: float = _pos(0.9, "-", "[D] same fit; 0.75-1.0")
@@ -304,8 +343,12 @@ class FSRParams(_Checked):
 
 FSRS: dict[str, FSRParams] = {
     "nominal": FSRParams(),
-    "low_k": FSRParams(name="fsr402_low_k", resistance_at_1n_ohm=6.9e3, exponent=0.86),
-    "high_k": FSRParams(name="fsr402_high_k", resistance_at_1n_ohm=14e3, exponent=0.95),
+    "low_k": FSRParams(name="fsr402_low_k", resistance_at_1n_ohm=6.9e3, exponent=0.86, sources=(
+        ("resistance_at_1n_ohm", "[D] power-law fit over 0.2-10 N of the Interlink/Adafruit points"),
+        ("exponent", "[D] same fit"))),
+    "high_k": FSRParams(name="fsr402_high_k", resistance_at_1n_ohm=14e3, exponent=0.95, sources=(
+        ("resistance_at_1n_ohm", "[E] upper part of the 6-27 kOhm part-to-part spread [R] Interlink guide"),
+        ("exponent", "[D] 0.2-1 N fit gives 1.0, full range 0.77"))),
 }
 
 
@@ -389,8 +432,12 @@ class DeviceParams:
 
 
 def source_of(obj, name: str) -> str:
-    """Source tag of field ``name`` of a parameter dataclass."""
-    return _field(obj, name).metadata.get("source", "")
+    """Source tag of field ``name`` of a parameter dataclass (preset-specific if given)."""
+    f = _field(obj, name)
+    for key, src in getattr(obj, "sources", ()):
+        if key == name:
+            return src
+    return f.metadata.get("source", "")
 
 
 def unit_of(obj, name: str) -> str:
@@ -408,8 +455,8 @@ def _field(obj, name):
 
 def describe(obj) -> list[tuple[str, Any, str, str]]:
     """Rows (name, value, unit, source) of a parameter dataclass, for reports and docs."""
-    return [(f.name, getattr(obj, f.name), f.metadata.get("unit", ""), f.metadata.get("source", ""))
-            for f in dataclasses.fields(obj)]
+    return [(f.name, getattr(obj, f.name), f.metadata.get("unit", ""), source_of(obj, f.name))
+            for f in dataclasses.fields(obj) if f.name != "sources"]
 
 
 def replace_checked(obj, **changes):

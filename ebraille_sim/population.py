@@ -87,7 +87,10 @@ def sample_finger(rng: np.random.Generator, spec: PopulationSpec, base=FINGERS["
     c0 = float(rng.uniform(*spec.relax_c0))
     rest = base.relax_weight_1 + base.relax_weight_2 + base.relax_weight_3
     k = (1.0 - c0) / rest
-    return replace_checked(base, name="drawn", stiffness_b_n_per_m=b, exponent_m_per_m=m, relax_weight_inf=c0,
+    src = tuple((k, "drawn from PopulationSpec (ebraille_sim/population.py)") for k in (
+        "stiffness_b_n_per_m", "exponent_m_per_m", "relax_weight_inf", "relax_weight_1", "relax_weight_2",
+        "relax_weight_3"))
+    return replace_checked(base, name="drawn", sources=src, stiffness_b_n_per_m=b, exponent_m_per_m=m, relax_weight_inf=c0,
                            relax_weight_1=base.relax_weight_1 * k, relax_weight_2=base.relax_weight_2 * k,
                            relax_weight_3=1.0 - c0 - base.relax_weight_1 * k - base.relax_weight_2 * k)
 
@@ -95,7 +98,9 @@ def sample_finger(rng: np.random.Generator, spec: PopulationSpec, base=FINGERS["
 def sample_fsr(rng: np.random.Generator, spec: PopulationSpec, base):
     """An FSR unit drawn around ``base``."""
     k = base.resistance_at_1n_ohm * float(math.exp(rng.normal(0.0, spec.fsr_k_sigma_ln)))
-    return replace_checked(base, name="drawn", resistance_at_1n_ohm=k,
+    src = tuple((f, "drawn from PopulationSpec (ebraille_sim/population.py)") for f in (
+        "resistance_at_1n_ohm", "exponent", "hysteresis_fraction", "creep_fraction_30min"))
+    return replace_checked(base, name="drawn", sources=src, resistance_at_1n_ohm=k,
                            exponent=float(rng.uniform(*spec.fsr_exponent)),
                            hysteresis_fraction=float(rng.uniform(*spec.fsr_hysteresis)),
                            creep_fraction_30min=float(rng.uniform(*spec.fsr_creep_30min)))

@@ -270,7 +270,7 @@ def _check_table(src, name, data):
 def _check_overrides(src, where, data, cls):
     if not isinstance(data, dict):
         raise ScenarioError(f"{src}: [{where}] must be a table")
-    names = {f.name: f for f in dataclasses.fields(cls) if f.name != "name"}
+    names = {f.name: f for f in dataclasses.fields(cls) if f.name not in ("name", "sources")}
     for key, value in data.items():
         if key not in names:
             raise ScenarioError(f"{src}: unknown key {key!r} in [{where}]; allowed: {', '.join(sorted(names))}")

@@ -9,8 +9,8 @@ from ebraille_sim.drivetrain import reflected
 from ebraille_sim.fingertip import relaxation_function
 from ebraille_sim.layout import U
 from ebraille_sim.loop import Plant
-from ebraille_sim.params import (FINGERS, MOTORS, DeviceParams, DriveTrainParams, FingerParams, RateParams,
-                                 source_of)
+from ebraille_sim.params import (DRIVETRAINS, FINGERS, FSRS, MOTORS, CircuitParams, DeviceParams,
+                                 DriveTrainParams, EstimatorParams, FingerParams, RateParams, describe, source_of)
 
 FAULHABER = MOTORS["faulhaber_0816_006sr"]
 
@@ -29,6 +29,16 @@ def test_every_motor_preset_is_consistent_with_its_stall_torque(name):
     m = MOTORS[name]
     assert m.stall_torque_at(m.nominal_voltage_v) == pytest.approx(m.stall_torque_nm, rel=0.08)
     assert source_of(m, "resistance_ohm").startswith("[")
+
+
+@pytest.mark.parametrize("preset", [*MOTORS.values(), *FINGERS.values(), *DRIVETRAINS.values(), *FSRS.values(),
+                                    CircuitParams(), RateParams(), EstimatorParams()])
+def test_every_preset_value_carries_a_unit_and_a_source_tag(preset):
+    for name, value, unit, source in describe(preset):
+        if name == "name":
+            continue
+        assert unit, f"{type(preset).__name__}.{name} has no unit"
+        assert source.startswith("[") or source.startswith("seed paper"), f"{name}: {source!r}"
 
 
 def test_reflected_quantities_at_the_rack():
