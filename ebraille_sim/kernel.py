@@ -24,9 +24,41 @@ rejects physics rates that give ``w h > 1``.
 """
 from __future__ import annotations
 
+import hashlib
 import math
+import pathlib
 
 from numba import njit
+
+def _drop_stale_compiled_cache() -> None:
+    """Remove Numba's on-disk cache of the kernel when any of its source files changed.
+
+    Numba keys a cached function on its own file only, but the compiled functions inline
+    the laws of several modules and bake in the slot indices of ``layout.py``; a change in
+    any of them must recompile.  A hash of ``layout.py`` and of every package module that
+    uses Numba is kept beside the cache; when it differs, the package's cache files go.
+    """
+    here = pathlib.Path(__file__).resolve().parent
+    try:
+        sources = sorted(f for f in here.glob("*.py") if f.name == "layout.py" or b"numba" in f.read_bytes())
+        digest = hashlib.sha256(b"".join(f.name.encode() + f.read_bytes() for f in sources)).hexdigest()
+        from numba.core.config import CACHE_DIR
+        cache = pathlib.Path(CACHE_DIR) if CACHE_DIR else here / "__pycache__"
+        stamp = cache / "ebraille_kernel_sources.sha256"
+        if stamp.exists() and stamp.read_text() == digest:
+            return
+        stems = {f.stem for f in sources}
+        if cache.is_dir():
+            for f in cache.iterdir():
+                if f.suffix in (".nbi", ".nbc") and f.name.split(".")[0] in stems:
+                    f.unlink(missing_ok=True)
+        cache.mkdir(parents=True, exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:
+        pass
+
+
+_drop_stale_compiled_cache()
 
 from .drivetrain import friction_velocity_update, mesh_force, stribeck
 from .fingertip import elastic_force
