@@ -23,7 +23,7 @@ Examples
 --------
 >>> import controllers
 >>> controllers.available()
-['pid']
+['lqg', 'pid', 'pid_feedforward', 'pid_scheduled']
 >>> ctrl = controllers.make("pid", kp_v_per_n=1.0)
 >>> ctrl.config.kp_v_per_n
 1.0
@@ -42,6 +42,7 @@ from .pid import DEFAULT_PID, PID, PIDConfig, pid_from_dict
 __all__ = ["Controller", "PID", "PIDConfig", "available", "make", "register"]
 
 _CONFIG_SUFFIXES = (".toml", ".json")
+_POLICY_PREFIX = "policy:"
 _FILE_KEYS = ("controller", "gains")
 
 _REGISTRY: dict[str, Callable[..., Controller]] = {}
@@ -137,8 +138,10 @@ def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
     Parameters
     ----------
     name_or_path : str or path-like
-        A name from :func:`available`, or a path to a ``.toml`` / ``.json``
-        file holding ``{"controller": name, "gains": {...}}``.
+        A name from :func:`available`, a path to a ``.toml`` / ``.json``
+        file holding ``{"controller": name, "gains": {...}}``, or
+        ``"policy:PATH"`` for a policy saved by ``ebraille-sim train``
+        (:mod:`controllers.policy`; needs the ``rl`` extra).
     **overrides
         Keyword arguments passed to the factory; they take precedence over
         the file's ``gains``. For ``"pid"`` these are :class:`PIDConfig`
@@ -163,9 +166,12 @@ def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
     >>> make("lqr")
     Traceback (most recent call last):
     ...
-    ValueError: unknown controller 'lqr'; available: pid (or give a path to a .toml/.json config file)
+    ValueError: unknown controller 'lqr'; available: lqg, pid, pid_feedforward, pid_scheduled (or give a path to a .toml/.json config file)
     """
     spec = os.fspath(name_or_path)
+    if spec.startswith(_POLICY_PREFIX):
+        from .policy import load_policy  # imports stable-baselines3 only when a policy is loaded
+        return load_policy(spec[len(_POLICY_PREFIX):], **overrides)
     if spec in _REGISTRY:
         return _REGISTRY[spec](**overrides)
     if spec.lower().endswith(_CONFIG_SUFFIXES):
@@ -189,3 +195,26 @@ def _make_pid(**gains: Any) -> PID:
 
 
 register("pid", _make_pid)
+
+
+def _make_scheduled(**gains: Any) -> Controller:
+    """Factory for ``"pid_scheduled"`` (imported lazily from :mod:`controllers.schedule`)."""
+    from .schedule import make_scheduled
+    return make_scheduled(**gains)
+
+
+def _make_feedforward(**gains: Any) -> Controller:
+    """Factory for ``"pid_feedforward"`` (imported lazily from :mod:`controllers.schedule`)."""
+    from .schedule import make_feedforward
+    return make_feedforward(**gains)
+
+
+def _make_lqg(**gains: Any) -> Controller:
+    """Factory for ``"lqg"`` (imported lazily from :mod:`controllers.lqg`)."""
+    from .lqg import make_lqg
+    return make_lqg(**gains)
+
+
+register("pid_scheduled", _make_scheduled)
+register("pid_feedforward", _make_feedforward)
+register("lqg", _make_lqg)

@@ -79,13 +79,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["LegibilityParams", "LEGIBLE_REQUIRED", "METRIC_NAMES", "contact_radius_m", "electrode_centres_m",
-           "coverage", "impedance_ohm", "relative_intensity", "legibility_metrics"]
+           "coverage", "impedance_ohm", "relative_intensity", "character_legibility", "legibility_metrics"]
 
 LEGIBLE_REQUIRED = 0.9
 """Fraction of a character's stimulation window in which all its raised dots must be legible."""
 
-METRIC_NAMES = ["legible_char_fraction", "intensity_ratio_p05", "intensity_ratio_p95"]
-"""Metrics added to a run's metrics (see :func:`legibility_metrics`)."""
+METRIC_NAMES = ["legible_char_fraction", "legible_char_fraction_cv"]
+"""Metrics added to a run's metrics (see :func:`legibility_metrics`): the legible fraction
+of characters with a constant-current stimulator (the default, :data:`DEFAULT`) and with a
+constant-voltage one (:data:`CONSTANT_VOLTAGE`)."""
 
 
 def _p(default, unit, source):
@@ -135,6 +137,7 @@ class LegibilityParams:
 
 
 DEFAULT = LegibilityParams()
+CONSTANT_VOLTAGE = LegibilityParams(mode="constant_voltage")
 
 
 def contact_radius_m(force_n, params: LegibilityParams = DEFAULT):
@@ -215,8 +218,8 @@ def relative_intensity(force_n, setpoint_n, params: LegibilityParams = DEFAULT) 
     return j / j_nom
 
 
-def legibility_metrics(force_n, setpoint_n, char_index, cells, params: LegibilityParams = DEFAULT) -> dict:
-    """Legibility of a run.
+def character_legibility(force_n, setpoint_n, char_index, cells, params: LegibilityParams = DEFAULT) -> dict:
+    """Legibility of a run with one stimulator.
 
     Parameters
     ----------
@@ -234,11 +237,14 @@ def legibility_metrics(force_n, setpoint_n, char_index, cells, params: Legibilit
         ``legible_char_fraction`` (characters with raised dots whose dots were all in the
         legible band for at least :data:`LEGIBLE_REQUIRED` of their window; None when no
         such character was shown), ``intensity_ratio_p05`` and ``intensity_ratio_p95``
-        (5th and 95th percentiles of the relative intensity over all raised-dot samples).
+        (5th and 95th percentiles of the relative intensity over all raised-dot samples;
+        None without any), ``legible_by_char`` (dict: cell index -> legible fraction of
+        its window).
     """
     ci = np.asarray(char_index)
     sel = ci >= 0
-    out = {"legible_char_fraction": None, "intensity_ratio_p05": None, "intensity_ratio_p95": None}
+    out = {"legible_char_fraction": None, "intensity_ratio_p05": None, "intensity_ratio_p95": None,
+           "legible_by_char": {}}
     if not sel.any():
         return out
     masks = np.array([c.mask for c in cells], dtype=np.int64)
@@ -260,4 +266,16 @@ def legibility_metrics(force_n, setpoint_n, char_index, cells, params: Legibilit
     n_all = np.bincount(idx, minlength=len(cells))
     frac = n_ok[shown] / n_all[shown]
     out["legible_char_fraction"] = float(np.mean(frac >= LEGIBLE_REQUIRED))
+    out["legible_by_char"] = {int(k): float(f) for k, f in zip(shown, frac)}
     return out
+
+
+def legibility_metrics(force_n, setpoint_n, char_index, cells) -> dict:
+    """The run metrics :data:`METRIC_NAMES`: legible fraction with both stimulator types.
+
+    Arguments as :func:`character_legibility`.
+    """
+    cc = character_legibility(force_n, setpoint_n, char_index, cells, DEFAULT)
+    cv = character_legibility(force_n, setpoint_n, char_index, cells, CONSTANT_VOLTAGE)
+    return {"legible_char_fraction": cc["legible_char_fraction"],
+            "legible_char_fraction_cv": cv["legible_char_fraction"]}

@@ -41,7 +41,7 @@ def list_passages() -> list[str]:
     Examples
     --------
     >>> list_passages()
-    ['default', 'garden', 'market']
+    ['default', 'garden', 'letter', 'market']
     """
     names = [
         entry.name[: -len(_SUFFIX)]

@@ -20,7 +20,8 @@ from .runner import TRACE_COLUMNS, RunResult
 _FMT = {"force_rmse_n": "{:.4f}", "force_mae_n": "{:.4f}", "in_band_fraction": "{:.3f}",
         "char_in_band_fraction": "{:.3f}", "peak_force_n": "{:.3f}", "onset_overshoot_fraction": "{:.3f}",
         "settling_time_s": "{:.3f}", "estimate_rmse_n": "{:.4f}", "energy_j": "{:.3f}",
-        "real_time_factor": "{:.0f}", "wpm": "{:.1f}"}
+        "real_time_factor": "{:.0f}", "wpm": "{:.1f}",
+        "legible_char_fraction": "{:.3f}", "legible_char_fraction_cv": "{:.3f}"}
 
 
 def summary_table(result: RunResult) -> str:

@@ -59,7 +59,7 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "duration_s": _num(0, 3600, lo_open=True),
         "reading": "table", "setpoint": "table", "device": "table", "rates": "table",
         "estimator": "table", "finger": "table", "controller": "table", "criteria": "table",
-        **{k: "delegate" for k in ("disturbances", "faults", "supervisor")},
+        **{k: "delegate" for k in ("disturbances", "faults", "supervisor", "mechanism")},
     },
     "reading": {
         "passage": _STR, "text": _STR, "file": _STR,
@@ -108,6 +108,7 @@ DELEGATES: dict[str, str] = {
     "disturbances": "ebraille_sim.disturbances",
     "faults": "ebraille_sim.faults",
     "supervisor": "controllers.supervisor",
+    "mechanism": "ebraille_sim.mechanism",
 }
 """Top-level scenario sections validated and applied by their own module.
 

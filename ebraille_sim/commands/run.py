@@ -15,6 +15,9 @@ def add_arguments(p):
     p.add_argument("--backend", default="lumped", help="plant model (default: lumped)")
     p.add_argument("--no-plot", action="store_true", help="skip force.png")
     p.add_argument("--json", action="store_true", help="print the metrics as JSON instead of a table")
+    p.add_argument("--animate", default=None, metavar="PATH",
+                   help="with --backend pymunk: write the mechanism as a GIF (PNG frames without Pillow), "
+                        "25 frames per simulated second")
 
 
 def main(args) -> int:
@@ -28,8 +31,18 @@ def main(args) -> int:
     spec = load_scenario(args.scenario)
     if args.seed is not None and args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
-    result = run_scenario(spec, controller=args.controller, seed=args.seed, duration_s=args.duration,
-                          backend=args.backend)
+    if args.animate is not None and args.backend != "pymunk":
+        raise ValueError(f"--animate draws the pymunk mechanism; use it with --backend pymunk, not {args.backend!r}")
+    if args.animate is not None:
+        from ..mechanism import recording, write_animation
+        with recording(every_s=1.0 / 25.0) as rec:
+            result = run_scenario(spec, controller=args.controller, seed=args.seed, duration_s=args.duration,
+                                  backend=args.backend)
+        anim = write_animation(rec.frames, args.animate, fps=25.0)
+        print(f"wrote {anim} ({len(rec.frames)} frames)")
+    else:
+        result = run_scenario(spec, controller=args.controller, seed=args.seed, duration_s=args.duration,
+                              backend=args.backend)
     out = pathlib.Path(args.out) if args.out else pathlib.Path("runs") / spec.name
     write_outputs(result, out, plot=not args.no_plot)
     if args.json:

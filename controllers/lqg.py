@@ -1,0 +1,185 @@
+"""LQG force controller: Kalman observer and LQ state feedback with integral action.
+
+The design model is the sampled-data plant of :func:`controllers.tuning.linearize` at
+the estimator rate (command held 10 ms, estimated force out) for the nominal device at
+``design_force_n``.  The controller is therefore a sampled-data controller at the
+estimator period ``sample_s`` (0.01 s): the measured signal only changes at that rate.
+It accumulates the ``dt_s`` it is given and acts when a full ``sample_s`` has elapsed,
+holding its command in between (its rate is a named, documented parameter, not a hidden
+gate: with ``sample_s`` equal to the control period it acts on every call).
+
+Per sample ``n`` (deviations from the design operating point ``(u0, y0)``)::
+
+    x^  <- x^ + L (y_n - C x^)                         (Kalman measurement update)
+    z   <- z + Ts (y_n - r_n)                          (integral of the error, only while
+                                                        the command is not saturated)
+    u_n = u0 + Nu dr - K (x^ - Nx dr) - kz z           (2-DOF: reference feedforward)
+    x^  <- A x^ + B (sat(u_n) - u0)                    (prediction with the applied command)
+
+with ``dr = r_n - y0`` and ``(Nx, Nu)`` the model's steady state for the output ``dr``.
+``K, kz`` come from ``control.dlqr`` on the model augmented with the integrator (weights
+``q_force`` on the force error, ``q_integral`` on its integral, ``r_command`` on the
+command); ``L`` from ``control.dlqe`` with process noise ``w_command_v`` on the command
+(friction and stiction act there) and measurement noise ``v_force_n`` (estimate noise).
+
+Examples
+--------
+>>> from controllers import make
+>>> c = make("lqg")
+>>> c.reset(force_est_n=1.0, setpoint_n=1.0, command_v=0.5)
+>>> abs(c.update(1.0, 1.0, 1e-3) - 0.5) < 0.6
+True
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import control
+import numpy as np
+
+from ebraille_sim.params import DeviceParams
+
+__all__ = ["LQGConfig", "LQG", "design", "make_lqg"]
+
+
+@dataclass(frozen=True)
+class LQGConfig:
+    """Weights and design point of :class:`LQG`."""
+    design_force_n: float = 1.0
+    q_force: float = 1.0
+    q_integral: float = 60.0
+    r_command: float = 0.08
+    w_command_v: float = 0.3
+    v_force_n: float = 0.01
+    sample_s: float = 0.01
+    u_min_v: float = -6.0
+    u_max_v: float = 6.0
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{f.name} must be a finite number, got {v!r}")
+            if f.name not in ("u_min_v", "u_max_v") and v <= 0:
+                raise ValueError(f"{f.name} must be > 0, got {v!r}")
+        if not self.u_min_v < self.u_max_v:
+            raise ValueError("u_min_v must be < u_max_v")
+
+
+def design(config: LQGConfig = LQGConfig(), device: DeviceParams = DeviceParams()) -> dict:
+    """Matrices of the LQG design (model, gains, operating point)."""
+    from .tuning import linearize
+    plant, op = linearize(device, config.design_force_n, return_point=True)
+    if not math.isclose(plant.dt, config.sample_s):
+        raise ValueError(f"sample_s ({config.sample_s:g}) must equal the estimator period ({plant.dt:g} s)")
+    A, B, C = plant.A, plant.B, plant.C
+    n = A.shape[0]
+    ts = plant.dt
+    Aa = np.block([[A, np.zeros((n, 1))], [ts * C, np.ones((1, 1))]])
+    Ba = np.vstack([B, np.zeros((1, 1))])
+    Q = np.zeros((n + 1, n + 1))
+    Q[:n, :n] = config.q_force * (C.T @ C)
+    Q[n, n] = config.q_integral
+    Ka, _, _ = control.dlqr(Aa, Ba, Q, [[config.r_command]])
+    L, _, _ = control.dlqe(A, B, C, [[config.w_command_v ** 2]], [[config.v_force_n ** 2]])
+    # steady state of the model for a unit output
+    M = np.block([[A - np.eye(n), B], [C, np.zeros((1, 1))]])
+    sol = np.linalg.solve(M, np.concatenate([np.zeros(n), [1.0]]))
+    return {"A": A, "B": B, "C": C, "K": Ka[:, :n], "kz": float(Ka[0, n]), "L": np.asarray(L),
+            "Nx": sol[:n], "Nu": float(sol[n]), "u0": op.command_v, "y0": op.estimate_n, "plant": plant,
+            "state_labels": plant.state_labels}
+
+
+class LQG:
+    """Sampled-data LQG controller (see the module docstring)."""
+
+    name = "lqg"
+
+    def __init__(self, config: LQGConfig = LQGConfig(), device: DeviceParams = DeviceParams()):
+        self.config = config
+        d = design(config, device)
+        self._d = d
+        self._A, self._B, self._C = d["A"], d["B"][:, 0], d["C"][0]
+        self._K, self._kz, self._L = d["K"][0], d["kz"], d["L"][:, 0]
+        self._Nx, self._Nu, self._u0, self._y0 = d["Nx"], d["Nu"], d["u0"], d["y0"]
+        self._clear()
+
+    def _clear(self):
+        self._x = np.zeros(self._A.shape[0])
+        self._z = 0.0
+        self._acc = math.inf
+        self._u = 0.0
+
+    def statespace(self) -> control.StateSpace:
+        """The linear controller at ``sample_s``: inputs (setpoint, estimate), output command deviation.
+
+        States: the observer's prediction and the integrator.  Used by
+        :func:`controllers.tuning.loop_models` for the margins and Ms.
+        """
+        A, B, C, L, K, kz = self._A, self._B[:, None], self._C[None, :], self._L[:, None], self._K[None, :], self._kz
+        ts, Nx, Nu = self.config.sample_s, self._Nx[:, None], self._Nu
+        n = A.shape[0]
+        # x^+|n = (I - L C) x^ + L y ; u = -K x^+|n - kz z+ + (Nu + K Nx) r ; z+ = z + ts (y - r)
+        # predicted x^(n+1) = A x^+|n + B u
+        Mx = np.eye(n) - L @ C
+        ux = -K @ Mx
+        uy = -K @ L - kz * ts
+        ur = Nu + K @ Nx + kz * ts
+        uz = -kz
+        Ac = np.block([[A @ Mx + B @ ux, B * uz], [np.zeros((1, n)), np.ones((1, 1))]])
+        Bc = np.block([[B * ur, A @ L + B * uy], [np.array([[-ts, ts]])]])
+        Cc = np.hstack([ux, [[uz]]])
+        Dc = np.array([[ur[0, 0], uy[0, 0]]])
+        return control.ss(Ac, Bc, Cc, Dc, dt=ts, inputs=["setpoint_n", "force_est_n"], outputs=["command_v"])
+
+    def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
+        for n, v in (("force_est_n", force_est_n), ("setpoint_n", setpoint_n), ("command_v", command_v)):
+            if not math.isfinite(v):
+                raise ValueError(f"{n} must be finite, got {v!r}")
+        self._clear()
+        c = self.config
+        u0 = min(max(command_v, c.u_min_v), c.u_max_v)
+        dr = setpoint_n - self._y0
+        self._x = self._Nx * (force_est_n - self._y0)
+        # integrator so that the first command equals u0
+        u_wo = self._u0 + self._Nu * dr - self._K @ (self._x - self._Nx * dr)
+        self._z = -(u0 - u_wo) / self._kz if self._kz != 0 else 0.0
+        self._u = u0
+
+    def update(self, force_est_n: float, setpoint_n: float, dt_s: float, motor_current_a=None) -> float:
+        if not 0.0 < dt_s < math.inf:
+            raise ValueError(f"dt_s must be finite and > 0, got {dt_s!r}")
+        if not math.isfinite(force_est_n):
+            raise ValueError(f"force_est_n must be finite, got {force_est_n!r}")
+        if not math.isfinite(setpoint_n):
+            raise ValueError(f"setpoint_n must be finite, got {setpoint_n!r}")
+        c = self.config
+        self._acc = self._acc + dt_s if math.isfinite(self._acc) else c.sample_s
+        if self._acc < c.sample_s - 1e-9:
+            return self._u
+        self._acc -= c.sample_s
+        y = force_est_n - self._y0
+        dr = setpoint_n - self._y0
+        self._x = self._x + self._L * (y - self._C @ self._x)
+        z_new = self._z + c.sample_s * (y - dr)
+        v = self._u0 + self._Nu * dr - self._K @ (self._x - self._Nx * dr) - self._kz * z_new
+        u = min(max(v, c.u_min_v), c.u_max_v)
+        if u == v:
+            self._z = z_new
+        else:
+            v = self._u0 + self._Nu * dr - self._K @ (self._x - self._Nx * dr) - self._kz * self._z
+            u = min(max(v, c.u_min_v), c.u_max_v)
+        self._x = self._A @ self._x + self._B * (u - self._u0)
+        self._u = float(u)
+        return self._u
+
+
+def make_lqg(**gains) -> LQG:
+    """Registry factory ``"lqg"``: :class:`LQGConfig` fields as keyword arguments."""
+    names = {f.name for f in dataclasses.fields(LQGConfig)}
+    for k in gains:
+        if k not in names:
+            raise ValueError(f"unknown gain key {k!r}; allowed keys: {', '.join(sorted(names))}")
+    return LQG(LQGConfig(**gains))

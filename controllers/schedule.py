@@ -1,0 +1,241 @@
+"""PID with gain scheduling on force, feedforward, and a static reference map.
+
+Three additions to the plain PID of :mod:`controllers.pid` (same discretisation: forward
+Euler integral with back-calculation anti-windup, backward-difference filtered
+derivative on the measurement, output saturation), each switchable:
+
+**Gain scheduling on force.**  The loop gain grows with the pulp's tangent stiffness,
+``K(F) = b + m F / c0`` at a relaxed equilibrium (:mod:`controllers.tuning`), which is why
+one set of gains that is fast at 0.6 N oscillates at 2 N.  The scheduled gains are::
+
+    kp(F) = kp_ref K(F_ref) / K(F),  and the same factor for ki and kd,
+
+with ``F`` the scheduling force clipped to [0.2, 3] N and ``b, m, c0`` the nominal
+reader's.  The scheduling force is the setpoint (``schedule_on = "setpoint"``, default):
+it is noise-free and known ahead from the reading schedule; ``schedule_on = "estimate"``
+uses the measured force.
+
+**Feedforward from the setpoint trajectory and the static command-force map.**  The
+setpoint comes from the reading schedule, so its rate ``r'`` (backward difference of the
+setpoints passed to :meth:`update`) is known without noise.  From the operating-point
+balance of :func:`controllers.tuning.operating_point`, holding ``r`` needs the command
+``R r / (kM g)`` (the middle of the friction band at rest), and moving the board so
+that the force rises at ``r'`` needs the back-EMF of the speed ``r'/K(r)`` plus the
+sliding friction in that direction::
+
+    u_ff = R / (kM g) [ (1 + s mu) r + s (Fc_pinion + Fc_guide) ] + kE g r' / K(r),
+
+with the nominal motor and drive train and ``s`` the direction of the last setpoint
+movement (``sign(r')`` whenever ``|r'| >= rate_deadband_n_per_s``; +1, pressing, after a
+reset).  ``s`` is latched on purpose: the drive sticks inside its friction band, and a
+feedforward that fell back to the middle of the band when a ramp ends would leave the
+integrator to wind the command back to the band's edge before the next correction in the
+same direction; the latched term holds the command on the edge (the operating point's
+command of :func:`controllers.tuning.operating_point`).  ``u_ff`` enters before the
+saturation and the integrator only corrects what it misses.
+
+**Static reference map.**  The controller regulates the *estimate*; the estimator has a
+static error that depends on the force (the paper's model reads +12 % at 0.5 N for the
+calibrated nominal FSR, :func:`ebraille_sim.estimator.static_error_table`).  With
+``reference_map`` the setpoint is replaced by the estimate the nominal sensor chain shows
+at the true force ``r`` (:func:`ebraille_sim.estimator.steady_estimate` on the loading
+branch after a 20 s hold, tabulated at construction), so that the true force, not the
+estimate, lands on the setpoint for the nominal FSR.
+
+Examples
+--------
+>>> from controllers import make
+>>> c = make("pid_scheduled")
+>>> c.gains_at(2.0)[0] < c.gains_at(0.6)[0]
+True
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ebraille_sim.params import DeviceParams
+
+__all__ = ["ScheduleConfig", "ScheduledPID", "make_scheduled", "make_feedforward", "stiffness_ratio"]
+
+F_MIN_N, F_MAX_N = 0.2, 3.0
+
+
+@dataclass(frozen=True)
+class ScheduleConfig:
+    """Gains at ``reference_force_n`` and the switches (see the module docstring).
+
+    The default gains are those found by ``ebraille-sim tune setpoint_steps --population 6
+    --evaluations 24`` (family ``pid_scheduled``, Ms <= 1.6 at every setpoint and device;
+    reproduced by ``docs/make_tuning_figures.py``), rounded.
+    """
+    kp_v_per_n: float = 0.50
+    ki_v_per_ns: float = 4.6
+    kd_vs_per_n: float = 0.0038
+    derivative_filter_s: float = 0.005
+    setpoint_weight_p: float = 1.0
+    reference_force_n: float = 1.0
+    schedule: bool = True
+    schedule_on: str = "setpoint"
+    feedforward: bool = False
+    reference_map: bool = False
+    rate_deadband_n_per_s: float = 0.05
+    u_min_v: float = -6.0
+    u_max_v: float = 6.0
+
+    def __post_init__(self):
+        if self.schedule_on not in ("estimate", "setpoint"):
+            raise ValueError(f"schedule_on must be 'estimate' or 'setpoint', got {self.schedule_on!r}")
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if f.name == "schedule_on":
+                continue
+            if f.type in ("bool", bool):
+                if not isinstance(v, bool):
+                    raise ValueError(f"{f.name} must be true or false, got {v!r}")
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise ValueError(f"{f.name} must be a finite number, got {v!r}")
+            if f.name not in ("u_min_v", "u_max_v") and v < 0:
+                raise ValueError(f"{f.name} must be >= 0, got {v!r}")
+        if not self.u_min_v < self.u_max_v:
+            raise ValueError("u_min_v must be < u_max_v")
+        if not F_MIN_N <= self.reference_force_n <= F_MAX_N:
+            raise ValueError(f"reference_force_n must be in [{F_MIN_N}, {F_MAX_N}] N, got {self.reference_force_n}")
+
+
+def stiffness_ratio(force_n: float, reference_force_n: float, device: DeviceParams = DeviceParams()) -> float:
+    """``K(F_ref) / K(F)`` with ``K(F) = b + m F / c0`` (relaxed tangent stiffness)."""
+    f = device.finger
+    k = lambda x: f.stiffness_b_n_per_m + f.exponent_m_per_m * x / f.relax_weight_inf  # noqa: E731
+    return k(reference_force_n) / k(min(max(force_n, F_MIN_N), F_MAX_N))
+
+
+class ScheduledPID:
+    """PID with optional gain schedule, feedforward and reference map (module docstring)."""
+
+    def __init__(self, config: ScheduleConfig = ScheduleConfig(), device: DeviceParams = DeviceParams(),
+                 name: str = "pid_scheduled"):
+        self.config = config
+        self.name = name
+        self._dev = device
+        m, d = device.motor, device.drivetrain
+        g = d.gear_ratio / d.pinion_radius_m
+        self._v_per_n = m.resistance_ohm / (m.torque_constant_nm_per_a * g)
+        self._mu = d.gear_loss_coefficient
+        self._fc = m.friction_torque_nm * g + d.guide_coulomb_n
+        self._ke_g = m.back_emf_v_s_per_rad * g
+        if config.reference_map:
+            from ebraille_sim.estimator import steady_estimate
+            from ebraille_sim.loop import load_estimator
+            from ebraille_sim.population import calibrate_device
+            dev = calibrate_device(device)
+            model = load_estimator(dev.estimator.model)
+            self._map_f = np.linspace(F_MIN_N, F_MAX_N, 57)
+            self._map_e = np.array([steady_estimate(model, f, dev.fsr, dev.circuit, 20.0) for f in self._map_f])
+        self._clear()
+
+    def _clear(self):
+        self._i = 0.0
+        self._d = 0.0
+        self._y_prev = None
+        self._e_prev = 0.0
+        self._res_prev = 0.0
+        self._r_prev = None
+        self._dir = 1.0
+
+    def gains_at(self, force_n: float) -> tuple[float, float, float]:
+        """``(kp, ki, kd)`` scheduled at ``force_n``."""
+        c = self.config
+        a = stiffness_ratio(force_n, c.reference_force_n, self._dev) if c.schedule else 1.0
+        return c.kp_v_per_n * a, c.ki_v_per_ns * a, c.kd_vs_per_n * a
+
+    def pid_config_at(self, force_n: float):
+        """The equivalent fixed :class:`~controllers.pid.PIDConfig` at ``force_n`` (for analysis)."""
+        from .pid import PIDConfig
+        kp, ki, kd = self.gains_at(force_n)
+        c = self.config
+        return PIDConfig(kp_v_per_n=kp, ki_v_per_ns=ki, kd_vs_per_n=kd, derivative_filter_s=c.derivative_filter_s,
+                         setpoint_weight_p=c.setpoint_weight_p, u_min_v=c.u_min_v, u_max_v=c.u_max_v)
+
+    def reference(self, setpoint_n: float) -> float:
+        """The estimate regulated for the true-force setpoint (identity without the map)."""
+        if not self.config.reference_map:
+            return setpoint_n
+        if setpoint_n <= F_MIN_N:
+            return float(setpoint_n * self._map_e[0] / self._map_f[0])
+        return float(np.interp(setpoint_n, self._map_f, self._map_e))
+
+    def feedforward_v(self, setpoint_n: float, rate_n_per_s: float, direction: float = 1.0) -> float:
+        """``u_ff`` of the module docstring; ``direction`` is the latched ``s`` (overridden by
+        the sign of a rate beyond the dead band)."""
+        if not self.config.feedforward:
+            return 0.0
+        r = max(setpoint_n, 0.0)
+        s = direction if abs(rate_n_per_s) < self.config.rate_deadband_n_per_s else math.copysign(1.0, rate_n_per_s)
+        f = self._dev.finger
+        k = f.stiffness_b_n_per_m + f.exponent_m_per_m * max(r, F_MIN_N) / f.relax_weight_inf
+        return self._v_per_n * ((1.0 + s * self._mu) * r + s * self._fc) + self._ke_g * rate_n_per_s / k
+
+    def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
+        for n, v in (("force_est_n", force_est_n), ("setpoint_n", setpoint_n), ("command_v", command_v)):
+            if not math.isfinite(v):
+                raise ValueError(f"{n} must be finite, got {v!r}")
+        self._clear()
+        c = self.config
+        kp, _, _ = self.gains_at(force_est_n if c.schedule_on == "estimate" else setpoint_n)
+        r = self.reference(setpoint_n)
+        u0 = min(max(command_v, c.u_min_v), c.u_max_v)
+        self._i = u0 - kp * (c.setpoint_weight_p * r - force_est_n) - self.feedforward_v(setpoint_n, 0.0)
+        self._y_prev = float(force_est_n)
+        self._r_prev = float(setpoint_n)
+
+    def update(self, force_est_n: float, setpoint_n: float, dt_s: float, motor_current_a=None) -> float:
+        if not 0.0 < dt_s < math.inf:
+            raise ValueError(f"dt_s must be finite and > 0, got {dt_s!r}")
+        if not math.isfinite(force_est_n):
+            raise ValueError(f"force_est_n must be finite, got {force_est_n!r}")
+        if not math.isfinite(setpoint_n):
+            raise ValueError(f"setpoint_n must be finite, got {setpoint_n!r}")
+        c = self.config
+        h, y = float(dt_s), float(force_est_n)
+        rate = 0.0 if self._r_prev is None else (setpoint_n - self._r_prev) / h
+        self._r_prev = float(setpoint_n)
+        if abs(rate) >= c.rate_deadband_n_per_s:
+            self._dir = math.copysign(1.0, rate)
+        kp, ki, kd = self.gains_at(y if c.schedule_on == "estimate" else setpoint_n)
+        r = self.reference(setpoint_n)
+        tt = math.sqrt(kd / ki) if (kd > 0 and ki > 0) else (kp / ki if ki > 0 else math.inf)
+        a = min(h / tt, 1.0) if tt > 0 else 1.0
+        i = self._i + ki * h * self._e_prev + (a * self._res_prev if ki > 0 else 0.0)
+        if self._y_prev is None:
+            self._y_prev = y
+        d = (c.derivative_filter_s * self._d - kd * (y - self._y_prev)) / (c.derivative_filter_s + h)
+        v = kp * (c.setpoint_weight_p * r - y) + i + d + self.feedforward_v(setpoint_n, rate, self._dir)
+        u = min(max(v, c.u_min_v), c.u_max_v)
+        self._i, self._d, self._y_prev = i, d, y
+        self._e_prev = r - y
+        self._res_prev = u - v
+        return u
+
+
+def _config(defaults: dict, gains: dict) -> ScheduleConfig:
+    names = {f.name for f in dataclasses.fields(ScheduleConfig)}
+    for k in gains:
+        if k not in names:
+            raise ValueError(f"unknown gain key {k!r}; allowed keys: {', '.join(sorted(names))}")
+    return ScheduleConfig(**{**defaults, **gains})
+
+
+def make_scheduled(**gains) -> ScheduledPID:
+    """Registry factory ``"pid_scheduled"``: gain schedule on force."""
+    return ScheduledPID(_config({"schedule": True}, gains), name="pid_scheduled")
+
+
+def make_feedforward(**gains) -> ScheduledPID:
+    """Registry factory ``"pid_feedforward"``: schedule + feedforward + static reference map."""
+    return ScheduledPID(_config({"schedule": True, "feedforward": True, "reference_map": True}, gains),
+                        name="pid_feedforward")

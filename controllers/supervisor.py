@@ -1,0 +1,358 @@
+"""Safety supervisor: wraps any controller and keeps the finger safe when something fails.
+
+The supervisor sees what the controller sees (estimated force, setpoint, time step,
+motor current) and the command the inner controller proposes.  In normal running it
+only shapes that command; when it detects a fault it takes over.
+
+Shaping (every period, in this order)
+-------------------------------------
+1. **Watchdog.**  A non-finite command is replaced by 0 V (the drive is not
+   back-drivable, so the board holds still).  When the inner controller returns a finite
+   command again it is reset bumplessly from 0 V and takes over at the next period; a
+   non-finite stretch longer than ``watchdog_timeout_s`` is a latched fault.
+2. **Force cap.**  The setpoint passed to the inner controller is clipped to
+   ``force_cap_n - cap_margin_n``.  Inside the soft zone ``[cap - margin, cap]`` a pushing
+   command is scaled by ``1 - v`` with ``v`` the degree of violation in [0, 1]; at or
+   above the cap the command is ``-retract_v`` until the estimate is back below it.
+3. **Rate limit.**  The command moves at most ``slew_v_per_s`` per second.
+
+Faults (latched: safe retract, then hold)
+-----------------------------------------
+================== =====================================================================
+cause              detection
+================== =====================================================================
+fsr_out_of_range   estimate above ``out_of_range_n`` (a short reads the supply: ~15 N),
+                   or not finite
+fsr_stuck          in contact, over ``stuck_window_s`` the estimate stays above
+                   ``contact_lost_n`` and moves less than ``stuck_tolerance_n`` while the
+                   command moves more than ``stuck_command_v`` and the motor turns (its
+                   back-EMF ``u - R i`` exceeds ``stuck_emf_v``; a jammed motor draws
+                   ``u / R`` and is left to the I^2 t protection)
+motor_overcurrent  I^2 t: ``theta = int (i^2 - I_rated^2) dt`` (kept >= 0) exceeds
+                   ``(I_stall^2 - I_rated^2) overload_time_s``
+contact_lost       after contact (estimate > ``contact_on_n``), a loss of contact
+                   (estimate < ``contact_lost_n``, or a drop by more than ``drop_n`` within
+                   ``drop_window_s`` while pushing) starts a *freeze*: back off at
+                   ``-retract_v`` for ``backoff_s`` then hold 0 V; contact regained
+                   (estimate > ``contact_on_n`` and not falling) resumes the inner
+                   controller from 0 V; no contact within ``contact_loss_timeout_s`` is
+                   latched (an open FSR reads 0 V, i.e. no force, for good)
+controller_nonfinite non-finite commands for longer than ``watchdog_timeout_s``
+================== =====================================================================
+
+*Safe retract*: ``-retract_v`` until the board has moved back for at least
+``retract_moving_s`` (motion is read from the current: a moving motor draws much less than
+``retract_v / R``) and then stalls on the end stop, or for ``max_retract_s`` at most; then
+0 V (hold).  A jammed motor keeps retracting at ``retract_v / R`` (below the rated current)
+until it frees itself.  Without a current measurement the retract lasts ``retract_s``.
+
+Scenario section ``[supervisor]`` (:func:`validate_section`, :func:`wrap_controller`):
+every :class:`SupervisorConfig` field may be given; ``enabled = false`` disables it.
+
+Examples
+--------
+>>> from controllers import make
+>>> sup = Supervisor(make("pid"))
+>>> sup.reset(force_est_n=0.0, setpoint_n=1.0)
+>>> sup.update(0.0, 5.0, 1e-3)      # setpoint clipped to 2.7 N; slew limit 0.6 V per ms
+0.6
+>>> sup.update(float("nan"), 1.0, 1e-3)   # a NaN estimate: latched fault, retract begins
+0.0
+>>> sup.fault, sup.mode
+('fsr_out_of_range', 'retract')
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import deque
+from dataclasses import dataclass
+
+__all__ = ["SupervisorConfig", "Supervisor", "validate_section", "wrap_controller"]
+
+_SRC_MOTOR = "[R] Faulhaber 0816 006 SR datasheet"
+
+
+@dataclass(frozen=True)
+class SupervisorConfig:
+    """Limits and detector settings of :class:`Supervisor` (SI units in the names)."""
+    force_cap_n: float = 3.0
+    """Cap on the estimated force (upper end of the 0.2-3 N reading range, seed paper)."""
+    cap_margin_n: float = 0.3
+    slew_v_per_s: float = 600.0
+    """Full scale (6 V) in 10 ms, one estimator period."""
+    rated_current_a: float = 0.19
+    """Continuous current [R] Faulhaber 0816 006 SR."""
+    stall_current_a: float = 6.0 / 21.2
+    """Stall current at the 6 V supply, [D] U / R with R = 21.2 ohm."""
+    overload_time_s: float = 0.5
+    """Time allowed at the stall current before the I^2 t trip [E]."""
+    motor_resistance_ohm: float = 21.2
+    retract_v: float = 2.0
+    retract_s: float = 0.6
+    retract_moving_s: float = 0.05
+    max_retract_s: float = 10.0
+    out_of_range_n: float = 4.0
+    stuck_window_s: float = 0.1
+    stuck_tolerance_n: float = 2e-3
+    stuck_command_v: float = 0.25
+    stuck_emf_v: float = 0.05
+    contact_on_n: float = 0.2
+    contact_lost_n: float = 0.1
+    """Above the 0.063 N that the paper's estimator reads with no load (and with an open FSR)."""
+    drop_n: float = 0.3
+    drop_window_s: float = 0.03
+    backoff_s: float = 0.05
+    contact_loss_timeout_s: float = 0.6
+    watchdog_timeout_s: float = 0.5
+    enabled: bool = True
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if f.name == "enabled":
+                if not isinstance(v, bool):
+                    raise ValueError(f"supervisor enabled must be true or false, got {v!r}")
+                continue
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                raise ValueError(f"supervisor {f.name} must be a positive finite number, got {v!r}")
+            object.__setattr__(self, f.name, float(v))
+        if self.cap_margin_n >= self.force_cap_n:
+            raise ValueError(f"supervisor cap_margin_n ({self.cap_margin_n:g}) must be below force_cap_n "
+                             f"({self.force_cap_n:g})")
+        if self.out_of_range_n <= self.force_cap_n:
+            raise ValueError(f"supervisor out_of_range_n ({self.out_of_range_n:g}) must exceed force_cap_n "
+                             f"({self.force_cap_n:g})")
+        if self.contact_lost_n >= self.contact_on_n:
+            raise ValueError("supervisor contact_lost_n must be below contact_on_n")
+        if self.stall_current_a <= self.rated_current_a:
+            raise ValueError("supervisor stall_current_a must exceed rated_current_a")
+
+    @property
+    def i2t_limit_a2s(self) -> float:
+        """Trip level of the I^2 t integral, A^2 s."""
+        return (self.stall_current_a ** 2 - self.rated_current_a ** 2) * self.overload_time_s
+
+
+class _Window:
+    """Running min and max over the last ``span_s`` seconds (monotonic deques)."""
+
+    def __init__(self, span_s: float):
+        self.span = span_s
+        self.lo: deque = deque()
+        self.hi: deque = deque()
+        self.t0 = None
+
+    def push(self, t: float, x: float) -> None:
+        if self.t0 is None:
+            self.t0 = t
+        while self.lo and self.lo[-1][1] >= x:
+            self.lo.pop()
+        self.lo.append((t, x))
+        while self.hi and self.hi[-1][1] <= x:
+            self.hi.pop()
+        self.hi.append((t, x))
+        cut = t - self.span
+        while self.lo[0][0] < cut:
+            self.lo.popleft()
+        while self.hi[0][0] < cut:
+            self.hi.popleft()
+
+    def full(self, t: float) -> bool:
+        return self.t0 is not None and t - self.t0 >= self.span
+
+    def range(self) -> float:
+        return self.hi[0][1] - self.lo[0][1]
+
+
+class Supervisor:
+    """Safety wrapper around a :class:`~controllers.base.Controller` (see the module docstring).
+
+    Attributes
+    ----------
+    mode : str
+        ``"run"``, ``"freeze"`` (contact lost), ``"retract"`` or ``"hold"``.
+    fault : str or None
+        Cause of the latched fault, if any.
+    events : list of (float, str)
+        Time since reset (s) and a short description of every mode change.
+    """
+
+    def __init__(self, inner, config: SupervisorConfig = SupervisorConfig()):
+        if not isinstance(config, SupervisorConfig):
+            raise TypeError(f"config must be a SupervisorConfig, got {type(config).__name__}")
+        self.inner = inner
+        self.config = config
+        self.name = f"supervised({getattr(inner, 'name', type(inner).__name__)})"
+        self._clear()
+
+    def _clear(self):
+        c = self.config
+        self.mode = "run"
+        self.fault = None
+        self.events = []
+        self.t = 0.0
+        self.u_prev = 0.0
+        self.theta = 0.0
+        self.nan_s = 0.0
+        self.in_contact = False
+        self.freeze_t0 = 0.0
+        self.retract_t0 = 0.0
+        self.moving_s = 0.0
+        self.est_win = _Window(c.stuck_window_s)
+        self.cmd_win = _Window(c.stuck_window_s)
+        self.drop_hist: deque = deque()
+        self.last_f = 0.0
+
+    def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
+        """Clear faults and detectors and reset the inner controller bumplessly."""
+        self._clear()
+        self.u_prev = float(command_v) if math.isfinite(command_v) else 0.0
+        self.inner.reset(force_est_n=force_est_n, setpoint_n=min(setpoint_n, self._sp_max), command_v=command_v)
+
+    @property
+    def _sp_max(self) -> float:
+        return self.config.force_cap_n - self.config.cap_margin_n
+
+    def _event(self, text: str) -> None:
+        self.events.append((round(self.t, 6), text))
+
+    def _trip(self, cause: str) -> None:
+        if self.fault is None:
+            self.fault = cause
+            self.mode = "retract"
+            self.retract_t0 = self.t
+            self.moving_s = 0.0
+            self._event(f"fault {cause}: retract")
+
+    def _slew(self, u: float, dt: float) -> float:
+        du = self.config.slew_v_per_s * dt
+        return min(max(u, self.u_prev - du), self.u_prev + du)
+
+    def update(self, force_est_n: float, setpoint_n: float, dt_s: float, motor_current_a: float | None = None) -> float:
+        """One period: run the detectors, then pass, shape or replace the inner command."""
+        c = self.config
+        if not 0.0 < dt_s < math.inf:
+            raise ValueError(f"dt_s must be finite and > 0, got {dt_s!r}")
+        if not c.enabled:
+            return self.inner.update(force_est_n, setpoint_n, dt_s, motor_current_a)
+        self.t += dt_s
+        t = self.t
+        f = float(force_est_n)
+        cur = None if motor_current_a is None or not math.isfinite(motor_current_a) else float(motor_current_a)
+        if cur is not None:
+            self.theta = max(0.0, self.theta + (cur * cur - c.rated_current_a ** 2) * dt_s)
+        if self.mode in ("retract", "hold"):
+            return self._safe(cur, dt_s)
+        # detectors that latch
+        if not math.isfinite(f) or f > c.out_of_range_n:
+            self._trip("fsr_out_of_range")
+            return self._safe(cur, dt_s)
+        if self.theta > c.i2t_limit_a2s:
+            self._trip("motor_overcurrent")
+            return self._safe(cur, dt_s)
+        self.est_win.push(t, f)
+        self.cmd_win.push(t, self.u_prev)
+        moving = cur is None or abs(self.u_prev - c.motor_resistance_ohm * cur) > c.stuck_emf_v
+        if (moving and self.in_contact and self.est_win.full(t) and self.est_win.lo[0][1] > c.contact_lost_n
+                and self.est_win.range() < c.stuck_tolerance_n and self.cmd_win.range() > c.stuck_command_v):
+            self._trip("fsr_stuck")
+            return self._safe(cur, dt_s)
+        # contact tracking
+        self.drop_hist.append((t, f))
+        while self.drop_hist[0][0] < t - c.drop_window_s:
+            self.drop_hist.popleft()
+        f_then = self.drop_hist[0][1]
+        if self.mode == "run":
+            if f > c.contact_on_n:
+                self.in_contact = True
+            lost = f < c.contact_lost_n or (f_then - f > c.drop_n and self.u_prev > 0.0)
+            if self.in_contact and lost:
+                self.mode = "freeze"
+                self.freeze_t0 = t
+                self._event("contact lost: freeze")
+        if self.mode == "freeze":
+            if f > c.contact_on_n and f >= f_then and t - self.freeze_t0 > c.backoff_s:
+                self.mode = "run"
+                self._event("contact regained: resume")
+                self.inner.reset(force_est_n=f, setpoint_n=min(setpoint_n, self._sp_max), command_v=0.0)
+                self.u_prev = 0.0
+                return 0.0
+            if t - self.freeze_t0 > c.contact_loss_timeout_s:
+                self._trip("contact_lost")
+                return self._safe(cur, dt_s)
+            u = -c.retract_v if t - self.freeze_t0 <= c.backoff_s else 0.0
+            self.u_prev = u
+            return u
+        # run: the inner controller, watchdog, cap, slew
+        sp = min(float(setpoint_n), self._sp_max)
+        u = self.inner.update(f, sp, dt_s, motor_current_a)
+        if not math.isfinite(u):
+            if self.nan_s == 0.0:
+                self._event("non-finite command: hold")
+            self.nan_s += dt_s
+            if self.nan_s > c.watchdog_timeout_s:
+                self._trip("controller_nonfinite")
+                return self._safe(cur, dt_s)
+            u = self._slew(0.0, dt_s)
+            self.u_prev = u
+            return u
+        if self.nan_s > 0.0:
+            self.nan_s = 0.0
+            self._event("finite command again: resume")
+            self.inner.reset(force_est_n=f, setpoint_n=sp, command_v=self.u_prev)
+            u = self.u_prev
+        lo = c.force_cap_n - c.cap_margin_n
+        if f >= c.force_cap_n:
+            u = -c.retract_v
+        elif f > lo and u > 0.0:
+            u *= 1.0 - (f - lo) / c.cap_margin_n
+        u = self._slew(u, dt_s)
+        self.u_prev = u
+        return u
+
+    def _safe(self, cur, dt_s) -> float:
+        """Command of the latched safe state: retract, then hold at 0 V."""
+        c = self.config
+        if self.mode == "retract":
+            el = self.t - self.retract_t0
+            if cur is None:
+                done = el >= c.retract_s
+            else:
+                stalled = abs(cur) > 0.6 * c.retract_v / c.motor_resistance_ohm
+                if not stalled and el > 0.01:
+                    self.moving_s += dt_s
+                done = (self.moving_s >= c.retract_moving_s and stalled) or el >= c.max_retract_s
+            if done:
+                self.mode = "hold"
+                self._event("retracted: hold")
+            else:
+                u = self._slew(-c.retract_v, dt_s)
+                self.u_prev = u
+                return u
+        u = self._slew(0.0, dt_s)
+        self.u_prev = u
+        return u
+
+
+def validate_section(source: str, value) -> dict:
+    """Check a ``[supervisor]`` table; raise ``ScenarioError`` naming a bad key or value."""
+    from ebraille_sim.scenario import ScenarioError
+    if not isinstance(value, dict):
+        raise ScenarioError(f"{source}: [supervisor] must be a table")
+    names = [f.name for f in dataclasses.fields(SupervisorConfig)]
+    for key in value:
+        if key not in names:
+            raise ScenarioError(f"{source}: unknown key {key!r} in [supervisor]; allowed: {', '.join(sorted(names))}")
+    try:
+        SupervisorConfig(**value)
+    except ValueError as exc:
+        msg = str(exc)
+        msg = msg[len("supervisor "):] if msg.startswith("supervisor ") else msg
+        raise ScenarioError(f"{source}: [supervisor] {msg}") from None
+    return dict(value)
+
+
+def wrap_controller(section: dict, controller, dt_s: float):
+    """Wrap ``controller`` in a :class:`Supervisor` configured by the ``[supervisor]`` section."""
+    return Supervisor(controller, SupervisorConfig(**section))

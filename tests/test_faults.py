@@ -1,0 +1,130 @@
+"""Injected faults (ebraille_sim.faults) under the safety supervisor: one scenario per fault.
+
+Each scenario reads at 1 N and injects its fault at 4 s.  Contract, checked on the trace:
+the true force never exceeds 3.5 N; "retract" faults end with the board on its retracted
+stop, no force and 0 V (hold); "recover" faults end back in the force band.
+"""
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from ebraille_sim.faults import build_inputs, validate_section
+from ebraille_sim.runner import run_scenario
+from ebraille_sim.scenario import ScenarioError, load_scenario
+
+MAX_SAFE_N = 3.5
+
+
+def _run(name, **kw):
+    return run_scenario(load_scenario(name), **kw)
+
+
+def _retracted(tr):
+    return tr["board_pos_m"][-1] < 0.1e-3 and tr["force_true_n"][-1] == 0.0 and tr["command_v"][-1] == 0.0
+
+
+def _recovered(tr, t_from):
+    sel = tr["t_s"] >= t_from
+    f, sp = tr["force_true_n"][sel], tr["setpoint_n"][sel]
+    return float(np.mean(np.abs(f - sp) <= 0.1 * sp))
+
+
+def test_fsr_open_retracts():
+    tr = _run("fault_fsr_open").trace
+    assert tr["force_true_n"].max() <= MAX_SAFE_N
+    assert _retracted(tr)
+    # the retract starts after the freeze times out (0.6 s), not before
+    assert np.all(tr["board_pos_m"][(tr["t_s"] > 4.1) & (tr["t_s"] < 4.55)] > 2e-3)
+
+
+def test_fsr_open_without_supervisor_presses_too_hard():
+    spec = load_scenario("fault_fsr_open")
+    spec = dataclasses.replace(spec, sections={k: v for k, v in spec.sections.items() if k != "supervisor"})
+    tr = run_scenario(spec).trace
+    assert tr["force_true_n"].max() > MAX_SAFE_N
+
+
+def test_fsr_short_retracts():
+    tr = _run("fault_fsr_short").trace
+    assert tr["force_true_n"].max() <= MAX_SAFE_N
+    assert _retracted(tr)
+
+
+def test_fsr_stuck_retracts():
+    tr = _run("fault_fsr_stuck").trace
+    assert tr["force_true_n"].max() <= MAX_SAFE_N
+    assert _retracted(tr)
+
+
+def test_motor_stall_trips_i2t_and_retracts_after_the_jam():
+    tr = _run("fault_motor_stall").trace
+    t = tr["t_s"]
+    assert tr["force_true_n"].max() <= MAX_SAFE_N
+    jam = (t >= 4.0) & (t < 6.0)
+    assert np.ptp(tr["board_pos_m"][jam]) < 1e-6           # the jam holds the board
+    assert np.abs(tr["motor_current_a"][jam]).max() > 0.19   # the controller saturates into it
+    assert _retracted(tr)
+
+
+def test_controller_nan_is_caught_and_reading_recovers():
+    res = _run("fault_controller_nan")
+    tr = res.trace
+    assert np.all(np.isfinite(tr["command_v"]))
+    win = (tr["t_s"] > 4.005) & (tr["t_s"] <= 4.2)
+    assert np.all(tr["command_v"][win] == 0.0)               # held at 0 V once slewed down
+    assert tr["force_true_n"].max() <= MAX_SAFE_N
+    assert _recovered(tr, 5.0) >= 0.95
+
+
+def test_controller_nan_without_supervisor_is_an_error():
+    spec = load_scenario("fault_controller_nan")
+    spec = dataclasses.replace(spec, sections={k: v for k, v in spec.sections.items() if k != "supervisor"})
+    with pytest.raises(ValueError, match="command_v must be finite"):
+        run_scenario(spec)
+
+
+def test_finger_withdrawn_and_put_back_recovers():
+    tr = _run("fault_finger_withdrawn").trace
+    assert tr["force_true_n"].max() <= MAX_SAFE_N
+    away = (tr["t_s"] > 4.1) & (tr["t_s"] < 4.4)
+    assert tr["force_true_n"][away].max() == 0.0
+    assert _recovered(tr, 5.5) >= 0.95
+
+
+def test_fault_runs_are_deterministic():
+    a = _run("fault_finger_withdrawn", duration_s=5.0).trace
+    b = _run("fault_finger_withdrawn", duration_s=5.0).trace
+    assert np.array_equal(a["force_true_n"], b["force_true_n"]) and np.array_equal(a["command_v"], b["command_v"])
+
+
+def test_build_inputs_windows_and_withdraw_profile():
+    sec = validate_section("x.toml", [
+        {"kind": "fsr_short", "start_s": 1.0, "duration_s": 0.5},
+        {"kind": "fsr_value", "start_s": 2.0, "duration_s": 0.5, "value_v": 1.25},
+        {"kind": "finger_withdrawn", "start_s": 3.0, "duration_s": 1.0, "distance_m": 0.002, "move_s": 0.1},
+        {"kind": "motor_stall", "start_s": 0.5}])
+    t = np.arange(0.0, 5.0, 0.01)
+    inp = build_inputs(sec, t, None, None)
+    fault = inp["fsr_fault"][1]
+    assert fault[np.searchsorted(t, 1.2)] == 2 and fault[np.searchsorted(t, 2.2)] == 4 and fault[0] == 0
+    assert inp["fsr_fault_value"][1][np.searchsorted(t, 2.2)] == 1.25
+    mode, x = inp["finger_pos_m"]
+    assert mode == "add" and x.max() == pytest.approx(0.002) and x[-1] == 0.0 and x[np.searchsorted(t, 3.05)] < 0.002
+    assert inp["motor_jammed"][1][-1] == 1 and inp["motor_jammed"][1][0] == 0
+
+
+@pytest.mark.parametrize("value,msg", [
+    ({"kind": "fsr_open"}, "not an array|array of tables"),
+    ([{"kind": "fsr_melt", "start_s": 1.0}], "kind = 'fsr_melt' is not one of"),
+    ([{"kind": "fsr_open", "start_s": 1.0, "volts": 2}], "unknown key 'volts'"),
+    ([{"kind": "fsr_open"}], "needs start_s"),
+    ([{"kind": "fsr_open", "start_s": -1.0}], "start_s = -1 is out of range"),
+    ([{"kind": "fsr_value", "start_s": 1.0}], "needs value_v"),
+    ([{"kind": "finger_withdrawn", "start_s": 1.0, "duration_s": 0.05}], "twice move_s"),
+    ([{"kind": "fsr_open", "start_s": math.nan}], "finite number"),
+])
+def test_validate_section_errors(value, msg):
+    with pytest.raises(ScenarioError, match=msg):
+        validate_section("x.toml", value)

@@ -1,0 +1,136 @@
+"""Regression suite: tolerances, tampered baselines and degraded gains fail; the pytest helper."""
+import json
+import pathlib
+import shutil
+
+import pytest
+
+from ebraille_sim import regress as R
+from ebraille_sim.cli import main as cli
+from ebraille_sim.scenario import list_scenarios
+from ebraille_sim.testing import assert_scenario, check_metrics, check_scenario_metrics
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+SCEN = ROOT / "scenarios"
+
+
+@pytest.fixture
+def suite(tmp_path):
+    """A private scenario folder with two short scenarios and fresh baselines."""
+    d = tmp_path / "scenarios"
+    d.mkdir()
+    shutil.copy(SCEN / "contact_onset.toml", d)
+    text = (SCEN / "refresh_60wpm.toml").read_text().replace("duration_s = 20.0", "duration_s = 4.0")
+    (d / "refresh_60wpm.toml").write_text(text)
+    assert cli(["regress", "--scenarios", str(d), "--update"]) == 0
+    return d
+
+
+def test_tolerance_table_covers_every_metric_but_the_wall_clock():
+    from ebraille_sim.legibility import METRIC_NAMES as LEG
+    from ebraille_sim.metrics import METRIC_NAMES
+    for m in list(METRIC_NAMES) + list(LEG):
+        assert (m in R.TOLERANCES) != (m in R.EXCLUDED), m
+    assert "real_time_factor" in R.EXCLUDED
+
+
+def test_compare_metrics_statuses():
+    base = {"force_rmse_n": 0.020, "contact_loss_count": 0, "settling_time_s": None, "old_metric": 1.0,
+            "real_time_factor": 100.0}
+    cur = {"force_rmse_n": 0.0225, "contact_loss_count": 1, "settling_time_s": None, "new_metric": 2.0,
+           "real_time_factor": 300.0}
+    rows = {r.metric: r for r in R.compare_metrics(cur, base)}
+    assert rows["force_rmse_n"].status == "ok"                       # 2.5 mN < 2 mN + 5 % of 20 mN
+    assert rows["contact_loss_count"].status == "moved" and rows["contact_loss_count"].note == "worse"
+    assert rows["settling_time_s"].status == "ok"
+    assert rows["old_metric"].status == "removed"
+    assert rows["new_metric"].status == "new"
+    assert "real_time_factor" not in rows
+    worse = R.compare_metrics({"force_rmse_n": 0.03}, {"force_rmse_n": 0.02})[0]
+    better = R.compare_metrics({"force_rmse_n": 0.01}, {"force_rmse_n": 0.02})[0]
+    assert (worse.status, worse.note) == ("moved", "worse") and (better.status, better.note) == ("moved", "better")
+    one_none = R.compare_metrics({"settling_time_s": None}, {"settling_time_s": 0.3})[0]
+    assert one_none.status == "moved"
+
+
+def test_unchanged_tree_matches_its_baselines(suite, capsys):
+    assert cli(["regress", "--scenarios", str(suite)]) == 0
+    assert "2 of 2 scenario(s) match their baselines" in capsys.readouterr().out
+    doc = json.loads((suite / "baselines" / "contact_onset.json").read_text())
+    assert doc["scenario"] == "contact_onset" and "real_time_factor" not in doc["metrics"]
+
+
+def test_tampered_baseline_fails_with_a_table(suite, capsys):
+    path = suite / "baselines" / "contact_onset.json"
+    doc = json.loads(path.read_text())
+    doc["metrics"]["peak_force_n"] += 0.1
+    path.write_text(json.dumps(doc))
+    assert cli(["regress", "--scenarios", str(suite)]) == 1
+    out = capsys.readouterr().out
+    line = next(ln for ln in out.splitlines() if ln.startswith("contact_onset") and "peak_force_n" in ln)
+    assert "moved" in line and "-0.1" in line
+    assert "1 of 2 scenario(s) match their baselines; 1 failed" in out
+    assert cli(["regress", "--scenarios", str(suite), "--only", "refresh_60wpm"]) == 0
+
+
+def test_degraded_gains_fail(suite, tmp_path, capsys):
+    weak = tmp_path / "weak.toml"
+    weak.write_text('controller = "pid"\n[gains]\nkp_v_per_n = 0.4\nki_v_per_ns = 1.0\n')
+    assert cli(["regress", "--scenarios", str(suite), "--controller", str(weak)]) == 1
+    out = capsys.readouterr().out
+    assert "settling_time_s" in out and "worse" in out
+
+
+def test_criteria_fail_whatever_the_baseline(suite, capsys):
+    p = suite / "contact_onset.toml"
+    p.write_text(p.read_text().replace("onset_overshoot_max = 0.15", "onset_overshoot_max = 0.05"))
+    assert cli(["regress", "--scenarios", str(suite), "--only", "contact_onset", "--update"]) == 1
+    assert "criterion ([criteria] onset_overshoot_max)" in capsys.readouterr().out
+
+
+def test_missing_baseline_and_bad_names(suite, capsys):
+    (suite / "baselines" / "refresh_60wpm.json").unlink()
+    assert cli(["regress", "--scenarios", str(suite)]) == 1
+    assert "no baseline refresh_60wpm.json; run with --update" in capsys.readouterr().out
+    assert cli(["regress", "--scenarios", str(suite), "--only", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: unknown scenario 'nope'") and err.count("\n") == 1
+    (suite / "baselines" / "contact_onset.json").write_text("{not json")
+    assert cli(["regress", "--scenarios", str(suite), "--only", "contact_onset"]) == 1
+    assert "is not valid JSON" in capsys.readouterr().out
+
+
+def test_every_shipped_scenario_has_a_baseline():
+    names = [p.stem for p in SCEN.glob("*.toml")]
+    missing = [n for n in names if not (SCEN / "baselines" / f"{n}.json").exists()]
+    assert not missing, f"run 'ebraille-sim regress --update --only {' '.join(missing)}'"
+
+
+@pytest.mark.slow
+def test_full_regression_suite_passes(capsys):
+    assert cli(["regress", "--scenarios", str(SCEN), "-j", "2"]) == 0, capsys.readouterr().out
+
+
+# ---------------------------------------------------------------- pytest helper
+
+def test_assert_scenario_one_liner():
+    m = assert_scenario("contact_onset", in_band_fraction__ge=0.9, peak_force_n__le=3.0,
+                        settling_time_s__between=(0.0, 2.0))
+    assert m["characters"] > 0
+    with pytest.raises(AssertionError, match=r"scenario contact_onset: peak_force_n = 1\.7\d*, expected <= 1"):
+        assert_scenario("contact_onset", peak_force_n__le=1.0)
+    fails = check_scenario_metrics("contact_onset", contact_loss_count__eq=0, onset_overshoot_fraction__lt=0.01)
+    assert len(fails) == 1 and fails[0].startswith("onset_overshoot_fraction = 0.13")
+
+
+def test_helper_rejects_unknown_checks():
+    with pytest.raises(ValueError, match="unknown metric 'in_band'"):
+        check_metrics({"in_band_fraction": 1.0}, in_band__ge=0.9)
+    with pytest.raises(ValueError, match="unknown operator 'atleast'"):
+        check_metrics({"in_band_fraction": 1.0}, in_band_fraction__atleast=0.9)
+    assert check_metrics({"settling_time_s": None}, settling_time_s__le=1.0) == \
+        ["settling_time_s = None, expected <= 1"]
+
+
+def test_shipped_names_are_listed():
+    assert "refresh_120wpm" in list_scenarios() and "tremor_90wpm" in list_scenarios()

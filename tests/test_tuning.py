@@ -1,0 +1,147 @@
+"""Linearisation, sampled-data loop analysis and robust tuning (controllers.tuning, controllers.robust)."""
+import dataclasses
+import math
+
+import control
+import numpy as np
+import pytest
+
+from controllers.pid import DEFAULT_PID, PID, PIDConfig
+from controllers.tuning import (CONTINUOUS_STATES, analyse_loop, contact_plant_system, continuous_model,
+                                linearize, operating_point, pid_statespace, simc_pid)
+from ebraille_sim.loop import Plant
+from ebraille_sim.params import DeviceParams
+
+COULOMB = dataclasses.replace(
+    DeviceParams(), motor=dataclasses.replace(DeviceParams().motor, breakaway_ratio=1.0),
+    drivetrain=dataclasses.replace(DeviceParams().drivetrain, guide_breakaway_ratio=1.0))
+"""The default device with the static-friction excess removed (pure Coulomb friction)."""
+
+
+@pytest.mark.parametrize("force", [0.5, 1.0, 2.0])
+def test_operating_point_closed_form_and_solver_agree(force):
+    dev = DeviceParams()
+    op = operating_point(dev, force)
+    f = dev.finger
+    assert op.elastic_force_n == pytest.approx(force / f.relax_weight_inf)
+    assert op.compression_m == pytest.approx(f.compression_at_m(force, relaxed=True))
+    assert op.tangent_stiffness_n_per_m == pytest.approx(f.stiffness_b_n_per_m + f.exponent_m_per_m * force / 0.4)
+    # pressing edge of the friction band: (1 + mu) Fm + Fc at the motor
+    g = dev.drivetrain.gear_ratio / dev.drivetrain.pinion_radius_m
+    mu = dev.drivetrain.gear_loss_coefficient
+    fm = force + dev.drivetrain.moving_mass_kg * dev.gravity_m_per_s2 + dev.drivetrain.guide_coulomb_n
+    v0 = dev.motor.resistance_ohm * ((1 + mu) * fm + dev.motor.friction_torque_nm * g) / (
+        dev.motor.torque_constant_nm_per_a * g)
+    assert op.command_v == pytest.approx(v0, rel=1e-12)
+    assert op.solver_residual < 1e-6
+
+
+def test_find_operating_point_from_out_of_contact_guess_is_not_trusted():
+    # the pitfall: from a guess outside contact the solver sees no force gradient
+    sys = contact_plant_system()
+    op = control.find_operating_point(sys, np.zeros(9), [0.5], y0=[1.0, 0.0], iy=[0], return_result=True)
+    ok = op.result.success and abs(float(np.asarray(op.outputs)[0]) - 1.0) < 1e-6
+    assert not ok
+
+
+def test_analytic_jacobian_matches_control_linearize():
+    dev = DeviceParams()
+    op = operating_point(dev, 1.0)
+    x_eq = np.array([op.current_a, op.pinion_pos_m, 0.0, op.board_pos_m, 0.0, 0.0, 0.0, 0.0, op.force_n])
+    num = control.linearize(contact_plant_system(dev), x_eq, [op.command_v], eps=1e-9)
+    ana = continuous_model(dev, op)
+    assert ana.state_labels == CONTINUOUS_STATES
+    scale = np.maximum(np.abs(ana.A), 1e-9 * np.max(np.abs(ana.A)))
+    assert np.max(np.abs(num.A - ana.A) / scale) < 1e-3
+    assert np.allclose(num.B, ana.B, rtol=1e-6)
+    assert np.allclose(num.C[0], ana.C[0], rtol=1e-4, atol=1e-6)
+
+
+def test_sampled_model_shape_and_gain():
+    P, op = linearize(force_n=1.0, return_point=True)
+    assert P.dt == pytest.approx(0.01)
+    assert P.state_labels[:9] == CONTINUOUS_STATES
+    assert P.state_labels[-1] == "est_raw_prev_n"
+    assert np.all(np.abs(P.poles()) < 1.0)
+    # DC gain: stall force per volt through the gear loss, times the sensor chain's slope
+    dev = DeviceParams()
+    g = dev.drivetrain.gear_ratio / dev.drivetrain.pinion_radius_m
+    stall = dev.motor.torque_constant_nm_per_a * g / (dev.motor.resistance_ohm * (1 + dev.drivetrain.gear_loss_coefficient))
+    assert float(np.real(control.dcgain(P))) == pytest.approx(stall * 0.955, rel=0.03)
+
+
+@pytest.mark.parametrize("force,dv", [(1.0, 0.1), (2.0, 0.1)])
+def test_small_step_matches_nonlinear_plant(force, dv):
+    """Tolerance: estimated force within 10 % and true force within 5 % of the final change.
+
+    The plant is the default device with pure Coulomb friction (the linearisation rule);
+    it is brought to its pressing equilibrium with the operating command held 15 s.
+    """
+    P, op = linearize(COULOMB, force, return_point=True)
+    pl = Plant.from_devices([COULOMB], seeds=[1])
+    pl.set_finger(1e-3)
+    for _ in range(15000):
+        pl.advance(op.command_v)
+    assert pl.contact_force_n[0] == pytest.approx(force, rel=1e-3)
+    f0, e0 = pl.contact_force_n[0], pl.force_est_n[0]
+    n = 1500
+    fe, ft = np.zeros(n), np.zeros(n)
+    for k in range(n):
+        pl.advance(op.command_v + dv)
+        fe[k], ft[k] = pl.force_est_n[0], pl.contact_force_n[0]
+    t = np.arange(n // 10) * 0.01
+    y_lin = np.asarray(control.forced_response(P, T=t, U=np.full(len(t), dv)).outputs).ravel()
+    y_nl = np.concatenate([[0.0], fe[9::10][:len(t) - 1] - e0])
+    assert np.max(np.abs(y_nl - y_lin)) <= 0.10 * abs(y_lin[-1])
+    ct = continuous_model(COULOMB, op)
+    tt = np.arange(n + 1) * 1e-3
+    y_ct = np.asarray(control.forced_response(ct[0, 0], T=tt, U=np.full(n + 1, dv)).outputs).ravel()[1:]
+    assert np.max(np.abs(ft - f0 - y_ct)) <= 0.05 * abs(y_ct[-1])
+
+
+def test_pid_statespace_reproduces_pid_recursions():
+    cfg = PIDConfig(kp_v_per_n=1.3, ki_v_per_ns=7.0, kd_vs_per_n=0.01, derivative_filter_s=0.004,
+                    setpoint_weight_p=0.7, setpoint_weight_d=0.2, u_min_v=-1e6, u_max_v=1e6,
+                    tracking_time_s=math.inf)
+    pid = PID(cfg)
+    pid.reset(force_est_n=0.0, setpoint_n=0.0, command_v=0.0)
+    rng = np.random.default_rng(0)
+    r, y = rng.normal(size=200), rng.normal(size=200)
+    u_pid = [pid.update(float(y[k]), float(r[k]), 1e-3) for k in range(200)]
+    ss = pid_statespace(cfg, 1e-3)
+    u_ss = np.asarray(control.forced_response(ss, U=np.vstack([r, y])).outputs).ravel()
+    assert np.allclose(u_pid, u_ss, atol=1e-12)
+
+
+def test_default_pid_loses_stability_at_2n_in_the_sliding_model():
+    a06 = analyse_loop(DEFAULT_PID, force_n=0.6)
+    a2 = analyse_loop(DEFAULT_PID, force_n=2.0)
+    assert a06.stable and 1.0 < a06.ms < 3.0
+    assert not a2.stable and a2.ms == math.inf
+
+
+def test_simc_gains_are_robust_on_the_nominal_plant():
+    cfg = simc_pid(force_n=1.0)
+    assert cfg.kp_v_per_n > 0 and cfg.ki_v_per_ns > 0
+    a = analyse_loop(dataclasses.replace(cfg, kp_v_per_n=0.5 * cfg.kp_v_per_n, ki_v_per_ns=0.5 * cfg.ki_v_per_ns),
+                     force_n=1.0)
+    assert a.stable and a.step["SettlingTime"] < 2.0
+
+
+def test_bad_arguments():
+    with pytest.raises(ValueError, match="force_n"):
+        linearize(force_n=-1.0)
+    with pytest.raises(ValueError, match="friction"):
+        linearize(force_n=1.0, friction="sticky")
+
+
+@pytest.mark.slow
+def test_robust_tuning_beats_default_on_worst_case_in_band():
+    from controllers.robust import robust_tune, tuning_population
+    from ebraille_sim.scenario import load_scenario
+    spec = load_scenario("setpoint_steps")
+    pop = tuning_population(4, seed=0)
+    res = robust_tune(spec, pop, family="pid_scheduled", max_evaluations=12)
+    rep = res.report()
+    assert res.ms_max <= 1.6
+    assert rep["tuned"]["metrics"]["in_band_fraction"]["worst"] > rep["default"]["metrics"]["in_band_fraction"]["worst"]
