@@ -53,13 +53,28 @@ def _num(lo=None, hi=None, lo_open=False, hi_open=False, integer=False):
 _STR = {"type": "str"}
 _BOOL = {"type": "bool"}
 
+DELEGATES: dict[str, str] = {
+    "disturbances": "ebraille_sim.disturbances",
+    "faults": "ebraille_sim.faults",
+    "supervisor": "controllers.supervisor",
+    "mechanism": "ebraille_sim.mechanism",
+}
+"""Top-level scenario sections validated and applied by their own module.
+
+Each module provides ``validate_section(source, value) -> object`` (raising
+:class:`ScenarioError` with a one-line message) and is used by the runner through
+``build_inputs(section, t_s, rng, device) -> dict`` (per-period plant inputs) and/or
+``wrap_controller(section, controller, dt_s) -> Controller``.  Wrappers are applied in
+the order of this dict, so an injected controller fault (``faults``) always sits inside
+the safety supervisor (``supervisor``)."""
+
 SCHEMA: dict[str, dict[str, Any]] = {
     "": {
         "name": _STR, "description": _STR, "seed": _num(0, 2**52, integer=True),
         "duration_s": _num(0, 3600, lo_open=True),
         "reading": "table", "setpoint": "table", "device": "table", "rates": "table",
         "estimator": "table", "finger": "table", "controller": "table", "criteria": "table",
-        **{k: "delegate" for k in ("disturbances", "faults", "supervisor", "mechanism")},
+        **{k: "delegate" for k in DELEGATES},
     },
     "reading": {
         "passage": _STR, "text": _STR, "file": _STR,
@@ -103,19 +118,6 @@ SCHEMA: dict[str, dict[str, Any]] = {
         "onset_overshoot_max": _num(0, 10), "in_band_min": _num(0, 1), "peak_force_max_n": _num(0, 100),
     },
 }
-
-DELEGATES: dict[str, str] = {
-    "disturbances": "ebraille_sim.disturbances",
-    "faults": "ebraille_sim.faults",
-    "supervisor": "controllers.supervisor",
-    "mechanism": "ebraille_sim.mechanism",
-}
-"""Top-level scenario sections validated and applied by their own module.
-
-Each module provides ``validate_section(source, value) -> object`` (raising
-:class:`ScenarioError` with a one-line message) and is used by the runner through
-``build_inputs(section, t_s, rng, device) -> dict`` (per-period plant inputs) and/or
-``wrap_controller(section, controller, dt_s) -> Controller``."""
 
 _OVERRIDE_TARGET = {
     "motor_overrides": _params.MotorParams, "drivetrain_overrides": _params.DriveTrainParams,
