@@ -8,5 +8,8 @@ from __future__ import annotations
 __version__ = "0.1.0"
 
 from .runner import RunResult, run_scenario  # noqa: E402
+from .env import register_envs as _register_envs  # noqa: E402
+
+_register_envs()
 
 __all__ = ["run_scenario", "RunResult", "__version__"]

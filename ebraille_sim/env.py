@@ -149,9 +149,27 @@ import numpy as np
 from gymnasium import spaces
 from numba import njit
 
-__all__ = ["ContactForceEnv", "EnvConfig", "Episode", "draw_episode", "observe", "reward_of",
-           "register_envs", "ENV_ID", "OPTION_KEYS", "OBS_LOW", "OBS_HIGH", "N_OBS",
-           "MAX_EPISODE_STEPS"]
+from .layout import S as _S
+from .layout import U as _U
+from .loop import loop_step
+
+__all__ = [
+    "ENV_ID",
+    "MAX_EPISODE_STEPS",
+    "N_OBS",
+    "OBS_HIGH",
+    "OBS_LOW",
+    "OPTION_KEYS",
+    "ContactForceEnv",
+    "EnvConfig",
+    "Episode",
+    "draw_episode",
+    "observe",
+    "post_step",
+    "register_envs",
+    "reward_of",
+    "validate_options",
+]
 
 ENV_ID = "EBraille/ContactForce-v0"
 
@@ -166,6 +184,9 @@ ERROR_SCALE_N = 1.0
 
 OPTION_KEYS = ("device", "passage", "first_character", "wpm", "setpoint_n", "setpoint_steps", "gap_m",
                "drift_amplitude_m", "tremor_amplitude_m", "supply_fraction", "disturbances")
+
+_I_FC, _I_FEST, _I_CUR = _S["contact_force_n"], _S["force_est_n"], _S["current_a"]
+_U_CMD, _U_FINGER = _U["command_v"], _U["finger_pos_m"]
 
 # env-state slots (per env, float64): carried between steps by observe()
 Z_EST_PREV, Z_RATE, Z_INT, Z_PREV_ACTION, Z_STEP = range(5)
@@ -287,7 +308,8 @@ def _check_pair(name, value, lo, hi):
 
 @dataclass(frozen=True)
 class EnvConfig:
-    """Constructor arguments of :class:`ContactForceEnv`, validated (see its table)."""
+    """Constructor arguments of :class:`ContactForceEnv`, validated (see its table), and the
+    time constants of the observation's rate filter and error integral."""
     control_rate_hz: float = 200.0
     safe_force_n: float = 3.0
     warn_force_n: float = 2.0
@@ -402,6 +424,8 @@ class Episode:
     supply_v : float
         Driver supply for the episode (after sag), V.
     gap_m : float
+    char_index : ndarray of int, shape (n_steps + 1,)
+        Cell on the display at ``t_k`` (-1 before the first and after the last).
     """
     device: object
     sensor_seed: float
@@ -414,6 +438,7 @@ class Episode:
     finger_m: np.ndarray
     supply_v: float
     gap_m: float
+    char_index: np.ndarray
 
 
 @functools.lru_cache(maxsize=16)
@@ -511,6 +536,9 @@ def draw_episode(ss: np.random.SeedSequence, cfg: EnvConfig, options: dict | Non
     starts = [0] + [k + 1 for k, c in enumerate(cells[:-1]) if c.kind == "space"]
     first = starts[int(rng.integers(len(starts)))]
     first = opt.get("first_character", first)
+    if first >= len(cells):
+        raise ValueError(f"option 'first_character' = {first} is out of range [0, {len(cells) - 1}] "
+                         f"for passage {passage!r}")
     wpm = float(rng.uniform(*cfg.wpm_range))
     wpm = opt.get("wpm", wpm)
     n_cells = cfg.episode_characters
@@ -550,11 +578,17 @@ def draw_episode(ss: np.random.SeedSequence, cfg: EnvConfig, options: dict | Non
     finger = gap + a_d * (np.sin(2 * np.pi * f_d * t + p_d) - np.sin(p_d)) + a_t * np.sin(2 * np.pi * f_t * t + p_t)
     return Episode(device=dev, sensor_seed=sensor_seed, schedule=schedule, passage=passage, first_character=first,
                    wpm=float(wpm), n_steps=n_steps, setpoint_n=sp, finger_m=finger,
-                   supply_v=dev.driver_supply_v * supply_fraction, gap_m=gap)
+                   supply_v=dev.driver_supply_v * supply_fraction, gap_m=gap,
+                   char_index=schedule.index_at(t))
 
 
-def check_action(action, n: int | None = None) -> np.ndarray:
-    """Action(s) as float64, shape (1,) or (n, 1); non-finite or misshapen input raises."""
+def check_action(action, n: int | None = None):
+    """A float (``n`` None, shape (1,) action) or an (n, 1) float64 array; non-finite or misshapen
+    input raises ``ValueError``."""
+    if n is None and type(action) is np.ndarray and action.shape == (1,):
+        x = float(action[0])
+        if math.isfinite(x):
+            return x
     a = np.asarray(action, dtype=np.float64)
     want = (1,) if n is None else (n, 1)
     if a.shape != want:
@@ -567,7 +601,7 @@ def check_action(action, n: int | None = None) -> np.ndarray:
     if not np.all(np.isfinite(a)):
         raise ValueError(f"action must be finite, got {action!r}" if n is None else
                          f"action must be finite; non-finite in envs {np.nonzero(~np.isfinite(a[:, 0]))[0].tolist()}")
-    return a
+    return float(a[0]) if n is None else a
 
 
 # ---------------------------------------------------------------------------------------------
@@ -590,8 +624,8 @@ class ContactForceEnv(gym.Env):
         self.render_mode = render_mode
         self.config = EnvConfig(control_rate_hz=control_rate_hz, safe_force_n=safe_force_n,
                                 warn_force_n=warn_force_n, episode_characters=episode_characters,
-                                reading_start_s=reading_start_s, wpm_range=tuple(wpm_range),
-                                setpoint_range_n=tuple(setpoint_range_n), randomize_device=randomize_device,
+                                reading_start_s=reading_start_s, wpm_range=wpm_range,
+                                setpoint_range_n=setpoint_range_n, randomize_device=randomize_device,
                                 disturbances=disturbances, effort_weight=effort_weight,
                                 violation_weight=violation_weight, backend=backend, base_device=base_device)
         from .loop import PLANT_BACKENDS
@@ -628,44 +662,45 @@ class ContactForceEnv(gym.Env):
                                 models=[estimator_model(dev.estimator.model)])
         self.plant.set_input("driver_supply_v", ep.supply_v)
         self.plant.set_finger(ep.finger_m[0])
+        self._st = self.plant.state[0]
+        self._inp = self.plant.inputs[0]
         self.episode = ep
         self._c = self.config.config_vector(dev.driver_supply_v)
         self._k = 0
-        fe = float(self.plant.force_est_n[0])
+        fe = float(self._st[_I_FEST])
         reset_features(self._z, fe)
-        write_observation(self._z, self._c, fe, ep.setpoint_n[0], float(self.plant.motor_current_a[0]), self._obs)
+        write_observation(self._z, self._c, fe, ep.setpoint_n[0], float(self._st[_I_CUR]), self._obs)
         if self.render_mode is not None:
-            self._history = {"t_s": [0.0], "force_true_n": [float(self.plant.contact_force_n[0])],
+            self._history = {"t_s": [0.0], "force_true_n": [float(self._st[_I_FC])],
                              "force_est_n": [fe], "setpoint_n": [float(ep.setpoint_n[0])]}
         return self._obs.copy(), self._info(0.0)
 
     def _info(self, violation: float) -> dict:
-        pl = self.plant
+        st = self._st
+        k = self._k
         ep = self.episode
-        t = self._k * self.config.dt_s
-        return {"force_true_n": float(pl.contact_force_n[0]), "force_est_n": float(pl.force_est_n[0]),
-                "setpoint_n": float(ep.setpoint_n[min(self._k, ep.n_steps)]),
-                "command_v": float(self._z[Z_PREV_ACTION] * self._c[C_CMD_SCALE]),
-                "violation": float(violation), "time_s": t, "char_index": int(ep.schedule.index_at(t))}
+        return {"force_true_n": float(st[_I_FC]), "force_est_n": float(st[_I_FEST]),
+                "setpoint_n": float(ep.setpoint_n[k]), "command_v": float(self._inp[_U_CMD]),
+                "violation": violation, "time_s": k * self.config.dt_s, "char_index": int(ep.char_index[k])}
 
     def step(self, action):
         if self.episode is None:
             raise RuntimeError("call reset() before step()")
-        a = check_action(action)[0]
-        a = -1.0 if a < -1.0 else (1.0 if a > 1.0 else float(a))
+        a = check_action(action)
+        a = -1.0 if a < -1.0 else (1.0 if a > 1.0 else a)
         ep = self.episode
         k = self._k
         if k >= ep.n_steps:
             raise RuntimeError("the episode has ended; call reset()")
-        pl = self.plant
-        pl.set_finger(ep.finger_m[k])
-        pl.advance(a * self._c[C_CMD_SCALE])
+        st = self._st
+        self._inp[_U_FINGER] = ep.finger_m[k]
+        loop_step(self.plant, a * self._c[C_CMD_SCALE])
         self._k = k + 1
-        ft = float(pl.contact_force_n[0])
-        r, v, term = post_step(self._z, self._c, float(pl.force_est_n[0]), ft, float(pl.motor_current_a[0]),
-                               ep.setpoint_n[k], ep.setpoint_n[k + 1], a, self._obs)
+        ft = float(st[_I_FC])
         if not math.isfinite(ft):
             raise FloatingPointError("the simulation diverged (non-finite contact force)")
+        r, v, term = post_step(self._z, self._c, float(st[_I_FEST]), ft, float(st[_I_CUR]),
+                               ep.setpoint_n[k], ep.setpoint_n[k + 1], a, self._obs)
         info = self._info(v)
         if self._history is not None:
             h = self._history

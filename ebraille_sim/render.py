@@ -128,12 +128,16 @@ class Renderer:
                 ax.add_patch(Circle((0.0 + 1.2 * r, xb + 0.12), 0.22,
                                     color="#ffd030" if raised else "#203050"))
         comp = max(0.0, xb - xf)
-        finger_bottom = xf + comp
-        ax.add_patch(Ellipse((1.3, finger_bottom + 3.2), 7.0, 6.4, color="#e8b8a0"))
-        if comp > 0:
-            ax.add_patch(Rectangle((-1.5, xb), 5.6, 0.06, color="#c06040"))
-        ax.annotate("", xy=(5.2, xb + 0.1), xytext=(5.2, xb + 0.1 + 0.8 * snap.force_true_n),
-                    arrowprops={"arrowstyle": "->", "color": "#c03030"})
+        pulp = Ellipse((1.3, xf + 3.2), 7.0, 6.4, color="#e8b8a0")            # undeformed pulp: bottom at xf
+        ax.add_patch(pulp)
+        if comp > 0:                                                          # flattened by the board
+            keep = Rectangle((-6.5, xb), 13.0, top + 10.0, transform=ax.transData)
+            pulp.set_clip_path(keep)
+            ax.add_patch(Rectangle((-1.5, xb), 5.6, 0.08, color="#c06040"))
+        arrow = 1.5 * snap.force_true_n
+        ax.annotate("", xy=(5.4, xb), xytext=(5.4, xb + max(arrow, 1e-3)),
+                    arrowprops={"arrowstyle": "->", "color": "#c03030", "lw": 1.5})
+        ax.text(5.0, xb + arrow + 0.3, "F", color="#c03030", fontsize=7)
         ax.text(-5.8, top + 4.8, f"board {xb:5.2f}\npulp  {xf:5.2f}\ncompression {comp:4.2f}", fontsize=6,
                 family="monospace", va="top")
         ax.set_xlim(-6.5, 6.5)

@@ -1,0 +1,138 @@
+"""Speed of the Gymnasium env against Gymnasium's Pendulum-v1, measured in the same run.
+
+* single env: steps per second of ``gym.make("EBraille/ContactForce-v0")`` and of
+  ``gym.make("Pendulum-v1")`` (both with Gymnasium's default wrappers, and both unwrapped),
+  random actions from a seeded generator, resets included; the ratio ours / Pendulum.
+* vector env: env-steps per second of the native vector env at ``--envs`` (1024) sub-envs,
+  every env-step a full control period with its physics substeps (50 at the default
+  200 Hz, 10 at the device's own 1 kHz), actions from a proportional-integral law computed
+  from the observations in numpy; with the default episodes' autoresets and without any
+  (measurement stopped before the first episode ends), rows on threads (numba prange) and
+  on one thread; each also as a ratio to Pendulum-v1's single-env steps/s and to the
+  1,000,000 env-steps/s target.
+
+Run:  python benchmarks/bench_env.py [--seconds 3] [--envs 1024] [--json FILE]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import ebraille_sim  # noqa: F401  (registers the id)
+from ebraille_sim.env import ENV_ID
+from ebraille_sim.vector_env import ContactForceVectorEnv
+
+TARGET_VECTOR = 1_000_000
+
+
+def single_steps_per_s(env, seconds: float, seed: int = 0) -> float:
+    """Steps per second of one env over about ``seconds`` (resets included)."""
+    rng = np.random.default_rng(seed)
+    lo, hi = env.action_space.low, env.action_space.high
+    actions = rng.uniform(lo, hi, size=(4096,) + env.action_space.shape).astype(np.float32)
+    env.reset(seed=seed)
+    for k in range(200):                                  # warm-up (compilation, caches)
+        _, _, term, trunc, _ = env.step(actions[k])
+        if term or trunc:
+            env.reset()
+    n = 0
+    t0 = time.perf_counter()
+    while True:
+        for _ in range(500):
+            _, _, term, trunc, _ = env.step(actions[n & 4095])
+            n += 1
+            if term or trunc:
+                env.reset()
+        dt = time.perf_counter() - t0
+        if dt >= seconds:
+            return n / dt
+
+
+def _law(obs):
+    """Proportional-integral law on the observation (error and error integral): holds contact
+    without crossing the safe force, so episodes end by truncation as in training."""
+    return np.clip(0.05 + 0.6 * obs[:, 2:3] + 0.2 * obs[:, 4:5] - 0.05 * obs[:, 3:4], -1.0, 1.0).astype(np.float32)
+
+
+def vector_steps_per_s(seconds: float, n_envs: int, resets: bool, **kwargs) -> tuple[float, int, int]:
+    """(env-steps/s, episode ends, substeps per env-step) of the native vector env.
+
+    With ``resets`` the measurement runs for 1.2 times the longest episode (every sub-env
+    passes through at least one autoreset, at the rate training sees); without, every episode
+    is read at 60 wpm (the longest) and the measurement stops before the first one is
+    truncated (or after ``seconds``).
+    """
+    venv = ContactForceVectorEnv(num_envs=n_envs, **kwargs)
+    obs, _ = venv.reset(seed=0, options=None if resets else {"wpm": 60.0})
+    limit = int(1.2 * venv.config.max_episode_steps()) if resets else int(venv.episodes[0].n_steps) - 30
+    for _ in range(20):
+        obs, *_ = venv.step(_law(obs))
+    ends = 0
+    steps = 0
+    t0 = time.perf_counter()
+    while True:
+        for _ in range(10):
+            obs, _, term, trunc, _ = venv.step(_law(obs))
+            ends += int(np.count_nonzero(term | trunc))
+            steps += 1
+        dt = time.perf_counter() - t0
+        if steps >= limit or (not resets and dt >= seconds):
+            venv.close()
+            return steps * n_envs / dt, ends, venv.config.substeps
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=3.0, help="measuring time per figure, s")
+    ap.add_argument("--envs", type=int, default=1024, help="sub-envs of the vector env")
+    ap.add_argument("--json", default=None, help="also write the results to this file")
+    a = ap.parse_args(argv)
+
+    res = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                       "processor": platform.machine(), "load_average_1min_at_start": os.getloadavg()[0]},
+           "seconds_per_figure": a.seconds}
+    pend = single_steps_per_s(gym.make("Pendulum-v1"), a.seconds)
+    pend_raw = single_steps_per_s(gym.make("Pendulum-v1").unwrapped, a.seconds)
+    ours = single_steps_per_s(gym.make(ENV_ID), a.seconds)
+    ours_raw = single_steps_per_s(gym.make(ENV_ID).unwrapped, a.seconds)
+    res["single"] = {"pendulum_steps_per_s": pend, "ours_steps_per_s": ours, "ratio": ours / pend,
+                     "pendulum_unwrapped_steps_per_s": pend_raw, "ours_unwrapped_steps_per_s": ours_raw,
+                     "ratio_unwrapped": ours_raw / pend_raw}
+    print(f"single env (gym.make, wrappers): ours {ours:10.0f} steps/s   Pendulum-v1 {pend:10.0f} steps/s   "
+          f"ratio {ours / pend:5.2f}")
+    print(f"single env (unwrapped):          ours {ours_raw:10.0f} steps/s   Pendulum-v1 {pend_raw:10.0f} steps/s   "
+          f"ratio {ours_raw / pend_raw:5.2f}")
+
+    rows = []
+    for label, resets, kwargs in [("200 Hz, autoresets, threads", True, {}),
+                                  ("200 Hz, no resets, threads", False, {}),
+                                  ("200 Hz, no resets, 1 thread", False, {"parallel": False}),
+                                  ("1 kHz, autoresets, threads", True, {"control_rate_hz": 1000.0}),
+                                  ("1 kHz, no resets, threads", False, {"control_rate_hz": 1000.0}),
+                                  ("1 kHz, no resets, 1 thread", False, {"control_rate_hz": 1000.0,
+                                                                         "parallel": False})]:
+        rate, ends, sub = vector_steps_per_s(a.seconds, a.envs, resets, **kwargs)
+        rows.append({"case": label, "envs": a.envs, "substeps_per_step": sub, "env_steps_per_s": rate,
+                     "physics_substeps_per_s": rate * sub, "episode_ends": ends,
+                     "ratio_to_pendulum_single": rate / pend, "ratio_to_target": rate / TARGET_VECTOR})
+        print(f"vector env {a.envs} envs, {label:28s} ({sub:2d} substeps/step): {rate:11.0f} env-steps/s  "
+              f"{rate * sub / 1e6:6.1f} M substeps/s  episode ends {ends:5d}  x{rate / pend:6.1f} Pendulum  "
+              f"{rate / TARGET_VECTOR:5.2f} of 1M target")
+    res["vector"] = rows
+    res["machine"]["load_average_1min_at_end"] = os.getloadavg()[0]
+    print(f"load average (1 min) at start {res['machine']['load_average_1min_at_start']:.2f}, "
+          f"at end {res['machine']['load_average_1min_at_end']:.2f} on {os.cpu_count()} cores")
+    if a.json:
+        with open(a.json, "w", encoding="utf-8") as fh:
+            json.dump(res, fh, indent=2)
+    return res
+
+
+if __name__ == "__main__":
+    main()

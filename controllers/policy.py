@@ -1,0 +1,209 @@
+"""A trained reinforcement-learning policy used as a contact-force controller.
+
+``controllers.make("policy:PATH")`` (and ``ebraille-sim run SCENARIO --controller
+policy:PATH``) loads a policy saved by ``ebraille-sim train``: ``PATH`` is the output
+folder or its ``policy.zip``; ``policy.json`` beside it records the algorithm and the
+environment settings the observation depends on.
+
+The controller sees only what the microcontroller sees (estimated force, setpoint, time
+step, motor current) and builds the policy's observation with the same compiled function
+as the environment (:func:`ebraille_sim.env.observe`), so a policy behaves in a scenario as
+it did in training.
+
+Sampling: the policy acts at the rate it was trained at (``control_rate_hz`` in
+``policy.json``, 200 Hz by default).  When the scenario's loop runs faster, the controller
+counts the ``dt_s`` it is given and evaluates the policy once a training period of
+simulated time has passed, holding the command in between (a zero-order hold, as a
+200 Hz task on a 1 kHz microcontroller would).  No wall clock is read.  The first
+``update`` after ``reset`` always evaluates.
+
+Unlike :class:`controllers.PID`, the start is not bumpless: the first command is whatever
+the policy outputs for the first observation (``command_v`` given to ``reset`` is
+shown to the policy as its previous action).
+
+Stable-Baselines3 (and PyTorch) are imported only when a policy is loaded; install them
+with ``pip install 'ebraille-sim[rl]'``.
+
+Examples
+--------
+>>> import controllers
+>>> ctrl = controllers.make("policy:runs/train-ppo")        # doctest: +SKIP
+>>> ctrl.reset(force_est_n=0.0, setpoint_n=1.0)             # doctest: +SKIP
+>>> volts = ctrl.update(0.0, 1.0, 1e-3, motor_current_a=0.0)  # doctest: +SKIP
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+
+import numpy as np
+
+from .base import check_dt, check_finite
+
+__all__ = ["ALGORITHMS", "POLICY_FORMAT", "PolicyController", "load_policy"]
+
+POLICY_FORMAT = "ebraille-sim-policy/1"
+ALGORITHMS = ("ppo", "sac")
+_META_KEYS = ("format", "algo", "env_id", "env", "training")
+_ENV_KEYS = ("control_rate_hz", "safe_force_n", "warn_force_n", "rate_filter_s", "integral_time_s",
+             "effort_weight", "violation_weight", "driver_supply_v")
+_PERIOD_TOL = 1e-6
+
+
+def _paths(path: str) -> tuple[str, str]:
+    path = os.fspath(path)
+    if os.path.isdir(path):
+        return os.path.join(path, "policy.zip"), os.path.join(path, "policy.json")
+    if path.endswith(".zip"):
+        return path, path[:-4] + ".json"
+    raise ValueError(f"policy path {path!r} must be a folder written by 'ebraille-sim train' or its .zip file")
+
+
+def read_metadata(json_path: str) -> dict:
+    """Read and validate ``policy.json``; one-line errors for anything unexpected."""
+    if not os.path.isfile(json_path):
+        raise FileNotFoundError(f"policy metadata not found: {json_path}")
+    with open(json_path, encoding="utf-8") as fh:
+        try:
+            meta = json.load(fh)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"invalid JSON in {json_path}: {exc}") from None
+    if not isinstance(meta, dict):
+        raise ValueError(f"{json_path} must hold a JSON object")
+    for key in meta:
+        if key not in _META_KEYS:
+            raise ValueError(f"unknown key {key!r} in {json_path}; allowed: {', '.join(_META_KEYS)}")
+    if meta.get("format") != POLICY_FORMAT:
+        raise ValueError(f"{json_path}: format must be {POLICY_FORMAT!r}, got {meta.get('format')!r}")
+    if meta.get("algo") not in ALGORITHMS:
+        raise ValueError(f"{json_path}: algo must be one of {', '.join(ALGORITHMS)}, got {meta.get('algo')!r}")
+    env = meta.get("env")
+    if not isinstance(env, dict):
+        raise ValueError(f"{json_path}: 'env' must be an object")
+    for key in env:
+        if key not in _ENV_KEYS:
+            raise ValueError(f"unknown key {key!r} in {json_path} 'env'; allowed: {', '.join(_ENV_KEYS)}")
+    for key in _ENV_KEYS:
+        v = env.get(key)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise ValueError(f"{json_path}: env.{key} must be a finite number, got {v!r}")
+    return meta
+
+
+def _load_sb3(algo: str, zip_path: str):
+    try:
+        import stable_baselines3 as sb3
+    except ModuleNotFoundError:
+        raise ValueError("a policy controller needs stable-baselines3; install it with "
+                         "pip install 'ebraille-sim[rl]'") from None
+    if not os.path.isfile(zip_path):
+        raise FileNotFoundError(f"policy file not found: {zip_path}")
+    cls = {"ppo": sb3.PPO, "sac": sb3.SAC}[algo]
+    return cls.load(zip_path, device="cpu")
+
+
+class PolicyController:
+    """Contact-force controller that runs a saved SB3 policy (see the module docstring).
+
+    Parameters
+    ----------
+    model : object
+        Anything with ``predict(obs, deterministic=True) -> (action, state)`` taking an
+        observation of shape (7,) float32 and returning an action of shape (1,).
+    env_settings : dict
+        The ``env`` entry of ``policy.json`` (:meth:`ebraille_sim.env.EnvConfig.policy_metadata`).
+    deterministic : bool
+        Use the policy's mean action (default True).
+    """
+
+    name = "policy"
+
+    def __init__(self, model, env_settings: dict, deterministic: bool = True):
+        from ebraille_sim.env import N_OBS, N_Z, EnvConfig
+        self.model = model
+        self.deterministic = bool(deterministic)
+        cfg = EnvConfig(control_rate_hz=float(env_settings["control_rate_hz"]),
+                        safe_force_n=float(env_settings["safe_force_n"]),
+                        warn_force_n=float(env_settings["warn_force_n"]),
+                        rate_filter_s=float(env_settings["rate_filter_s"]),
+                        integral_time_s=float(env_settings["integral_time_s"]),
+                        effort_weight=float(env_settings["effort_weight"]),
+                        violation_weight=float(env_settings["violation_weight"]))
+        self.supply_v = float(env_settings["driver_supply_v"])
+        if not self.supply_v > 0:
+            raise ValueError(f"driver_supply_v must be > 0, got {self.supply_v}")
+        self.period_s = cfg.dt_s
+        self._c = cfg.config_vector(self.supply_v)
+        self._z = np.zeros(N_Z)
+        self._obs = np.zeros(N_OBS, dtype=np.float32)
+        self._since_s = 0.0
+        self._first = True
+        self._command_v = 0.0
+        self.last_observation = self._obs
+
+    def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
+        """Forget the history; the next ``update`` evaluates the policy."""
+        from ebraille_sim.env import Z_PREV_ACTION, reset_features
+        fe = check_finite("force_est_n", force_est_n)
+        check_finite("setpoint_n", setpoint_n)
+        u0 = check_finite("command_v", command_v)
+        reset_features(self._z, fe)
+        self._z[Z_PREV_ACTION] = min(1.0, max(-1.0, u0 / self.supply_v))
+        self._since_s = 0.0
+        self._first = True
+        self._command_v = u0
+
+    def update(self, force_est_n: float, setpoint_n: float, dt_s: float,
+               motor_current_a: float | None = None) -> float:
+        """Motor command, V; the policy is evaluated once per training period (held in between).
+
+        ``motor_current_a`` None (a drive without current sensing) is observed as 0 A.
+        """
+        from ebraille_sim.env import Z_PREV_ACTION, observe, write_observation
+        dt = check_dt(dt_s)
+        fe = check_finite("force_est_n", force_est_n)
+        sp = check_finite("setpoint_n", setpoint_n)
+        ia = 0.0 if motor_current_a is None else check_finite("motor_current_a", motor_current_a)
+        if self._first:
+            write_observation(self._z, self._c, fe, sp, ia, self._obs)
+        else:
+            self._since_s += dt
+            if self._since_s < self.period_s * (1.0 - _PERIOD_TOL):
+                return self._command_v
+            observe(self._z, self._c, fe, sp, ia, self._since_s, self._obs)
+        self._first = False
+        self._since_s = 0.0
+        action, _ = self.model.predict(self._obs, deterministic=self.deterministic)
+        a = float(np.asarray(action, dtype=np.float64).reshape(-1)[0])
+        if not math.isfinite(a):
+            raise ValueError(f"the policy returned a non-finite action {a!r}")
+        a = min(1.0, max(-1.0, a))
+        self._z[Z_PREV_ACTION] = a
+        self._command_v = a * self.supply_v
+        return self._command_v
+
+
+def load_policy(path, **overrides) -> PolicyController:
+    """Load a policy saved by ``ebraille-sim train`` (folder or ``policy.zip``).
+
+    Parameters
+    ----------
+    path : str or path-like
+    **overrides
+        ``deterministic`` (bool) only; anything else is an error.
+    """
+    for key in overrides:
+        if key != "deterministic":
+            raise ValueError(f"unknown option {key!r} for a policy controller; allowed: deterministic")
+    det = overrides.get("deterministic", True)
+    if not isinstance(det, bool):
+        raise ValueError(f"deterministic must be True or False, got {det!r}")
+    if not str(path):
+        raise ValueError("policy: needs a path, e.g. policy:runs/train-ppo")
+    zip_path, json_path = _paths(path)
+    if not os.path.exists(zip_path):
+        raise FileNotFoundError(f"policy file not found: {zip_path}")
+    meta = read_metadata(json_path)
+    model = _load_sb3(meta["algo"], zip_path)
+    return PolicyController(model, meta["env"], deterministic=det)

@@ -1,0 +1,121 @@
+"""``ebraille-sim train``: train a contact-force policy with Stable-Baselines3 (PPO or SAC).
+
+The policy learns on ``EBraille/ContactForce-v0`` (randomised readers, FSR units, motors,
+drive trains, passages, rates, setpoints and disturbances) through Stable-Baselines3's own
+vectorisation of the registered id, with no wrapper of ours.  The output folder receives
+``policy.zip`` (the SB3 model) and ``policy.json`` (algorithm, the env settings the
+observation depends on, and the training record: steps, seed, wall time, versions), which
+``--controller policy:DIR`` loads in ``ebraille-sim run``.
+
+Needs the ``rl`` extra: ``pip install 'ebraille-sim[rl]'``.
+"""
+from __future__ import annotations
+
+NAME = "train"
+HELP = "train a learned contact-force controller (PPO or SAC, needs the rl extra) and save it"
+
+_PPO = {"n_steps": 1024, "batch_size": 256, "n_epochs": 10, "gamma": 0.99, "gae_lambda": 0.95,
+        "learning_rate": 3e-4, "clip_range": 0.2, "ent_coef": 0.0}
+_SAC = {"learning_starts": 5000, "batch_size": 256, "gamma": 0.99, "learning_rate": 3e-4, "buffer_size": 300_000}
+
+
+def add_arguments(p):
+    p.add_argument("--algo", choices=["ppo", "sac"], default="ppo", help="algorithm (default: ppo)")
+    p.add_argument("--steps", type=int, default=200_000, metavar="N", help="environment steps (default: 200000)")
+    p.add_argument("--out", default=None, metavar="DIR", help="output folder (default: runs/train-ALGO)")
+    p.add_argument("--seed", type=int, default=0, help="master seed of training (default: 0)")
+    p.add_argument("--envs", type=int, default=4, metavar="N", help="environments stepped together (default: 4)")
+    p.add_argument("--control-rate", type=float, default=200.0, metavar="HZ",
+                   help="env step rate = the policy's control rate, Hz (default: 200)")
+    p.add_argument("--threads", type=int, default=1, metavar="N", help="PyTorch threads (default: 1)")
+
+
+def _check(args):
+    if args.steps < 1:
+        raise ValueError(f"--steps must be >= 1, got {args.steps}")
+    if args.seed < 0:
+        raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    if not 1 <= args.envs <= 256:
+        raise ValueError(f"--envs must be in [1, 256], got {args.envs}")
+    if not 1 <= args.threads <= 64:
+        raise ValueError(f"--threads must be in [1, 64], got {args.threads}")
+
+
+def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_rate_hz: float = 200.0,
+          threads: int = 1, verbose: int = 0) -> dict:
+    """Train and save a policy; returns the ``training`` record written to ``policy.json``.
+
+    Parameters
+    ----------
+    algo : {"ppo", "sac"}
+    steps : int
+        Environment steps (summed over the ``n_envs`` environments).
+    out : path
+        Output folder (created).
+    seed : int
+        Seeds SB3, the network initialisation and env ``k`` (``seed + k``).
+    n_envs : int
+    control_rate_hz : float
+        Env step rate; must divide the 10 kHz physics rate.
+    threads : int
+        PyTorch intra-op threads.
+    """
+    import json
+    import pathlib
+    import platform
+    import time
+
+    try:
+        import stable_baselines3 as sb3
+        import torch
+        from stable_baselines3.common.env_util import make_vec_env
+    except ModuleNotFoundError:
+        raise ValueError("training needs stable-baselines3; install it with pip install 'ebraille-sim[rl]'") from None
+    from controllers.policy import POLICY_FORMAT
+
+    from ..env import ENV_ID, EnvConfig, register_envs
+    if algo not in ("ppo", "sac"):
+        raise ValueError(f"algo must be 'ppo' or 'sac', got {algo!r}")
+    register_envs()
+    cfg = EnvConfig(control_rate_hz=control_rate_hz)
+    torch.set_num_threads(threads)
+    env_kwargs = {"control_rate_hz": cfg.control_rate_hz, "max_episode_steps": cfg.max_episode_steps()}
+    venv = make_vec_env(ENV_ID, n_envs=n_envs, seed=seed, env_kwargs=env_kwargs)
+    if algo == "ppo":
+        model = sb3.PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=verbose, **_PPO)
+    else:
+        model = sb3.SAC("MlpPolicy", venv, seed=seed, device="cpu", verbose=verbose, **_SAC)
+    t0 = time.perf_counter()
+    model.learn(total_timesteps=int(steps))
+    wall = time.perf_counter() - t0
+    returns = [ep["r"] for ep in model.ep_info_buffer] if model.ep_info_buffer else []
+    out = pathlib.Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    model.save(out / "policy.zip")
+    record = {
+        "steps": int(model.num_timesteps), "seed": int(seed), "envs": int(n_envs), "wall_time_s": round(wall, 1),
+        "steps_per_s": round(model.num_timesteps / wall, 1),
+        "mean_episode_return_last_100": float(sum(returns) / len(returns)) if returns else None,
+        "hyperparameters": _PPO if algo == "ppo" else _SAC, "torch_threads": int(threads),
+        "versions": {"stable_baselines3": sb3.__version__, "torch": torch.__version__,
+                     "python": platform.python_version()},
+        "machine": {"cpus": __import__("os").cpu_count(), "processor": platform.machine()},
+    }
+    meta = {"format": POLICY_FORMAT, "algo": algo, "env_id": ENV_ID, "env": cfg.policy_metadata(),
+            "training": record}
+    (out / "policy.json").write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
+    venv.close()
+    return record
+
+
+def main(args) -> int:
+    import pathlib
+    _check(args)
+    out = pathlib.Path(args.out) if args.out else pathlib.Path("runs") / f"train-{args.algo}"
+    rec = train(args.algo, args.steps, out, seed=args.seed, n_envs=args.envs, control_rate_hz=args.control_rate,
+                threads=args.threads)
+    ret = rec["mean_episode_return_last_100"]
+    print(f"trained {args.algo.upper()} for {rec['steps']} steps in {rec['wall_time_s']:.1f} s "
+          f"({rec['steps_per_s']:.0f} steps/s)" + ("" if ret is None else f"; mean episode return {ret:.1f}"))
+    print(f"wrote {out / 'policy.zip'}, {out / 'policy.json'}  (use --controller policy:{out})")
+    return 0

@@ -1,0 +1,117 @@
+"""The learned-policy controller: same observation as the env, lazy imports, loading, errors."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import controllers
+from controllers.policy import POLICY_FORMAT, PolicyController, load_policy, read_metadata
+from ebraille_sim.env import ContactForceEnv, EnvConfig
+from ebraille_sim.layout import S
+from ebraille_sim.loop import Plant
+from ebraille_sim.params import DeviceParams, RateParams
+
+
+class LinearPolicy:
+    """A fixed policy of the observation, standing in for a trained network."""
+
+    def predict(self, obs, deterministic=True):
+        a = 0.2 + 1.5 * obs[2] + 0.4 * obs[4] - 0.3 * obs[3] + 0.1 * obs[6] - 0.2 * obs[5]
+        return np.array([a], dtype=np.float32), None
+
+
+def test_importing_controllers_does_not_import_torch_or_sb3():
+    code = ("import sys, controllers, ebraille_sim; "
+            "print(any(m in sys.modules for m in ('torch', 'stable_baselines3')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
+def test_policy_in_a_1khz_loop_matches_the_200hz_env_exactly():
+    """The controller rebuilds the env's observation: same actions, same forces (to 1e-9)."""
+    env = ContactForceEnv(randomize_device=False)
+    obs, info = env.reset(seed=5, options={"disturbances": False, "gap_m": 1e-3,
+                                           "setpoint_steps": [(1.5, 1.2)], "setpoint_n": 0.7})
+    ep = env.episode
+    policy = LinearPolicy()
+    env_forces, env_actions = [], []
+    for _ in range(500):                                          # 2.5 s
+        a = float(np.clip(policy.predict(obs)[0][0], -1, 1))
+        obs, _, term, trunc, info = env.step(np.array([a], np.float32))
+        env_forces.append(info["force_true_n"])
+        env_actions.append(a)
+        assert not (term or trunc)
+
+    dev = DeviceParams(rates=RateParams(control_rate_hz=1000.0))
+    plant = Plant.from_devices([dev], [ep.sensor_seed])
+    plant.set_finger(1e-3)
+    ctrl = PolicyController(policy, EnvConfig().policy_metadata())
+    st = plant.state[0]
+    ctrl.reset(force_est_n=float(st[S["force_est_n"]]), setpoint_n=0.7)
+    loop_forces, loop_commands = [], []
+    for k in range(2500):
+        sp = ep.setpoint_n[k // 5]
+        u = ctrl.update(float(st[S["force_est_n"]]), sp, 1e-3, float(st[S["current_a"]]))
+        plant.advance(u)
+        if k % 5 == 0:
+            loop_commands.append(u)
+        if k % 5 == 4:
+            loop_forces.append(float(st[S["contact_force_n"]]))
+    assert np.max(np.abs(np.array(loop_commands) / 6.0 - env_actions)) <= 1e-9
+    assert np.max(np.abs(np.array(loop_forces) - env_forces)) <= 1e-9
+    assert max(env_forces) > 0.5                                  # the policy did press
+
+
+def test_policy_controller_holds_between_evaluations_and_validates_inputs():
+    ctrl = PolicyController(LinearPolicy(), EnvConfig().policy_metadata())
+    ctrl.reset(force_est_n=0.0, setpoint_n=1.0)
+    u0 = ctrl.update(0.0, 1.0, 1e-3, 0.0)
+    assert [ctrl.update(0.5, 1.0, 1e-3, 0.0) for _ in range(4)] == [u0] * 4
+    assert ctrl.update(0.5, 1.0, 1e-3, 0.0) != u0                # 5 ms later: a new evaluation
+    with pytest.raises(ValueError, match="dt_s"):
+        ctrl.update(0.5, 1.0, 0.0)
+    with pytest.raises(ValueError, match="force_est_n"):
+        ctrl.update(float("nan"), 1.0, 1e-3)
+
+
+def _write_meta(folder, **changes):
+    meta = {"format": POLICY_FORMAT, "algo": "ppo", "env_id": "EBraille/ContactForce-v0",
+            "env": EnvConfig().policy_metadata(), "training": {}}
+    meta.update(changes)
+    (folder / "policy.json").write_text(json.dumps(meta))
+    return folder / "policy.json"
+
+
+def test_bad_policy_paths_and_metadata_are_one_line_errors(tmp_path):
+    with pytest.raises(FileNotFoundError, match="policy file not found"):
+        controllers.make(f"policy:{tmp_path}")
+    with pytest.raises(ValueError, match="must be a folder"):
+        controllers.make("policy:missing.txt")
+    with pytest.raises(ValueError, match="unknown key 'colour'"):
+        read_metadata(_write_meta(tmp_path, colour=1))
+    with pytest.raises(ValueError, match="algo must be one of ppo, sac"):
+        read_metadata(_write_meta(tmp_path, algo="dqn"))
+    with pytest.raises(ValueError, match="unknown option 'gain'"):
+        load_policy(tmp_path, gain=2)
+
+
+def test_trained_policy_loads_and_runs_a_scenario(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    from ebraille_sim.commands.train import train
+    from ebraille_sim.runner import run_scenario
+    rec = train("ppo", 1024, tmp_path, seed=0, n_envs=1)
+    assert rec["steps"] >= 1024 and rec["wall_time_s"] > 0
+    ctrl = controllers.make(f"policy:{tmp_path}")
+    assert ctrl.name == "policy" and ctrl.period_s == pytest.approx(0.005)
+    env = ContactForceEnv()
+    obs, _ = env.reset(seed=0)
+    expect = ctrl.model.predict(obs, deterministic=True)[0]
+    again = controllers.make(f"policy:{tmp_path / 'policy.zip'}").model.predict(obs, deterministic=True)[0]
+    assert np.array_equal(expect, again)
+    res = run_scenario("contact_onset", controller=f"policy:{tmp_path}", duration_s=0.3)
+    assert res.controller_name == "policy" and np.all(np.isfinite(res.trace["command_v"]))
+    assert np.all(np.abs(res.trace["command_v"]) <= 6.0)

@@ -1,0 +1,130 @@
+"""The native vector env: equal to N scalar envs, NEXT_STEP autoreset, batched step, errors."""
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+
+import ebraille_sim  # noqa: F401  (registers the id)
+from ebraille_sim.env import ENV_ID, ContactForceEnv
+from ebraille_sim.vector_env import ContactForceVectorEnv
+
+SHORT = {"episode_characters": 3}        # ~1.2-1.3 s episodes, so autoresets happen in a short test
+
+
+def _compare(n, steps, seed, vec_kwargs, env_kwargs, max_episode_steps=None, action_seed=0):
+    """Step a vector env and n scalar envs with the same actions; return the largest difference."""
+    venv = ContactForceVectorEnv(num_envs=n, max_episode_steps=max_episode_steps, **vec_kwargs, **env_kwargs)
+    envs = [ContactForceEnv(**env_kwargs) for _ in range(n)]
+    if max_episode_steps is not None:
+        envs = [gym.wrappers.TimeLimit(e, max_episode_steps) for e in envs]
+    vobs, _ = venv.reset(seed=seed)
+    sobs = np.array([e.reset(seed=seed + i)[0] for i, e in enumerate(envs)])
+    worst = float(np.max(np.abs(vobs - sobs)))
+    rng = np.random.default_rng(action_seed)
+    done = [False] * n
+    ends = 0
+    for _ in range(steps):
+        act = rng.uniform(-0.5, 0.9, size=(n, 1)).astype(np.float32)
+        vobs, vrew, vterm, vtrunc, vinfo = venv.step(act)
+        for i, e in enumerate(envs):
+            if done[i]:
+                obs, _ = e.reset()
+                rew, term, trunc = 0.0, False, False
+                ends += 1
+            else:
+                obs, rew, term, trunc, info = e.step(act[i])
+                assert abs(info["force_true_n"] - vinfo["force_true_n"][i]) <= 1e-9
+            worst = max(worst, float(np.max(np.abs(obs - vobs[i]))), abs(rew - vrew[i]))
+            assert (term, trunc) == (bool(vterm[i]), bool(vtrunc[i]))
+            done[i] = term or trunc
+    return worst, ends
+
+
+def test_vector_env_equals_scalar_envs_through_autoresets():
+    worst, ends = _compare(3, 600, seed=20, vec_kwargs={}, env_kwargs=SHORT)
+    assert ends >= 3                                   # every sub-env went through an autoreset
+    assert worst <= 1e-9
+
+
+def test_vector_env_equals_scalar_envs_with_a_time_limit_and_another_rate():
+    worst, ends = _compare(2, 250, seed=5, vec_kwargs={"parallel": False},
+                           env_kwargs={**SHORT, "control_rate_hz": 100.0}, max_episode_steps=40)
+    assert ends >= 8 and worst <= 1e-9
+
+
+def test_parallel_and_serial_batches_are_identical():
+    out = []
+    for parallel in (True, False):
+        venv = ContactForceVectorEnv(num_envs=5, parallel=parallel, **SHORT)
+        venv.reset(seed=9)
+        rng = np.random.default_rng(3)
+        trace = [venv.step(rng.uniform(-1, 1, size=(5, 1)).astype(np.float32))[0] for _ in range(150)]
+        out.append(np.array(trace))
+    assert np.array_equal(out[0], out[1])
+
+
+def test_make_vec_uses_the_native_vector_env_in_next_step_mode():
+    envs = gym.make_vec(ENV_ID, num_envs=3)
+    assert isinstance(envs.unwrapped, ContactForceVectorEnv)
+    assert envs.metadata["autoreset_mode"] is AutoresetMode.NEXT_STEP
+    assert envs.unwrapped.max_episode_steps == 1400
+    obs, _ = envs.reset(seed=0)
+    assert obs.shape == (3, 7) and obs.dtype == np.float32 and envs.observation_space.contains(obs)
+    obs, rew, term, _, info = envs.step(envs.action_space.sample())
+    assert rew.shape == (3,) and term.dtype == np.bool_ and info["force_true_n"].shape == (3,)
+    envs.close()
+
+
+def test_next_step_autoreset_returns_the_new_episode_with_zero_reward():
+    venv = ContactForceVectorEnv(num_envs=2, max_episode_steps=5)
+    venv.reset(seed=1)
+    act = np.zeros((2, 1), np.float32)
+    for k in range(5):
+        obs, rew, term, trunc, _ = venv.step(act)
+    assert np.all(trunc) and not np.any(term)
+    ref = ContactForceEnv()
+    ref.reset(seed=1)
+    expect, _ = ref.reset()                            # the second episode of sub-env 0
+    obs, rew, term, trunc, _ = venv.step(np.ones((2, 1), np.float32))
+    assert np.array_equal(obs[0], expect)
+    assert np.all(rew == 0.0) and not np.any(term | trunc)
+
+
+def test_seed_sequence_and_reset_options():
+    venv = ContactForceVectorEnv(num_envs=2)
+    a, _ = venv.reset(seed=[7, 3])
+    b = np.array([ContactForceEnv().reset(seed=s)[0] for s in (7, 3)])
+    assert np.array_equal(a, b)
+    venv.reset(seed=0, options={"wpm": 100.0, "setpoint_n": 0.8})
+    assert all(ep.wpm == 100.0 and np.all(ep.setpoint_n == 0.8) for ep in venv.episodes)
+    with pytest.raises(ValueError, match="unknown reset option 'speed'"):
+        venv.reset(seed=0, options={"speed": 1})
+    with pytest.raises(ValueError, match="2 seeds"):
+        venv.reset(seed=[1, 2, 3])
+
+
+def test_bad_arguments_and_actions_are_one_line_errors():
+    with pytest.raises(ValueError, match="num_envs"):
+        ContactForceVectorEnv(num_envs=0)
+    with pytest.raises(ValueError, match="unknown argument 'colour'"):
+        ContactForceVectorEnv(num_envs=2, colour="red")
+    with pytest.raises(ValueError, match="backend"):
+        ContactForceVectorEnv(num_envs=2, backend="pymunk")
+    venv = ContactForceVectorEnv(num_envs=2)
+    with pytest.raises(RuntimeError, match="reset"):
+        venv.step(np.zeros((2, 1), np.float32))
+    venv.reset(seed=0)
+    with pytest.raises(ValueError, match=r"non-finite in envs \[1\]"):
+        venv.step(np.array([[0.0], [np.nan]], np.float32))
+    with pytest.raises(ValueError, match="shape"):
+        venv.step(np.zeros((3, 1), np.float32))
+
+
+def test_vector_render_gives_one_frame_per_env():
+    venv = ContactForceVectorEnv(num_envs=2, render_mode="rgb_array")
+    venv.reset(seed=0)
+    frames = venv.render()
+    assert len(frames) == 2 and frames[0].shape == (360, 720, 3)
+    venv.close()
