@@ -34,7 +34,7 @@ from .layout import (MAX_BREAKPOINTS, MAX_TF_LEN, N_INPUT, N_PARAM, N_PLAYS, N_S
 from .motor import current_decay
 from .params import DeviceParams
 
-__all__ = ["Plant", "loop_step", "make_plant", "PLANT_BACKENDS", "pack_params", "initial_state",
+__all__ = ["Plant", "loop_step", "make_plant", "PLANT_BACKENDS", "pack_params", "pack_devices", "initial_state",
            "check_step", "load_estimator"]
 
 
@@ -224,6 +224,45 @@ def _estimator_steady_state(s: np.ndarray, p: np.ndarray, u0: float) -> None:
     s[S["force_est_n"]] = max(f0, 0.0) if p[P["est_clamp"]] > 0 else f0
 
 
+def pack_devices(devices, seeds, board_pos_m=None, models=None):
+    """Packed parameters, initial states and default inputs of several devices.
+
+    All devices must share their rates.  Estimator models are loaded once per distinct
+    ``estimator.model`` unless given in ``models``.
+
+    Returns
+    -------
+    devices : list of DeviceParams
+    params : list of ndarray, each (N_PARAM,)
+    states : list of ndarray, each (N_STATE,)
+    inputs : ndarray, shape (n, N_INPUT)
+        Gravity along the travel and the driver supply filled in; everything else zero.
+    """
+    devices = list(devices)
+    if not devices:
+        raise ValueError("a plant needs at least one device")
+    rates = devices[0].rates
+    for dvc in devices[1:]:
+        if dvc.rates != rates:
+            raise ValueError("all devices of one plant must share control, sensor and physics rates")
+    cache: dict[str, object] = {}
+    params, states = [], []
+    for k, (dvc, seed) in enumerate(zip(devices, seeds, strict=True)):
+        model = models[k] if models is not None else None
+        if model is None:
+            key = dvc.estimator.model
+            if key not in cache:
+                cache[key] = load_estimator(key)
+            model = cache[key]
+        p = pack_params(dvc, seed, model)
+        params.append(p)
+        states.append(initial_state(dvc, p, board_pos_m))
+    inputs = np.zeros((len(devices), N_INPUT))
+    inputs[:, U["gravity_along_m_per_s2"]] = [-d.gravity_m_per_s2 for d in devices]
+    inputs[:, U["driver_supply_v"]] = [d.driver_supply_v for d in devices]
+    return devices, params, states, inputs
+
+
 @dataclass
 class Plant:
     """Packed state of ``n`` devices and their per-period inputs.
@@ -249,29 +288,8 @@ class Plant:
     @classmethod
     def from_devices(cls, devices, seeds, board_pos_m=None, models=None) -> "Plant":
         """Build a plant of ``len(devices)`` devices; all must share the same rates."""
-        devices = list(devices)
-        if not devices:
-            raise ValueError("a plant needs at least one device")
+        devices, params, states, inputs = pack_devices(devices, seeds, board_pos_m, models)
         rates = devices[0].rates
-        for dvc in devices[1:]:
-            if dvc.rates != rates:
-                raise ValueError("all devices of one plant must share control, sensor and physics rates")
-        cache: dict[str, object] = {}
-        params, states = [], []
-        for k, (dvc, seed) in enumerate(zip(devices, seeds, strict=True)):
-            model = models[k] if models is not None else None
-            if model is None:
-                key = dvc.estimator.model
-                if key not in cache:
-                    cache[key] = load_estimator(key)
-                model = cache[key]
-            p = pack_params(dvc, seed, model)
-            params.append(p)
-            states.append(initial_state(dvc, p, board_pos_m))
-        n = len(devices)
-        inputs = np.zeros((n, N_INPUT))
-        inputs[:, U["gravity_along_m_per_s2"]] = [-d.gravity_m_per_s2 for d in devices]
-        inputs[:, U["driver_supply_v"]] = [d.driver_supply_v for d in devices]
         plant = cls(np.array(states), np.array(params), inputs, rates.substeps_per_control,
                     1.0 / rates.control_rate_hz, devices)
         # compile (or load from the cache) before any timed loop: zero substeps change nothing

@@ -103,8 +103,8 @@ from numba import njit
 from . import kernel
 from .drivetrain import stribeck
 from .fingertip import elastic_force, prony_coefficients
-from .layout import N_INPUT, P, S, U
-from .loop import Plant, initial_state, load_estimator, pack_params
+from .layout import P, S, U
+from .loop import Plant, pack_devices
 from .motor import current_decay, current_step
 from .params import DeviceParams, check_finite, replace_checked
 
@@ -654,31 +654,9 @@ class PymunkPlant(Plant):
         mech = mechanism if mechanism is not None else MechanismParams()
         if overrides:
             mech = replace_checked(mech, **overrides)
-        devices = list(devices)
-        if not devices:
-            raise ValueError("a plant needs at least one device")
+        devices, params, states, inputs = pack_devices(devices, seeds, board_pos_m, models)
         rates = devices[0].rates
-        for dvc in devices[1:]:
-            if dvc.rates != rates:
-                raise ValueError("all devices of one plant must share control, sensor and physics rates")
-        cache: dict = {}
-        params, states, mechs = [], [], []
-        for k, (dvc, seed) in enumerate(zip(devices, seeds, strict=True)):
-            model = models[k] if models is not None else None
-            if model is None:
-                key = dvc.estimator.model
-                if key not in cache:
-                    cache[key] = load_estimator(key)
-                model = cache[key]
-            pk = pack_params(dvc, seed, model)
-            sk = initial_state(dvc, pk, board_pos_m)
-            params.append(pk)
-            states.append(sk)
-            mechs.append(_Mechanism(dvc, mech, pk, sk[S["board_pos_m"]]))
-        n = len(devices)
-        inputs = np.zeros((n, N_INPUT))
-        inputs[:, U["gravity_along_m_per_s2"]] = [-d.gravity_m_per_s2 for d in devices]
-        inputs[:, U["driver_supply_v"]] = [d.driver_supply_v for d in devices]
+        mechs = [_Mechanism(dvc, mech, pk, sk[S["board_pos_m"]]) for dvc, pk, sk in zip(devices, params, states)]
         plant = cls(np.array(states), np.array(params), inputs, rates.substeps_per_control,
                     1.0 / rates.control_rate_hz, devices)
         plant.mechanisms = mechs
