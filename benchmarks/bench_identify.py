@@ -16,21 +16,12 @@ import argparse
 import json
 import os
 import platform
-import time
 
 import numpy as np
 import scipy.signal
 
 from ebraille_sim import bench, sysid
-
-
-def _best(fn, repeat):
-    best, out = float("inf"), None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
+from timing import best_of
 
 
 def main(argv=None):
@@ -43,9 +34,9 @@ def main(argv=None):
     u, y = rec.voltage_v, rec.force_n
     b, f = np.array([0.2, -0.1, 0.05, 0.02, 0.01]), np.real(np.poly([0.9, 0.5, -0.3, 0.2, 0.1]))
 
-    t_filter, _ = _best(lambda: scipy.signal.lfilter(b, f, u), max(a.repeat, 20))
-    t_linear, _ = _best(lambda: sysid.fit("linear", u, y, 5, nk=0, n_starts=1, n_delay_candidates=1), a.repeat)
-    t_wiener, rep = _best(lambda: sysid.fit_report("wiener", u, y, 5, seed=a.seed), a.repeat)
+    t_filter, _ = best_of(lambda: scipy.signal.lfilter(b, f, u), max(a.repeat, 20))
+    t_linear, _ = best_of(lambda: sysid.fit("linear", u, y, 5, nk=0, n_starts=1, n_delay_candidates=1), a.repeat)
+    t_wiener, rep = best_of(lambda: sysid.fit_report("wiener", u, y, 5, seed=a.seed), a.repeat)
 
     doc = {"machine": f"{platform.machine()} {platform.processor() or ''} python {platform.python_version()} "
                       f"cpus {os.cpu_count()}",

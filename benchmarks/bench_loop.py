@@ -13,22 +13,12 @@ import argparse
 import dataclasses
 import json
 import platform
-import time
 
 import controllers
 import ebraille_sim
 from ebraille_sim.params import RateParams
 from ebraille_sim.scenario import load_scenario
-
-
-def _best(fn, repeat):
-    best = float("inf")
-    out = None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
+from timing import best_of
 
 
 def main(argv=None):
@@ -48,13 +38,13 @@ def main(argv=None):
         for _ in range(int(a.duration * 1000)):
             upd(y, 1.0, 1e-3, 0.0)
 
-    t_ref, _ = _best(controller_only, a.repeat)
+    t_ref, _ = best_of(controller_only, a.repeat)
     rows = []
     for phys in (5000.0, 10000.0, 20000.0, 50000.0):
         dev = dataclasses.replace(spec.device, rates=RateParams(control_rate_hz=1000.0, sensor_rate_hz=1000.0,
                                                                 physics_rate_hz=phys))
         s = dataclasses.replace(spec, device=dev)
-        wall, res = _best(lambda: ebraille_sim.run_scenario(s, duration_s=a.duration), a.repeat)
+        wall, res = best_of(lambda: ebraille_sim.run_scenario(s, duration_s=a.duration), a.repeat)
         rows.append({"physics_rate_hz": phys, "wall_s": wall,
                      "real_time_factor_loop": res.metrics["real_time_factor"],
                      "real_time_factor_total": a.duration / wall,
