@@ -26,7 +26,11 @@ def main(args) -> int:
     print("controllers:")
     for name in controllers.available():
         print(f"  {name}")
-    print("  (or a gains file: .toml/.json with controller = NAME and a [gains] table)")
+    print("  (or a gains file: .toml/.json with controller = NAME and a [gains] table,")
+    print("   or policy:PATH for a policy saved by 'ebraille-sim train', extra: rl)")
+    print("plant backends:")
+    from ..loop import PLANT_BACKENDS
+    print("  " + ", ".join(PLANT_BACKENDS))
     print("device presets:")
     print("  motor:      " + ", ".join(params.MOTORS))
     print("  drivetrain: " + ", ".join(params.DRIVETRAINS))
