@@ -34,7 +34,7 @@ same direction; the latched term holds the command on the edge (the operating po
 command of :func:`controllers.tuning.operating_point`).  ``u_ff`` enters before the
 saturation and the integrator only corrects what it misses.
 
-**Static reference map.**  The controller regulates the *estimate*; the estimator has a
+**Static reference map** (on by default).  The controller regulates the *estimate*; the estimator has a
 static error that depends on the force (the paper's model reads +12 % at 0.5 N for the
 calibrated nominal FSR, :func:`ebraille_sim.estimator.static_error_table`).  With
 ``reference_map`` the setpoint is replaced by the estimate the nominal sensor chain shows
@@ -59,7 +59,8 @@ import numpy as np
 
 from ebraille_sim.params import DeviceParams
 
-__all__ = ["ScheduleConfig", "ScheduledPID", "make_scheduled", "make_feedforward", "stiffness_ratio"]
+__all__ = ["ScheduleConfig", "ScheduledPID", "make_scheduled", "make_feedforward", "stiffness_ratio",
+           "RECOMMENDED", "MS_1_6", "HAND"]
 
 F_MIN_N, F_MAX_N = 0.2, 3.0
 
@@ -68,20 +69,25 @@ F_MIN_N, F_MAX_N = 0.2, 3.0
 class ScheduleConfig:
     """Gains at ``reference_force_n`` and the switches (see the module docstring).
 
-    The default gains are those found by ``ebraille-sim tune setpoint_steps --population 6
-    --evaluations 24`` (family ``pid_scheduled``, Ms <= 1.6 at every setpoint and device;
-    reproduced by ``docs/make_tuning_figures.py``), rounded.
+    The default gains are the design docs/tuning.md recommends (:data:`RECOMMENDED`):
+    ``ebraille-sim tune setpoint_steps --population 6 --evaluations 36 --ms-gain 0.5`` (family
+    ``pid_scheduled``, multi-scenario cost, Ms <= 1.6 for the loop scaled by the
+    friction-band describing-function factor 0.5; reproduced by
+    ``docs/make_tuning_figures.py``), rounded, with the static reference map on.  On the
+    sliding linearisation their Ms is at most 2.45 over the tuning population (2.0 or less
+    at 63 of its 66 points); the design that meets the issue's Ms <= 1.6 there is
+    :data:`MS_1_6`.
     """
-    kp_v_per_n: float = 0.50
-    ki_v_per_ns: float = 4.6
-    kd_vs_per_n: float = 0.0038
+    kp_v_per_n: float = 0.81
+    ki_v_per_ns: float = 1.8
+    kd_vs_per_n: float = 0.011
     derivative_filter_s: float = 0.005
     setpoint_weight_p: float = 1.0
     reference_force_n: float = 1.0
     schedule: bool = True
     schedule_on: str = "setpoint"
     feedforward: bool = False
-    reference_map: bool = False
+    reference_map: bool = True
     rate_deadband_n_per_s: float = 0.05
     u_min_v: float = -6.0
     u_max_v: float = 6.0
@@ -105,6 +111,19 @@ class ScheduleConfig:
             raise ValueError("u_min_v must be < u_max_v")
         if not F_MIN_N <= self.reference_force_n <= F_MAX_N:
             raise ValueError(f"reference_force_n must be in [{F_MIN_N}, {F_MAX_N}] N, got {self.reference_force_n}")
+
+
+RECOMMENDED = ScheduleConfig()
+"""The design docs/tuning.md recommends shipping (the defaults of :class:`ScheduleConfig`)."""
+
+MS_1_6 = ScheduleConfig(kp_v_per_n=0.537, ki_v_per_ns=1.148, kd_vs_per_n=0.0002)
+"""What ``ebraille-sim tune setpoint_steps --population 6 --evaluations 36`` finds under the
+issue's bound, Ms <= 1.6 on the sliding linearisation at every device and setpoint (max 1.59;
+reference map on).  Kept to three digits: its worst case on ``setpoint_steps`` is fragile
+(docs/tuning.md, section 3)."""
+
+HAND = ScheduleConfig(kp_v_per_n=2.0, ki_v_per_ns=8.0, kd_vs_per_n=0.0)
+"""The default PID's gains at 1 N, scheduled, with the reference map (a hand design)."""
 
 
 def stiffness_ratio(force_n: float, reference_force_n: float, device: DeviceParams = DeviceParams()) -> float:

@@ -1,8 +1,10 @@
 """Figures and numbers of docs/tuning.md.
 
-Run from the repository root (takes about 10 minutes on 2 cores)::
+Run from the repository root (about 14 minutes on the 2-core development machine, 10 of
+them the four robust tunings, two at a time)::
 
-    python docs/make_tuning_figures.py
+    python docs/make_tuning_figures.py            # everything
+    python docs/make_tuning_figures.py --reuse    # keep the tunings of results.json, redo the rest (4 min)
 
 Writes PNGs and ``results.json`` into ``docs/figures/tuning/``.  Every number quoted in
 docs/tuning.md comes from ``results.json``.
@@ -25,14 +27,13 @@ import numpy as np  # noqa: E402
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import controllers  # noqa: E402
 from controllers.lqg import LQG  # noqa: E402
 from controllers.pid import DEFAULT_PID, PID  # noqa: E402
-from controllers.robust import (evaluate, linearisation_points, population_ms, robust_tune,  # noqa: E402
-                                scenario_setpoints, summarise, tuning_population)
-from controllers.schedule import ScheduleConfig, ScheduledPID  # noqa: E402
-from controllers.tuning import (analyse_loop, continuous_model, linearize, plot_bode,  # noqa: E402
-                                plot_nyquist, simc_pid)
+from controllers.robust import (evaluate, friction_band_v, linearisation_points, population_ms, robust_tune,  # noqa: E402
+                                standard_scenarios, summarise, tuning_population, unramped)
+from controllers.schedule import HAND, MS_1_6, RECOMMENDED, ScheduleConfig, ScheduledPID  # noqa: E402
+from controllers.tuning import (_sampled_front, analyse_loop, continuous_model, linearize,  # noqa: E402
+                                operating_point, plot_bode, plot_nyquist, simc_pid)
 from ebraille_sim.loop import Plant  # noqa: E402
 from ebraille_sim.params import DeviceParams  # noqa: E402
 from ebraille_sim.runner import run_scenario  # noqa: E402
@@ -40,6 +41,16 @@ from ebraille_sim.scenario import load_scenario  # noqa: E402
 
 OUT = ROOT / "docs" / "figures" / "tuning"
 POP_SEED, POP_N = 0, 6
+HELDOUT_SEED, HELDOUT_N = 1, 8
+FORCES = [0.6, 0.8, 1.0, 1.2, 1.5, 2.0]
+"""Every setpoint of the tuning scenarios (setpoint steps, steady reading, contact onset)."""
+TUNINGS = {
+    "ms1.6": {"ms_max": 1.6, "ms_gain": 1.0, "label": "Ms <= 1.6, sliding model (the issue's bound)"},
+    "ms2.0": {"ms_max": 2.0, "ms_gain": 1.0, "label": "Ms <= 2.0, sliding model"},
+    "friction": {"ms_max": 1.6, "ms_gain": 0.5, "label": "Ms <= 1.6 on the loop x 0.5 (friction-band DF)"},
+    "free": {"ms_max": float("inf"), "ms_gain": 1.0, "label": "no Ms bound (simulation only)"},
+}
+EVALUATIONS = 36
 
 
 def step_match(results):
@@ -86,15 +97,51 @@ def step_match(results):
     results["step_match"] = out
 
 
-def loop_figures(results):
+REC = "recommended (pid_scheduled default)"
+"""``controllers.schedule.RECOMMENDED``: the "friction" tuning, rounded."""
+TUNE_DEFAULT = "Ms <= 1.6 (MS_1_6)"
+"""``controllers.schedule.MS_1_6``: the "ms1.6" tuning (what ``tune`` gives by default), rounded."""
+
+
+def _toml(doc):
+    from ebraille_sim.commands.tune import _toml as t
+    return t(doc)
+
+
+def _slim(obj, key=None):
+    """results.json without per-device rows of the tuning reports, floats to 5 digits."""
+    if isinstance(obj, dict):
+        return {k: _slim(v, k) for k, v in obj.items() if k not in ("per_device", "play_model")}
+    if isinstance(obj, (list, tuple)):
+        return [_slim(v) for v in obj]
+    if isinstance(obj, float):
+        return float(f"{obj:.5g}")
+    return obj
+
+
+def _write(results):
+    import re
+    text = json.dumps(_slim(results), indent=1, default=float)
+    # lists of plain numbers on one line
+    text = re.sub(r"\[[-0-9.eE,\s]*\]", lambda m: " ".join(m.group(0).split()), text)
+    # innermost objects (e.g. median / worst / cvar25) on one line
+    text = re.sub(r"\{[^{}\[\]]*\}", lambda m: " ".join(m.group(0).split()), text)
+    (OUT / "results.json").write_text(text + "\n")
+
+
+def _ms_grid(ms):
+    return np.where(np.isfinite(ms), ms, -1).tolist()
+
+
+def loop_figures(results, recommended):
     forces = (0.6, 1.2, 2.0)
-    sched = ScheduledPID(ScheduleConfig())
+    sched = ScheduledPID(recommended)
     an_d = [analyse_loop(DEFAULT_PID, force_n=f) for f in forces]
     an_s = [analyse_loop(sched.pid_config_at(f), force_n=f) for f in forces]
     plot_bode(an_d, OUT / "bode_default.png", "default PID (kp 2, ki 8), nominal reader")
     plot_nyquist(an_d, OUT / "nyquist_default.png", "default PID, nominal reader")
-    plot_bode(an_s, OUT / "bode_scheduled.png", "gain-scheduled PID, nominal reader")
-    plot_nyquist(an_s, OUT / "nyquist_scheduled.png", "gain-scheduled PID, nominal reader")
+    plot_bode(an_s, OUT / "bode_scheduled.png", "recommended scheduled PID, nominal reader (sliding model)")
+    plot_nyquist(an_s, OUT / "nyquist_scheduled.png", "recommended scheduled PID, nominal reader (sliding model)")
     simc = simc_pid(force_n=1.0)
     an_simc = [analyse_loop(simc, force_n=f) for f in forces]
     results["loops"] = {"default_pid": [a.summary() for a in an_d], "scheduled_pid": [a.summary() for a in an_s],
@@ -106,86 +153,230 @@ def loop_figures(results):
                            "states": P.state_labels}
 
 
-def ms_map(results, pop, spec):
-    forces = scenario_setpoints(spec)
-    pts = linearisation_points(pop, forces)
-    sched = ScheduledPID(ScheduleConfig())
-    ms_d = population_ms(DEFAULT_PID, pts).reshape(len(pop), len(forces))
-    ms_s = population_ms(sched.pid_config_at, pts).reshape(len(pop), len(forces))
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
-    for ax, ms, title in ((axes[0], ms_d, "default PID"), (axes[1], ms_s, "gain-scheduled PID")):
+def ms_maps(results, pop, designs):
+    """Ms of each design at every device and setpoint (sliding model), figure of three of them."""
+    pts = linearisation_points(pop, FORCES)
+    maps = {}
+    for name, ctrl in designs.items():
+        maps[name] = population_ms(ctrl, pts).reshape(len(pop), len(FORCES))
+    shown_names = [n for n in ("default PID", "hand design", TUNE_DEFAULT, REC) if n in maps]
+    fig, axes = plt.subplots(1, len(shown_names), figsize=(4.6 * len(shown_names), 4.5), sharey=True)
+    for ax, name in zip(axes, shown_names):
+        ms = maps[name]
         shown = np.where(np.isfinite(ms), ms, 10.0)
         im = ax.imshow(shown, aspect="auto", cmap="RdYlGn_r", vmin=1.0, vmax=3.0)
         for i in range(ms.shape[0]):
             for j in range(ms.shape[1]):
                 ax.text(j, i, "unst." if not np.isfinite(ms[i, j]) else f"{ms[i, j]:.2f}", ha="center",
-                        va="center", fontsize=7)
-        ax.set_xticks(range(len(forces)))
-        ax.set_xticklabels([f"{f:g} N" for f in forces])
-        ax.set_title(f"Ms, {title}")
+                        va="center", fontsize=6)
+        ax.set_xticks(range(len(FORCES)))
+        ax.set_xticklabels([f"{f:g} N" for f in FORCES], fontsize=8)
+        ax.set_title(f"Ms (sliding), {name}", fontsize=8)
     axes[0].set_yticks(range(len(pop)))
     axes[0].set_yticklabels([lab for lab, _ in pop], fontsize=8)
     fig.colorbar(im, ax=axes, shrink=0.8)
     fig.savefig(OUT / "ms_map.png", dpi=110)
     plt.close(fig)
-    ms_l = population_ms(LQG().statespace(), pts).reshape(len(pop), len(forces))
-    results["ms_map"] = {"forces_n": forces, "labels": [lab for lab, _ in pop], "unstable": -1,
-                         "default_pid": np.where(np.isfinite(ms_d), ms_d, -1).tolist(),
-                         "scheduled_pid": np.where(np.isfinite(ms_s), ms_s, -1).tolist(),
-                         "lqg": np.where(np.isfinite(ms_l), ms_l, -1).tolist()}
+    results["ms_map"] = {"forces_n": FORCES, "labels": [lab for lab, _ in pop], "unstable": -1,
+                         **{name: _ms_grid(ms) for name, ms in maps.items()}}
+    return maps
 
 
-def tuning(results, pop, spec):
+def describing_function(results):
+    """Measured describing function of the drive around the pressing equilibrium at 1 N.
+
+    The nominal device (and the same with pure Coulomb friction) is brought to the pressing
+    equilibrium with the operating command held 15 s; a sinusoid of amplitude A is added to
+    the command for 4 s and the fundamental of the estimate over the last 2 s (detrended)
+    is divided by the sampled-data linear model's response to the same input.
+    """
+    base = DeviceParams()
+    coulomb = dataclasses.replace(base, motor=dataclasses.replace(base.motor, breakaway_ratio=1.0),
+                                  drivetrain=dataclasses.replace(base.drivetrain, guide_breakaway_ratio=1.0))
+    amps = [0.1, 0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.6, 2.4]
+    freqs = [2.0, 8.0]
+    band = friction_band_v(base, 1.0)
+    out = {"friction_band_v": band, "amplitudes_v": amps, "frequencies_hz": freqs, "measured": {}}
+
+    def fund(y, tt, f, t_end):
+        m = tt >= t_end - 2.0
+        A = np.vstack([np.sin(2 * np.pi * f * tt[m]), np.cos(2 * np.pi * f * tt[m]), np.ones(m.sum()), tt[m]]).T
+        c = np.linalg.lstsq(A, y[m], rcond=None)[0]
+        return complex(c[0], c[1])
+
+    for dname, dev in (("default device", base), ("pure Coulomb friction", coulomb)):
+        op = operating_point(dev, 1.0)
+        front, est = _sampled_front(dev, op)
+        for f in freqs:
+            vals = []
+            for a in amps:
+                pl = Plant.from_devices([dev], seeds=[1])
+                pl.set_finger(1e-3)
+                for _ in range(15000):
+                    pl.advance(op.command_v)
+                e0 = pl.force_est_n[0]
+                T = 4.0
+                n = int(T * 1000)
+                t = np.arange(n) * 1e-3
+                u = a * np.sin(2 * np.pi * f * t)
+                fe = np.zeros(n)
+                for k in range(n):
+                    pl.advance(op.command_v + u[k])
+                    fe[k] = pl.force_est_n[0]
+                aa = np.asarray(control.forced_response(front, T=t, U=u).outputs).ravel()
+                y_lin = np.asarray(control.forced_response(est, U=aa[9::10]).outputs).ravel()
+                te = t[9::10]
+                N = fund(fe[9::10] - e0, te, f, T) / fund(y_lin, te, f, T)
+                vals.append([abs(N), float(np.degrees(np.angle(N)))])
+            out["measured"][f"{dname}, {f:g} Hz"] = vals
+    # play (backlash) describing function of half-width b = band/2
+    b = band / 2
+    aa_ = np.linspace(b * 1.001, max(amps) * 1.2, 300)
+    r = b / aa_
+    re = 0.5 + (np.arcsin(1 - 2 * r) + 2 * (1 - 2 * r) * np.sqrt(r * (1 - r))) / np.pi
+    im = -4 * r * (1 - r) / np.pi
+    out["play_model"] = {"amplitude_v": aa_.tolist(), "gain": np.hypot(re, im).tolist(),
+                         "phase_deg": np.degrees(np.arctan2(im, re)).tolist()}
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4))
+    for key, vals in out["measured"].items():
+        v = np.array(vals)
+        a1.plot(amps, v[:, 0], "o-", label=key)
+        a2.plot(amps, v[:, 1], "o-", label=key)
+    a1.plot(aa_, np.hypot(re, im), "k--", label=f"play of width {band:.2f} V (formula)")
+    a2.plot(aa_, np.degrees(np.arctan2(im, re)), "k--", label="play (formula)")
+    a1.axvline(b, color="0.6", lw=0.8)
+    a1.set_xlabel("command amplitude A (V)")
+    a2.set_xlabel("command amplitude A (V)")
+    a1.set_ylabel("|N(A)| (nonlinear / sliding model)")
+    a2.set_ylabel("phase of N(A) (deg)")
+    a2.set_ylim(-100, 30)
+    a1.legend(fontsize=7)
+    a1.set_title("describing function of the drive at 1 N (estimate out)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(OUT / "describing_function.png", dpi=110)
+    plt.close(fig)
+    results["describing_function"] = out
+    print("describing function done")
+
+
+def _tune_one(name):
+    t = TUNINGS[name]
+    spec = load_scenario("setpoint_steps")
+    pop = tuning_population(POP_N, seed=POP_SEED)
+    t0 = time.perf_counter()
+    res = robust_tune(spec, pop, family="pid_scheduled", ms_max=t["ms_max"], ms_gain=t["ms_gain"],
+                      max_evaluations=EVALUATIONS, scenarios=standard_scenarios(spec))
+    rep = res.report()
+    rep["wall_s"] = time.perf_counter() - t0
+    rep["gains_file"] = res.gains_file()
+    rep["label"] = t["label"]
+    return name, rep
+
+
+def tuning(results):
+    """The four tunings of TUNINGS, two at a time (one per core)."""
+    from concurrent.futures import ProcessPoolExecutor
     out = {}
-    for family in ("pid", "pid_scheduled"):
-        t0 = time.perf_counter()
-        res = robust_tune(spec, pop, family=family, max_evaluations=24)
-        rep = res.report()
-        rep["wall_s"] = time.perf_counter() - t0
-        rep["gains_file"] = res.gains_file()
-        out[family] = rep
-        print(f"tuned {family}: {rep['gains_file']}  worst in-band {rep['tuned']['metrics']['in_band_fraction']}"
-              f" default {rep['default']['metrics']['in_band_fraction']}  ({rep['wall_s']:.0f} s)")
+    with ProcessPoolExecutor(max_workers=2) as ex:
+        for name, rep in ex.map(_tune_one, list(TUNINGS)):
+            g = rep["gains_file"]["gains"]
+            print(f"tuned [{name}]: kp {g['kp_v_per_n']:.3g} ki {g['ki_v_per_ns']:.3g} kd {g['kd_vs_per_n']:.3g} "
+                  f"cost {rep['tuned']['cost']:.3f} (hand {rep['hand']['cost']:.3f}) ({rep['wall_s']:.0f} s)", flush=True)
+            out[name] = rep
     results["tuning"] = out
     return out
 
 
-def comparison(results, pop, tuned):
-    makers = {
-        "pid (default)": lambda: PID(DEFAULT_PID),
-        "pid (robust-tuned)": lambda: controllers.make("pid", **tuned["pid"]["gains_file"]["gains"]),
-        "pid_scheduled (tuned)": lambda: controllers.make("pid_scheduled", **tuned["pid_scheduled"]["gains_file"]["gains"]),
-        "pid_scheduled (defaults)": lambda: controllers.make("pid_scheduled"),
-        "pid_scheduled + map": lambda: ScheduledPID(ScheduleConfig(reference_map=True)),
-        "pid_feedforward": lambda: controllers.make("pid_feedforward"),
-        "lqg": lambda: LQG(),
-    }
-    scen = {"setpoint_steps": None, "steady_90wpm": 12.0, "contact_onset": None}
+def _tuned_config(rep):
+    g = rep["gains_file"]["gains"]
+    return ScheduleConfig(**g)
+
+
+EVAL_SCENARIOS = [("steady_60wpm", 12.0), ("steady_90wpm", 12.0), ("steady_120wpm", 12.0), ("contact_onset", None),
+                  ("setpoint_steps", None), ("setpoint_steps_unramped", None), ("strap_slip", 20.0),
+                  ("tremor_90wpm", 12.0)]
+DESIGN_KEYS = {"tuned, Ms <= 1.6": "ms1.6", "tuned, Ms <= 2.0": "ms2.0", "tuned, friction DF": "friction",
+               "tuned, no Ms bound": "free"}
+
+
+def _load(name):
+    if name.endswith("_unramped"):
+        return unramped(load_scenario(name[: -len("_unramped")]))
+    return load_scenario(name)
+
+
+def comparison(results, pops, makers):
+    """Worst case, CVaR25 and median of each metric, every controller x scenario x population."""
     table = {}
-    for sname, dur in scen.items():
-        spec = load_scenario(sname)
-        table[sname] = {}
-        for cname, mk in makers.items():
-            table[sname][cname] = summarise(evaluate(mk, pop, spec, duration_s=dur))
-            print(sname, cname, table[sname][cname]["in_band_fraction"])
-    results["comparison"] = table
+    for pname, pop in pops.items():
+        table[pname] = {}
+        for sname, dur in EVAL_SCENARIOS:
+            spec = _load(sname)
+            table[pname][sname] = {}
+            for cname, mk in makers.items():
+                rows = evaluate(mk, pop, spec, duration_s=dur)
+                table[pname][sname][cname] = summarise(rows)
+                table[pname][sname][cname]["in_band_per_device"] = [r["in_band_fraction"] for r in rows]
+            print(pname, sname, {c: round(v["in_band_fraction"]["worst"], 3) for c, v in table[pname][sname].items()},
+                  flush=True)
+    results["comparison"] = {"scenarios": EVAL_SCENARIOS, "populations": {k: [lab for lab, _ in p]
+                                                                           for k, p in pops.items()},
+                             "table": table}
     names = list(makers)
-    fig, axes = plt.subplots(1, len(scen), figsize=(15, 4.5), sharey=True)
-    for ax, sname in zip(axes, scen):
-        med = [table[sname][c]["in_band_fraction"]["median"] for c in names]
-        worst = [table[sname][c]["in_band_fraction"]["worst"] for c in names]
+    tab = table["tuning population"]
+    fig, axes = plt.subplots(1, len(EVAL_SCENARIOS), figsize=(20, 5), sharey=True)
+    for ax, (sname, _) in zip(axes, EVAL_SCENARIOS):
+        med = [tab[sname][c]["in_band_fraction"]["median"] for c in names]
+        worst = [tab[sname][c]["in_band_fraction"]["worst"] for c in names]
         y = np.arange(len(names))
         ax.barh(y + 0.2, med, height=0.4, label="median")
         ax.barh(y - 0.2, worst, height=0.4, label="worst case")
-        ax.set_title(sname)
+        ax.set_title(sname, fontsize=9)
         ax.set_xlim(0, 1.02)
-        ax.set_xlabel("in-band fraction (true force within 10 %)")
+        ax.set_xlabel("in-band fraction", fontsize=8)
     axes[0].set_yticks(np.arange(len(names)))
     axes[0].set_yticklabels(names, fontsize=8)
     axes[0].legend(fontsize=8, loc="lower left")
     fig.tight_layout()
     fig.savefig(OUT / "comparison.png", dpi=110)
     plt.close(fig)
+
+
+def fragility(results, pop):
+    """Worst case on setpoint_steps of MS_1_6 and of the same gains rounded to two digits."""
+    spec = load_scenario("setpoint_steps")
+    out = {}
+    for name, c in (("MS_1_6", MS_1_6), ("kp 0.53, ki 1.15, kd 0", dataclasses.replace(
+            MS_1_6, kp_v_per_n=0.53, ki_v_per_ns=1.15, kd_vs_per_n=0.0))):
+        rows = evaluate(lambda: ScheduledPID(c), pop, spec)
+        out[name] = {r["label"]: r["in_band_fraction"] for r in rows}
+    results["fragility_setpoint_steps"] = out
+
+
+def step_traces(results, makers, names):
+    """Nominal reader, setpoint steps with and without the ramp, a few controllers."""
+    fig, axes = plt.subplots(2, 1, figsize=(11, 7), sharex=True)
+    out = {}
+    for ax, sname in zip(axes, ("setpoint_steps", "setpoint_steps_unramped")):
+        spec = _load(sname)
+        out[sname] = {}
+        for j, cname in enumerate(names):
+            r = run_scenario(spec, controller=makers[cname]())
+            tr = r.trace
+            if j == 0:
+                ax.plot(tr["t_s"], tr["setpoint_n"], "k--", lw=0.8, label="setpoint")
+                ax.fill_between(tr["t_s"], 0.9 * tr["setpoint_n"], 1.1 * tr["setpoint_n"], color="0.9")
+            ax.plot(tr["t_s"], tr["force_true_n"], lw=0.9, label=cname)
+            out[sname][cname] = {"in_band_fraction": r.metrics["in_band_fraction"],
+                                 "peak_force_n": r.metrics["peak_force_n"]}
+        ax.set_title(f"{sname}, nominal reader (true force)", fontsize=9)
+        ax.set_ylabel("force (N)")
+    axes[0].legend(fontsize=8, ncol=3)
+    axes[-1].set_xlabel("time (s)")
+    fig.tight_layout()
+    fig.savefig(OUT / "steps.png", dpi=110)
+    plt.close(fig)
+    results["step_traces"] = out
 
 
 def fault_figure(results):
@@ -226,20 +417,62 @@ def fault_figure(results):
 
 
 def main():
+    reuse = "--reuse" in sys.argv[1:]
     OUT.mkdir(parents=True, exist_ok=True)
-    results = {"population": {"seed": POP_SEED, "n_random": POP_N}}
+    old = json.loads((OUT / "results.json").read_text()) if reuse else {}
+    results = {"population": {"seed": POP_SEED, "n_random": POP_N},
+               "heldout_population": {"seed": HELDOUT_SEED, "n_random": HELDOUT_N}}
     t0 = time.perf_counter()
-    step_match(results)
-    loop_figures(results)
-    spec = load_scenario("setpoint_steps")
     pop = tuning_population(POP_N, seed=POP_SEED)
     results["population"]["labels"] = [lab for lab, _ in pop]
-    ms_map(results, pop, spec)
+    if reuse and "tuning" in old:
+        tuned = results["tuning"] = old["tuning"]
+    else:
+        tuned = tuning(results)
+        # saved at once, so that a later step can be redone with --reuse
+        _write(results)
+        if "--tuning-only" in sys.argv[1:]:
+            return
+    cfg = {name: _tuned_config(rep) for name, rep in tuned.items()}
+    results["recommended"] = {"config": dataclasses.asdict(RECOMMENDED), "from_tuning": "friction",
+                              "ms_1_6": dataclasses.asdict(MS_1_6), "hand": dataclasses.asdict(HAND)}
+    step_match(results)
+    loop_figures(results, RECOMMENDED)
+    describing_function(results)
+    simc = simc_pid(force_n=1.0)
+    designs = {"default PID": DEFAULT_PID, "SIMC": simc, "hand design": ScheduledPID(HAND).pid_config_at,
+               **{label: ScheduledPID(cfg[key]).pid_config_at for label, key in DESIGN_KEYS.items()},
+               TUNE_DEFAULT: ScheduledPID(MS_1_6).pid_config_at, REC: ScheduledPID(RECOMMENDED).pid_config_at,
+               "LQG": LQG().statespace()}
+    ms_maps(results, pop, designs)
+    pts = linearisation_points(pop, FORCES)
+    results["ms_map_friction_0.5"] = {name: _ms_grid(population_ms(c, pts, 0.5).reshape(len(pop), len(FORCES)))
+                                      for name, c in designs.items() if name != "LQG"}
+    for label, key in DESIGN_KEYS.items():
+        (OUT / f"gains_{key}.toml").write_text(_toml(tuned[key]["gains_file"]))
+    (OUT / "gains_hand.toml").write_text(_toml({"controller": "pid_scheduled",
+                                                "gains": dataclasses.asdict(HAND)}))
+    makers = {
+        "default PID": lambda: PID(DEFAULT_PID),
+        "SIMC": lambda: PID(simc),
+        "hand design": lambda: ScheduledPID(HAND),
+        **{name: (lambda c: (lambda: ScheduledPID(c)))(cfg[key]) for name, key in DESIGN_KEYS.items()},
+        "hand + feedforward": lambda: ScheduledPID(dataclasses.replace(HAND, feedforward=True),
+                                                   name="pid_feedforward"),
+        TUNE_DEFAULT: lambda: ScheduledPID(MS_1_6),
+        REC: lambda: ScheduledPID(RECOMMENDED),
+        "LQG": lambda: LQG(),
+    }
+    pops = {"tuning population": pop,
+            "held-out draws": [(f"heldout_{k}", d) for k, d in
+                               enumerate(__import__("ebraille_sim.population", fromlist=["x"]).sample_devices(
+                                   HELDOUT_SEED, HELDOUT_N))]}
+    comparison(results, pops, makers)
+    fragility(results, pop)
+    step_traces(results, makers, ["default PID", "hand design", TUNE_DEFAULT, REC])
     fault_figure(results)
-    tuned = tuning(results, pop, spec)
-    comparison(results, pop, tuned)
     results["wall_s"] = time.perf_counter() - t0
-    (OUT / "results.json").write_text(json.dumps(results, indent=1, default=float) + "\n")
+    _write(results)
     print(f"wrote {OUT} in {results['wall_s']:.0f} s")
 
 

@@ -1,19 +1,26 @@
-"""``ebraille-sim tune SCENARIO``: robust PID tuning over a population, with report and figures.
+"""``ebraille-sim tune SCENARIO``: robust PID tuning over a population and several scenarios.
 
 Writes into ``--out`` (default ``runs/tune-SCENARIO``):
 
-* ``gains.toml``: the tuned controller, accepted by ``ebraille-sim run --controller``;
-* ``report.md`` and ``report.json``: gains, Ms, median and worst-case metrics of the tuned
-  controller, the hand-tuned default PID and the SIMC rule, per device;
+* ``gains.toml``: the tuned controller, accepted by ``ebraille-sim run --controller``
+  (for a scheduled family ``controller = "pid_scheduled"`` or ``"pid_feedforward"`` with
+  every :class:`~controllers.schedule.ScheduleConfig` field);
+* ``gains_hand.toml`` (scheduled families): the family at the hand-tuned default gains,
+  the reference the tuned gains are compared with;
+* ``report.md`` and ``report.json``: gains, Ms at every linearisation point, median,
+  CVaR25 and worst-case metrics per scenario of the tuned controller, the hand-tuned
+  default PID, the SIMC rule and the family at the default gains, per device;
 * ``bode.png``, ``nyquist.png`` (tuned loop on the nominal reader at each setpoint) and
-  ``population.png`` (in-band fraction per device for the three controllers).
+  ``population.png`` (worst-case in-band fraction per scenario for each controller).
 """
 from __future__ import annotations
 
+import math
 import sys
 
 NAME = "tune"
-HELP = "tune PID gains over a population of readers and FSR units (Ms <= 1.6); write gains, report, figures"
+HELP = ("tune PID gains over a population of readers and FSR units and several scenarios "
+        "(Ms <= 1.6); write gains, report, figures")
 
 
 def add_arguments(p):
@@ -22,11 +29,23 @@ def add_arguments(p):
                    help="random devices drawn besides the 5 presets (default 8)")
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default runs/tune-SCENARIO)")
     p.add_argument("--seed", type=int, default=0, help="population seed (default 0)")
-    p.add_argument("--family", default="pid_scheduled", choices=["pid", "pid_scheduled"],
-                   help="fixed PID gains, or gains scheduled on force (default)")
+    p.add_argument("--family", default="pid_scheduled", choices=["pid", "pid_scheduled", "pid_feedforward"],
+                   help="fixed PID gains, gains scheduled on force with the reference map (default), "
+                        "or that plus the friction-band feedforward")
+    p.add_argument("--scenarios", default="standard", metavar="LIST",
+                   help="'standard' (default: SCENARIO plus steady_90wpm shortened, contact_onset, "
+                        "setpoint_steps, setpoint_steps without its ramp and strap_slip shortened), "
+                        "'single' (SCENARIO alone), "
+                        "or a comma-separated list of scenarios added to SCENARIO "
+                        "(NAME_unramped takes NAME's steps at once)")
     p.add_argument("--evaluations", type=int, default=30, metavar="N", help="cost evaluations (default 30)")
-    p.add_argument("--duration", type=float, default=None, metavar="S", help="override the scenario duration, s")
-    p.add_argument("--ms-max", type=float, default=1.6, help="bound on the sensitivity peak (default 1.6)")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="override the duration of SCENARIO, s (steady scenarios default to 12 s in 'standard')")
+    p.add_argument("--ms-max", type=float, default=1.6,
+                   help="bound on the sensitivity peak at every device and setpoint (default 1.6; 'inf' for none)")
+    p.add_argument("--ms-gain", type=float, default=1.0,
+                   help="describing-function factor applied to the loop in the Ms check (default 1: the "
+                        "sliding linearisation; e.g. 0.5 for the friction-band relaxation of docs/tuning.md)")
 
 
 class _Bar:
@@ -58,31 +77,83 @@ class _Bar:
             sys.stderr.write("\n")
 
 
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, int):
+        return str(v)
+    v = float(v)
+    if math.isinf(v):
+        return "inf" if v > 0 else "-inf"
+    return repr(v)
+
+
 def _toml(doc: dict) -> str:
     lines = [f'controller = "{doc["controller"]}"', "", "[gains]"]
-    lines += [f"{k} = {v!r}" for k, v in doc["gains"].items()]
+    lines += [f"{k} = {_toml_value(v)}" for k, v in doc["gains"].items()]
     return "\n".join(lines) + "\n"
 
 
+def _fmt_ms(x: float) -> str:
+    return "unstable" if (x is None or x < 0 or not math.isfinite(x)) else f"{x:.2f}"
+
+
+_NAMES = {"tuned": "tuned", "hand": "family at default gains", "default": "default PID", "simc": "SIMC"}
+
+
 def _markdown(spec, rep: dict, n_dev: int) -> str:
+    keys = [k for k in ("tuned", "hand", "default", "simc") if k in rep]
+    bound = rep["ms_bound"]
+    rule = (f"Ms <= {bound:g}" if math.isfinite(bound) else "no Ms bound") + \
+        (" on the sliding linearisation" if rep["ms_gain"] == 1.0 else
+         f" on the loop scaled by the describing-function factor {rep['ms_gain']:g}")
     out = [f"# Robust tuning: {spec.name}", "",
-           f"Population: {n_dev} devices (reader presets, FSR presets, random draws), "
-           f"controller family `{rep['family']}`, {rep['evaluations']} cost evaluations.", "",
-           "| controller | kp (V/N) | ki (V/Ns) | kd (Vs/N) | max Ms | in-band median | in-band worst | "
-           "RMSE median (N) | RMSE worst (N) |", "|---|---|---|---|---|---|---|---|---|"]
-    for key in ("tuned", "default", "simc"):
+           f"Population: {n_dev} devices (reader presets, FSR presets, random draws), controller family "
+           f"`{rep['family']}`, {rep['evaluations']} cost evaluations, constraint: {rule}.", "",
+           "Scenarios of the cost: " + ", ".join(
+               f"{n}" + (f" ({d:g} s)" if d else "") for n, d in zip(rep["scenarios"], rep["scenario_durations_s"])),
+           "", "| controller | kp (V/N) | ki (V/Ns) | kd (Vs/N) | max Ms | cost |", "|---|---|---|---|---|---|"]
+    for key in keys:
         b = rep[key]
-        g, m = b["gains"], b["metrics"]
-        out.append(f"| {key} | {g['kp_v_per_n']:.3g} | {g['ki_v_per_ns']:.3g} | {g['kd_vs_per_n']:.3g} | "
-                   f"{b['ms_max']:.2f} | {m['in_band_fraction']['median']:.3f} | {m['in_band_fraction']['worst']:.3f} | "
-                   f"{m['force_rmse_n']['median']:.3f} | {m['force_rmse_n']['worst']:.3f} |")
-    out += ["", "The tuned gains of a scheduled family are its gains at 1 N; they scale with the pulp "
-            "stiffness ratio K(1 N)/K(F) at other setpoints.", "",
-            "## Per device (in-band fraction)", "", "| device | tuned | default | simc |", "|---|---|---|---|"]
-    for a, b, c in zip(rep["tuned"]["per_device"], rep["default"]["per_device"], rep["simc"]["per_device"]):
-        out.append(f"| {a['label']} | {a['in_band_fraction']:.3f} | {b['in_band_fraction']:.3f} | "
-                   f"{c['in_band_fraction']:.3f} |")
-    out += ["", "Figures: bode.png, nyquist.png (tuned loop, nominal reader), population.png."]
+        g = b["gains"]
+        out.append(f"| {_NAMES[key]} | {g['kp_v_per_n']:.3g} | {g['ki_v_per_ns']:.3g} | {g['kd_vs_per_n']:.3g} | "
+                   f"{_fmt_ms(b['ms_max'])} | {b['cost']:.3f} |")
+    out += ["", "## In-band fraction per scenario: worst / CVaR25 / median (peak force worst, N)", "",
+            "| scenario | " + " | ".join(_NAMES[k] for k in keys) + " |", "|---|" + "---|" * len(keys)]
+    for s in rep["scenarios"]:
+        cells = []
+        for k in keys:
+            m = rep[k]["scenarios"][s]["metrics"]
+            ib = m["in_band_fraction"]
+            cells.append(f"{ib['worst']:.3f} / {ib['cvar25']:.3f} / {ib['median']:.3f} ({m['peak_force_n']['worst']:.2f})")
+        out.append(f"| {s} | " + " | ".join(cells) + " |")
+    out += ["", "The gains of a scheduled family are its gains at 1 N; they scale with the pulp stiffness "
+            "ratio K(1 N)/K(F) at other setpoints.", "",
+            "## Ms at every linearisation point (sliding model" +
+            ("" if rep["ms_gain"] == 1.0 else f", loop scaled by {rep['ms_gain']:g}") + ")", ""]
+    forces = rep["forces_n"]
+    for key in keys:
+        out += [f"**{_NAMES[key]}**", "", "| device | " + " | ".join(f"{f:g} N" for f in forces) + " |",
+                "|---|" + "---|" * len(forces)]
+        for lab, row in zip(rep["labels"], rep[key]["ms_table"]):
+            out.append(f"| {lab} | " + " | ".join(_fmt_ms(x) for x in row) + " |")
+        out.append("")
+    if "hand" in rep and rep["hand"]["cost"] < rep["tuned"]["cost"]:
+        out += ["**Note.** The family at the hand-tuned default gains has a lower cost than the tuned gains "
+                f"({rep['hand']['cost']:.3f} against {rep['tuned']['cost']:.3f}) but does not meet the Ms bound "
+                f"(max Ms {_fmt_ms(rep['hand']['ms_max'])}); it is written as gains_hand.toml.  docs/tuning.md "
+                "discusses which one to ship.", ""]
+    out += ["## Per device (in-band fraction)", ""]
+    for s in rep["scenarios"]:
+        out += [f"**{s}**", "", "| device | " + " | ".join(_NAMES[k] for k in keys) + " |",
+                "|---|" + "---|" * len(keys)]
+        for j, lab in enumerate(rep["labels"]):
+            out.append(f"| {lab} | " + " | ".join(
+                f"{rep[k]['scenarios'][s]['per_device'][j]['in_band_fraction']:.3f}" for k in keys) + " |")
+        out.append("")
+    out += ["Figures: bode.png, nyquist.png (tuned loop, nominal reader), population.png."]
     return "\n".join(out) + "\n"
 
 
@@ -91,20 +162,45 @@ def _plot_population(rep: dict, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
-    labels = [r["label"] for r in rep["tuned"]["per_device"]]
-    x = np.arange(len(labels))
-    fig, ax = plt.subplots(figsize=(max(6, 0.6 * len(labels) + 2), 4))
-    for j, key in enumerate(("tuned", "default", "simc")):
-        vals = [r["in_band_fraction"] for r in rep[key]["per_device"]]
-        ax.bar(x + (j - 1) * 0.27, vals, width=0.27, label=key)
+    keys = [k for k in ("tuned", "hand", "default", "simc") if k in rep]
+    scen = rep["scenarios"]
+    x = np.arange(len(scen))
+    wdt = 0.8 / len(keys)
+    fig, ax = plt.subplots(figsize=(max(6, 1.6 * len(scen) + 2), 4))
+    for j, key in enumerate(keys):
+        vals = [rep[key]["scenarios"][s]["metrics"]["in_band_fraction"]["worst"] for s in scen]
+        ax.bar(x + (j - (len(keys) - 1) / 2) * wdt, vals, width=wdt, label=_NAMES[key])
     ax.set_xticks(x)
-    ax.set_xticklabels(labels, rotation=45, ha="right", fontsize=8)
-    ax.set_ylabel("in-band fraction")
+    ax.set_xticklabels(scen, rotation=20, ha="right", fontsize=8)
+    ax.set_ylabel("worst-case in-band fraction")
     ax.set_ylim(0, 1.05)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _scenarios(arg: str, spec, duration):
+    from controllers.robust import TuneScenario, standard_scenarios, unramped
+
+    from ..scenario import load_scenario
+    if arg == "single":
+        return [TuneScenario(spec.name, spec, duration)]
+    if arg == "standard":
+        out = standard_scenarios(spec)
+        if duration is not None:
+            out[0] = TuneScenario(out[0].name, out[0].spec, duration)
+        return out
+    out = [TuneScenario(spec.name, spec, duration)]
+    for name in (n.strip() for n in arg.split(",")):
+        if not name or name in {s.name for s in out}:
+            continue
+        if name.endswith("_unramped"):
+            out.append(TuneScenario(name, unramped(load_scenario(name[: -len("_unramped")])), None))
+        else:
+            sp = load_scenario(name)
+            out.append(TuneScenario(sp.name, sp, 12.0 if sp.name.startswith("steady_") else None))
+    return out
 
 
 def main(args) -> int:
@@ -114,7 +210,7 @@ def main(args) -> int:
     import shutil
     import tempfile
 
-    from controllers.robust import robust_tune, scenario_setpoints, tuning_population
+    from controllers.robust import family_ms_controller, robust_tune, tuning_population
     from controllers.tuning import analyse_loop, plot_bode, plot_nyquist
 
     from ..scenario import load_scenario
@@ -127,14 +223,20 @@ def main(args) -> int:
         raise ValueError(f"--evaluations must be >= 4, got {args.evaluations}")
     if args.duration is not None and not args.duration > 0:
         raise ValueError(f"--duration must be > 0, got {args.duration}")
+    if not args.ms_max > 1.0:
+        raise ValueError(f"--ms-max must be > 1 (or inf), got {args.ms_max}")
+    if not (math.isfinite(args.ms_gain) and args.ms_gain > 0):
+        raise ValueError(f"--ms-gain must be finite and > 0, got {args.ms_gain}")
     spec = load_scenario(args.scenario)
+    scenarios = _scenarios(args.scenarios, spec, args.duration)
     out = pathlib.Path(args.out) if args.out else pathlib.Path("runs") / f"tune-{spec.name}"
     pop = tuning_population(args.population, seed=args.seed, base=spec.device)
-    total = len(pop) * (args.evaluations + 3)
+    n_ref = 3 if args.family != "pid" else 2
+    total = len(pop) * len(scenarios) * (max(args.evaluations, 9) + n_ref)   # at most; rejected candidates are not run
     bar = _Bar(total, f"tune {spec.name}")
     try:
-        res = robust_tune(spec, pop, family=args.family, ms_max=args.ms_max, duration_s=args.duration,
-                          max_evaluations=args.evaluations, progress=bar)
+        res = robust_tune(spec, pop, family=args.family, ms_max=args.ms_max, ms_gain=args.ms_gain,
+                          max_evaluations=args.evaluations, progress=bar, scenarios=scenarios)
     finally:
         bar.close()
     rep = res.report()
@@ -142,31 +244,39 @@ def main(args) -> int:
     rep["population"] = [label for label, _ in pop]
     rep["population_seed"] = args.seed
     nominal = dict(pop).get("nominal", pop[0][1])
-    if args.family == "pid":
-        cfg_at = lambda f: res.config  # noqa: E731
-    else:
-        from controllers.schedule import ScheduledPID
-        cfg_at = ScheduledPID(res.config).pid_config_at
-    analyses = [analyse_loop(cfg_at(f), nominal, f) for f in scenario_setpoints(spec)]
+    cfg_at = family_ms_controller(res.config)
+    if not callable(cfg_at):
+        cfg_at = (lambda c: (lambda f: c))(cfg_at)
+    analyses = [analyse_loop(cfg_at(f), nominal, f) for f in res.forces_n]
     rep["nominal_loop"] = [a.summary() for a in analyses]
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = pathlib.Path(tempfile.mkdtemp(prefix=".ebraille-tune-", dir=out.parent))
     try:
         (tmp / "gains.toml").write_text(_toml(res.gains_file()))
+        if "hand" in res.references:
+            from controllers.robust import gains_document
+            (tmp / "gains_hand.toml").write_text(_toml(gains_document(res.references["hand"].config, args.family)))
         (tmp / "report.json").write_text(json.dumps(rep, indent=2, default=float) + "\n")
         (tmp / "report.md").write_text(_markdown(spec, rep, len(pop)))
         plot_bode(analyses, tmp / "bode.png", title=f"tuned loop, nominal reader ({spec.name})")
         plot_nyquist(analyses, tmp / "nyquist.png", title=f"tuned loop, nominal reader ({spec.name})",
-                     ms_limit=args.ms_max)
+                     ms_limit=args.ms_max if math.isfinite(args.ms_max) else 2.0)
         _plot_population(rep, tmp / "population.png")
         out.mkdir(parents=True, exist_ok=True)
         for f in tmp.iterdir():
             os.replace(f, out / f.name)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    t, d = rep["tuned"]["metrics"]["in_band_fraction"], rep["default"]["metrics"]["in_band_fraction"]
-    print(f"tuned {args.family}: " + ", ".join(f"{k} {v:.4g}" for k, v in res.gains_file()["gains"].items()))
-    print(f"max Ms {res.ms_max:.3f} (bound {args.ms_max:g}); in-band worst {t['worst']:.3f} "
-          f"(default PID {d['worst']:.3f}), median {t['median']:.3f} (default {d['median']:.3f})")
+    g = res.gains_file()["gains"]
+    print(f"tuned {args.family}: kp {g['kp_v_per_n']:.4g}, ki {g['ki_v_per_ns']:.4g}, kd {g['kd_vs_per_n']:.4g}; "
+          f"max Ms {res.ms_max:.3f} (bound {args.ms_max:g}, loop factor {args.ms_gain:g}); cost {res.cost:.3f}")
+    for s in rep["scenarios"]:
+        t = rep["tuned"]["scenarios"][s]["metrics"]["in_band_fraction"]
+        d = rep["default"]["scenarios"][s]["metrics"]["in_band_fraction"]
+        print(f"  {s}: in-band worst {t['worst']:.3f} (default PID {d['worst']:.3f}), "
+              f"median {t['median']:.3f} (default {d['median']:.3f})")
+    if "hand" in rep and rep["hand"]["cost"] < rep["tuned"]["cost"]:
+        print(f"note: the family at the default gains has a lower cost ({rep['hand']['cost']:.3f}) but max Ms "
+              f"{_fmt_ms(rep['hand']['ms_max'])}: written as gains_hand.toml (see report.md)")
     print(f"wrote {out / 'gains.toml'}, report.md, report.json, bode.png, nyquist.png, population.png")
     return 0
