@@ -161,3 +161,15 @@ def check_finite(name: str, value: float) -> float:
     if not math.isfinite(value):
         raise ValueError(f"{name} must be finite, got {value!r}")
     return float(value)
+
+
+def check_update_args(force_est_n: float, setpoint_n: float, dt_s: float) -> tuple[float, float, float]:
+    """Validate the arguments of :meth:`Controller.update`; return them as floats.
+
+    Raises
+    ------
+    ValueError
+        One line naming the first bad argument (non-finite force or setpoint, dt_s not > 0).
+    """
+    return (check_finite("force_est_n", force_est_n), check_finite("setpoint_n", setpoint_n),
+            check_dt(dt_s))

@@ -41,6 +41,8 @@ import numpy as np
 
 from ebraille_sim.params import DeviceParams
 
+from .base import check_update_args
+
 __all__ = ["LQGConfig", "LQG", "design", "make_lqg"]
 
 
@@ -149,12 +151,7 @@ class LQG:
         self._u = u0
 
     def update(self, force_est_n: float, setpoint_n: float, dt_s: float, motor_current_a=None) -> float:
-        if not 0.0 < dt_s < math.inf:
-            raise ValueError(f"dt_s must be finite and > 0, got {dt_s!r}")
-        if not math.isfinite(force_est_n):
-            raise ValueError(f"force_est_n must be finite, got {force_est_n!r}")
-        if not math.isfinite(setpoint_n):
-            raise ValueError(f"setpoint_n must be finite, got {setpoint_n!r}")
+        check_update_args(force_est_n, setpoint_n, dt_s)
         c = self.config
         self._acc = self._acc + dt_s if math.isfinite(self._acc) else c.sample_s
         if self._acc < c.sample_s - 1e-9:

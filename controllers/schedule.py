@@ -59,6 +59,8 @@ import numpy as np
 
 from ebraille_sim.params import DeviceParams
 
+from .base import check_update_args
+
 __all__ = ["ScheduleConfig", "ScheduledPID", "make_scheduled", "make_feedforward", "stiffness_ratio",
            "RECOMMENDED", "MS_1_6", "HAND"]
 
@@ -213,12 +215,7 @@ class ScheduledPID:
         self._r_prev = float(setpoint_n)
 
     def update(self, force_est_n: float, setpoint_n: float, dt_s: float, motor_current_a=None) -> float:
-        if not 0.0 < dt_s < math.inf:
-            raise ValueError(f"dt_s must be finite and > 0, got {dt_s!r}")
-        if not math.isfinite(force_est_n):
-            raise ValueError(f"force_est_n must be finite, got {force_est_n!r}")
-        if not math.isfinite(setpoint_n):
-            raise ValueError(f"setpoint_n must be finite, got {setpoint_n!r}")
+        check_update_args(force_est_n, setpoint_n, dt_s)
         c = self.config
         h, y = float(dt_s), float(force_est_n)
         rate = 0.0 if self._r_prev is None else (setpoint_n - self._r_prev) / h
