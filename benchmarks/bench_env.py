@@ -25,8 +25,8 @@ import gymnasium as gym
 import numpy as np
 
 import ebraille_sim  # noqa: F401  (registers the id)
-from ebraille_sim.env import ENV_ID
-from ebraille_sim.vector_env import ContactForceVectorEnv
+from ebraille_sim.rl.env import ENV_ID
+from ebraille_sim.rl.vector_env import ContactForceVectorEnv
 
 TARGET_VECTOR = 1_000_000
 

@@ -20,7 +20,8 @@ import platform
 import numpy as np
 import scipy.signal
 
-from ebraille_sim import bench, sysid
+from ebraille_sim.identification import bench
+from ebraille_sim.identification import sysid
 from timing import best_of
 
 

@@ -16,8 +16,8 @@ import platform
 
 import controllers
 import ebraille_sim
-from ebraille_sim.params import RateParams
-from ebraille_sim.scenario import load_scenario
+from ebraille_sim.physics.params import RateParams
+from ebraille_sim.scenarios.spec import load_scenario
 from timing import best_of
 
 

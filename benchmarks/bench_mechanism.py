@@ -29,7 +29,7 @@ def main(argv=None) -> int:
         print("error: --repeats must be >= 1 and --duration > 0", file=sys.stderr)
         return 2
 
-    from ebraille_sim.runner import run_scenario
+    from ebraille_sim.scenarios.runner import run_scenario
 
     # warm-up: compile the kernel and load the estimator for both backends
     for backend in ("lumped", "pymunk"):

@@ -29,7 +29,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-serial", action="store_true", help="skip the in-process serial run")
     args = ap.parse_args(argv)
 
-    from ebraille_sim import sweep as S
+    from ebraille_sim.tools import sweep as S
 
     with tempfile.TemporaryDirectory() as tmp:
         gains = pathlib.Path(tmp) / "soft.toml"

@@ -36,8 +36,8 @@ import os
 from collections.abc import Callable
 from typing import Any
 
-from .base import Controller
-from .pid import DEFAULT_PID, PID, PIDConfig, pid_from_dict
+from controllers.base import Controller
+from controllers.pid import DEFAULT_PID, PID, PIDConfig, pid_from_dict
 
 __all__ = ["Controller", "PID", "PIDConfig", "available", "make", "register"]
 
@@ -170,7 +170,7 @@ def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
     """
     spec = os.fspath(name_or_path)
     if spec.startswith(_POLICY_PREFIX):
-        from .policy import load_policy  # imports stable-baselines3 only when a policy is loaded
+        from controllers.policy import load_policy  # imports stable-baselines3 only when a policy is loaded
         return load_policy(spec[len(_POLICY_PREFIX):], **overrides)
     if spec in _REGISTRY:
         return _REGISTRY[spec](**overrides)
@@ -199,20 +199,26 @@ register("pid", _make_pid)
 
 def _make_scheduled(**gains: Any) -> Controller:
     """Factory for ``"pid_scheduled"`` (imported lazily from :mod:`controllers.schedule`)."""
-    from .schedule import make_scheduled
+    from controllers.schedule import make_scheduled
     return make_scheduled(**gains)
 
 
 def _make_feedforward(**gains: Any) -> Controller:
     """Factory for ``"pid_feedforward"`` (imported lazily from :mod:`controllers.schedule`)."""
-    from .schedule import make_feedforward
+    from controllers.schedule import make_feedforward
     return make_feedforward(**gains)
 
 
 def _make_lqg(**gains: Any) -> Controller:
-    """Factory for ``"lqg"`` (imported lazily from :mod:`controllers.lqg`)."""
-    from .lqg import make_lqg
-    return make_lqg(**gains)
+    """Factory for ``"lqg"``: the LQG designed on the simulator's linearised plant.
+
+    The design model comes from the analysis layer
+    (:func:`ebraille_sim.analysis.tuning.make_lqg`), resolved when the controller is
+    made, like a plugin entry point; ``controllers`` itself imports only the physics and
+    estimation layers.
+    """
+    import importlib
+    return importlib.import_module("ebraille_sim.analysis.tuning").make_lqg(**gains)
 
 
 register("pid_scheduled", _make_scheduled)

@@ -1,8 +1,10 @@
 """LQG force controller: Kalman observer and LQ state feedback with integral action.
 
-The design model is the sampled-data plant of :func:`controllers.tuning.linearize` at
-the estimator rate (command held 10 ms, estimated force out) for the nominal device at
-``design_force_n``.  The controller is therefore a sampled-data controller at the
+The controller is handed its design model: a discrete-time ``control.StateSpace`` from
+the command (held over a sample) to the estimated force, with the operating point
+``(u0, y0)`` it was linearised at.  The registered ``"lqg"`` uses the sampled-data plant of
+:func:`ebraille_sim.analysis.tuning.linearize` at the estimator rate for the nominal device
+at ``design_force_n`` (:func:`ebraille_sim.analysis.tuning.make_lqg`).  The controller is therefore a sampled-data controller at the
 estimator period ``sample_s`` (0.01 s): the measured signal only changes at that rate.
 It accumulates the ``dt_s`` it is given and acts when a full ``sample_s`` has elapsed,
 holding its command in between (its rate is a named, documented parameter, not a hidden
@@ -24,8 +26,10 @@ command); ``L`` from ``control.dlqe`` with process noise ``w_command_v`` on the 
 
 Examples
 --------
->>> from controllers import make
->>> c = make("lqg")
+>>> import control
+>>> from controllers.lqg import LQG, LQGConfig
+>>> model = control.ss([[0.9]], [[0.1]], [[1.0]], [[0.0]], dt=0.01)   # a toy first-order plant
+>>> c = LQG(LQGConfig(), model, command_v=0.5, estimate_n=1.0)
 >>> c.reset(force_est_n=1.0, setpoint_n=1.0, command_v=0.5)
 >>> abs(c.update(1.0, 1.0, 1e-3) - 0.5) < 0.6
 True
@@ -39,11 +43,9 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from ebraille_sim.params import DeviceParams
+from controllers.base import check_update_args
 
-from .base import check_update_args
-
-__all__ = ["LQGConfig", "LQG", "design", "make_lqg"]
+__all__ = ["LQGConfig", "LQG", "design", "config_from"]
 
 
 @dataclass(frozen=True)
@@ -70,10 +72,20 @@ class LQGConfig:
             raise ValueError("u_min_v must be < u_max_v")
 
 
-def design(config: LQGConfig = LQGConfig(), device: DeviceParams = DeviceParams()) -> dict:
-    """Matrices of the LQG design (model, gains, operating point)."""
-    from .tuning import linearize
-    plant, op = linearize(device, config.design_force_n, return_point=True)
+def design(config: LQGConfig, plant: control.StateSpace, command_v: float, estimate_n: float) -> dict:
+    """Matrices of the LQG design (model, gains, operating point).
+
+    Parameters
+    ----------
+    config : LQGConfig
+    plant : control.StateSpace
+        Discrete-time single-input single-output design model, command (V) to the
+        estimated force (N), sampled at ``config.sample_s``.
+    command_v, estimate_n : float
+        The operating point the model was linearised at.
+    """
+    if not (plant.isdtime(strict=True) and plant.ninputs == 1 and plant.noutputs == 1):
+        raise ValueError("the LQG design model must be a discrete-time SISO state space")
     if not math.isclose(plant.dt, config.sample_s):
         raise ValueError(f"sample_s ({config.sample_s:g}) must equal the estimator period ({plant.dt:g} s)")
     A, B, C = plant.A, plant.B, plant.C
@@ -90,7 +102,7 @@ def design(config: LQGConfig = LQGConfig(), device: DeviceParams = DeviceParams(
     M = np.block([[A - np.eye(n), B], [C, np.zeros((1, 1))]])
     sol = np.linalg.solve(M, np.concatenate([np.zeros(n), [1.0]]))
     return {"A": A, "B": B, "C": C, "K": Ka[:, :n], "kz": float(Ka[0, n]), "L": np.asarray(L),
-            "Nx": sol[:n], "Nu": float(sol[n]), "u0": op.command_v, "y0": op.estimate_n, "plant": plant,
+            "Nx": sol[:n], "Nu": float(sol[n]), "u0": float(command_v), "y0": float(estimate_n), "plant": plant,
             "state_labels": plant.state_labels}
 
 
@@ -99,9 +111,9 @@ class LQG:
 
     name = "lqg"
 
-    def __init__(self, config: LQGConfig = LQGConfig(), device: DeviceParams = DeviceParams()):
+    def __init__(self, config: LQGConfig, model: control.StateSpace, command_v: float, estimate_n: float):
         self.config = config
-        d = design(config, device)
+        d = design(config, model, command_v, estimate_n)
         self._d = d
         self._A, self._B, self._C = d["A"], d["B"][:, 0], d["C"][0]
         self._K, self._kz, self._L = d["K"][0], d["kz"], d["L"][:, 0]
@@ -118,7 +130,7 @@ class LQG:
         """The linear controller at ``sample_s``: inputs (setpoint, estimate), output command deviation.
 
         States: the observer's prediction and the integrator.  Used by
-        :func:`controllers.tuning.loop_models` for the margins and Ms.
+        :func:`ebraille_sim.analysis.tuning.loop_models` for the margins and Ms.
         """
         A, B, C, L, K, kz = self._A, self._B[:, None], self._C[None, :], self._L[:, None], self._K[None, :], self._kz
         ts, Nx, Nu = self.config.sample_s, self._Nx[:, None], self._Nu
@@ -173,10 +185,10 @@ class LQG:
         return self._u
 
 
-def make_lqg(**gains) -> LQG:
-    """Registry factory ``"lqg"``: :class:`LQGConfig` fields as keyword arguments."""
+def config_from(**gains) -> LQGConfig:
+    """:class:`LQGConfig` from keyword arguments; an unknown key is a one-line error."""
     names = {f.name for f in dataclasses.fields(LQGConfig)}
     for k in gains:
         if k not in names:
             raise ValueError(f"unknown gain key {k!r}; allowed keys: {', '.join(sorted(names))}")
-    return LQG(LQGConfig(**gains))
+    return LQGConfig(**gains)

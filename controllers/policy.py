@@ -7,7 +7,7 @@ environment settings the observation depends on.
 
 The controller sees only what the microcontroller sees (estimated force, setpoint, time
 step, motor current) and builds the policy's observation with the same compiled function
-as the environment (:func:`ebraille_sim.env.observe`), so a policy behaves in a scenario as
+as the environment (:func:`ebraille_sim.rl.env.observe`), so a policy behaves in a scenario as
 it did in training.
 
 Sampling: the policy acts at the rate it was trained at (``control_rate_hz`` in
@@ -39,7 +39,8 @@ import os
 
 import numpy as np
 
-from .base import check_dt, check_finite
+from controllers.base import check_dt, check_finite
+from controllers.features import N_OBS, N_Z, Z_PREV_ACTION, config_vector, observe, reset_features, write_observation
 
 __all__ = ["ALGORITHMS", "POLICY_FORMAT", "PolicyController", "load_policy"]
 
@@ -112,7 +113,7 @@ class PolicyController:
         Anything with ``predict(obs, deterministic=True) -> (action, state)`` taking an
         observation of shape (7,) float32 and returning an action of shape (1,).
     env_settings : dict
-        The ``env`` entry of ``policy.json`` (:meth:`ebraille_sim.env.EnvConfig.policy_metadata`).
+        The ``env`` entry of ``policy.json`` (:meth:`ebraille_sim.rl.env.EnvConfig.policy_metadata`).
     deterministic : bool
         Use the policy's mean action (default True).
     """
@@ -120,21 +121,21 @@ class PolicyController:
     name = "policy"
 
     def __init__(self, model, env_settings: dict, deterministic: bool = True):
-        from ebraille_sim.env import N_OBS, N_Z, EnvConfig
         self.model = model
         self.deterministic = bool(deterministic)
-        cfg = EnvConfig(control_rate_hz=float(env_settings["control_rate_hz"]),
-                        safe_force_n=float(env_settings["safe_force_n"]),
-                        warn_force_n=float(env_settings["warn_force_n"]),
-                        rate_filter_s=float(env_settings["rate_filter_s"]),
-                        integral_time_s=float(env_settings["integral_time_s"]),
-                        effort_weight=float(env_settings["effort_weight"]),
-                        violation_weight=float(env_settings["violation_weight"]))
+        try:
+            rate = float(env_settings["control_rate_hz"])
+            settings = {k: float(env_settings[k]) for k in ("safe_force_n", "warn_force_n", "rate_filter_s",
+                                                            "integral_time_s")}
+        except KeyError as exc:
+            raise ValueError(f"policy metadata has no env setting {exc.args[0]!r}") from None
+        if not (math.isfinite(rate) and rate > 0):
+            raise ValueError(f"control_rate_hz must be a positive number, got {rate!r}")
         self.supply_v = float(env_settings["driver_supply_v"])
         if not self.supply_v > 0:
             raise ValueError(f"driver_supply_v must be > 0, got {self.supply_v}")
-        self.period_s = cfg.dt_s
-        self._c = cfg.config_vector(self.supply_v)
+        self.period_s = 1.0 / rate
+        self._c = config_vector(rate, driver_supply_v=self.supply_v, **settings)
         self._z = np.zeros(N_Z)
         self._obs = np.zeros(N_OBS, dtype=np.float32)
         self._since_s = 0.0
@@ -144,7 +145,6 @@ class PolicyController:
 
     def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
         """Forget the history; the next ``update`` evaluates the policy."""
-        from ebraille_sim.env import Z_PREV_ACTION, reset_features
         fe = check_finite("force_est_n", force_est_n)
         check_finite("setpoint_n", setpoint_n)
         u0 = check_finite("command_v", command_v)
@@ -160,7 +160,6 @@ class PolicyController:
 
         ``motor_current_a`` None (a drive without current sensing) is observed as 0 A.
         """
-        from ebraille_sim.env import Z_PREV_ACTION, observe, write_observation
         dt = check_dt(dt_s)
         fe = check_finite("force_est_n", force_est_n)
         sp = check_finite("setpoint_n", setpoint_n)

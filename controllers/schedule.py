@@ -5,7 +5,7 @@ Euler integral with back-calculation anti-windup, backward-difference filtered
 derivative on the measurement, output saturation), each switchable:
 
 **Gain scheduling on force.**  The loop gain grows with the pulp's tangent stiffness,
-``K(F) = b + m F / c0`` at a relaxed equilibrium (:mod:`controllers.tuning`), which is why
+``K(F) = b + m F / c0`` at a relaxed equilibrium (:mod:`ebraille_sim.analysis.tuning`), which is why
 one set of gains that is fast at 0.6 N oscillates at 2 N.  The scheduled gains are::
 
     kp(F) = kp_ref K(F_ref) / K(F),  and the same factor for ki and kd,
@@ -18,7 +18,7 @@ uses the measured force.
 **Feedforward from the setpoint trajectory and the static command-force map.**  The
 setpoint comes from the reading schedule, so its rate ``r'`` (backward difference of the
 setpoints passed to :meth:`update`) is known without noise.  From the operating-point
-balance of :func:`controllers.tuning.operating_point`, holding ``r`` needs the command
+balance of :func:`ebraille_sim.analysis.tuning.operating_point`, holding ``r`` needs the command
 ``R r / (kM g)`` (the middle of the friction band at rest), and moving the board so
 that the force rises at ``r'`` needs the back-EMF of the speed ``r'/K(r)`` plus the
 sliding friction in that direction::
@@ -31,14 +31,14 @@ reset).  ``s`` is latched on purpose: the drive sticks inside its friction band,
 feedforward that fell back to the middle of the band when a ramp ends would leave the
 integrator to wind the command back to the band's edge before the next correction in the
 same direction; the latched term holds the command on the edge (the operating point's
-command of :func:`controllers.tuning.operating_point`).  ``u_ff`` enters before the
+command of :func:`ebraille_sim.analysis.tuning.operating_point`).  ``u_ff`` enters before the
 saturation and the integrator only corrects what it misses.
 
 **Static reference map** (on by default).  The controller regulates the *estimate*; the estimator has a
 static error that depends on the force (the paper's model reads +12 % at 0.5 N for the
-calibrated nominal FSR, :func:`ebraille_sim.estimator.static_error_table`).  With
+calibrated nominal FSR, :func:`ebraille_sim.estimation.calibration.static_error_table`).  With
 ``reference_map`` the setpoint is replaced by the estimate the nominal sensor chain shows
-at the true force ``r`` (:func:`ebraille_sim.estimator.steady_estimate` on the loading
+at the true force ``r`` (:func:`ebraille_sim.estimation.calibration.steady_estimate` on the loading
 branch after a 20 s hold, tabulated at construction), so that the true force, not the
 estimate, lands on the setpoint for the nominal FSR.
 
@@ -57,9 +57,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ebraille_sim.params import DeviceParams
+from ebraille_sim.physics.params import DeviceParams
 
-from .base import check_update_args
+from controllers.base import check_update_args
 
 __all__ = ["ScheduleConfig", "ScheduledPID", "make_scheduled", "make_feedforward", "stiffness_ratio",
            "RECOMMENDED", "MS_1_6", "HAND"]
@@ -150,9 +150,9 @@ class ScheduledPID:
         self._fc = m.friction_torque_nm * g + d.guide_coulomb_n
         self._ke_g = m.back_emf_v_s_per_rad * g
         if config.reference_map:
-            from ebraille_sim.estimator import steady_estimate
-            from ebraille_sim.loop import load_estimator
-            from ebraille_sim.population import calibrate_device
+            from ebraille_sim.estimation.calibration import steady_estimate
+            from ebraille_sim.estimation.models import load_estimator
+            from ebraille_sim.estimation.calibration import calibrate_device
             dev = calibrate_device(device)
             model = load_estimator(dev.estimator.model)
             self._map_f = np.linspace(F_MIN_N, F_MAX_N, 57)
@@ -176,7 +176,7 @@ class ScheduledPID:
 
     def pid_config_at(self, force_n: float):
         """The equivalent fixed :class:`~controllers.pid.PIDConfig` at ``force_n`` (for analysis)."""
-        from .pid import PIDConfig
+        from controllers.pid import PIDConfig
         kp, ki, kd = self.gains_at(force_n)
         c = self.config
         return PIDConfig(kp_v_per_n=kp, ki_v_per_ns=ki, kd_vs_per_n=kd, derivative_filter_s=c.derivative_filter_s,

@@ -333,26 +333,3 @@ class Supervisor:
         u = self._slew(0.0, dt_s)
         self.u_prev = u
         return u
-
-
-def validate_section(source: str, value) -> dict:
-    """Check a ``[supervisor]`` table; raise ``ScenarioError`` naming a bad key or value."""
-    from ebraille_sim.scenario import ScenarioError
-    if not isinstance(value, dict):
-        raise ScenarioError(f"{source}: [supervisor] must be a table")
-    names = [f.name for f in dataclasses.fields(SupervisorConfig)]
-    for key in value:
-        if key not in names:
-            raise ScenarioError(f"{source}: unknown key {key!r} in [supervisor]; allowed: {', '.join(sorted(names))}")
-    try:
-        SupervisorConfig(**value)
-    except ValueError as exc:
-        msg = str(exc)
-        msg = msg[len("supervisor "):] if msg.startswith("supervisor ") else msg
-        raise ScenarioError(f"{source}: [supervisor] {msg}") from None
-    return dict(value)
-
-
-def wrap_controller(section: dict, controller, dt_s: float):
-    """Wrap ``controller`` in a :class:`Supervisor` configured by the ``[supervisor]`` section."""
-    return Supervisor(controller, SupervisorConfig(**section))

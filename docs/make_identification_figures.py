@@ -20,13 +20,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ebraille_sim import bench as B  # noqa: E402
-from ebraille_sim import dma as D  # noqa: E402
-from ebraille_sim import sysid  # noqa: E402
-from ebraille_sim.blockmodels import BlockModel, LinearBF, PiecewiseLinear  # noqa: E402
+from ebraille_sim.identification import bench as B  # noqa: E402
+from ebraille_sim.identification import dma as D  # noqa: E402
+from ebraille_sim.identification import sysid  # noqa: E402
+from ebraille_sim.estimation.blockmodels import BlockModel, LinearBF, PiecewiseLinear  # noqa: E402
 from ebraille_sim.commands.identify import best_model, identify_all, plot_fit  # noqa: E402
-from ebraille_sim.fsr import static_voltage  # noqa: E402
-from ebraille_sim.paper_models import paper_model_table  # noqa: E402
+from ebraille_sim.physics.fsr import static_voltage  # noqa: E402
+from ebraille_sim.estimation.paper_models import paper_model_table  # noqa: E402
 
 OUT = pathlib.Path(__file__).resolve().parent / "figures" / "identification"
 SEED = 0
@@ -207,8 +207,8 @@ def fig_paper_poles():
 
 
 def closed_loop_check(device_model_path, raw_model_path):
-    from ebraille_sim.runner import run_scenario
-    from ebraille_sim.scenario import load_scenario
+    from ebraille_sim.scenarios.runner import run_scenario
+    from ebraille_sim.scenarios.spec import load_scenario
 
     spec = load_scenario("steady_60wpm")
     out = {}

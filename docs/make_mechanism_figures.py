@@ -25,10 +25,11 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ebraille_sim.mechanism import PymunkPlant, draw_snapshot, load_mechanism_scenario, recording  # noqa: E402
-from ebraille_sim.params import DeviceParams  # noqa: E402
-from ebraille_sim.runner import run_scenario  # noqa: E402
-from ebraille_sim.scenario import load_scenario  # noqa: E402
+from ebraille_sim.plant.mechanism import PymunkPlant, draw_snapshot, recording  # noqa: E402
+from ebraille_sim.scenarios.mechanism_section import load_mechanism_scenario  # noqa: E402
+from ebraille_sim.physics.params import DeviceParams  # noqa: E402
+from ebraille_sim.scenarios.runner import run_scenario  # noqa: E402
+from ebraille_sim.scenarios.spec import load_scenario  # noqa: E402
 
 OUT = pathlib.Path(__file__).resolve().parent / "figures" / "mechanism"
 STANDARD = ["steady_60wpm", "steady_90wpm", "steady_120wpm", "setpoint_steps", "contact_onset"]

@@ -12,15 +12,15 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import ebraille_sim  # noqa: E402
-from ebraille_sim import kernel  # noqa: E402
-from ebraille_sim.estimator import static_error_table  # noqa: E402
-from ebraille_sim.fingertip import relaxation_function  # noqa: E402
-from ebraille_sim.layout import N_INPUT, S, U  # noqa: E402
-from ebraille_sim.loop import Plant, initial_state, pack_params  # noqa: E402
-from ebraille_sim.paper_models import paper_model  # noqa: E402
-from ebraille_sim.params import (FINGERS, CircuitParams, DeviceParams, DriveTrainParams, FSRParams,  # noqa: E402
+from ebraille_sim.plant import kernel  # noqa: E402
+from ebraille_sim.estimation.calibration import static_error_table  # noqa: E402
+from ebraille_sim.physics.fingertip import relaxation_function  # noqa: E402
+from ebraille_sim.plant.layout import N_INPUT, S, U  # noqa: E402
+from ebraille_sim.plant.loop import Plant, initial_state, pack_params  # noqa: E402
+from ebraille_sim.estimation.paper_models import paper_model  # noqa: E402
+from ebraille_sim.physics.params import (FINGERS, CircuitParams, DeviceParams, DriveTrainParams, FSRParams,  # noqa: E402
                                  RateParams)
-from ebraille_sim.report import plot_force  # noqa: E402
+from ebraille_sim.tools.report import plot_force  # noqa: E402
 
 OUT = pathlib.Path(__file__).resolve().parent / "figures" / "model"
 

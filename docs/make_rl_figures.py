@@ -44,7 +44,7 @@ def _fmt(v):
 
 def env_episode(ctrl, seed: int) -> dict:
     """One randomised env episode driven by a Controller; returns its summary."""
-    from ebraille_sim.env import ContactForceEnv
+    from ebraille_sim.rl.env import ContactForceEnv
     env = ContactForceEnv()
     _, info = env.reset(seed=seed)
     dt = env.config.dt_s
@@ -125,7 +125,7 @@ def main(argv=None):
               f"{pop[who]['mean_abs_error_n']:.3f} N  terminations {pop[who]['terminations']}")
     (out / "population.json").write_text(json.dumps(pop, indent=2) + "\n")
 
-    from ebraille_sim.env import ContactForceEnv
+    from ebraille_sim.rl.env import ContactForceEnv
     env = ContactForceEnv(render_mode="rgb_array")
     obs, _ = env.reset(seed=1, options={"wpm": 90.0, "setpoint_n": 1.0})
     ctrl = controllers.make(spec)

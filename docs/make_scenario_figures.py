@@ -2,7 +2,7 @@
 
 Writes docs/figures/scenarios/*.png, summary.json (every number quoted on the page),
 metrics_table.md (the library table of the page) and disturbance_parameters.md (the
-disturbance parameter table, from ebraille_sim.disturbances.parameter_table).
+disturbance parameter table, from ebraille_sim.scenarios.disturbances.parameter_table).
 """
 from __future__ import annotations
 
@@ -17,12 +17,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ebraille_sim import disturbances as D  # noqa: E402
-from ebraille_sim import legibility as L  # noqa: E402
-from ebraille_sim import sweep as S  # noqa: E402
-from ebraille_sim.reading import mean_dwell_s  # noqa: E402
-from ebraille_sim.runner import refresh_phases, run_scenario  # noqa: E402
-from ebraille_sim.scenario import list_scenarios, load_scenario, parse_scenario  # noqa: E402
+from ebraille_sim.scenarios import disturbances as D  # noqa: E402
+from ebraille_sim.scenarios import legibility as L  # noqa: E402
+from ebraille_sim.tools import sweep as S  # noqa: E402
+from ebraille_sim.scenarios.reading import mean_dwell_s  # noqa: E402
+from ebraille_sim.scenarios.runner import refresh_phases, run_scenario  # noqa: E402
+from ebraille_sim.scenarios.spec import list_scenarios, load_scenario, parse_scenario  # noqa: E402
 
 OUT = pathlib.Path(__file__).resolve().parent / "figures" / "scenarios"
 TABLE_METRICS = ["force_rmse_n", "in_band_fraction", "char_in_band_fraction", "peak_force_n", "contact_loss_count",

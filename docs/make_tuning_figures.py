@@ -27,17 +27,17 @@ import numpy as np  # noqa: E402
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from controllers.lqg import LQG  # noqa: E402
+from ebraille_sim.analysis.tuning import make_lqg  # noqa: E402
 from controllers.pid import DEFAULT_PID, PID  # noqa: E402
-from controllers.robust import (evaluate, friction_band_v, linearisation_points, population_ms, robust_tune,  # noqa: E402
+from ebraille_sim.analysis.robust import (evaluate, friction_band_v, linearisation_points, population_ms, robust_tune,  # noqa: E402
                                 standard_scenarios, summarise, tuning_population, unramped)
 from controllers.schedule import HAND, MS_1_6, RECOMMENDED, ScheduleConfig, ScheduledPID  # noqa: E402
-from controllers.tuning import (_sampled_front, analyse_loop, continuous_model, linearize,  # noqa: E402
+from ebraille_sim.analysis.tuning import (_sampled_front, analyse_loop, continuous_model, linearize,  # noqa: E402
                                 operating_point, plot_bode, plot_nyquist, simc_pid)
-from ebraille_sim.loop import Plant  # noqa: E402
-from ebraille_sim.params import DeviceParams  # noqa: E402
-from ebraille_sim.runner import run_scenario  # noqa: E402
-from ebraille_sim.scenario import load_scenario  # noqa: E402
+from ebraille_sim.plant.loop import Plant  # noqa: E402
+from ebraille_sim.physics.params import DeviceParams  # noqa: E402
+from ebraille_sim.scenarios.runner import run_scenario  # noqa: E402
+from ebraille_sim.scenarios.spec import load_scenario  # noqa: E402
 
 OUT = ROOT / "docs" / "figures" / "tuning"
 POP_SEED, POP_N = 0, 6
@@ -443,7 +443,7 @@ def main():
     designs = {"default PID": DEFAULT_PID, "SIMC": simc, "hand design": ScheduledPID(HAND).pid_config_at,
                **{label: ScheduledPID(cfg[key]).pid_config_at for label, key in DESIGN_KEYS.items()},
                TUNE_DEFAULT: ScheduledPID(MS_1_6).pid_config_at, REC: ScheduledPID(RECOMMENDED).pid_config_at,
-               "LQG": LQG().statespace()}
+               "LQG": make_lqg().statespace()}
     ms_maps(results, pop, designs)
     pts = linearisation_points(pop, FORCES)
     results["ms_map_friction_0.5"] = {name: _ms_grid(population_ms(c, pts, 0.5).reshape(len(pop), len(FORCES)))
@@ -461,11 +461,11 @@ def main():
                                                    name="pid_feedforward"),
         TUNE_DEFAULT: lambda: ScheduledPID(MS_1_6),
         REC: lambda: ScheduledPID(RECOMMENDED),
-        "LQG": lambda: LQG(),
+        "LQG": lambda: make_lqg(),
     }
     pops = {"tuning population": pop,
             "held-out draws": [(f"heldout_{k}", d) for k, d in
-                               enumerate(__import__("ebraille_sim.population", fromlist=["x"]).sample_devices(
+                               enumerate(__import__("ebraille_sim.scenarios.population", fromlist=["x"]).sample_devices(
                                    HELDOUT_SEED, HELDOUT_N))]}
     comparison(results, pops, makers)
     fragility(results, pop)

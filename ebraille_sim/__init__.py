@@ -7,8 +7,8 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from .runner import RunResult, run_scenario  # noqa: E402
-from .env import register_envs as _register_envs  # noqa: E402
+from ebraille_sim.scenarios.runner import RunResult, run_scenario  # noqa: E402
+from ebraille_sim.rl.env import register_envs as _register_envs  # noqa: E402
 
 _register_envs()
 

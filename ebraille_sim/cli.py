@@ -11,7 +11,7 @@ import importlib
 import pkgutil
 import sys
 
-from . import __version__
+from ebraille_sim import __version__
 
 
 class _Parser(argparse.ArgumentParser):
@@ -20,7 +20,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 def _commands():
-    from . import commands
+    from ebraille_sim import commands
     mods = []
     for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
         mod = importlib.import_module(f"{commands.__name__}.{info.name}")
@@ -44,7 +44,7 @@ def build_parser():
 
 
 def main(argv=None) -> int:
-    from .commands import UserError
+    from ebraille_sim.commands import UserError
     parser, table = build_parser()
     try:
         args = parser.parse_args(argv)

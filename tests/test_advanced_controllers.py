@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 import controllers
-from controllers.lqg import LQG, LQGConfig
+from ebraille_sim.analysis.tuning import make_lqg
 from controllers.pid import DEFAULT_PID, PID
-from controllers.robust import evaluate, linearisation_points, population_ms, summarise, tuning_population
+from ebraille_sim.analysis.robust import evaluate, linearisation_points, population_ms, summarise, tuning_population
 from controllers.schedule import ScheduleConfig, ScheduledPID, stiffness_ratio
-from ebraille_sim.params import DeviceParams
-from ebraille_sim.scenario import load_scenario
+from ebraille_sim.physics.params import DeviceParams
+from ebraille_sim.scenarios.spec import load_scenario
 
 
 def test_registered_and_listed():
@@ -82,7 +82,7 @@ def test_pid_scheduled_defaults_are_the_recommended_design():
 
 
 def test_lqg_statespace_matches_the_controller_in_the_linear_range():
-    c = LQG(LQGConfig())
+    c = make_lqg()
     ss = c.statespace()
     c.reset(force_est_n=c._y0, setpoint_n=c._y0, command_v=c._u0)
     rng = np.random.default_rng(1)
@@ -96,7 +96,7 @@ def test_lqg_statespace_matches_the_controller_in_the_linear_range():
 
 
 def test_lqg_acts_at_its_sample_period():
-    c = LQG(LQGConfig())
+    c = make_lqg()
     c.reset(force_est_n=0.5, setpoint_n=1.0, command_v=0.0)
     u = [c.update(0.5, 1.0, 1e-3) for _ in range(25)]
     changes = [k for k in range(1, 25) if u[k] != u[k - 1]]

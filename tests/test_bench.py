@@ -1,12 +1,12 @@
-"""Tests of ebraille_sim.bench: profiles, the simulated instruments, conditioning, CSV input."""
+"""Tests of ebraille_sim.identification.bench: profiles, the simulated instruments, conditioning, CSV input."""
 
 import math
 
 import numpy as np
 import pytest
 
-from ebraille_sim import bench as B
-from ebraille_sim.fsr import static_voltage
+from ebraille_sim.identification import bench as B
+from ebraille_sim.physics.fsr import static_voltage
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Tests of ebraille_sim.blockmodels."""
+"""Tests of ebraille_sim.estimation.blockmodels."""
 
 import json
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from ebraille_sim.blockmodels import BlockModel, LinearBF, PiecewiseLinear, fitness
+from ebraille_sim.estimation.blockmodels import BlockModel, LinearBF, PiecewiseLinear, fitness
 
 
 # ---------------------------------------------------------------------------

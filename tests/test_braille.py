@@ -1,9 +1,9 @@
-"""Tests for ebraille_sim.braille (English Grade 1 / EBAE transcription)."""
+"""Tests for ebraille_sim.scenarios.braille (English Grade 1 / EBAE transcription)."""
 
 import numpy as np
 import pytest
 
-from ebraille_sim.braille import (
+from ebraille_sim.scenarios.braille import (
     Cell,
     cells_to_unicode,
     dots_grid,

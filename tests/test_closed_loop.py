@@ -11,8 +11,8 @@ import pytest
 
 import ebraille_sim
 from ebraille_sim.cli import main as cli_main
-from ebraille_sim.metrics import compute_metrics, in_band, settling_time
-from ebraille_sim.scenario import ScenarioError, load_scenario, parse_scenario
+from ebraille_sim.scenarios.metrics import compute_metrics, in_band, settling_time
+from ebraille_sim.scenarios.spec import ScenarioError, load_scenario, parse_scenario
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 

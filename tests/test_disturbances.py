@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from ebraille_sim import disturbances as D
-from ebraille_sim.params import DeviceParams
-from ebraille_sim.runner import run_scenario
-from ebraille_sim.scenario import ScenarioError, parse_scenario
+from ebraille_sim.scenarios import disturbances as D
+from ebraille_sim.physics.params import DeviceParams
+from ebraille_sim.scenarios.runner import run_scenario
+from ebraille_sim.scenarios.spec import ScenarioError, parse_scenario
 
 DT = 1e-3
 T = np.arange(0, 60_000) * DT          # 60 s at the control rate

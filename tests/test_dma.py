@@ -1,12 +1,12 @@
-"""Tests of ebraille_sim.dma: the virtual DMA against Table 3 and the eq. 6 model."""
+"""Tests of ebraille_sim.identification.dma: the virtual DMA against Table 3 and the eq. 6 model."""
 
 import math
 
 import numpy as np
 import pytest
 
-from ebraille_sim import bench as B
-from ebraille_sim import dma as D
+from ebraille_sim.identification import bench as B
+from ebraille_sim.identification import dma as D
 
 IDEAL = D.ideal_instruments()
 
@@ -102,7 +102,7 @@ def test_eq6_amplitude_on_the_chirp_matches_the_paper(records):
 
 
 def test_eq6_scores_every_profile_below_a_nonlinear_model(records):
-    from ebraille_sim import sysid
+    from ebraille_sim.identification import sysid
 
     table = D.second_order_table(records, D.fit_second_order(records["chirp"]))
     assert list(table) == list(B.PAPER_PROFILES)

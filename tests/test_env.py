@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import ebraille_sim
-from ebraille_sim.env import ENV_ID, MAX_EPISODE_STEPS, OPTION_KEYS, ContactForceEnv, EnvConfig, register_envs
-from ebraille_sim.params import FINGERS, DeviceParams
+from ebraille_sim.rl.env import ENV_ID, MAX_EPISODE_STEPS, OPTION_KEYS, ContactForceEnv, EnvConfig, register_envs
+from ebraille_sim.physics.params import FINGERS, DeviceParams
 
 
 def _rollout(env, seed, actions, options=None):
@@ -27,8 +27,8 @@ def _rollout(env, seed, actions, options=None):
 
 def test_import_registers_the_id_once_without_warnings():
     spec = gym.spec(ENV_ID)
-    assert spec.entry_point == "ebraille_sim.env:ContactForceEnv"
-    assert spec.vector_entry_point == "ebraille_sim.vector_env:ContactForceVectorEnv"
+    assert spec.entry_point == "ebraille_sim.rl.env:ContactForceEnv"
+    assert spec.vector_entry_point == "ebraille_sim.rl.vector_env:ContactForceVectorEnv"
     assert spec.max_episode_steps == MAX_EPISODE_STEPS == 1400
     with warnings.catch_warnings():
         warnings.simplefilter("error")

@@ -1,4 +1,4 @@
-"""Injected faults (ebraille_sim.faults) under the safety supervisor: one scenario per fault.
+"""Injected faults (ebraille_sim.scenarios.faults) under the safety supervisor: one scenario per fault.
 
 Each scenario reads at 1 N and injects its fault at 4 s.  Contract, checked on the trace:
 the true force never exceeds 3.5 N; "retract" faults end with the board on its retracted
@@ -10,9 +10,9 @@ import math
 import numpy as np
 import pytest
 
-from ebraille_sim.faults import build_inputs, validate_section
-from ebraille_sim.runner import run_scenario
-from ebraille_sim.scenario import ScenarioError, load_scenario
+from ebraille_sim.scenarios.faults import build_inputs, validate_section
+from ebraille_sim.scenarios.runner import run_scenario
+from ebraille_sim.scenarios.spec import ScenarioError, load_scenario
 
 MAX_SAFE_N = 3.5
 

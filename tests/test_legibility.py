@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from ebraille_sim import legibility as L
-from ebraille_sim.braille import text_to_cells
-from ebraille_sim.runner import run_scenario
-from ebraille_sim.scenario import parse_scenario
+from ebraille_sim.scenarios import legibility as L
+from ebraille_sim.scenarios.braille import text_to_cells
+from ebraille_sim.scenarios.runner import run_scenario
+from ebraille_sim.scenarios.spec import parse_scenario
 
 P = L.LegibilityParams()
 

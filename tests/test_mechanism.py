@@ -1,4 +1,4 @@
-"""The pymunk mechanism (ebraille_sim.mechanism): physics, cross-validation with the lumped plant,
+"""The pymunk mechanism (ebraille_sim.plant.mechanism): physics, cross-validation with the lumped plant,
 determinism, the off-centre press, inputs and pictures."""
 from __future__ import annotations
 
@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 
 import controllers
-from ebraille_sim.drivetrain import mesh_force
-from ebraille_sim.loop import Plant
-from ebraille_sim.mechanism import (MechanismParams, PymunkPlant, build_inputs, check_mechanism_step,
-                                    draw_snapshot, load_mechanism_scenario, recording, validate_section,
-                                    write_animation)
-from ebraille_sim.params import DeviceParams
-from ebraille_sim.runner import run_scenario
-from ebraille_sim.scenario import ScenarioError
+from ebraille_sim.physics.drivetrain import mesh_force
+from ebraille_sim.plant.loop import Plant
+from ebraille_sim.plant.mechanism import (MechanismParams, PymunkPlant, check_mechanism_step, draw_snapshot,
+                                          recording, write_animation)
+from ebraille_sim.scenarios.mechanism_section import build_inputs, load_mechanism_scenario, validate_section
+from ebraille_sim.physics.params import DeviceParams
+from ebraille_sim.scenarios.runner import run_scenario
+from ebraille_sim.scenarios.spec import ScenarioError
 
 STANDARD = ["steady_60wpm", "steady_90wpm", "steady_120wpm", "setpoint_steps", "contact_onset"]
 BOUND = 0.05          # true-force RMS difference between the backends, fraction of the setpoint
@@ -55,7 +55,7 @@ def test_backends_agree_on_standard_scenarios_full_length(scenario):
     stay within that reproducibility of the reference model."""
     import dataclasses
 
-    from ebraille_sim.scenario import load_scenario
+    from ebraille_sim.scenarios.spec import load_scenario
     rel, a, _ = _rms_difference(scenario, None)
     spec = load_scenario(scenario)
     fine = dataclasses.replace(spec.device, rates=dataclasses.replace(spec.device.rates, physics_rate_hz=20000.0))
@@ -68,8 +68,8 @@ def test_backends_agree_on_standard_scenarios_full_length(scenario):
 
 def test_without_2d_effects_the_mechanism_reproduces_the_lumped_plant_closely(monkeypatch):
     """No mesh offset (no binding): what remains is the step size and the rack/board split."""
-    import ebraille_sim.loop as loop
-    import ebraille_sim.mechanism as mechanism
+    import ebraille_sim.plant.loop as loop
+    import ebraille_sim.plant.mechanism as mechanism
 
     class NoOffsetPlant(PymunkPlant):
         @classmethod
@@ -77,7 +77,7 @@ def test_without_2d_effects_the_mechanism_reproduces_the_lumped_plant_closely(mo
             return super().from_devices(devices, seeds, board_pos_m, models, mesh_offset_m=0.0)
 
     monkeypatch.setattr(mechanism, "NoOffsetPlant", NoOffsetPlant, raising=False)
-    monkeypatch.setitem(loop.PLANT_BACKENDS, "pymunk_no_offset", "ebraille_sim.mechanism:NoOffsetPlant")
+    monkeypatch.setitem(loop.PLANT_BACKENDS, "pymunk_no_offset", "ebraille_sim.plant.mechanism:NoOffsetPlant")
     a = run_scenario("setpoint_steps", duration_s=4.5)
     b = run_scenario("setpoint_steps", duration_s=4.5, backend="pymunk_no_offset")
     d = a.trace["force_true_n"] - b.trace["force_true_n"]

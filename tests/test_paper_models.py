@@ -1,12 +1,12 @@
-"""Tests of ebraille_sim.paper_models (the published FSR estimators)."""
+"""Tests of ebraille_sim.estimation.paper_models (the published FSR estimators)."""
 
 import math
 
 import numpy as np
 import pytest
 
-from ebraille_sim.blockmodels import BlockModel
-from ebraille_sim.paper_models import (
+from ebraille_sim.estimation.blockmodels import BlockModel
+from ebraille_sim.estimation.paper_models import (
     DEFAULT_ESTIMATOR,
     INPUT_RANGE_V,
     KINDS,

@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from ebraille_sim.drivetrain import reflected
-from ebraille_sim.fingertip import relaxation_function
-from ebraille_sim.layout import U
-from ebraille_sim.loop import Plant
-from ebraille_sim.params import (DRIVETRAINS, FINGERS, FSRS, MOTORS, CircuitParams, DeviceParams,
+from ebraille_sim.physics.drivetrain import reflected
+from ebraille_sim.physics.fingertip import relaxation_function
+from ebraille_sim.plant.layout import U
+from ebraille_sim.plant.loop import Plant
+from ebraille_sim.physics.params import (DRIVETRAINS, FINGERS, FSRS, MOTORS, CircuitParams, DeviceParams,
                                  DriveTrainParams, EstimatorParams, FingerParams, RateParams, describe, source_of)
 
 FAULHABER = MOTORS["faulhaber_0816_006sr"]

@@ -10,10 +10,10 @@ import pytest
 
 import controllers
 from controllers.policy import POLICY_FORMAT, PolicyController, load_policy, read_metadata
-from ebraille_sim.env import ContactForceEnv, EnvConfig
-from ebraille_sim.layout import S
-from ebraille_sim.loop import Plant
-from ebraille_sim.params import DeviceParams, RateParams
+from ebraille_sim.rl.env import ContactForceEnv, EnvConfig
+from ebraille_sim.plant.layout import S
+from ebraille_sim.plant.loop import Plant
+from ebraille_sim.physics.params import DeviceParams, RateParams
 
 
 class LinearPolicy:
@@ -102,7 +102,7 @@ def test_bad_policy_paths_and_metadata_are_one_line_errors(tmp_path):
 def test_trained_policy_loads_and_runs_a_scenario(tmp_path):
     pytest.importorskip("stable_baselines3")
     from ebraille_sim.commands.train import train
-    from ebraille_sim.runner import run_scenario
+    from ebraille_sim.scenarios.runner import run_scenario
     rec = train("ppo", 1024, tmp_path, seed=0, n_envs=1)
     assert rec["steps"] >= 1024 and rec["wall_time_s"] > 0
     ctrl = controllers.make(f"policy:{tmp_path}")

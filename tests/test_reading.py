@@ -1,13 +1,13 @@
-"""Tests for ebraille_sim.reading and the built-in passages."""
+"""Tests for ebraille_sim.scenarios.reading and the built-in passages."""
 
 import math
 
 import numpy as np
 import pytest
 
-from ebraille_sim.braille import text_to_cells
-from ebraille_sim.passages import list_passages, load_passage
-from ebraille_sim.reading import (
+from ebraille_sim.scenarios.braille import text_to_cells
+from ebraille_sim.scenarios.passages import list_passages, load_passage
+from ebraille_sim.scenarios.reading import (
     ReadingSchedule,
     build_schedule,
     mean_dwell_s,

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from ebraille_sim.metrics import CHAR_IN_BAND_REQUIRED, compute_metrics, in_band
-from ebraille_sim.runner import build_schedule_for, refresh_phases, run_scenario, setpoint_profile
-from ebraille_sim.scenario import ScenarioError, parse_scenario
+from ebraille_sim.scenarios.metrics import CHAR_IN_BAND_REQUIRED, compute_metrics, in_band
+from ebraille_sim.scenarios.runner import build_schedule_for, refresh_phases, run_scenario, setpoint_profile
+from ebraille_sim.scenarios.spec import ScenarioError, parse_scenario
 
 
 def spec(**reading):
@@ -88,8 +88,8 @@ def test_refresh_meets_its_band_at_60_wpm_but_not_at_120_wpm():
 # ---------------------------------------------------------------- reading inputs
 
 def test_user_text_file_with_natural_variability(tmp_path):
-    from ebraille_sim.braille import text_to_cells
-    from ebraille_sim.scenario import load_scenario
+    from ebraille_sim.scenarios.braille import text_to_cells
+    from ebraille_sim.scenarios.spec import load_scenario
     (tmp_path / "note.txt").write_text("Meet me at 5.\nBring the map, please!\n", encoding="utf-8")
     (tmp_path / "mine.toml").write_text(
         'name = "mine"\nseed = 3\n[reading]\nfile = "note.txt"\nwpm = 90\nstart_s = 1.0\n'
@@ -111,7 +111,7 @@ def test_user_text_file_with_natural_variability(tmp_path):
 
 
 def test_letter_passage_has_lines_for_line_pauses():
-    from ebraille_sim.braille import text_to_cells
-    from ebraille_sim.passages import load_passage
+    from ebraille_sim.scenarios.braille import text_to_cells
+    from ebraille_sim.scenarios.passages import load_passage
     cells = text_to_cells(load_passage("letter"))
     assert sum(c.line_end for c in cells) >= 10 and len(cells) > 500

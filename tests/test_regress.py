@@ -5,10 +5,10 @@ import shutil
 
 import pytest
 
-from ebraille_sim import regress as R
+from ebraille_sim.tools import regress as R
 from ebraille_sim.cli import main as cli
-from ebraille_sim.scenario import list_scenarios
-from ebraille_sim.testing import assert_scenario, check_metrics, check_scenario_metrics
+from ebraille_sim.scenarios.spec import list_scenarios
+from ebraille_sim.tools.testing import assert_scenario, check_metrics, check_scenario_metrics
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SCEN = ROOT / "scenarios"
@@ -27,8 +27,8 @@ def suite(tmp_path):
 
 
 def test_tolerance_table_covers_every_metric_but_the_wall_clock():
-    from ebraille_sim.legibility import METRIC_NAMES as LEG
-    from ebraille_sim.metrics import METRIC_NAMES
+    from ebraille_sim.scenarios.legibility import METRIC_NAMES as LEG
+    from ebraille_sim.scenarios.metrics import METRIC_NAMES
     for m in list(METRIC_NAMES) + list(LEG):
         assert (m in R.TOLERANCES) != (m in R.EXCLUDED), m
     assert "real_time_factor" in R.EXCLUDED

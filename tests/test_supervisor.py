@@ -3,8 +3,9 @@ import math
 
 import pytest
 
-from controllers.supervisor import Supervisor, SupervisorConfig, validate_section, wrap_controller
-from ebraille_sim.scenario import ScenarioError
+from controllers.supervisor import Supervisor, SupervisorConfig
+from ebraille_sim.scenarios.supervision import validate_section, wrap_controller
+from ebraille_sim.scenarios.spec import ScenarioError
 
 
 class Const:

@@ -6,7 +6,7 @@ import time
 import numpy as np
 import pytest
 
-from ebraille_sim import sweep as S
+from ebraille_sim.tools import sweep as S
 from ebraille_sim.cli import main as cli
 
 
@@ -65,7 +65,7 @@ def test_serial_and_local_processes_give_identical_rows():
 def test_episode_rows_match_a_direct_run():
     import dataclasses
 
-    from ebraille_sim.runner import run_scenario
+    from ebraille_sim.scenarios.runner import run_scenario
     plan = small_plan()
     ep = plan.episodes[3]
     row = S.run_episode(plan, ep)

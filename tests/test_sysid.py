@@ -1,12 +1,14 @@
-"""Tests of ebraille_sim.sysid: recovery of known block-oriented systems, conventions, errors."""
+"""Tests of ebraille_sim.identification.sysid: recovery of known block-oriented systems, conventions, errors."""
 
 import math
 
 import numpy as np
 import pytest
 
-from ebraille_sim import blockmodels, paper_models, sysid
-from ebraille_sim.blockmodels import BlockModel, LinearBF, PiecewiseLinear
+from ebraille_sim.estimation import blockmodels
+from ebraille_sim.estimation import paper_models
+from ebraille_sim.identification import sysid
+from ebraille_sim.estimation.blockmodels import BlockModel, LinearBF, PiecewiseLinear
 
 # A well-conditioned fifth-order block: poles and zeros apart, every mode excited.
 TRUE_POLES = np.array([0.92, 0.7 + 0.5j, 0.7 - 0.5j, -0.5 + 0.3j, -0.5 - 0.3j])
@@ -164,8 +166,9 @@ def test_same_seed_same_model_exactly(wiener_truth):
 
 
 def test_model_saves_and_loads_as_in_loop_estimator(tmp_path, wiener_fit):
-    from ebraille_sim.loop import load_estimator, pack_params
-    from ebraille_sim.params import DeviceParams
+    from ebraille_sim.estimation.models import load_estimator
+    from ebraille_sim.plant.loop import pack_params
+    from ebraille_sim.physics.params import DeviceParams
 
     path = tmp_path / "w5.json"
     wiener_fit.model.save(path)
@@ -223,7 +226,7 @@ def test_unknown_option_is_rejected():
 # ---------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def csv_records(tmp_path_factory):
-    from ebraille_sim import bench
+    from ebraille_sim.identification import bench
 
     d = tmp_path_factory.mktemp("csv")
     recs = bench.run_profiles([bench.PAPER_PROFILES["square_0.2hz"], bench.PAPER_PROFILES["triangle_0.25hz"]], seed=2)

@@ -1,4 +1,4 @@
-"""Linearisation, sampled-data loop analysis and robust tuning (controllers.tuning, controllers.robust)."""
+"""Linearisation, sampled-data loop analysis and robust tuning (ebraille_sim.analysis.tuning, ebraille_sim.analysis.robust)."""
 import dataclasses
 import math
 
@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from controllers.pid import DEFAULT_PID, PID, PIDConfig
-from controllers.tuning import (CONTINUOUS_STATES, analyse_loop, contact_plant_system, continuous_model,
+from ebraille_sim.analysis.tuning import (CONTINUOUS_STATES, analyse_loop, contact_plant_system, continuous_model,
                                 linearize, operating_point, pid_statespace, simc_pid)
-from ebraille_sim.loop import Plant
-from ebraille_sim.params import DeviceParams
+from ebraille_sim.plant.loop import Plant
+from ebraille_sim.physics.params import DeviceParams
 
 COULOMB = dataclasses.replace(
     DeviceParams(), motor=dataclasses.replace(DeviceParams().motor, breakaway_ratio=1.0),
@@ -137,7 +137,7 @@ def test_bad_arguments():
 
 def test_describing_function_gain_equals_scaled_controller():
     # kappa L is the loop of the controller with every gain scaled by kappa
-    from controllers.robust import linearisation_points, population_ms, tuning_population
+    from ebraille_sim.analysis.robust import linearisation_points, population_ms, tuning_population
     pts = linearisation_points(tuning_population(0, seed=0)[:2], [0.6, 2.0])
     cfg = dataclasses.replace(DEFAULT_PID, kp_v_per_n=1.0, ki_v_per_ns=6.0, kd_vs_per_n=0.002)
     half = dataclasses.replace(cfg, kp_v_per_n=0.5, ki_v_per_ns=3.0, kd_vs_per_n=0.001)
@@ -147,7 +147,7 @@ def test_describing_function_gain_equals_scaled_controller():
 
 
 def test_friction_band_is_the_press_release_command_gap():
-    from controllers.robust import friction_band_v
+    from ebraille_sim.analysis.robust import friction_band_v
     dev = DeviceParams()
     g = dev.drivetrain.gear_ratio / dev.drivetrain.pinion_radius_m
     v_per_n = dev.motor.resistance_ohm / (dev.motor.torque_constant_nm_per_a * g)
@@ -161,7 +161,7 @@ def test_friction_band_is_the_press_release_command_gap():
 
 
 def test_scenario_cost_rewards_in_band_and_penalises_overshoot():
-    from controllers.robust import cvar, scenario_cost
+    from ebraille_sim.analysis.robust import cvar, scenario_cost
     good = [{"force_rmse_n": 0.02, "in_band_fraction": 1.0, "peak_force_n": 1.1}] * 4
     worse = good[:3] + [{"force_rmse_n": 0.02, "in_band_fraction": 0.5, "peak_force_n": 1.1}]
     over = good[:3] + [{"force_rmse_n": 0.02, "in_band_fraction": 1.0, "peak_force_n": 1.5}]
@@ -174,7 +174,7 @@ def test_scenario_cost_rewards_in_band_and_penalises_overshoot():
 
 def test_gains_file_of_a_schedule_round_trips_through_make(tmp_path):
     import controllers
-    from controllers.robust import family_config, gains_document
+    from ebraille_sim.analysis.robust import family_config, gains_document
     from ebraille_sim.commands.tune import _toml
     cfg = family_config("pid_scheduled", 1.5, 6.0, 0.002)
     doc = gains_document(cfg, "pid_scheduled")
@@ -190,9 +190,9 @@ def test_gains_file_of_a_schedule_round_trips_through_make(tmp_path):
 def test_recommended_design_beats_default_on_worst_case_in_band():
     """The design docs/tuning.md recommends, against the hand-tuned default PID, on the
     setpoint steps (with and without the ramp) for the three reader presets."""
-    from controllers.robust import evaluate, summarise, tuning_population, unramped
+    from ebraille_sim.analysis.robust import evaluate, summarise, tuning_population, unramped
     from controllers.schedule import RECOMMENDED, ScheduledPID
-    from ebraille_sim.scenario import load_scenario
+    from ebraille_sim.scenarios.spec import load_scenario
     pop = tuning_population(0, seed=0)[:3]
     steps = load_scenario("setpoint_steps")
     for spec in (steps, unramped(steps)):
@@ -203,9 +203,9 @@ def test_recommended_design_beats_default_on_worst_case_in_band():
 
 
 def test_recommended_design_holds_steady_reading_and_onset():
-    from controllers.robust import evaluate, summarise, tuning_population
+    from ebraille_sim.analysis.robust import evaluate, summarise, tuning_population
     from controllers.schedule import RECOMMENDED, ScheduledPID
-    from ebraille_sim.scenario import load_scenario
+    from ebraille_sim.scenarios.spec import load_scenario
     pop = tuning_population(0, seed=0)[:3]
     s = summarise(evaluate(lambda: ScheduledPID(RECOMMENDED), pop, load_scenario("steady_90wpm"), duration_s=8.0))
     assert s["in_band_fraction"]["worst"] >= 0.95
@@ -216,8 +216,8 @@ def test_recommended_design_holds_steady_reading_and_onset():
 @pytest.mark.slow
 def test_robust_tuning_beats_default_on_worst_case_in_band():
     """Multi-scenario tuning under Ms <= 1.6 (sliding model) on a small population."""
-    from controllers.robust import TuneScenario, robust_tune, tuning_population, unramped
-    from ebraille_sim.scenario import load_scenario
+    from ebraille_sim.analysis.robust import TuneScenario, robust_tune, tuning_population, unramped
+    from ebraille_sim.scenarios.spec import load_scenario
     spec = load_scenario("setpoint_steps")
     pop = tuning_population(0, seed=0)[:3]
     scen = [TuneScenario(spec.name, spec), TuneScenario("unramped", unramped(spec)),

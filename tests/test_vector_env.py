@@ -7,8 +7,8 @@ import pytest
 from gymnasium.vector import AutoresetMode
 
 import ebraille_sim  # noqa: F401  (registers the id)
-from ebraille_sim.env import ENV_ID, ContactForceEnv
-from ebraille_sim.vector_env import ContactForceVectorEnv
+from ebraille_sim.rl.env import ENV_ID, ContactForceEnv
+from ebraille_sim.rl.vector_env import ContactForceVectorEnv
 
 SHORT = {"episode_characters": 3}        # ~1.2-1.3 s episodes, so autoresets happen in a short test
 

@@ -1,11 +1,11 @@
 """``ebraille-sim identify``: the seed paper's FSR identification, on the virtual bench or on
 recorded data.
 
-Without ``--csv`` the virtual bench (:mod:`ebraille_sim.bench`) records the paper's six
+Without ``--csv`` the virtual bench (:mod:`ebraille_sim.identification.bench`) records the paper's six
 profiles, the 30-minute hold and the DMA test; with ``--csv FILE`` (repeatable) recorded
 bench data are read instead (columns ``time_s``, ``voltage_v``, ``force_n``; the first file
 is the estimation record).  Every model kind and order is identified on the estimation
-record (:func:`ebraille_sim.sysid.fit_report`) and scored on every record.
+record (:func:`ebraille_sim.identification.sysid.fit_report`) and scored on every record.
 
 Outputs in ``--out DIR`` (written to a temporary folder first and moved into place only
 when complete):
@@ -17,7 +17,7 @@ when complete):
 * ``models/KIND-ORDER.json``: the identified models, in the records' detrended units;
 * ``models/KIND-ORDER-device.json``: the same models re-expressed for the device, which
   tares the voltage at no load and reads the absolute force
-  (:func:`ebraille_sim.sysid.shift_operating_point`); choose one as the in-loop estimator
+  (:func:`ebraille_sim.identification.sysid.shift_operating_point`); choose one as the in-loop estimator
   with ``[estimator] model = "path.json"`` (bench runs, or CSV runs with
   ``--no-load-voltage``);
 * ``plots/KIND-ORDER.png``: measured and modelled force for every record;
@@ -89,7 +89,7 @@ def identify_all(records: dict, estimation: str, kinds, orders, fit_options: dic
     info : dict
         ``"kind-order" -> {nk, estimation_fitness, poles, max_abs_pole, stable, seconds}``.
     """
-    from ..sysid import fit_report, fitness, simulate
+    from ebraille_sim.identification.sysid import fit_report, fitness, simulate
 
     est = records[estimation]
     models, table, info = {}, {}, {}
@@ -167,7 +167,7 @@ def plot_fit(model, records: dict, labels: dict, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..sysid import fitness, simulate
+    from ebraille_sim.identification.sysid import fitness, simulate
 
     n = len(records)
     cols = 2 if n > 1 else 1
@@ -192,7 +192,7 @@ def plot_fit(model, records: dict, labels: dict, path) -> None:
 
 def dma_markdown(ideal_rows, real_rows, coeffs, eq6, eq6_paper_a, a_fit, labels) -> str:
     """``dma.md``: virtual DMA beside Table 3, eqs. 3-4 refitted, eq. 6 like Table 4."""
-    from ..dma import EQ3_DAMPING_COEFFS, EQ4_STIFFNESS_COEFFS, PAPER_A, TABLE4_FITNESS
+    from ebraille_sim.identification.dma import EQ3_DAMPING_COEFFS, EQ4_STIFFNESS_COEFFS, PAPER_A, TABLE4_FITNESS
 
     lines = ["# Virtual DMA and the second-order model", "",
              "## Stiffness and damping (eq. 5) beside Table 3", "",
@@ -229,9 +229,9 @@ def _write_json(path, doc) -> None:
 def main(args) -> int:
     import numpy as np
 
-    from .. import bench as B
-    from .. import dma as D
-    from ..sysid import PAPER_FITNESS, shift_operating_point
+    from ebraille_sim.identification import bench as B
+    from ebraille_sim.identification import dma as D
+    from ebraille_sim.identification.sysid import PAPER_FITNESS, shift_operating_point
 
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
@@ -273,7 +273,7 @@ def main(args) -> int:
         records = B.run_profiles(B.PAPER_PROFILES.values(), bench, ss_bench)
         estimation = "chirp"
         source = f"virtual bench, seed {args.seed}"
-        from ..fsr import static_voltage
+        from ebraille_sim.physics.fsr import static_voltage
         no_load_v = static_voltage(0.0, bench.device.fsr, bench.device.circuit)
         hold = B.run_profile(B.HOLD_PROFILE, bench, ss_hold)
         creep = B.hold_creep(hold, bench)

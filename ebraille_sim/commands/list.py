@@ -12,9 +12,9 @@ def add_arguments(p):
 def main(args) -> int:
     import controllers
 
-    from .. import params
-    from ..paper_models import KINDS, ORDERS
-    from ..scenario import list_scenarios, load_scenario
+    from ebraille_sim.physics import params
+    from ebraille_sim.estimation.paper_models import KINDS, ORDERS
+    from ebraille_sim.scenarios.spec import list_scenarios, load_scenario
 
     print("scenarios:")
     for name in list_scenarios():
@@ -29,7 +29,7 @@ def main(args) -> int:
     print("  (or a gains file: .toml/.json with controller = NAME and a [gains] table,")
     print("   or policy:PATH for a policy saved by 'ebraille-sim train', extra: rl)")
     print("plant backends:")
-    from ..loop import PLANT_BACKENDS
+    from ebraille_sim.plant.loop import PLANT_BACKENDS
     print("  " + ", ".join(PLANT_BACKENDS))
     print("device presets:")
     print("  motor:      " + ", ".join(params.MOTORS))

@@ -20,7 +20,7 @@ def add_arguments(p):
 def main(args) -> int:
     import time
 
-    from ..regress import format_report, regress_scenarios
+    from ebraille_sim.tools.regress import format_report, regress_scenarios
 
     if args.jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")

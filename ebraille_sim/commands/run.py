@@ -24,9 +24,9 @@ def main(args) -> int:
     import json
     import pathlib
 
-    from ..report import metrics_document, summary_table, write_outputs
-    from ..runner import run_scenario
-    from ..scenario import load_scenario
+    from ebraille_sim.tools.report import metrics_document, summary_table, write_outputs
+    from ebraille_sim.scenarios.runner import run_scenario
+    from ebraille_sim.scenarios.spec import load_scenario
 
     spec = load_scenario(args.scenario)
     if args.seed is not None and args.seed < 0:
@@ -34,7 +34,7 @@ def main(args) -> int:
     if args.animate is not None and args.backend != "pymunk":
         raise ValueError(f"--animate draws the pymunk mechanism; use it with --backend pymunk, not {args.backend!r}")
     if args.animate is not None:
-        from ..mechanism import recording, write_animation
+        from ebraille_sim.plant.mechanism import recording, write_animation
         with recording(every_s=1.0 / 25.0) as rec:
             result = run_scenario(spec, controller=args.controller, seed=args.seed, duration_s=args.duration,
                                   backend=args.backend)

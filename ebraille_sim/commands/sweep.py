@@ -28,7 +28,7 @@ def add_arguments(p):
 
 
 def main(args) -> int:
-    from ..sweep import format_summary, plan_sweep, run_sweep, summarise, write_results
+    from ebraille_sim.tools.sweep import format_summary, plan_sweep, run_sweep, summarise, write_results
 
     if args.jobs is not None and args.jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
@@ -49,6 +49,6 @@ def main(args) -> int:
 
 
 def _metric_names():
-    from ..legibility import METRIC_NAMES as LEG
-    from ..metrics import METRIC_NAMES
+    from ebraille_sim.scenarios.legibility import METRIC_NAMES as LEG
+    from ebraille_sim.scenarios.metrics import METRIC_NAMES
     return list(METRIC_NAMES) + list(LEG)

@@ -73,7 +73,7 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
         raise ValueError("training needs stable-baselines3; install it with pip install 'ebraille-sim[rl]'") from None
     from controllers.policy import POLICY_FORMAT
 
-    from ..env import ENV_ID, EnvConfig, register_envs
+    from ebraille_sim.rl.env import ENV_ID, EnvConfig, register_envs
     if algo not in ("ppo", "sac"):
         raise ValueError(f"algo must be 'ppo' or 'sac', got {algo!r}")
     register_envs()

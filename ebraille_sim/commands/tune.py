@@ -181,9 +181,9 @@ def _plot_population(rep: dict, path) -> None:
 
 
 def _scenarios(arg: str, spec, duration):
-    from controllers.robust import TuneScenario, standard_scenarios, unramped
+    from ebraille_sim.analysis.robust import TuneScenario, standard_scenarios, unramped
 
-    from ..scenario import load_scenario
+    from ebraille_sim.scenarios.spec import load_scenario
     if arg == "single":
         return [TuneScenario(spec.name, spec, duration)]
     if arg == "standard":
@@ -210,10 +210,10 @@ def main(args) -> int:
     import shutil
     import tempfile
 
-    from controllers.robust import family_ms_controller, robust_tune, tuning_population
-    from controllers.tuning import analyse_loop, plot_bode, plot_nyquist
+    from ebraille_sim.analysis.robust import family_ms_controller, robust_tune, tuning_population
+    from ebraille_sim.analysis.tuning import analyse_loop, plot_bode, plot_nyquist
 
-    from ..scenario import load_scenario
+    from ebraille_sim.scenarios.spec import load_scenario
 
     if args.population < 0:
         raise ValueError(f"--population must be >= 0, got {args.population}")
@@ -254,7 +254,7 @@ def main(args) -> int:
     try:
         (tmp / "gains.toml").write_text(_toml(res.gains_file()))
         if "hand" in res.references:
-            from controllers.robust import gains_document
+            from ebraille_sim.analysis.robust import gains_document
             (tmp / "gains_hand.toml").write_text(_toml(gains_document(res.references["hand"].config, args.family)))
         (tmp / "report.json").write_text(json.dumps(rep, indent=2, default=float) + "\n")
         (tmp / "report.md").write_text(_markdown(spec, rep, len(pop)))

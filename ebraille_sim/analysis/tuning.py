@@ -1,0 +1,756 @@
+r"""Small-signal model of the contact-force loop and its frequency analysis.
+
+The plant seen by a controller runs from the motor command (V) to the *estimated* force
+(N).  :func:`linearize` returns it as a ``control.StateSpace`` at an operating force in
+contact; :func:`analyse_loop` closes it with a controller and reports gain and phase
+margins, the sensitivity peak ``Ms``, the bandwidth and the closed-loop step.
+
+The model, block by block (symbols at the rack line, ``g = N/r``)
+-----------------------------------------------------------------
+
+Armature, pinion side (reflected rotor mass ``Mp = J g^2``), mesh, board and pulp::
+
+    L di/dt    = V - R i - kE g vp
+    Mp dvp/dt  = kM g i - (1 + s mu) Fm - cp vp              Fm = km (xp - xb) + cm (vp - vb)
+    Mb dvb/dt  = Fm - F - cg vb
+    dh_j/dt    = -h_j / tau_j + c_j K vb                     (j = 1, 2, 3: QLV Prony states)
+    F          = c0 K (xb - xb0) + h1 + h2 + h3              K = b + m Fe0 (tangent stiffness)
+    dFl/dt     = (F - Fl) / tau_fsr                          (FSR mechanical lag)
+    v          = (dV/dF) Fl                                  (divider slope on the loading branch)
+
+*Friction rule.*  Coulomb friction has no derivative at zero speed, and the drive sticks
+whenever the command change is inside the break-away band.  The model describes the
+**sliding regime**: the pinion and the board keep moving in one direction (``s = +1``
+while pressing, the default; ``s = -1`` while releasing).  The constant Coulomb levels
+then only shift the operating point, and the load-dependent gear loss ``mu |Fm|``
+(``mu = 1/eta - 1``) keeps a small-signal part ``s mu dFm``.  ``friction="none"`` drops
+all friction (``s = 0``).  The Stribeck rise below 0.5 mm/s is neglected.
+
+*Backlash* is closed under load: the mesh is a spring-damper around the loaded flank.
+
+*Pulp.*  At a relaxed equilibrium the Prony states are zero and the contact force is
+``F0 = c0 Fe0``, so the tangent stiffness of the instantaneous law is ``K = b + m F0/c0``
+(the long-time stiffness is ``c0 K``).
+
+*FSR.*  After a monotone press every play operator of the hysteresis sits on its edge and
+moves with the input, so the slope is that of the static loading-branch voltage
+:func:`ebraille_sim.estimation.calibration.loading_voltage` with the creep reached after
+``load_time_s``; the creep itself (a 1.4-decade-per-hour effect) is frozen.  ADC
+quantisation and noise are left out.
+
+Sampled-data form (the method)
+------------------------------
+The controller runs at the control rate (1 kHz) and holds its command over each
+control period; the ADC samples the divider once per period and the digital anti-alias
+biquad runs at that rate; the estimator (the paper's Wiener model, linear block and the
+slope of its output map at the operating point, then the two-sample mean) runs every
+``N = rate_ctrl / rate_est`` samples (10).  Nothing here is approximated by a continuous
+equivalent:
+
+1. the continuous part above is discretised exactly at the control period (zero-order
+   hold, which is what the kernel does: the command is held over the period);
+2. it is put in series with the anti-alias biquad at the same rate;
+3. for the open-loop plant, the command is held over ``N`` control periods and the
+   sampled model is lifted to the estimator rate (``A^N``, ``sum A^j B``) and put in series
+   with the estimator: :func:`linearize` returns this model with ``dt`` = 0.01 s;
+4. for a loop with a controller that runs at the control rate (:func:`pid_statespace`),
+   the controller and the plant are lifted together over ``N`` periods with the estimate
+   held, which gives the exact loop transfer at the estimator rate (the only rate at which
+   the measured signal changes).
+
+Operating point
+---------------
+:func:`operating_point` derives the equilibrium in closed form and checks it with
+``control.find_operating_point`` (``return_result=True``; the result's ``success`` flag
+is checked, and the two answers must agree) on :func:`contact_plant_system`, a
+``NonlinearIOSystem`` of the contact plant that keeps the contact and backlash kinks.
+
+Examples
+--------
+>>> from ebraille_sim.analysis.tuning import linearize, analyse_loop
+>>> from controllers.pid import DEFAULT_PID
+>>> P = linearize(force_n=1.0)
+>>> P.dt
+0.01
+>>> a = analyse_loop(DEFAULT_PID, force_n=0.6)
+>>> a.stable, round(a.ms, 2)
+(True, 1.96)
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import control
+import numpy as np
+import scipy.linalg
+import scipy.signal
+
+from ebraille_sim.physics.params import DeviceParams
+
+__all__ = [
+    "OperatingPoint", "LoopAnalysis", "FRICTION_RULES", "CONTINUOUS_STATES",
+    "operating_point", "contact_plant_system", "continuous_model", "sensor_models",
+    "linearize", "pid_statespace", "lift", "loop_models", "analyse_loop", "sensitivity_peak",
+    "simc_pid", "foptd_fit", "plot_bode", "plot_nyquist",
+]
+
+FRICTION_RULES = {"press": 1.0, "release": -1.0, "none": 0.0}
+"""Sliding direction used to linearise the friction (see the module docstring)."""
+
+CONTINUOUS_STATES = ["current_a", "pinion_pos_m", "pinion_vel_m_per_s", "board_pos_m",
+                     "board_vel_m_per_s", "prony_1_n", "prony_2_n", "prony_3_n",
+                     "fsr_force_lagged_n"]
+"""State names of the continuous part (the same names as :data:`ebraille_sim.plant.layout.S`)."""
+
+
+@dataclass(frozen=True)
+class OperatingPoint:
+    """A relaxed equilibrium of the device pressing the pulp.
+
+    All quantities are absolute values of the nonlinear model.
+    """
+    force_n: float
+    """Contact force (relaxed), N."""
+    elastic_force_n: float
+    """Instantaneous elastic force ``Fe0 = F0/c0``, N."""
+    compression_m: float
+    tangent_stiffness_n_per_m: float
+    """``K = b + m Fe0``, N/m."""
+    finger_pos_m: float
+    board_pos_m: float
+    pinion_pos_m: float
+    mesh_force_n: float
+    current_a: float
+    command_v: float
+    """Command at the edge of the friction band in the sliding direction, V."""
+    fsr_voltage_v: float
+    """Noise-free divider voltage on the loading branch, V."""
+    fsr_slope_v_per_n: float
+    estimator_input_v: float
+    """Tared voltage seen by the estimator, V."""
+    estimator_linear_output: float
+    estimator_output_slope_n: float
+    """Slope of the estimator's output map at its operating input, N per unit."""
+    estimate_n: float
+    """Steady estimate at the operating point, N (differs from ``force_n`` by the
+    estimator's static error)."""
+    friction: str
+    solver_residual: float
+    """Largest state-derivative residual of ``find_operating_point``'s answer."""
+
+
+def _constants(device: DeviceParams) -> dict:
+    m, d, f = device.motor, device.drivetrain, device.finger
+    g = d.gear_ratio / d.pinion_radius_m
+    return dict(
+        g=g, R=m.resistance_ohm, L=m.inductance_h, kt=m.torque_constant_nm_per_a,
+        ke=m.back_emf_v_s_per_rad, Mp=m.rotor_inertia_kg_m2 * g * g,
+        Fpc=m.friction_torque_nm * g, cp=m.viscous_friction_nm_s_per_rad * g * g,
+        mu=d.gear_loss_coefficient, hb=0.5 * d.backlash_m, km=d.mesh_stiffness_n_per_m,
+        cm=2.0 * d.mesh_damping_ratio * math.sqrt(d.mesh_stiffness_n_per_m * d.moving_mass_kg),
+        Mb=d.moving_mass_kg, Fgc=d.guide_coulomb_n, cg=d.guide_viscous_n_s_per_m,
+        b=f.stiffness_b_n_per_m, m=f.exponent_m_per_m,
+        c=(f.relax_weight_inf, f.relax_weight_1, f.relax_weight_2, f.relax_weight_3),
+        tau=(f.relax_tau_1_s, f.relax_tau_2_s, f.relax_tau_3_s),
+        tau_fsr=device.fsr.mechanical_lag_s, grav=-device.gravity_m_per_s2,
+    )
+
+
+def _friction_sign(friction: str) -> float:
+    if friction not in FRICTION_RULES:
+        raise ValueError(f"friction must be one of {', '.join(FRICTION_RULES)}, got {friction!r}")
+    return FRICTION_RULES[friction]
+
+
+def contact_plant_system(device: DeviceParams = DeviceParams(), friction: str = "press",
+                         finger_pos_m: float = 1e-3) -> control.NonlinearIOSystem:
+    """The continuous contact plant as a ``control.NonlinearIOSystem``.
+
+    States :data:`CONTINUOUS_STATES` (SI units), input ``command_v``, outputs
+    ``contact_force_n`` and ``mesh_force_n``.  Friction follows the sliding rule of the
+    module docstring (constant Coulomb levels in the direction ``friction``); the contact
+    (no force for ``d <= 0``, force never negative) and the backlash dead zone are kept, so
+    the system has the kinks that make a blind equilibrium search fail.
+    """
+    k = _constants(device)
+    sgn = _friction_sign(friction)
+    c0, c1, c2, c3 = k["c"]
+    t1, t2, t3 = k["tau"]
+
+    def mesh(x):
+        dx = x[1] - x[3]
+        dv = x[2] - x[4]
+        if dx > k["hb"]:
+            return max(k["km"] * (dx - k["hb"]) + k["cm"] * dv, 0.0)
+        if dx < -k["hb"]:
+            return min(k["km"] * (dx + k["hb"]) + k["cm"] * dv, 0.0)
+        return 0.0
+
+    def elastic(xb):
+        d = xb - finger_pos_m
+        return 0.0 if d <= 0.0 else k["b"] / k["m"] * math.expm1(k["m"] * d)
+
+    def stiffness(xb):
+        d = xb - finger_pos_m
+        return 0.0 if d <= 0.0 else k["b"] * math.exp(k["m"] * d)
+
+    def contact(x):
+        d = x[3] - finger_pos_m
+        f = c0 * elastic(x[3]) + x[5] + x[6] + x[7]
+        return 0.0 if (d <= 0.0 or f < 0.0) else f
+
+    def updfcn(t, x, u, params):
+        v = float(u[0])
+        fm = mesh(x)
+        f = contact(x)
+        kk = stiffness(x[3])
+        di = (v - k["R"] * x[0] - k["ke"] * k["g"] * x[2]) / k["L"]
+        fric_p = sgn * (k["Fpc"] + k["mu"] * abs(fm))
+        dvp = (k["kt"] * k["g"] * x[0] - fm - fric_p - k["cp"] * x[2]) / k["Mp"]
+        dvb = (fm - f + k["Mb"] * k["grav"] - sgn * k["Fgc"] - k["cg"] * x[4]) / k["Mb"]
+        dfe = kk * x[4]
+        return np.array([di, x[2], dvp, x[4], dvb,
+                         -x[5] / t1 + c1 * dfe, -x[6] / t2 + c2 * dfe, -x[7] / t3 + c3 * dfe,
+                         (f - x[8]) / k["tau_fsr"]])
+
+    def outfcn(t, x, u, params):
+        return np.array([contact(x), mesh(x)])
+
+    return control.nlsys(updfcn, outfcn, inputs=["command_v"], outputs=["contact_force_n", "mesh_force_n"],
+                         states=list(CONTINUOUS_STATES), name="contact_plant")
+
+
+def _sensor_point(device: DeviceParams, force_n: float, load_time_s: float, model=None, direction: float = 1.0):
+    """Loading-branch voltage, its slope and the estimator's operating values.
+
+    At a breakpoint of a piecewise-linear map the slope of the segment the signal enters
+    when the force moves in ``direction`` (+1 rising, -1 falling) is used.
+    """
+    from ebraille_sim.estimation.calibration import _tare, loading_voltage
+    from ebraille_sim.estimation.models import load_estimator
+    model = model if model is not None else load_estimator(device.estimator.model)
+    fsr, circ = device.fsr, device.circuit
+    v0 = loading_voltage(force_n, fsr, circ, load_time_s)
+    h = 1e-4 * max(force_n, 1e-2)
+    slope = (loading_voltage(force_n + h, fsr, circ, load_time_s)
+             - loading_voltage(force_n - h, fsr, circ, load_time_s)) / (2 * h)
+    tare = _tare(fsr, circ) if device.estimator.tare_at_start else 0.0
+    u0 = v0 - tare
+    w0 = model._in(u0)
+    side = 1.0 if direction >= 0 else -1.0
+    du = side * 1e-9 * max(1.0, abs(u0))
+    in_slope = 1.0 if model.input_nl is None else float(model.input_nl.slope_at(u0 + du))
+    gain = model.linear.steady_state_gain()
+    y0 = gain * w0
+    dy = side * math.copysign(1.0, gain * in_slope) * 1e-9 * max(1.0, abs(y0))
+    out_slope = 1.0 if model.output_nl is None else float(model.output_nl.slope_at(y0 + dy))
+    est = float(model.steady_state(u0))
+    return model, v0, slope, u0, in_slope, y0, out_slope, est
+
+
+def operating_point(device: DeviceParams = DeviceParams(), force_n: float = 1.0, *,
+                    friction: str = "press", finger_pos_m: float = 1e-3,
+                    load_time_s: float = 20.0, check: bool = True) -> OperatingPoint:
+    """Relaxed equilibrium at the contact force ``force_n``.
+
+    Derived in closed form (Prony states zero, ``Fe0 = F0/c0``, mesh and friction
+    balances in the sliding direction) and, with ``check`` (default), verified with
+    ``control.find_operating_point(..., return_result=True)`` on
+    :func:`contact_plant_system` started from a guess 20 % off in compression: the
+    solver must report success and agree with the closed form to 1e-6 relative.
+
+    Raises
+    ------
+    ValueError
+        If ``force_n`` is not in (0, 10] N.
+    RuntimeError
+        If the solver fails or disagrees with the closed form.
+    """
+    if not (isinstance(force_n, (int, float)) and math.isfinite(force_n) and 0.0 < force_n <= 10.0):
+        raise ValueError(f"force_n must be in (0, 10] N, got {force_n!r}")
+    sgn = _friction_sign(friction)
+    k = _constants(device)
+    c0 = k["c"][0]
+    fe0 = force_n / c0
+    d0 = math.log1p(k["m"] * fe0 / k["b"]) / k["m"]
+    kk = k["b"] + k["m"] * fe0
+    xb0 = finger_pos_m + d0
+    fm0 = force_n - k["Mb"] * k["grav"] + sgn * k["Fgc"]
+    xp0 = xb0 + k["hb"] + fm0 / k["km"]
+    i0 = (fm0 + sgn * (k["Fpc"] + k["mu"] * abs(fm0))) / (k["kt"] * k["g"])
+    v0 = k["R"] * i0
+    x_eq = np.array([i0, xp0, 0.0, xb0, 0.0, 0.0, 0.0, 0.0, force_n])
+    residual = 0.0
+    if check:
+        sys = contact_plant_system(device, friction, finger_pos_m)
+        guess = x_eq.copy()
+        guess[3] = finger_pos_m + 0.8 * d0
+        guess[1] = guess[3] + k["hb"] + 0.8 * fm0 / k["km"]
+        guess[0] *= 0.8
+        guess[8] *= 0.5
+        op = control.find_operating_point(sys, guess, [0.8 * v0], y0=[force_n, 0.0], iy=[0],
+                                          return_result=True)
+        res = op.result
+        if not res.success:
+            raise RuntimeError(f"find_operating_point failed at {force_n:g} N: {res.message}")
+        x_s, u_s = np.asarray(op.states, float), float(np.asarray(op.inputs, float)[0])
+        scale = np.array([1e-2, 1e-3, 1e-3, 1e-3, 1e-3, 1.0, 1.0, 1.0, 1.0])
+        dev = np.max(np.abs(x_s - x_eq) / scale)
+        if dev > 1e-6 or abs(u_s - v0) > 1e-6 * max(1.0, abs(v0)):
+            raise RuntimeError(f"find_operating_point disagrees with the closed-form equilibrium at "
+                               f"{force_n:g} N (state deviation {dev:.3g}, input {u_s:.6g} vs {v0:.6g} V)")
+        residual = float(np.max(np.abs(sys._rhs(0.0, x_s, np.array([u_s])) * scale)))
+    _, vf, slope, u_est, _, y_lin, out_slope, est = _sensor_point(device, force_n, load_time_s,
+                                                                  direction=-1.0 if friction == "release" else 1.0)
+    return OperatingPoint(force_n=float(force_n), elastic_force_n=fe0, compression_m=d0,
+                          tangent_stiffness_n_per_m=kk, finger_pos_m=finger_pos_m, board_pos_m=xb0,
+                          pinion_pos_m=xp0, mesh_force_n=fm0, current_a=i0, command_v=v0,
+                          fsr_voltage_v=vf, fsr_slope_v_per_n=slope, estimator_input_v=u_est,
+                          estimator_linear_output=y_lin, estimator_output_slope_n=out_slope,
+                          estimate_n=est, friction=friction, solver_residual=residual)
+
+
+def continuous_model(device: DeviceParams = DeviceParams(), op: OperatingPoint | None = None, *,
+                     force_n: float = 1.0, friction: str = "press") -> control.StateSpace:
+    """Continuous small-signal model of the drive train, pulp and FSR lag.
+
+    Input ``command_v``; outputs ``contact_force_n`` (deviation, N) and ``fsr_voltage_v``
+    (deviation of the divider voltage, V); states :data:`CONTINUOUS_STATES` (deviations
+    from ``op``).
+    """
+    if op is None:
+        op = operating_point(device, force_n, friction=friction)
+    k = _constants(device)
+    sgn = FRICTION_RULES[op.friction]
+    kk = op.tangent_stiffness_n_per_m
+    c0, c1, c2, c3 = k["c"]
+    t1, t2, t3 = k["tau"]
+    A = np.zeros((9, 9))
+    B = np.zeros((9, 1))
+    # armature
+    A[0, 0] = -k["R"] / k["L"]
+    A[0, 2] = -k["ke"] * k["g"] / k["L"]
+    B[0, 0] = 1.0 / k["L"]
+    # pinion: Fm = km (xp - xb) + cm (vp - vb), loaded by (1 + s mu) Fm
+    A[1, 2] = 1.0
+    gl = 1.0 + sgn * k["mu"]
+    A[2, 0] = k["kt"] * k["g"] / k["Mp"]
+    A[2, 1] = -gl * k["km"] / k["Mp"]
+    A[2, 3] = gl * k["km"] / k["Mp"]
+    A[2, 2] = -(gl * k["cm"] + k["cp"]) / k["Mp"]
+    A[2, 4] = gl * k["cm"] / k["Mp"]
+    # board
+    A[3, 4] = 1.0
+    A[4, 1] = k["km"] / k["Mb"]
+    A[4, 3] = -(k["km"] + c0 * kk) / k["Mb"]
+    A[4, 2] = k["cm"] / k["Mb"]
+    A[4, 4] = -(k["cm"] + k["cg"]) / k["Mb"]
+    A[4, 5:8] = -1.0 / k["Mb"]
+    # Prony states
+    for j, (cj, tj) in enumerate(((c1, t1), (c2, t2), (c3, t3))):
+        A[5 + j, 5 + j] = -1.0 / tj
+        A[5 + j, 4] = cj * kk
+    # FSR lag, driven by F = c0 K xb + h1 + h2 + h3
+    tf = k["tau_fsr"]
+    A[8, 3] = c0 * kk / tf
+    A[8, 5:8] = 1.0 / tf
+    A[8, 8] = -1.0 / tf
+    C = np.zeros((2, 9))
+    C[0, 3] = c0 * kk
+    C[0, 5:8] = 1.0
+    C[1, 8] = op.fsr_slope_v_per_n
+    return control.ss(A, B, C, np.zeros((2, 1)), inputs=["command_v"],
+                      outputs=["contact_force_n", "fsr_voltage_v"], states=list(CONTINUOUS_STATES),
+                      name="plant_ct")
+
+
+def sensor_models(device: DeviceParams = DeviceParams(), op: OperatingPoint | None = None, *,
+                  force_n: float = 1.0, model=None) -> tuple[control.StateSpace, control.StateSpace]:
+    """The digital anti-alias filter (at the sensor rate) and the linearised estimator.
+
+    Returns
+    -------
+    aa : StateSpace, dt = 1/sensor_rate
+        Tared divider voltage (V) to filtered voltage (V); states ``aa_z1``, ``aa_z2``.
+    est : StateSpace, dt = the estimator model's period
+        Filtered voltage (V) to estimated force (N): input-map slope, the linear block,
+        the output-map slope at the operating point and (when enabled) the two-sample mean;
+        states ``est_z0...`` and ``est_raw_prev_n``.
+    """
+    if op is None:
+        op = operating_point(device, force_n)
+    r = device.rates
+    bb, aa = scipy.signal.butter(2, device.estimator.antialias_cutoff_hz, fs=r.sensor_rate_hz)
+    # DF2T realisation exactly as the kernel runs it
+    b0, b1, b2 = bb
+    a1, a2 = aa[1], aa[2]
+    Aaa = np.array([[-a1, 1.0], [-a2, 0.0]])
+    Baa = np.array([[b1 - a1 * b0], [b2 - a2 * b0]])
+    aa_sys = control.ss(Aaa, Baa, [[1.0, 0.0]], [[b0]], dt=1.0 / r.sensor_rate_hz,
+                        inputs=["fsr_voltage_v"], outputs=["aa_out_v"], states=["aa_z1", "aa_z2"],
+                        name="antialias")
+    from ebraille_sim.estimation.models import load_estimator
+    model, _, _, _, in_slope, _, out_slope, _ = _sensor_point(
+        device, op.force_n, 20.0, model, direction=-1.0 if op.friction == "release" else 1.0)
+    model = model if model is not None else load_estimator(device.estimator.model)
+    num = np.asarray(model.linear.numerator(), float)
+    den = np.asarray(model.linear.denominator(), float)
+    n = max(len(num), len(den))
+    num = np.pad(num, (0, n - len(num))) / den[0]
+    den = np.pad(den, (0, n - len(den))) / den[0]
+    gain = in_slope * out_slope
+    # DF2T: y = num0 x + z0 ; z_j <- num_{j+1} x + z_{j+1} - den_{j+1} y
+    m = n - 1
+    Ae = np.zeros((m, m))
+    Be = np.zeros((m, 1))
+    for j in range(m):
+        Ae[j, 0] = -den[j + 1]
+        if j + 1 < m:
+            Ae[j, j + 1] = 1.0
+        Be[j, 0] = num[j + 1] - den[j + 1] * num[0]
+    Ce = np.zeros((1, m))
+    Ce[0, 0] = gain
+    De = np.array([[gain * num[0]]])
+    names = [f"est_z{j}" for j in range(m)]
+    if device.estimator.nyquist_average:
+        # f = (f_raw + f_raw_prev)/2 with f_raw_prev a state
+        A2 = np.zeros((m + 1, m + 1))
+        A2[:m, :m] = Ae
+        A2[m, :m] = Ce[0]
+        B2 = np.vstack([Be, De])
+        C2 = np.hstack([0.5 * Ce, [[0.5]]])
+        D2 = 0.5 * De
+        Ae, Be, Ce, De = A2, B2, C2, D2
+        names.append("est_raw_prev_n")
+    est_sys = control.ss(Ae, Be, Ce, De, dt=model.dt_s, inputs=["aa_out_v"], outputs=["force_est_n"],
+                         states=names, name="estimator")
+    return aa_sys, est_sys
+
+
+def _ratio(device: DeviceParams, est_dt: float) -> int:
+    n = device.rates.control_rate_hz * est_dt
+    if abs(n - round(n)) > 1e-9 or round(n) < 1:
+        raise ValueError(f"the estimator period {est_dt:g} s must be a whole number of control periods")
+    if device.rates.sensor_rate_hz != device.rates.control_rate_hz:
+        raise ValueError("the sampled-data model assumes the sensor rate equals the control rate")
+    return int(round(n))
+
+
+def _sampled_front(device: DeviceParams, op: OperatingPoint) -> tuple[control.StateSpace, control.StateSpace]:
+    """Control-rate model from the command to the anti-alias output, and the estimator."""
+    ct = continuous_model(device, op)
+    h = 1.0 / device.rates.control_rate_hz
+    dt_sys = control.c2d(ct[1, 0], h, method="zoh")
+    dt_sys = control.ss(dt_sys.A, dt_sys.B, dt_sys.C, dt_sys.D, dt=h, inputs=["command_v"],
+                        outputs=["fsr_voltage_v"], states=list(CONTINUOUS_STATES))
+    aa, est = sensor_models(device, op)
+    front = control.series(dt_sys, aa)
+    front = control.ss(front.A, front.B, front.C, front.D, dt=h, inputs=["command_v"], outputs=["aa_out_v"],
+                       states=list(CONTINUOUS_STATES) + ["aa_z1", "aa_z2"], name="front")
+    return front, est
+
+
+def lift(A: np.ndarray, B: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(A^n, sum_{j<n} A^j B)``: ``n`` steps of ``x+ = A x + B u`` with ``u`` held."""
+    An = np.eye(A.shape[0])
+    Bn = np.zeros_like(B)
+    for _ in range(n):
+        Bn = A @ Bn + B
+        An = A @ An
+    return An, Bn
+
+
+def linearize(device: DeviceParams = DeviceParams(), force_n: float = 1.0, *, friction: str = "press",
+              finger_pos_m: float = 1e-3, load_time_s: float = 20.0, return_point: bool = False):
+    """Small-signal plant from the command (V) to the estimated force (N).
+
+    A discrete-time ``control.StateSpace`` at the estimator's period (0.01 s): the input
+    is the command held over one estimator period, the output the estimate produced at
+    the end of it (see the module docstring for the sampled-data method).  States, in
+    order: :data:`CONTINUOUS_STATES`, ``aa_z1``, ``aa_z2``, ``est_z0...``,
+    ``est_raw_prev_n``; all are deviations from the operating point.
+
+    Parameters
+    ----------
+    device : DeviceParams
+    force_n : float
+        Operating contact force, N (relaxed equilibrium).
+    friction : {"press", "release", "none"}
+        Sliding direction for the friction linearisation.
+    finger_pos_m : float
+        Pulp surface position (the scenario's gap), m; it only shifts positions.
+    load_time_s : float
+        FSR creep clock at the operating point, s.
+    return_point : bool
+        Also return the :class:`OperatingPoint`.
+
+    Returns
+    -------
+    StateSpace or (StateSpace, OperatingPoint)
+    """
+    op = operating_point(device, force_n, friction=friction, finger_pos_m=finger_pos_m,
+                         load_time_s=load_time_s)
+    front, est = _sampled_front(device, op)
+    n = _ratio(device, est.dt)
+    An, Bn = lift(front.A, front.B, n)
+    lifted = control.ss(An, Bn, front.C, np.zeros((1, 1)), dt=est.dt, inputs=["command_v"],
+                        outputs=["aa_out_v"], states=front.state_labels)
+    plant = control.series(lifted, est)
+    plant = control.ss(plant.A, plant.B, plant.C, plant.D, dt=est.dt, inputs=["command_v"],
+                       outputs=["force_est_n"], states=front.state_labels + est.state_labels,
+                       name="plant")
+    return (plant, op) if return_point else plant
+
+
+def pid_statespace(config, dt_s: float) -> control.StateSpace:
+    """The linear part of :class:`controllers.pid.PID` (no saturation) at the step ``dt_s``.
+
+    Inputs ``setpoint_n`` and ``force_est_n``; output ``command_v``; states
+    ``integrator_v`` and ``derivative_v``.  Exactly the recursions of :mod:`controllers.pid`:
+    forward-Euler integral on ``r - y``, backward-difference filtered derivative on
+    ``c r - y``, proportional on ``b r - y``.
+    """
+    kp, ki, kd = config.kp_v_per_n, config.ki_v_per_ns, config.kd_vs_per_n
+    tf, b, c, h = config.derivative_filter_s, config.setpoint_weight_p, config.setpoint_weight_d, dt_s
+    alpha = tf / (tf + h)
+    beta = kd / (tf + h)
+    A = np.diag([1.0, alpha])
+    B = np.array([[ki * h, -ki * h], [(alpha - 1.0) * beta * c, -(alpha - 1.0) * beta]])
+    C = np.array([[1.0, 1.0]])
+    D = np.array([[kp * b + beta * c, -(kp + beta)]])
+    return control.ss(A, B, C, D, dt=h, inputs=["setpoint_n", "force_est_n"], outputs=["command_v"],
+                      states=["integrator_v", "derivative_v"], name="pid")
+
+
+def loop_models(device: DeviceParams, force_n: float, controller, *, friction: str = "press",
+                op: OperatingPoint | None = None, front=None):
+    """Exact sampled-data loop at the estimator rate.
+
+    ``controller`` is a two-input (setpoint, estimate) ``StateSpace`` at the control rate
+    (e.g. :func:`pid_statespace`), a :class:`~controllers.pid.PIDConfig`, or a
+    two-input ``StateSpace`` already at the estimator rate (a sampled-data design such as
+    :mod:`controllers.lqg`).
+
+    Returns
+    -------
+    loop : StateSpace
+        Loop transfer ``L`` (estimate in, estimate out, negative feedback), at the
+        estimator rate.
+    closed : StateSpace
+        Setpoint to estimated force, closed loop.
+    """
+    from controllers.pid import PIDConfig
+    if front is None:
+        if op is None:
+            op = operating_point(device, force_n, friction=friction)
+        front = _sampled_front(device, op)
+    fr, est = front
+    n = _ratio(device, est.dt)
+    h = fr.dt
+    if isinstance(controller, PIDConfig):
+        controller = pid_statespace(controller, h)
+    Ac, Bc, Cc, Dc = (np.atleast_2d(np.asarray(m, float)) for m in
+                      (controller.A, controller.B, controller.C, controller.D))
+    nx, nc = fr.A.shape[0], Ac.shape[0]
+    if math.isclose(controller.dt, h):
+        # controller and plant lifted together over n control periods
+        AJ = np.block([[fr.A, fr.B @ Cc], [np.zeros((nc, nx)), Ac]])
+        BJ = np.vstack([fr.B @ Dc, Bc])
+        An, Bn = lift(AJ, BJ, n)
+        CJ = np.hstack([fr.C, np.zeros((1, nc))])
+        q = control.ss(An, Bn, CJ, np.zeros((1, 2)), dt=est.dt)
+        q = control.series(q, est)
+    elif math.isclose(controller.dt, est.dt):
+        An, Bn = lift(fr.A, fr.B, n)
+        p = control.series(control.ss(An, Bn, fr.C, np.zeros((1, 1)), dt=est.dt), est)
+        # controller then plant
+        q = control.series(control.ss(Ac, Bc, Cc, Dc, dt=est.dt), p)
+    else:
+        raise ValueError(f"controller dt {controller.dt} must equal the control period {h} or the "
+                         f"estimator period {est.dt}")
+    A, B, C, D = q.A, q.B, q.C, q.D
+    if np.any(np.abs(D) > 0):
+        raise ValueError("the sampled loop must be strictly proper")
+    loop = control.ss(A, -B[:, [1]], C, np.zeros((1, 1)), dt=est.dt, inputs=["e"], outputs=["force_est_n"])
+    closed = control.ss(A + B[:, [1]] @ C, B[:, [0]], C, np.zeros((1, 1)), dt=est.dt,
+                        inputs=["setpoint_n"], outputs=["force_est_n"])
+    return loop, closed
+
+
+def _freq_grid(dt: float, n: int = 400) -> np.ndarray:
+    return np.logspace(-1.5, math.log10(0.999 * math.pi / dt), n)
+
+
+def _freq_response(sys: control.StateSpace, w: np.ndarray) -> np.ndarray:
+    """Frequency response of a SISO discrete system on ``w`` (rad/s), by a Hessenberg solve."""
+    A, B, C, D = sys.A, sys.B, sys.C, sys.D
+    z = np.exp(1j * w * sys.dt)
+    H, Q = scipy.linalg.hessenberg(A, calc_q=True)
+    Bq = Q.T @ B
+    Cq = C @ Q
+    out = np.empty(len(w), complex)
+    I = np.eye(A.shape[0])
+    for k, zk in enumerate(z):
+        out[k] = (Cq @ np.linalg.solve(zk * I - H, Bq))[0, 0] + D[0, 0]
+    return out
+
+
+def sensitivity_peak(loop: control.StateSpace, w: np.ndarray | None = None) -> float:
+    """``Ms = max |1/(1 + L)|`` on the unit circle (``inf`` if the closed loop is unstable)."""
+    acl = loop.A - loop.B @ loop.C
+    if np.max(np.abs(np.linalg.eigvals(acl))) >= 1.0:
+        return math.inf
+    w = _freq_grid(loop.dt) if w is None else w
+    return float(np.max(np.abs(1.0 / (1.0 + _freq_response(loop, w)))))
+
+
+@dataclass
+class LoopAnalysis:
+    """Frequency and step analysis of one loop at one operating force."""
+    force_n: float
+    gain_margin: float
+    """Gain margin (absolute, ``inf`` if the phase never crosses -180 deg)."""
+    phase_margin_deg: float
+    gain_crossover_hz: float
+    ms: float
+    """Sensitivity peak max |S|."""
+    bandwidth_hz: float
+    """First frequency where |T| falls 3 dB below its DC value."""
+    step: dict
+    """``control.step_info`` of the setpoint-to-estimate step (a unit step)."""
+    stable: bool
+    loop: control.StateSpace
+    closed: control.StateSpace
+    op: OperatingPoint
+
+    def summary(self) -> dict:
+        keys = ("RiseTime", "SettlingTime", "Overshoot", "Peak")
+        return {"force_n": self.force_n, "gain_margin": self.gain_margin, "phase_margin_deg": self.phase_margin_deg,
+                "gain_crossover_hz": self.gain_crossover_hz, "ms": self.ms, "bandwidth_hz": self.bandwidth_hz,
+                "stable": self.stable, **{f"step_{k}": float(self.step.get(k, math.nan)) for k in keys}}
+
+
+def analyse_loop(controller, device: DeviceParams = DeviceParams(), force_n: float = 1.0, *,
+                 friction: str = "press", step_time_s: float = 3.0) -> LoopAnalysis:
+    """Margins, Ms, bandwidth and closed-loop step of ``controller`` at ``force_n``.
+
+    ``controller`` as in :func:`loop_models`.  Margins come from
+    ``control.stability_margins``; the step from ``control.step_info`` on a
+    ``step_time_s`` response.
+    """
+    op = operating_point(device, force_n, friction=friction)
+    loop, closed = loop_models(device, force_n, controller, op=op)
+    stable = bool(np.max(np.abs(np.linalg.eigvals(closed.A))) < 1.0)
+    gm, pm, _, _, wgc, _ = control.stability_margins(loop)
+    gm, pm, wgc = float(gm), float(pm), float(wgc)
+    ms = sensitivity_peak(loop)
+    w = _freq_grid(loop.dt, 800)
+    t_mag = np.abs(_freq_response(closed, w))
+    t0 = abs(float(np.real(control.dcgain(closed)))) if stable else math.nan
+    below = np.nonzero(t_mag < t0 / math.sqrt(2.0))[0] if stable else []
+    bw = float(w[below[0]] / (2 * math.pi)) if len(below) else math.nan
+    if stable:
+        t = np.arange(0.0, step_time_s, closed.dt)
+        resp = control.step_response(closed, T=t)
+        info = control.step_info(resp.outputs, T=resp.time, yfinal=t0)
+    else:
+        info = {}
+    return LoopAnalysis(force_n=float(force_n), gain_margin=gm, phase_margin_deg=pm,
+                        gain_crossover_hz=wgc / (2 * math.pi) if math.isfinite(wgc) else math.nan,
+                        ms=ms, bandwidth_hz=bw, step=dict(info), stable=stable, loop=loop, closed=closed, op=op)
+
+
+def foptd_fit(plant: control.StateSpace, t_end_s: float = 6.0) -> tuple[float, float, float]:
+    """First-order-plus-delay fit ``k e^{-theta s}/(tau s + 1)`` of a stable plant's step.
+
+    Uses the 28 % / 63 % two-point method on the step response of ``plant``
+    (Smith's method); returns ``(k, tau_s, theta_s)``.
+    """
+    t = np.arange(0.0, t_end_s, plant.dt)
+    r = control.step_response(plant, T=t)
+    y = np.asarray(r.outputs).ravel()
+    k = float(np.real(control.dcgain(plant)))
+    t28 = float(np.interp(0.283 * k, y, r.time)) if np.all(np.diff(y[y < 0.7 * k]) >= -1e-12) else \
+        float(r.time[np.argmax(y >= 0.283 * k)])
+    t63 = float(r.time[np.argmax(y >= 0.632 * k)])
+    tau = 1.5 * (t63 - t28)
+    theta = max(t63 - tau, 0.0)
+    return k, tau, theta
+
+
+def simc_pid(device: DeviceParams = DeviceParams(), force_n: float = 1.0, tau_c_s: float | None = None):
+    """SIMC PI gains (Skogestad 2003) from a first-order-plus-delay fit of :func:`linearize`.
+
+    ``kc = tau / (k (tau_c + theta))``, ``tau_I = min(tau, 4 (tau_c + theta))``, with the
+    "tight" choice ``tau_c = theta`` unless given.  Returns a
+    :class:`~controllers.pid.PIDConfig` with the default limits and derivative filter.
+    """
+    from controllers.pid import DEFAULT_PID
+    plant = linearize(device, force_n)
+    k, tau, theta = foptd_fit(plant)
+    tc = theta if tau_c_s is None else tau_c_s
+    kc = tau / (k * (tc + theta))
+    ti = min(tau, 4.0 * (tc + theta))
+    return dataclasses.replace(DEFAULT_PID, kp_v_per_n=kc, ki_v_per_ns=kc / ti, kd_vs_per_n=0.0)
+
+
+def plot_bode(analyses, path, title: str = "") -> None:
+    """Bode plot of the loop transfer of several :class:`LoopAnalysis` (one line each)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    for an in analyses:
+        w = _freq_grid(an.loop.dt, 600)
+        l = _freq_response(an.loop, w)
+        f = w / (2 * math.pi)
+        lab = f"{an.force_n:g} N (PM {an.phase_margin_deg:.0f} deg, Ms {an.ms:.2f})"
+        a1.semilogx(f, 20 * np.log10(np.abs(l)), label=lab)
+        a2.semilogx(f, np.degrees(np.unwrap(np.angle(l))))
+    a1.axhline(0, color="0.5", lw=0.8)
+    a2.axhline(-180, color="0.5", lw=0.8)
+    a1.set_ylabel("|L| (dB)")
+    a2.set_ylabel("phase L (deg)")
+    a2.set_xlabel("frequency (Hz)")
+    a1.legend(fontsize=8)
+    a1.set_title(title or "loop transfer L = C P (sampled at the estimator rate)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_nyquist(analyses, path, title: str = "", ms_limit: float = 1.6) -> None:
+    """Nyquist plot of the loop transfers with the ``1/ms_limit`` circle around -1."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6, 6))
+    for an in analyses:
+        w = _freq_grid(an.loop.dt, 800)
+        l = _freq_response(an.loop, w)
+        ax.plot(l.real, l.imag, label=f"{an.force_n:g} N (Ms {an.ms:.2f})")
+        ax.plot(l.real, -l.imag, color=ax.lines[-1].get_color(), ls=":", lw=0.8)
+    th = np.linspace(0, 2 * np.pi, 200)
+    ax.plot(-1 + np.cos(th) / ms_limit, np.sin(th) / ms_limit, "k--", lw=0.8, label=f"|1+L| = 1/{ms_limit:g}")
+    ax.plot([-1], [0], "r+", ms=12)
+    ax.set_xlim(-3, 1.5)
+    ax.set_ylim(-2.5, 2.5)
+    ax.set_aspect("equal")
+    ax.set_xlabel("Re L")
+    ax.set_ylabel("Im L")
+    ax.legend(fontsize=8, loc="lower right")
+    ax.set_title(title or "Nyquist plot of L")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def make_lqg(device: DeviceParams = DeviceParams(), **gains):
+    """The registered ``"lqg"`` controller: :class:`controllers.lqg.LQG` designed on
+    :func:`linearize` of ``device`` at ``design_force_n``."""
+    from controllers.lqg import LQG, config_from
+    config = config_from(**gains)
+    plant, op = linearize(device, config.design_force_n, return_point=True)
+    return LQG(config, plant, op.command_v, op.estimate_n)

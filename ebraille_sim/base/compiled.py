@@ -1,0 +1,91 @@
+"""Numba compilation with a disk cache keyed on every compiled source of the package.
+
+Numba keys a cached function on its own source file only.  The kernel inlines the laws of
+the physics modules and bakes in the slot indices of the state layout, so a change in any
+of those files must also invalidate the kernel's cache.  Every compiled function of this
+package is therefore decorated with :func:`njit` from this module, whose cache locator
+stamps the cache index with :func:`source_key`: a SHA-256 digest of every package source
+that compiles with Numba (and of the layout).  A changed source gives a new key; Numba then
+finds the index stale and recompiles.  Nothing is deleted and nothing is scanned at import
+beyond reading those sources once per process.
+
+``NUMBA_CACHE_DIR``, when set, is honoured (the cache goes below it); where neither that
+nor the source tree's ``__pycache__`` is writable, Numba's own user-wide cache is used.
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import pathlib
+
+import numba
+from numba.core import caching, config
+
+__all__ = ["njit", "prange", "source_key", "compiled_sources"]
+
+prange = numba.prange
+
+_PACKAGE_ROOT = pathlib.Path(__file__).resolve().parent.parent
+_CONTROLLERS_ROOT = _PACKAGE_ROOT.parent / "controllers"
+_MARKER = b"base.compiled import"
+
+
+def compiled_sources() -> list[pathlib.Path]:
+    """The package's sources that compile with Numba, and the state layout they index."""
+    roots = [_PACKAGE_ROOT] + ([_CONTROLLERS_ROOT] if _CONTROLLERS_ROOT.is_dir() else [])
+    out = []
+    for root in roots:
+        for f in sorted(root.rglob("*.py")):
+            try:
+                data = f.read_bytes()
+            except OSError:
+                continue
+            if _MARKER in data or f.name == "layout.py":
+                out.append(f)
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def source_key() -> bytes:
+    """SHA-256 over the names and contents of :func:`compiled_sources` (computed once)."""
+    h = hashlib.sha256()
+    for f in compiled_sources():
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return h.digest()
+
+
+class _PackageCacheLocator(caching.InTreeCacheLocator):
+    """Cache beside the source (or below ``NUMBA_CACHE_DIR``), stamped with the package key."""
+
+    def __init__(self, py_func, py_file):
+        super().__init__(py_func, py_file)
+        if config.CACHE_DIR:
+            rel = pathlib.Path(py_file).resolve().parent.relative_to(_PACKAGE_ROOT.parent)
+            self._cache_path = os.path.join(config.CACHE_DIR, "ebraille_sim_cache", str(rel))
+
+    def get_source_stamp(self):
+        return source_key()
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        try:
+            path = pathlib.Path(py_file).resolve()
+        except (OSError, TypeError):
+            return None
+        if not (path.is_relative_to(_PACKAGE_ROOT) or path.is_relative_to(_CONTROLLERS_ROOT)):
+            return None
+        return super().from_function(py_func, py_file)
+
+
+if _PackageCacheLocator not in caching.CacheImpl._locator_classes:
+    caching.CacheImpl._locator_classes.insert(0, _PackageCacheLocator)
+
+
+def njit(*args, **kwargs):
+    """``numba.njit`` with ``cache=True`` by default, cached under the package key."""
+    kwargs.setdefault("cache", True)
+    return numba.njit(*args, **kwargs)
+
+

@@ -1,0 +1,51 @@
+"""Fingertip pulp under a flat board: exponential elasticity with QLV relaxation.
+
+Instantaneous elastic law (Serina et al. 1997; Pawluk & Howe 1999)::
+
+    Fe(d) = (b/m) (exp(m d) - 1),   d > 0 (compression), else 0
+    dFe/dd = b + m Fe          (stiffness grows linearly with force)
+
+Quasi-linear viscoelasticity (Fung; Pawluk & Howe 1999) with the reduced relaxation
+function ``G(t) = c0 + sum_i c_i exp(-t/tau_i)`` (tau = 4 ms, 70 ms, 1.4 s)::
+
+    F(t) = c0 Fe(t) + sum_i h_i(t),     dh_i/dt = -h_i/tau_i + c_i dFe/dt
+
+Each Prony state is advanced exactly for ``Fe`` varying linearly over a step ``h``::
+
+    h_i <- a_i h_i + c_i beta_i (Fe_new - Fe_old),  a_i = exp(-h/tau_i),
+    beta_i = (tau_i/h)(1 - a_i)
+
+A step in compression gives the full instantaneous force ``Fe`` that relaxes to
+``c0 Fe``.  Contact can only push: the force is clipped at zero and is zero whenever the
+board is below the pulp surface (the pulp then recovers through the decaying h_i).
+"""
+from __future__ import annotations
+
+import math
+
+from ebraille_sim.base.compiled import njit
+
+
+@njit(cache=True, inline="always")
+def elastic_force(d_m, b_n_per_m, m_per_m):
+    """Instantaneous elastic force (N) at compression ``d_m`` (m)."""
+    if d_m <= 0.0:
+        return 0.0
+    return b_n_per_m / m_per_m * math.expm1(m_per_m * d_m)
+
+
+def prony_coefficients(h_s: float, taus_s) -> tuple[list[float], list[float]]:
+    """Exact ramp-invariant decay ``a_i`` and input weights ``beta_i`` for step ``h_s``."""
+    a = [math.exp(-h_s / t) for t in taus_s]
+    beta = [t / h_s * (1.0 - ai) for t, ai in zip(taus_s, a)]
+    return a, beta
+
+
+def relaxation_function(t_s, finger) -> "numpy.ndarray":
+    """Reduced relaxation function G(t) of a :class:`~ebraille_sim.physics.params.FingerParams`."""
+    import numpy as np
+    t = np.asarray(t_s, dtype=float)
+    return (finger.relax_weight_inf
+            + finger.relax_weight_1 * np.exp(-t / finger.relax_tau_1_s)
+            + finger.relax_weight_2 * np.exp(-t / finger.relax_tau_2_s)
+            + finger.relax_weight_3 * np.exp(-t / finger.relax_tau_3_s))

@@ -1,0 +1,52 @@
+"""Brushed DC motor: armature circuit and torque.
+
+Armature: ``L di/dt = V - R i - kE w``.  Its time constant L/R (10 us for the Faulhaber
+0816 006 SR) is far below any practical physics step, so the current is advanced with
+the exact solution for a step ``h`` during which the voltage ``V`` and the speed ``w``
+are held::
+
+    i(t+h) = i_ss + (i(t) - i_ss) exp(-h R/L),   i_ss = (V - kE w)/R
+
+which is stable for every ``h`` and tends to the quasi-static ``i_ss`` when h >> L/R.
+Shaft torque ``kM i``; brush/bearing friction is applied by :mod:`ebraille_sim.physics.drivetrain`.
+
+Examples
+--------
+>>> from ebraille_sim.physics.params import MOTORS
+>>> m = MOTORS["faulhaber_0816_006sr"]
+>>> round(m.stall_torque_at(6.0) * 1e3, 2)     # mN m, datasheet 1.13
+1.13
+>>> round(m.no_load_speed_at(6.0) * 60 / (2 * 3.141592653589793))   # rpm, datasheet 13 500
+13510
+"""
+from __future__ import annotations
+
+import math
+
+from ebraille_sim.base.compiled import njit
+
+
+@njit(cache=True, inline="always")
+def current_step(i_a, v_v, omega_rad_s, r_ohm, ke_v_s, decay):
+    """Advance the armature current over one step, exactly for held V and w.
+
+    Parameters
+    ----------
+    i_a : float
+        Current at the start of the step, A.
+    v_v : float
+        Terminal voltage, V.
+    omega_rad_s : float
+        Shaft speed, rad/s.
+    r_ohm, ke_v_s : float
+        Armature resistance and back-EMF constant.
+    decay : float
+        ``exp(-h R / L)`` for the step ``h``.
+    """
+    i_ss = (v_v - ke_v_s * omega_rad_s) / r_ohm
+    return i_ss + (i_a - i_ss) * decay
+
+
+def current_decay(h_s: float, r_ohm: float, l_h: float) -> float:
+    """``exp(-h R/L)``: the per-step decay of the armature transient."""
+    return math.exp(-h_s * r_ohm / l_h)

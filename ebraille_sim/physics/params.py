@@ -1,0 +1,473 @@
+"""Physical parameters of the device, the reader and the sensor, with units and sources.
+
+Every parameter set is a frozen dataclass whose field names carry SI units
+(``resistance_ohm``, ``mass_kg``).  Every field carries two pieces of metadata:
+``unit`` and ``source``.  Source tags follow ``docs/model.md``:
+
+``[R]``  read in a datasheet or paper (the reference is named),
+``[D]``  derived by calculation from ``[R]`` values (the formula is named),
+``[E]``  engineering estimate (the reasoning is named; calibrate before trusting).
+
+Derived quantities (reflected mass, reflected friction, Prony decay factors...)
+are computed by properties or by :mod:`ebraille_sim.plant.layout`, never stored.
+
+Examples
+--------
+>>> from ebraille_sim.physics.params import MOTORS, FINGERS
+>>> MOTORS["faulhaber_0816_006sr"].resistance_ohm
+21.2
+>>> round(FINGERS["nominal"].stiffness_b_n_per_m, 1)
+264.0
+>>> source_of(MOTORS["faulhaber_0816_006sr"], "torque_constant_nm_per_a")[:3]
+'[R]'
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = [
+    "MotorParams", "DriveTrainParams", "FingerParams", "FSRParams", "CircuitParams",
+    "EstimatorParams", "RateParams", "DeviceParams",
+    "MOTORS", "DRIVETRAINS", "FINGERS", "FSRS",
+    "source_of", "unit_of", "describe", "replace_checked", "check_finite",
+]
+
+
+STANDARD_GRAVITY_M_PER_S2 = 9.81
+"""Gravity at the reader, m/s^2 ([R] standard gravity 9.80665 (CGPM 1901) to three figures;
+local gravity on Earth spans 9.78-9.83)."""
+
+
+def _p(default: Any, unit: str, source: str):
+    return field(default=default, metadata={"unit": unit, "source": source})
+
+
+FAULHABER = "[R] Faulhaber 0816 K 006 SR datasheet table"
+MAXON = "[R] maxon DCX 6 M 3 V datasheet excerpt"
+POLOLU = "[R] Pololu micro metal gearmotor LP 6 V 100:1 datasheet"
+
+
+def check_finite(obj) -> None:
+    """Raise ``ValueError`` naming the first non-finite or negative-where-forbidden field.
+
+    Parameters
+    ----------
+    obj : dataclass instance
+        Every float field must be finite.  Fields whose metadata has
+        ``"positive": True`` must be > 0; fields with ``"nonneg": True`` >= 0.
+    """
+    for f in dataclasses.fields(obj):
+        v = getattr(obj, f.name)
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            continue
+        if not math.isfinite(v):
+            raise ValueError(f"{type(obj).__name__}.{f.name} must be finite, got {v}")
+        if f.metadata.get("positive") and not v > 0:
+            raise ValueError(f"{type(obj).__name__}.{f.name} must be > 0, got {v}")
+        if f.metadata.get("nonneg") and v < 0:
+            raise ValueError(f"{type(obj).__name__}.{f.name} must be >= 0, got {v}")
+
+
+def _pos(default, unit, source):
+    return field(default=default, metadata={"unit": unit, "source": source, "positive": True})
+
+
+def _nn(default, unit, source):
+    return field(default=default, metadata={"unit": unit, "source": source, "nonneg": True})
+
+
+class _Checked:
+    def __post_init__(self):
+        check_finite(self)
+
+
+@dataclass(frozen=True)
+class MotorParams(_Checked):
+    """Brushed DC motor (armature circuit and rotor).
+
+    Electrical: ``L di/dt = V - R i - kE w``; mechanical torque ``kM i`` minus
+    brush/bearing friction.  The friction torque equals the torque that the
+    no-load current produces, ``kM * I0``.
+    """
+    name: str = "faulhaber_0816_006sr"
+    sources: tuple = ()
+    """Per-preset (field, source) pairs overriding the class-level source of those fields."""
+    nominal_voltage_v: float = _pos(6.0, "V", FAULHABER)
+    resistance_ohm: float = _pos(21.2, "ohm", FAULHABER)
+    inductance_h: float = _pos(217e-6, "H", FAULHABER)
+    torque_constant_nm_per_a: float = _pos(4.12e-3, "N m/A", FAULHABER)
+    back_emf_v_s_per_rad: float = _pos(
+        4.116e-3, "V s/rad", "[R] Faulhaber 0816 006 SR: kE = 0.431 mV/rpm = 0.431e-3*60/(2 pi)")
+    rotor_inertia_kg_m2: float = _pos(0.052e-7, "kg m^2", FAULHABER + " (0.052 g cm^2)")
+    friction_torque_nm: float = _nn(0.034e-3, "N m", FAULHABER)
+    breakaway_ratio: float = _pos(
+        1.25, "-", "[E] static/kinetic friction ratio 1.2-1.5 for sliding polymer/metal pairs "
+        "(POM on steel mu_s/mu_k = 0.25/0.2, [R] Stagnoli)")
+    viscous_friction_nm_s_per_rad: float = _nn(
+        0.0, "N m s/rad", "[E] datasheet friction is given as a constant torque; no viscous term")
+    # datasheet performance values used only for cross-checks
+    no_load_speed_rpm: float = _pos(13500.0, "rpm", FAULHABER)
+    no_load_current_a: float = _nn(8.3e-3, "A", FAULHABER)
+    stall_torque_nm: float = _pos(1.13e-3, "N m", FAULHABER)
+
+    @property
+    def electrical_time_constant_s(self) -> float:
+        """L/R in seconds."""
+        return self.inductance_h / self.resistance_ohm
+
+    @property
+    def mechanical_time_constant_s(self) -> float:
+        """R J / (kM kE) in seconds (datasheet: 6.5 ms for the 0816 006 SR)."""
+        return self.resistance_ohm * self.rotor_inertia_kg_m2 / (
+            self.torque_constant_nm_per_a * self.back_emf_v_s_per_rad)
+
+    def stall_torque_at(self, voltage_v: float) -> float:
+        """Shaft torque at zero speed, N m: kM V/R minus the friction torque."""
+        return self.torque_constant_nm_per_a * voltage_v / self.resistance_ohm - self.friction_torque_nm
+
+    def no_load_speed_at(self, voltage_v: float) -> float:
+        """Steady speed with no load, rad/s: (V - R I_f)/kE with I_f = T_f/kM."""
+        i_f = self.friction_torque_nm / self.torque_constant_nm_per_a
+        return (voltage_v - self.resistance_ohm * i_f) / self.back_emf_v_s_per_rad
+
+
+MOTORS: dict[str, MotorParams] = {
+    "faulhaber_0816_006sr": MotorParams(),
+    "maxon_dcx6m_3v": MotorParams(
+        name="maxon_dcx6m_3v",
+        nominal_voltage_v=3.0,
+        resistance_ohm=8.9,
+        inductance_h=40e-6,
+        torque_constant_nm_per_a=1.56e-3,
+        back_emf_v_s_per_rad=1.55e-3,
+        rotor_inertia_kg_m2=0.015e-7,
+        friction_torque_nm=1.56e-3 * 17.1e-3,
+        no_load_speed_rpm=17500.0,
+        no_load_current_a=17.1e-3,
+        stall_torque_nm=0.524e-3,
+        sources=(
+            ("nominal_voltage_v", MAXON), ("no_load_speed_rpm", MAXON), ("no_load_current_a", MAXON),
+            ("stall_torque_nm", MAXON),
+            ("resistance_ohm", "[D] U/I_stall = 3 V/0.336 A from the maxon DCX 6 M 3 V datasheet"),
+            ("torque_constant_nm_per_a", "[D] M_H/I_H = 0.524 mN m/0.336 A (maxon DCX 6 M 3 V)"),
+            ("back_emf_v_s_per_rad", "[D] (U - I0 R)/w0 from the maxon no-load point"),
+            ("friction_torque_nm", "[D] kM x no-load current 17.1 mA"),
+            ("inductance_h", "[E] not in the excerpt; 20-60 uH for a 6 mm coreless motor"),
+            ("rotor_inertia_kg_m2", "[E] not in the excerpt; 0.01-0.02 g cm^2 for a 6 mm rotor"),
+        ),
+    ),
+    "pololu_lp_6v": MotorParams(
+        name="pololu_lp_6v",
+        nominal_voltage_v=6.0,
+        resistance_ohm=16.7,
+        inductance_h=0.3e-3,
+        torque_constant_nm_per_a=4.15e-3,
+        back_emf_v_s_per_rad=4.15e-3,
+        rotor_inertia_kg_m2=0.075e-7,
+        friction_torque_nm=4.15e-3 * 0.02 / 1.0,
+        no_load_speed_rpm=130.0 * 100.37,
+        no_load_current_a=0.02,
+        stall_torque_nm=72.6e-3 / (100.37 * 0.51),
+        sources=(
+            ("nominal_voltage_v", POLOLU), ("no_load_current_a", POLOLU),
+            ("no_load_speed_rpm", "[D] 130 rpm at the output x 100.37 (Pololu datasheet)"),
+            ("stall_torque_nm", "[D] 7.4 kg mm at the output / (100.37 x 0.51) (Pololu datasheet)"),
+            ("resistance_ohm", "[D] 6 V / 0.36 A stall current (Pololu datasheet)"),
+            ("torque_constant_nm_per_a", "[D] (U - I0 R)/w0 from the Pololu no-load point"),
+            ("back_emf_v_s_per_rad", "[D] equal to kt in SI units"),
+            ("friction_torque_nm", "[D] kt x no-load current 20 mA"),
+            ("inductance_h", "[E] iron-core 10 mm motor, 0.1-0.5 mH"),
+            ("rotor_inertia_kg_m2", "[E] 0.05-0.1 g cm^2"),
+        ),
+    ),
+}
+"""Motor presets.  Sources of the non-default presets (see docs/model.md):
+
+* ``maxon_dcx6m_3v``: [R] maxon DCX 6 M 3 V datasheet (no-load speed/current, stall torque
+  and current); R = U/I_stall and kM = M_H/I_H are [D]; J = 0.015 g cm^2 and L = 40 uH are
+  [E] (not printed in the excerpt; ranges 0.01-0.02 g cm^2 and 20-60 uH).
+* ``pololu_lp_6v``: [R] Pololu LP 6 V 100.37:1 datasheet (130 rpm, 20 mA no-load, 0.36 A
+  stall); R = 6/0.36 and kt = (U - I0 R)/w0 are [D]; J and L are [E].  Its gearbox is the
+  ``pololu_100`` drive train.
+"""
+
+
+@dataclass(frozen=True)
+class DriveTrainParams(_Checked):
+    """Gearhead, pinion, racks and board, guide rods, backlash and end stops.
+
+    All forces and positions are expressed at the rack (board) line.
+    """
+    name: str = "planetary_64"
+    sources: tuple = ()
+    """Per-preset (field, source) pairs overriding the class-level source of those fields."""
+    gear_ratio: float = _pos(64.0, "-", "[E] three-stage planetary head (4:1 per stage) for the "
+                             "0816 series; catalogue ratios 4:1-1024:1 [R] Faulhaber")
+    gear_efficiency: float = _pos(0.6, "-", "[R] 81 % per planetary stage (Citizen) gives 0.53 for "
+                                  "3 stages [D]; 0.7 at 43:1 [R] Faulhaber 16/7; 0.6 chosen [E]")
+    pinion_radius_m: float = _pos(2.5e-3, "m", "[E] module 0.3 mm, 16 teeth -> 2.4 mm")
+    moving_mass_kg: float = _pos(6e-3, "kg", "[E] two plastic racks, board and 3x2 display")
+    backlash_m: float = _nn(0.1e-3, "m", "[E] rack mesh 0.01-0.03 mm plus 1-3 deg gearhead play x r")
+    mesh_stiffness_n_per_m: float = _pos(3e4, "N/m", "[E] plastic mesh contact 1e4-1e5 N/m")
+    mesh_damping_ratio: float = _nn(0.3, "-", "[E] polymer mesh loss")
+    guide_coulomb_n: float = _nn(0.10, "N", "[E] guide rods 0.05-0.3 N")
+    guide_viscous_n_s_per_m: float = _nn(1.0, "N s/m", "[E] guide rods 0.5-5 N s/m")
+    guide_breakaway_ratio: float = _pos(1.25, "-", "[R] POM on steel mu_s/mu_k = 0.25/0.2 (Stagnoli)")
+    stribeck_velocity_m_per_s: float = _pos(0.5e-3, "m/s", "[E] 0.1-1 mm/s")
+    travel_min_m: float = _p(0.0, "m", "[E] board fully retracted")
+    travel_max_m: float = _p(6e-3, "m", "[E] rack travel of a finger-worn frame")
+
+    @property
+    def transmission_m_per_rad(self) -> float:
+        """Rack travel per motor-shaft radian, r/N (m/rad)."""
+        return self.pinion_radius_m / self.gear_ratio
+
+    @property
+    def gear_loss_coefficient(self) -> float:
+        """Load-proportional friction of the gearhead, mu = 1/eta - 1 (-)."""
+        return 1.0 / self.gear_efficiency - 1.0
+
+
+DRIVETRAINS: dict[str, DriveTrainParams] = {
+    "planetary_64": DriveTrainParams(),
+    "planetary_16": DriveTrainParams(name="planetary_16", gear_ratio=16.0, gear_efficiency=0.66,
+                                     backlash_m=0.08e-3, sources=(
+                                         ("gear_ratio", "[E] two planetary stages of 4:1"),
+                                         ("gear_efficiency", "[D] 0.81^2 from 81 % per stage [R] Citizen"),
+                                         ("backlash_m", "[E] fewer stages, less accumulated play"))),
+    "pololu_100": DriveTrainParams(name="pololu_100", gear_ratio=100.37, gear_efficiency=0.51,
+                                   backlash_m=0.15e-3, sources=(
+                                       ("gear_ratio", POLOLU),
+                                       ("gear_efficiency", "[D] 72.6 mN m/(4.15 mN m/A x 0.34 A x 100.37) at stall"),
+                                       ("backlash_m", "[E] 2-5 deg at the output x r (not published)"))),
+}
+"""Drive-train presets.  ``planetary_16``: two stages, 0.81^2 = 0.66 [D]; ``pololu_100``:
+[R] Pololu 100.37:1, efficiency at stall 0.51 [D], backlash 2-5 deg at the output [E]."""
+
+
+@dataclass(frozen=True)
+class FingerParams(_Checked):
+    """Fingertip pulp in normal indentation by a flat board (quasi-linear viscoelastic).
+
+    Instantaneous elastic force ``Fe(d) = (b/m)(exp(m d) - 1)`` for compression d > 0;
+    reduced relaxation ``G(t) = c0 + c1 e^{-t/tau1} + c2 e^{-t/tau2} + c3 e^{-t/tau3}``
+    with ``c0 + c1 + c2 + c3 = 1``; the contact force is the hereditary integral of
+    ``G`` against ``dFe``, clipped at zero (the board can leave the pulp).
+    """
+    name: str = "nominal"
+    sources: tuple = ()
+    """Per-preset (field, source) pairs overriding the class-level source of those fields."""
+    stiffness_b_n_per_m: float = _pos(264.0, "N/m", "[E] solved through 1.4 mm at 1 N and 2.4 mm at "
+                                      "4 N, checked against Hertz E = 0.1 MPa (parameters table 1.2)")
+    exponent_m_per_m: float = _pos(1246.0, "1/m", "[E] as stiffness_b_n_per_m")
+    relax_weight_inf: float = _pos(0.4, "-", "[E] c0 of the Prony series")
+    relax_weight_1: float = _nn(0.3, "-", "[E] c1")
+    relax_weight_2: float = _nn(0.2, "-", "[E] c2")
+    relax_weight_3: float = _nn(0.1, "-", "[E] c3")
+    relax_tau_1_s: float = _pos(0.004, "s", "[R] Pawluk & Howe 1999, J Biomech Eng 121:178")
+    relax_tau_2_s: float = _pos(0.070, "s", "[R] Pawluk & Howe 1999")
+    relax_tau_3_s: float = _pos(1.4, "s", "[R] Pawluk & Howe 1999")
+
+    def __post_init__(self):
+        super().__post_init__()
+        s = self.relax_weight_inf + self.relax_weight_1 + self.relax_weight_2 + self.relax_weight_3
+        if abs(s - 1.0) > 1e-9:
+            raise ValueError(f"FingerParams relaxation weights must sum to 1, got {s:.6g}")
+
+    def elastic_force_n(self, d_m: float) -> float:
+        """Instantaneous elastic force at compression ``d_m`` (0 for d <= 0)."""
+        if d_m <= 0.0:
+            return 0.0
+        b, m = self.stiffness_b_n_per_m, self.exponent_m_per_m
+        return b / m * math.expm1(m * d_m)
+
+    def compression_at_m(self, force_n: float, relaxed: bool = False) -> float:
+        """Compression that gives ``force_n``; ``relaxed`` uses the long-time force c0 Fe."""
+        f = force_n / self.relax_weight_inf if relaxed else force_n
+        b, m = self.stiffness_b_n_per_m, self.exponent_m_per_m
+        return math.log1p(m * f / b) / m
+
+
+FINGERS: dict[str, FingerParams] = {
+    "soft": FingerParams(name="soft", stiffness_b_n_per_m=141.0, exponent_m_per_m=1080.0, sources=(
+        ("stiffness_b_n_per_m", "[E] solved through 2.0 mm at 1 N and 3.2 mm at 4 N"),
+        ("exponent_m_per_m", "[E] as stiffness_b_n_per_m"))),
+    "nominal": FingerParams(),
+    "stiff": FingerParams(name="stiff", stiffness_b_n_per_m=540.0, exponent_m_per_m=1448.0, sources=(
+        ("stiffness_b_n_per_m", "[E] solved through 0.9 mm at 1 N and 1.7 mm at 4 N"),
+        ("exponent_m_per_m", "[E] as stiffness_b_n_per_m"))),
+}
+"""Reader presets [E]: soft 2.0 mm at 1 N, nominal 1.4 mm, stiff 0.9 mm (instantaneous law)."""
+
+
+@dataclass(frozen=True)
+class FSRParams(_Checked):
+    """Interlink FSR 402 as a force-to-resistance transducer.
+
+    Conductance ``G = 1/R_standoff + F_eff^n / k`` where ``F_eff`` is the force after
+    the mechanical lag and the hysteresis operator, and the resistance creeps by
+    ``1 + creep_per_decade * log10(1 + t_load/t0)`` while loaded.
+    """
+    name: str = "fsr402_nominal"
+    sources: tuple = ()
+    """Per-preset (field, source) pairs overriding the class-level source of those fields."""
+    resistance_at_1n_ohm: float = _pos(10e3, "ohm", "[D] power-law fit through Interlink/Adafruit "
+                                       "points 0.2 N-30 k, 1 N-6 k, 10 N-1 k; spread 6-27 k")
+    exponent: float = _pos(0.9, "-", "[D] same fit; 0.75-1.0")
+    standoff_resistance_ohm: float = _pos(10e6, "ohm", "[R] FSR 402 datasheet: > 10 MOhm unloaded")
+    hysteresis_fraction: float = _nn(0.10, "-", "[R] FSR 402 datasheet: +10 % (R_F+ - R_F-)/R_F+")
+    creep_fraction_30min: float = _nn(0.06, "-", "[R] seed paper: resistance +6 % over a 30 min hold")
+    creep_t0_s: float = _pos(1.0, "s", "[E] onset time of logarithmic creep")
+    creep_recovery_s: float = _pos(10.0, "s", "[E] recovery time constant after unloading")
+    load_threshold_n: float = _pos(0.02, "N", "[E] below the 0.1 N actuation force [R]")
+    mechanical_lag_s: float = _pos(1.5e-3, "s", "[R] Interlink integration guide: 1-2 ms mechanical rise")
+    noise_v_rms: float = _nn(2e-3, "V", "[E] divider + ADC input noise, about 0.4 LSB of a 10-bit 5 V ADC")
+    temperature_coeff_per_k: float = _p(
+        -0.15 / 60.0, "1/K", "[R] datasheet: -15 % resistance at +85 C after 1 h, taken linear from 25 C")
+
+    @property
+    def creep_per_decade(self) -> float:
+        """Creep slope per decade of load time so that 30 min gives creep_fraction_30min."""
+        return self.creep_fraction_30min / math.log10(1.0 + 1800.0 / self.creep_t0_s)
+
+    @property
+    def hysteresis_log_halfwidth(self) -> float:
+        """Total half-width in ln(force) of the play operators: -ln(1-h)/(2 n)."""
+        return -math.log(1.0 - self.hysteresis_fraction) / (2.0 * self.exponent)
+
+    def resistance_ohm(self, force_n: float) -> float:
+        """Static resistance without hysteresis or creep."""
+        g = 1.0 / self.standoff_resistance_ohm
+        if force_n > 0.0:
+            g += force_n ** self.exponent / self.resistance_at_1n_ohm
+        return 1.0 / g
+
+
+FSRS: dict[str, FSRParams] = {
+    "nominal": FSRParams(),
+    "low_k": FSRParams(name="fsr402_low_k", resistance_at_1n_ohm=6.9e3, exponent=0.86, sources=(
+        ("resistance_at_1n_ohm", "[D] power-law fit over 0.2-10 N of the Interlink/Adafruit points"),
+        ("exponent", "[D] same fit"))),
+    "high_k": FSRParams(name="fsr402_high_k", resistance_at_1n_ohm=14e3, exponent=0.95, sources=(
+        ("resistance_at_1n_ohm", "[E] upper part of the 6-27 kOhm part-to-part spread [R] Interlink guide"),
+        ("exponent", "[D] 0.2-1 N fit gives 1.0, full range 0.77"))),
+}
+
+
+@dataclass(frozen=True)
+class CircuitParams(_Checked):
+    """Voltage divider (FSR to the supply, R2 to ground) and ADC; paper eq. 1."""
+    supply_v: float = _pos(5.0, "V", "[R] Arduino Uno 5 V rail (Carambat 2016)")
+    r2_ohm: float = _pos(1310.0, "ohm", "[D] calibrated so the paper's Wiener estimator reads the "
+                         "nominal FSR (docs/model.md, 'Calibration'); paper: adjustable 1-20 kOhm")
+    adc_bits: int = _pos(10, "bit", "[R] ATmega328 10-bit ADC")
+    adc_ref_v: float = _pos(5.0, "V", "[R] ATmega328 AVcc reference")
+
+    def divider_v(self, resistance_ohm: float) -> float:
+        """Paper eq. 1: V_o = V_in R2/(R2 + R_FSR)."""
+        return self.supply_v * self.r2_ohm / (self.r2_ohm + resistance_ohm)
+
+    @property
+    def adc_lsb_v(self) -> float:
+        return self.adc_ref_v / (2 ** self.adc_bits)
+
+
+@dataclass(frozen=True)
+class EstimatorParams(_Checked):
+    """In-loop force estimator: anti-alias filter, decimation, block-oriented model."""
+    model: str = _p("paper:wiener:5", "-", "seed paper, Appendix 2-3, fifth-order Wiener")
+    rate_hz: float = _pos(100.0, "Hz", "[R] seed paper: models identified at 100 Hz")
+    antialias_cutoff_hz: float = _pos(20.0, "Hz", "[E] the paper band-limited its data below 40 Hz; "
+                                      "the model gain grows 9x at 40 Hz and 300x at 50 Hz")
+    tare_at_start: bool = _p(True, "-", "[E] the no-load voltage is subtracted (the paper detrends)")
+    clamp_nonnegative: bool = _p(True, "-", "[E] a contact force estimate is never negative")
+    nyquist_average: bool = _p(True, "-", "[E] two-sample mean of the estimate: cancels the 50 Hz "
+                               "ringing of the paper model's pole at z = -0.967")
+
+
+@dataclass(frozen=True)
+class RateParams(_Checked):
+    """Control, sensor and physics rates; each a whole multiple of the next slower one."""
+    control_rate_hz: float = _pos(1000.0, "Hz", "[E] microcontroller loop")
+    sensor_rate_hz: float = _pos(1000.0, "Hz", "[E] ADC sampling")
+    physics_rate_hz: float = _pos(10000.0, "Hz", "[E] integrator step; stable to ~40 kN/m at 6 g")
+
+    def __post_init__(self):
+        super().__post_init__()
+        for slow_name, slow in (("control_rate_hz", self.control_rate_hz),
+                                ("sensor_rate_hz", self.sensor_rate_hz)):
+            ratio = self.physics_rate_hz / slow
+            if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+                raise ValueError(f"physics_rate_hz ({self.physics_rate_hz:g}) must be a whole multiple "
+                                 f"of {slow_name} ({slow:g})")
+
+    @property
+    def substeps_per_control(self) -> int:
+        return int(round(self.physics_rate_hz / self.control_rate_hz))
+
+    @property
+    def substeps_per_sensor(self) -> int:
+        return int(round(self.physics_rate_hz / self.sensor_rate_hz))
+
+
+@dataclass(frozen=True)
+class DeviceParams:
+    """Everything physical about one device worn by one reader."""
+    motor: MotorParams = MotorParams()
+    drivetrain: DriveTrainParams = DriveTrainParams()
+    finger: FingerParams = FingerParams()
+    fsr: FSRParams = FSRParams()
+    circuit: CircuitParams = CircuitParams()
+    estimator: EstimatorParams = EstimatorParams()
+    rates: RateParams = RateParams()
+    driver_supply_v: float = 6.0
+    """H-bridge supply, V: the command saturates at +/- this value [E] (motor nominal voltage)."""
+    gravity_m_per_s2: float = STANDARD_GRAVITY_M_PER_S2
+
+    def __post_init__(self):
+        for name in ("driver_supply_v", "gravity_m_per_s2"):
+            v = getattr(self, name)
+            if not math.isfinite(v):
+                raise ValueError(f"DeviceParams.{name} must be finite, got {v}")
+        if not self.driver_supply_v > 0:
+            raise ValueError(f"DeviceParams.driver_supply_v must be > 0, got {self.driver_supply_v}")
+
+
+def source_of(obj, name: str) -> str:
+    """Source tag of field ``name`` of a parameter dataclass (preset-specific if given)."""
+    f = _field(obj, name)
+    for key, src in getattr(obj, "sources", ()):
+        if key == name:
+            return src
+    return f.metadata.get("source", "")
+
+
+def unit_of(obj, name: str) -> str:
+    """Unit of field ``name`` of a parameter dataclass."""
+    return _field(obj, name).metadata.get("unit", "")
+
+
+def _field(obj, name):
+    for f in dataclasses.fields(obj):
+        if f.name == name:
+            return f
+    allowed = ", ".join(f.name for f in dataclasses.fields(obj))
+    raise KeyError(f"{type(obj).__name__} has no field {name!r}; allowed: {allowed}")
+
+
+def describe(obj) -> list[tuple[str, Any, str, str]]:
+    """Rows (name, value, unit, source) of a parameter dataclass, for reports and docs."""
+    return [(f.name, getattr(obj, f.name), f.metadata.get("unit", ""), source_of(obj, f.name))
+            for f in dataclasses.fields(obj) if f.name != "sources"]
+
+
+def replace_checked(obj, **changes):
+    """``dataclasses.replace`` that rejects unknown field names with a one-line error."""
+    names = {f.name for f in dataclasses.fields(obj)}
+    for k in changes:
+        if k not in names:
+            raise ValueError(f"unknown key {k!r} for {type(obj).__name__}; allowed: {', '.join(sorted(names))}")
+    return dataclasses.replace(obj, **changes)

@@ -1,0 +1,369 @@
+"""The closed loop, one control period at a time.
+
+:func:`loop_step` is the one function that advances the whole loop (drive train, board,
+fingertip, FSR, ADC, estimator) by one control period; the scenario runner, the
+Gymnasium environment and its vectorised form all call it, so a learned controller and a
+PID see identical physics.  :class:`Plant` holds the packed state of ``n`` devices
+(``n = 1`` for a scenario) and exposes the microcontroller's view.
+
+Array-shape convention: per-device quantities are arrays of shape ``(n,)``; the packed
+state is ``(n, N_STATE)``, the parameters ``(n, N_PARAM)``, the inputs ``(n, N_INPUT)``.
+
+Examples
+--------
+>>> from ebraille_sim.estimation.models import load_estimator
+from ebraille_sim.physics.params import DeviceParams
+>>> plant = Plant.from_devices([DeviceParams()], seeds=[1])
+>>> plant.set_finger(1.0e-3)
+>>> for _ in range(200):
+...     loop_step(plant, 3.0)          # 3 V up for 0.2 s
+>>> bool(plant.contact_force_n[0] > 0.0)
+True
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+
+from ebraille_sim.plant import kernel
+from ebraille_sim.physics.fingertip import prony_coefficients
+from ebraille_sim.physics.fsr import play_widths, static_voltage
+from ebraille_sim.plant.layout import (MAX_BREAKPOINTS, MAX_TF_LEN, N_INPUT, N_PARAM, N_PLAYS, N_STATE, P, S, U)
+from ebraille_sim.physics.motor import current_decay
+from ebraille_sim.estimation.models import load_estimator
+from ebraille_sim.physics.params import DeviceParams
+
+__all__ = ["Plant", "loop_step", "make_plant", "PLANT_BACKENDS", "pack_params", "pack_devices", "initial_state",
+           "check_step", "load_estimator"]
+
+
+def check_step(device: DeviceParams, max_force_n: float = 10.0) -> float:
+    """Largest ``w h`` of the explicit mechanics; raise if the physics rate is too low.
+
+    The stiffest oscillation is the board (``moving_mass_kg``) between the mesh and the
+    pulp loaded to ``max_force_n``; the semi-implicit step is stable for ``w h < 2`` and
+    accurate for ``w h < 1``.
+    """
+    dt = device.drivetrain
+    k_pulp = device.finger.stiffness_b_n_per_m + device.finger.exponent_m_per_m * max_force_n
+    w = math.sqrt((dt.mesh_stiffness_n_per_m + k_pulp) / dt.moving_mass_kg)
+    wh = w / device.rates.physics_rate_hz
+    if wh > 1.0:
+        need = w
+        raise ValueError(f"physics_rate_hz {device.rates.physics_rate_hz:g} is too low for the stiff "
+                         f"mesh/pulp contact (w = {w:.0f} rad/s); use at least {need:.0f} Hz")
+    return wh
+
+
+def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
+    """Flat parameter vector ``(N_PARAM,)`` of one device for the kernel."""
+    m, d, f, s, c, e, r = (device.motor, device.drivetrain, device.finger, device.fsr, device.circuit,
+                           device.estimator, device.rates)
+    check_step(device)
+    if model is None:
+        model = load_estimator(e.model)
+    est_rate = 1.0 / model.dt_s
+    ratio = r.sensor_rate_hz / est_rate
+    if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
+        raise ValueError(f"sensor_rate_hz ({r.sensor_rate_hz:g}) must be a whole multiple of the "
+                         f"estimator model's rate ({est_rate:g} Hz)")
+    p = np.zeros(N_PARAM)
+    h = 1.0 / r.physics_rate_hz
+    g = d.gear_ratio / d.pinion_radius_m
+    p[P["h_s"]] = h
+    p[P["substeps_per_sensor"]] = r.substeps_per_sensor
+    p[P["sensors_per_estimate"]] = round(ratio)
+    p[P["motor_r_ohm"]] = m.resistance_ohm
+    p[P["motor_current_decay"]] = current_decay(h, m.resistance_ohm, m.inductance_h)
+    p[P["motor_kt"]] = m.torque_constant_nm_per_a
+    p[P["motor_ke"]] = m.back_emf_v_s_per_rad
+    p[P["n_over_r_per_m"]] = g
+    p[P["pinion_mass_kg"]] = m.rotor_inertia_kg_m2 * g * g
+    p[P["pinion_coulomb_n"]] = m.friction_torque_nm * g
+    p[P["pinion_static_n"]] = m.friction_torque_nm * g * m.breakaway_ratio
+    p[P["pinion_viscous_n_s_per_m"]] = m.viscous_friction_nm_s_per_rad * g * g
+    p[P["gear_mu"]] = d.gear_loss_coefficient
+    p[P["half_backlash_m"]] = 0.5 * d.backlash_m
+    p[P["mesh_k_n_per_m"]] = d.mesh_stiffness_n_per_m
+    p[P["mesh_c_n_s_per_m"]] = 2.0 * d.mesh_damping_ratio * math.sqrt(d.mesh_stiffness_n_per_m * d.moving_mass_kg)
+    p[P["board_mass_kg"]] = d.moving_mass_kg
+    p[P["guide_coulomb_n"]] = d.guide_coulomb_n
+    p[P["guide_static_n"]] = d.guide_coulomb_n * d.guide_breakaway_ratio
+    p[P["guide_viscous_n_s_per_m"]] = d.guide_viscous_n_s_per_m
+    p[P["stribeck_v_m_per_s"]] = d.stribeck_velocity_m_per_s
+    p[P["travel_min_m"]] = d.travel_min_m
+    p[P["travel_max_m"]] = d.travel_max_m
+    p[P["finger_b_n_per_m"]] = f.stiffness_b_n_per_m
+    p[P["finger_m_per_m"]] = f.exponent_m_per_m
+    p[P["relax_c0"]] = f.relax_weight_inf
+    p[P["relax_c1"]] = f.relax_weight_1
+    p[P["relax_c2"]] = f.relax_weight_2
+    p[P["relax_c3"]] = f.relax_weight_3
+    a, beta = prony_coefficients(h, (f.relax_tau_1_s, f.relax_tau_2_s, f.relax_tau_3_s))
+    for j in range(3):
+        p[P[f"relax_a{j + 1}"]] = a[j]
+        p[P[f"relax_beta{j + 1}"]] = beta[j]
+    p[P["fsr_lag_alpha"]] = 1.0 - math.exp(-h / s.mechanical_lag_s)
+    p[P["fsr_k_ohm"]] = s.resistance_at_1n_ohm
+    p[P["fsr_n"]] = s.exponent
+    p[P["fsr_g_standoff_s"]] = 1.0 / s.standoff_resistance_ohm
+    p[P["fsr_creep_per_decade"]] = s.creep_per_decade
+    p[P["fsr_creep_t0_s"]] = s.creep_t0_s
+    dt_sensor = 1.0 / r.sensor_rate_hz
+    p[P["fsr_recovery_decay"]] = math.exp(-dt_sensor / s.creep_recovery_s)
+    p[P["fsr_load_threshold_n"]] = s.load_threshold_n
+    p[P["fsr_tempco_per_k"]] = s.temperature_coeff_per_k
+    p[P["fsr_noise_v"]] = s.noise_v_rms
+    p[P["fsr_dt_s"]] = dt_sensor
+    p[P["r2_ohm"]] = c.r2_ohm
+    p[P["divider_supply_v"]] = c.supply_v
+    p[P["adc_lsb_v"]] = c.adc_lsb_v
+    p[P["adc_max_code"]] = 2 ** c.adc_bits - 1
+    widths, weights = play_widths(s)
+    for j in range(N_PLAYS):
+        p[P[f"play_w{j}"]] = widths[j]
+        p[P[f"play_weight{j}"]] = weights[j]
+    nyq = 0.5 * r.sensor_rate_hz
+    if not 0 < e.antialias_cutoff_hz < nyq:
+        raise ValueError(f"antialias_cutoff_hz {e.antialias_cutoff_hz:g} must lie in (0, {nyq:g}) Hz")
+    bb, aa = scipy.signal.butter(2, e.antialias_cutoff_hz, fs=r.sensor_rate_hz)
+    p[P["aa_b0"]], p[P["aa_b1"]], p[P["aa_b2"]] = bb
+    p[P["aa_a1"]], p[P["aa_a2"]] = aa[1], aa[2]
+    _pack_model(p, model)
+    p[P["est_clamp"]] = 1.0 if e.clamp_nonnegative else 0.0
+    p[P["est_nyquist_average"]] = 1.0 if e.nyquist_average else 0.0
+    p[P["seed"]] = float(seed)
+    return p
+
+
+def _pack_model(p: np.ndarray, model) -> None:
+    arr = model.kernel_arrays()
+    num, den = np.asarray(arr["num"], float), np.asarray(arr["den"], float)
+    n = max(len(num), len(den))
+    if n > MAX_TF_LEN:
+        raise ValueError(f"estimator linear block has {n} coefficients; at most {MAX_TF_LEN} are supported")
+    num = np.pad(num, (0, n - len(num)))
+    den = np.pad(den, (0, n - len(den)))
+    if den[0] != 1.0:
+        num, den = num / den[0], den / den[0]
+    p[P["est_len"]] = n
+    p[P["est_num0"]:P["est_num0"] + n] = num
+    p[P["est_den0"]:P["est_den0"] + n] = den
+    for side in ("in", "out"):
+        xs, ys = np.asarray(arr[f"{side}_x"], float), np.asarray(arr[f"{side}_y"], float)
+        if len(xs) > MAX_BREAKPOINTS or len(xs) < 2:
+            raise ValueError(f"estimator {side}put nonlinearity needs 2..{MAX_BREAKPOINTS} breakpoints, got {len(xs)}")
+        p[P[f"est_n_{side}"]] = len(xs)
+        p[P[f"est_{side}_x0"]:P[f"est_{side}_x0"] + len(xs)] = xs
+        p[P[f"est_{side}_y0"]:P[f"est_{side}_y0"] + len(ys)] = ys
+
+
+def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None = None) -> np.ndarray:
+    """State ``(N_STATE,)`` at rest: board at ``board_pos_m`` (default fully retracted),
+    pinion centred in the backlash, no contact, estimator at its steady state for the
+    tared no-load voltage."""
+    s = np.zeros(N_STATE)
+    xb = device.drivetrain.travel_min_m if board_pos_m is None else float(board_pos_m)
+    s[S["board_pos_m"]] = xb
+    s[S["pinion_pos_m"]] = xb
+    lf = math.log(0.0 + 1e-3)
+    for j in range(N_PLAYS):
+        s[S[f"play_{j}"]] = lf
+    v0 = static_voltage(0.0, device.fsr, device.circuit)
+    lsb = device.circuit.adc_lsb_v
+    code0 = math.floor(v0 / lsb)
+    s[S["fsr_code"]] = code0
+    s[S["fsr_voltage_v"]] = code0 * lsb
+    s[S["tare_v"]] = code0 * lsb if device.estimator.tare_at_start else 0.0
+    _estimator_steady_state(s, p, code0 * lsb - s[S["tare_v"]])
+    return s
+
+
+def _estimator_steady_state(s: np.ndarray, p: np.ndarray, u0: float) -> None:
+    """Fill the anti-alias and estimator states for a constant input ``u0``."""
+    bb = np.array([p[P["aa_b0"]], p[P["aa_b1"]], p[P["aa_b2"]]])
+    aa = np.array([1.0, p[P["aa_a1"]], p[P["aa_a2"]]])
+    zi = scipy.signal.lfilter_zi(bb, aa) * u0
+    s[S["aa_z1"]], s[S["aa_z2"]] = zi
+    n = int(p[P["est_len"]])
+    num = p[P["est_num0"]:P["est_num0"] + n]
+    den = p[P["est_den0"]:P["est_den0"] + n]
+    x0 = kernel.pwl_eval(u0, p, P["est_in_x0"], P["est_in_y0"], int(p[P["est_n_in"]]))
+    if n >= 2:
+        zi = scipy.signal.lfilter_zi(num, den) * x0
+        s[S["est_z0"]:S["est_z0"] + n - 1] = zi
+    y0 = num.sum() / den.sum() * x0 if abs(den.sum()) > 1e-12 else 0.0
+    f0 = kernel.pwl_eval(y0, p, P["est_out_x0"], P["est_out_y0"], int(p[P["est_n_out"]]))
+    s[S["est_raw_prev_n"]] = f0
+    s[S["force_est_n"]] = max(f0, 0.0) if p[P["est_clamp"]] > 0 else f0
+
+
+def pack_devices(devices, seeds, board_pos_m=None, models=None):
+    """Packed parameters, initial states and default inputs of several devices.
+
+    All devices must share their rates.  Estimator models are loaded once per distinct
+    ``estimator.model`` unless given in ``models``.
+
+    Returns
+    -------
+    devices : list of DeviceParams
+    params : list of ndarray, each (N_PARAM,)
+    states : list of ndarray, each (N_STATE,)
+    inputs : ndarray, shape (n, N_INPUT)
+        Gravity along the travel and the driver supply filled in; everything else zero.
+    """
+    devices = list(devices)
+    if not devices:
+        raise ValueError("a plant needs at least one device")
+    rates = devices[0].rates
+    for dvc in devices[1:]:
+        if dvc.rates != rates:
+            raise ValueError("all devices of one plant must share control, sensor and physics rates")
+    cache: dict[str, object] = {}
+    params, states = [], []
+    for k, (dvc, seed) in enumerate(zip(devices, seeds, strict=True)):
+        model = models[k] if models is not None else None
+        if model is None:
+            key = dvc.estimator.model
+            if key not in cache:
+                cache[key] = load_estimator(key)
+            model = cache[key]
+        p = pack_params(dvc, seed, model)
+        params.append(p)
+        states.append(initial_state(dvc, p, board_pos_m))
+    inputs = np.zeros((len(devices), N_INPUT))
+    inputs[:, U["gravity_along_m_per_s2"]] = [-d.gravity_m_per_s2 for d in devices]
+    inputs[:, U["driver_supply_v"]] = [d.driver_supply_v for d in devices]
+    return devices, params, states, inputs
+
+
+@dataclass
+class Plant:
+    """Packed state of ``n`` devices and their per-period inputs.
+
+    Attributes
+    ----------
+    state : ndarray, shape (n, N_STATE)
+    params : ndarray, shape (n, N_PARAM)
+    inputs : ndarray, shape (n, N_INPUT)
+    substeps : int
+        Physics steps per control period.
+    control_dt_s : float
+        Control period, s.
+    devices : list of DeviceParams
+    """
+    state: np.ndarray
+    params: np.ndarray
+    inputs: np.ndarray
+    substeps: int
+    control_dt_s: float
+    devices: list
+
+    @classmethod
+    def from_devices(cls, devices, seeds, board_pos_m=None, models=None) -> "Plant":
+        """Build a plant of ``len(devices)`` devices; all must share the same rates."""
+        devices, params, states, inputs = pack_devices(devices, seeds, board_pos_m, models)
+        rates = devices[0].rates
+        plant = cls(np.array(states), np.array(params), inputs, rates.substeps_per_control,
+                    1.0 / rates.control_rate_hz, devices)
+        # compile (or load from the cache) before any timed loop: zero substeps change nothing
+        kernel.advance(plant.state[0], plant.params[0], plant.inputs[0], 0)
+        return plant
+
+    @property
+    def n(self) -> int:
+        return self.state.shape[0]
+
+    def advance(self, command_v) -> None:
+        """Advance every device by one control period (see :func:`loop_step`)."""
+        inp = self.inputs
+        if self.state.shape[0] == 1:
+            c = float(command_v) if np.ndim(command_v) == 0 else float(command_v[0])
+            if not math.isfinite(c):
+                raise ValueError(f"command_v must be finite, got {c}")
+            inp[0, 0] = c
+            kernel.advance(self.state[0], self.params[0], inp[0], self.substeps)
+        else:
+            cmd = np.broadcast_to(np.asarray(command_v, dtype=float), (self.n,))
+            if not np.all(np.isfinite(cmd)):
+                raise ValueError("command_v must be finite for every device")
+            inp[:, U["command_v"]] = cmd
+            kernel.advance_batch(self.state, self.params, inp, self.substeps)
+
+    def set_input(self, name: str, value) -> None:
+        """Set a per-period input (see :data:`ebraille_sim.plant.layout.INPUT_NAMES`) for all devices."""
+        if name not in U:
+            raise KeyError(f"unknown plant input {name!r}; allowed: {', '.join(U)}")
+        self.inputs[:, U[name]] = value
+
+    def set_finger(self, finger_pos_m) -> None:
+        """Pulp surface position(s) relative to the device frame, m (board travel axis)."""
+        self.inputs[:, U["finger_pos_m"]] = finger_pos_m
+
+    def _col(self, name):
+        return self.state[:, S[name]]
+
+    @property
+    def contact_force_n(self):
+        """True contact force on the pulp (what the finger feels), N, shape (n,)."""
+        return self._col("contact_force_n")
+
+    @property
+    def force_est_n(self):
+        """Estimated force (the microcontroller's view), N, shape (n,)."""
+        return self._col("force_est_n")
+
+    @property
+    def fsr_voltage_v(self):
+        return self._col("fsr_voltage_v")
+
+    @property
+    def motor_current_a(self):
+        return self._col("current_a")
+
+    @property
+    def board_pos_m(self):
+        return self._col("board_pos_m")
+
+    @property
+    def energy_j(self):
+        return self._col("energy_j")
+
+    @property
+    def time_s(self):
+        return self._col("time_s")
+
+
+def loop_step(plant, command_v) -> None:
+    """Advance every device of ``plant`` by one control period with ``command_v`` held.
+
+    Parameters
+    ----------
+    plant : Plant or another backend with the same interface
+        Modified in place.
+    command_v : float or ndarray, shape (n,)
+        Motor command, V (clipped to the driver supply inside the kernel).  Must be finite.
+    """
+    plant.advance(command_v)
+
+
+PLANT_BACKENDS: dict = {"lumped": "ebraille_sim.plant.loop:Plant", "pymunk": "ebraille_sim.plant.mechanism:PymunkPlant"}
+"""Plant classes by backend name, as ``"module:Class"``; each class provides
+``from_devices(devices, seeds, board_pos_m=None, models=None)`` and the :class:`Plant`
+interface (``advance``, ``set_finger``, ``set_input``, ``state``/``params``/``inputs``)."""
+
+
+def make_plant(devices, seeds, backend: str = "lumped", **kwargs):
+    """Build a plant of the named backend (a key of :data:`PLANT_BACKENDS`)."""
+    import importlib
+    if backend not in PLANT_BACKENDS:
+        raise ValueError(f"unknown backend {backend!r}; available: {', '.join(sorted(PLANT_BACKENDS))}")
+    mod_name, cls_name = PLANT_BACKENDS[backend].split(":")
+    try:
+        cls = getattr(importlib.import_module(mod_name), cls_name)
+    except (ModuleNotFoundError, AttributeError):
+        raise ValueError(f"backend {backend!r} is not available in this installation") from None
+    return cls.from_devices(devices, seeds, **kwargs)

@@ -1,0 +1,658 @@
+r"""Gymnasium environment: learn to hold the display against the reading finger.
+
+One environment step is one control period of the device's microcontroller at
+``control_rate_hz`` (default 200 Hz, i.e. 50 physics steps of the 10 kHz lumped plant):
+the action is held as the motor command while :func:`ebraille_sim.plant.loop.loop_step` (the
+same closed-loop function the scenario runner calls) advances the drive train, board,
+fingertip, FSR, ADC and force estimator.  A learned controller and a PID therefore see
+identical physics.
+
+## Description
+
+A Faulhaber gearmotor drives a pinion and two racks that lift a board with a 3x2
+electrotactile display against the pulp of the reader's index finger.  An FSR 402 in a
+voltage divider under the display is read by the microcontroller, which estimates the
+force with the paper's fifth-order Wiener model.  The agent commands the motor so that the
+TRUE contact force follows a comfort setpoint while the reader moves through a Braille
+passage, and must never press harder than the safe force.
+
+## Action Space
+
+``Box(-1, 1, shape=(1,), float32)``: the motor command as a fraction of the device's
+nominal driver supply, ``command_v = a * driver_supply_v`` (6 V for the Faulhaber drive).
+Actions outside [-1, 1] are clipped (the H-bridge saturates), a non-finite action or one
+of the wrong shape raises ``ValueError``.  A sagging supply (a disturbance) clips the
+command again inside the plant.
+
+## Observation Space
+
+``Box(low, high, shape=(7,), float32)``; only what the microcontroller sees.  Every entry
+is clipped to its bounds.  ``F_s`` is ``safe_force_n`` (3 N).
+
+| Num | Observation                                              | Min | Max |
+|-----|----------------------------------------------------------|-----|-----|
+| 0   | estimated force ``F_est / F_s``                          | -1  | 2   |
+| 1   | setpoint ``F_sp / F_s``                                  | 0   | 1   |
+| 2   | error ``(F_sp - F_est) / F_s``                           | -2  | 2   |
+| 3   | filtered rate of the estimate ``dF_est/dt / 10 N/s``     | -3  | 3   |
+| 4   | clipped error integral ``I``                             | -1  | 1   |
+| 5   | previous action ``a_{k-1}``                              | -1  | 1   |
+| 6   | motor current ``i / 0.283 A`` (stall current at 6 V)     | -3  | 3   |
+
+The rate is a first-order low-pass (time constant ``rate_filter_s``, 20 ms) of the
+backward difference of the estimate; the integral is
+``I_k = clip(I_{k-1} + dt (F_sp - F_est)/(F_s integral_time_s), -1, 1)`` with
+``integral_time_s`` = 0.1 s.  Both use the step ``dt = 1/control_rate_hz`` as an argument
+(:func:`observe`), and :class:`controllers.policy.PolicyController` calls the same function.
+
+## Rewards
+
+With the true force ``F`` at the end of the period, the setpoint ``F_sp`` that was
+shown with the action, the clipped action ``a`` and the degree of violation of the safe
+force ``v = clip((F - F_warn)/(F_safe - F_warn), 0, 1)`` (architecture rule 8; ``F_warn``
+= ``warn_force_n`` = 2 N, ``F_safe`` = 3 N)::
+
+    r = 1 - sqrt(min(1, |F - F_sp| / e_s)) - w_u a^2 - w_v v
+
+with ``e_s`` = 1 N, ``w_u`` = ``effort_weight`` = 0.1 and ``w_v`` = ``violation_weight``
+= 1.  A perfect, effortless step earns 1; the reward lies in [-1.1, 1], so ending an
+episode early by crushing the finger forfeits the reward of the remaining steps.
+
+## Starting State
+
+The board rests fully retracted (``travel_min_m``), the pinion centred in its backlash,
+no contact, the estimator at its steady state for the tared no-load voltage.  The pulp
+surface sits ``gap_m`` above the board (0.5-1.5 mm), so every episode begins with a
+contact onset.  The first character appears at ``reading_start_s`` (1 s).
+
+## Episode End
+
+1. Termination: the true contact force exceeds ``safe_force_n`` (3.0 N).
+2. Truncation: the last character of the passage excerpt leaves the display
+   (``episode_characters`` cells after ``reading_start_s``).  At the defaults this is at
+   most 1400 steps (60 wpm), the ``max_episode_steps`` of the registered id.
+
+## Episodes and domain randomisation
+
+Every reset spawns one ``SeedSequence`` child of the env's master seed for the episode,
+and from it one child per component, so fixing one component never shifts another:
+
+==============  ===========================================================  ==========
+component       draw                                                         source
+==============  ===========================================================  ==========
+device          reader pulp, FSR unit, motor, drive train from               population
+                :func:`ebraille_sim.scenarios.population.sample_device` (R2
+                recalibrated per FSR unit)
+sensor          seed of the counter-based ADC noise                          -
+reading         passage (shipped passages), excerpt start (a word start),    [R] paper
+                rate uniform in 60-120 wpm
+setpoint        1-3 levels uniform in 0.3-1.5 N; steps at uniform times     [E]
+                during reading
+finger          gap 0.5-1.5 mm; slow drift ``A_d (sin(2 pi f_d t + p_d) -    [E]
+                sin p_d)``, ``A_d`` <= 0.15 mm, ``f_d`` 0.05-0.3 Hz; tremor
+                ``A_t sin(2 pi f_t t + p_t)``, ``A_t`` <= 20 um, ``f_t``
+                8-12 Hz (physiological tremor band)
+supply          driver supply sag, uniform 0-15 % for the episode            [E]
+==============  ===========================================================  ==========
+
+``reset(seed=..., options=...)`` fixes any of them for evaluation; the allowed option keys
+are :data:`OPTION_KEYS` (an unknown key or a value out of range raises ``ValueError``
+naming it):
+
+``device`` (a :class:`~ebraille_sim.physics.params.DeviceParams`; its rates are set to the env's),
+``passage`` (a name from :func:`ebraille_sim.scenarios.passages.list_passages`), ``first_character``
+(cell index of the excerpt start), ``wpm`` (0-1000], ``setpoint_n`` (0, safe force),
+``setpoint_steps`` (list of ``(time_s, force_n)``), ``gap_m`` [0, 5 mm],
+``drift_amplitude_m`` [0, 1 mm], ``tremor_amplitude_m`` [0, 0.1 mm], ``supply_fraction``
+[0.5, 1], ``disturbances`` (False: no drift, tremor or sag).
+
+## Arguments
+
+| Parameter              | Type  | Default   | Description                                            |
+|------------------------|-------|-----------|--------------------------------------------------------|
+| `render_mode`          | str   | None      | None or "rgb_array" (:mod:`ebraille_sim.rl.render`)       |
+| `control_rate_hz`      | float | 200.0     | env steps per second; divides the 10 kHz physics rate  |
+| `safe_force_n`         | float | 3.0       | termination threshold, N                               |
+| `warn_force_n`         | float | 2.0       | start of the soft penalty zone, N                      |
+| `episode_characters`   | int   | 30        | Braille cells read per episode                         |
+| `reading_start_s`      | float | 1.0       | contact onset time before the first cell, s            |
+| `wpm_range`            | tuple | (60, 120) | reading-rate range, words per minute                   |
+| `setpoint_range_n`     | tuple | (0.3,1.5) | setpoint range, N                                      |
+| `randomize_device`     | bool  | True      | draw a device per episode (False: the nominal device)  |
+| `disturbances`         | bool  | True      | finger drift, tremor and supply sag                    |
+| `effort_weight`        | float | 0.1       | ``w_u``                                                |
+| `violation_weight`     | float | 1.0       | ``w_v``                                                |
+| `backend`              | str   | "lumped"  | plant model for :func:`ebraille_sim.plant.loop.make_plant`   |
+| `base_device`          | DeviceParams | nominal | centre of the population                        |
+
+Examples
+--------
+>>> import gymnasium as gym
+>>> import ebraille_sim
+>>> env = gym.make("EBraille/ContactForce-v0")
+>>> obs, info = env.reset(seed=3)
+>>> obs.shape, obs.dtype
+((7,), dtype('float32'))
+>>> obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+>>> -1.1 <= reward <= 1.0
+True
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from dataclasses import dataclass
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from ebraille_sim.base.compiled import njit
+
+from ebraille_sim.plant.layout import S as _S
+from ebraille_sim.plant.layout import U as _U
+from ebraille_sim.plant.loop import loop_step
+from controllers import features
+from controllers.features import (C_CMD_SCALE, C_DT, C_FS, C_INT_GAIN, C_RATE_ALPHA, C_SAFE, C_WARN, C_WU, C_WV,
+                                  ERROR_SCALE_N, N_C, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, Z_STEP, _clip,
+                                  observe, reset_features, write_observation)
+
+__all__ = [
+    "ENV_ID",
+    "MAX_EPISODE_STEPS",
+    "N_OBS",
+    "OBS_HIGH",
+    "OBS_LOW",
+    "OPTION_KEYS",
+    "ContactForceEnv",
+    "EnvConfig",
+    "Episode",
+    "draw_episode",
+    "observe",
+    "post_step",
+    "register_envs",
+    "reward_of",
+    "validate_options",
+]
+
+ENV_ID = "EBraille/ContactForce-v0"
+
+OPTION_KEYS = ("device", "passage", "first_character", "wpm", "setpoint_n", "setpoint_steps", "gap_m",
+               "drift_amplitude_m", "tremor_amplitude_m", "supply_fraction", "disturbances")
+
+_I_FC, _I_FEST, _I_CUR = _S["contact_force_n"], _S["force_est_n"], _S["current_a"]
+_U_CMD, _U_FINGER = _U["command_v"], _U["finger_pos_m"]
+
+@njit(cache=True)
+def reward_of(c, force_true_n, setpoint_n, action):
+    """Reward and degree of violation ``(r, v)`` of one step (formula in the module docstring)."""
+    e = abs(force_true_n - setpoint_n) / ERROR_SCALE_N
+    if e > 1.0:
+        e = 1.0
+    v = _clip((force_true_n - c[C_WARN]) / (c[C_SAFE] - c[C_WARN]), 0.0, 1.0)
+    r = 1.0 - math.sqrt(e) - c[C_WU] * action * action - c[C_WV] * v
+    return r, v
+
+
+@njit(cache=True)
+def post_step(z, c, force_est_n, force_true_n, current_a, setpoint_shown_n, setpoint_next_n, action, obs):
+    """Everything after the physics of one step: reward, termination, next observation.
+
+    Returns ``(reward, violation, terminated)``.
+    """
+    r, v = reward_of(c, force_true_n, setpoint_shown_n, action)
+    z[Z_PREV_ACTION] = action
+    z[Z_STEP] += 1.0
+    observe(z, c, force_est_n, setpoint_next_n, current_a, c[C_DT], obs)
+    return r, v, force_true_n > c[C_SAFE]
+
+
+# ---------------------------------------------------------------------------------------------
+# configuration and episodes
+# ---------------------------------------------------------------------------------------------
+
+def _check_range(name, value, lo, hi, lo_open=False, hi_open=False):
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name} must be a number, got {value!r}")
+    value = float(value)
+    bad = not math.isfinite(value) or value < lo or value > hi or (lo_open and value == lo) or \
+        (hi_open and value == hi)
+    if bad:
+        lb = "(" if lo_open else "["
+        rb = ")" if hi_open else "]"
+        raise ValueError(f"{name} = {value!r} is out of range {lb}{lo:g}, {hi:g}{rb}")
+    return value
+
+
+def _check_pair(name, value, lo, hi):
+    if not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise ValueError(f"{name} must be a (low, high) pair, got {value!r}")
+    a = _check_range(f"{name}[0]", value[0], lo, hi)
+    b = _check_range(f"{name}[1]", value[1], lo, hi)
+    if a > b:
+        raise ValueError(f"{name} must have low <= high, got {value!r}")
+    return (a, b)
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Constructor arguments of :class:`ContactForceEnv`, validated (see its table), and the
+    time constants of the observation's rate filter and error integral."""
+    control_rate_hz: float = 200.0
+    safe_force_n: float = 3.0
+    warn_force_n: float = 2.0
+    episode_characters: int = 30
+    reading_start_s: float = 1.0
+    wpm_range: tuple = (60.0, 120.0)
+    setpoint_range_n: tuple = (0.3, 1.5)
+    randomize_device: bool = True
+    disturbances: bool = True
+    effort_weight: float = 0.1
+    violation_weight: float = 1.0
+    rate_filter_s: float = 0.02
+    integral_time_s: float = 0.1
+    backend: str = "lumped"
+    base_device: object = None
+
+    def __post_init__(self):
+        from ebraille_sim.physics.params import DeviceParams, RateParams
+        _check_range("control_rate_hz", self.control_rate_hz, 1.0, 1e5)
+        _check_range("safe_force_n", self.safe_force_n, 0.0, 20.0, lo_open=True)
+        _check_range("warn_force_n", self.warn_force_n, 0.0, self.safe_force_n, hi_open=True)
+        if isinstance(self.episode_characters, bool) or not isinstance(self.episode_characters, (int, np.integer)):
+            raise ValueError(f"episode_characters must be an integer, got {self.episode_characters!r}")
+        _check_range("episode_characters", self.episode_characters, 1, 100000)
+        _check_range("reading_start_s", self.reading_start_s, 0.0, 60.0)
+        object.__setattr__(self, "wpm_range", _check_pair("wpm_range", self.wpm_range, 1.0, 1000.0))
+        object.__setattr__(self, "setpoint_range_n",
+                           _check_pair("setpoint_range_n", self.setpoint_range_n, 0.01, self.warn_force_n))
+        for name in ("randomize_device", "disturbances"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        _check_range("effort_weight", self.effort_weight, 0.0, 100.0)
+        _check_range("violation_weight", self.violation_weight, 0.0, 100.0)
+        _check_range("rate_filter_s", self.rate_filter_s, 0.0, 10.0)
+        _check_range("integral_time_s", self.integral_time_s, 0.0, 100.0, lo_open=True)
+        if not isinstance(self.backend, str):
+            raise ValueError(f"backend must be a string, got {self.backend!r}")
+        base = DeviceParams() if self.base_device is None else self.base_device
+        if not isinstance(base, DeviceParams):
+            raise ValueError(f"base_device must be a DeviceParams, got {type(base).__name__}")
+        r = base.rates
+        try:
+            rates = RateParams(control_rate_hz=float(self.control_rate_hz), sensor_rate_hz=r.sensor_rate_hz,
+                               physics_rate_hz=r.physics_rate_hz)
+        except ValueError as exc:
+            raise ValueError(f"control_rate_hz {self.control_rate_hz:g}: {exc}") from None
+        object.__setattr__(self, "base_device", dataclasses.replace(base, rates=rates))
+        object.__setattr__(self, "control_rate_hz", float(self.control_rate_hz))
+
+    @property
+    def dt_s(self) -> float:
+        return 1.0 / self.control_rate_hz
+
+    @property
+    def substeps(self) -> int:
+        return self.base_device.rates.substeps_per_control
+
+    def config_vector(self, driver_supply_v: float) -> np.ndarray:
+        """The per-env configuration vector ``c`` of :func:`observe` and :func:`reward_of`."""
+        return features.config_vector(self.control_rate_hz, self.safe_force_n, self.warn_force_n,
+                                      self.rate_filter_s, self.integral_time_s, driver_supply_v,
+                                      self.effort_weight, self.violation_weight)
+
+    def max_episode_steps(self) -> int:
+        """Steps of the longest episode at the slowest rate of ``wpm_range``."""
+        from ebraille_sim.scenarios.reading import mean_dwell_s
+        t = self.reading_start_s + self.episode_characters * mean_dwell_s(self.wpm_range[0])
+        return int(math.ceil(t * self.control_rate_hz - 1e-9))
+
+    def policy_metadata(self) -> dict:
+        """What a policy controller needs to rebuild the observation (JSON-serialisable)."""
+        return {"control_rate_hz": self.control_rate_hz, "safe_force_n": self.safe_force_n,
+                "warn_force_n": self.warn_force_n, "rate_filter_s": self.rate_filter_s,
+                "integral_time_s": self.integral_time_s, "effort_weight": self.effort_weight,
+                "violation_weight": self.violation_weight,
+                "driver_supply_v": self.base_device.driver_supply_v}
+
+
+MAX_EPISODE_STEPS = EnvConfig().max_episode_steps()
+"""``max_episode_steps`` of the registered id: the longest episode at the defaults (1 s of
+onset + 30 cells at 60 wpm, 0.2 s each, at 200 Hz: 1400 steps)."""
+
+
+@dataclass(frozen=True)
+class Episode:
+    """Everything drawn for one episode (inputs are arrays over the step index).
+
+    Attributes
+    ----------
+    device : DeviceParams
+    sensor_seed : float
+        Seed of the ADC noise (52-bit integer as float).
+    schedule : ReadingSchedule
+    passage : str
+    first_character : int
+    wpm : float
+    n_steps : int
+        Steps until the passage ends (truncation).
+    setpoint_n : ndarray, shape (n_steps + 1,)
+        Setpoint at ``t_k = k dt``.
+    finger_m : ndarray, shape (n_steps + 1,)
+        Pulp surface position at ``t_k`` (held over step k).
+    supply_v : float
+        Driver supply for the episode (after sag), V.
+    gap_m : float
+    char_index : ndarray of int, shape (n_steps + 1,)
+        Cell on the display at ``t_k`` (-1 before the first and after the last).
+    """
+    device: object
+    sensor_seed: float
+    schedule: object
+    passage: str
+    first_character: int
+    wpm: float
+    n_steps: int
+    setpoint_n: np.ndarray
+    finger_m: np.ndarray
+    supply_v: float
+    gap_m: float
+    char_index: np.ndarray
+
+
+@functools.lru_cache(maxsize=16)
+def _passage_cells(name: str):
+    from ebraille_sim.scenarios.braille import text_to_cells
+    from ebraille_sim.scenarios.passages import load_passage
+    return tuple(text_to_cells(load_passage(name)))
+
+
+@functools.lru_cache(maxsize=4)
+def estimator_model(spec: str):
+    """The estimator model named ``spec``, loaded once per process."""
+    from ebraille_sim.estimation.models import load_estimator
+    return load_estimator(spec)
+
+
+def validate_options(options, safe_force_n: float) -> dict:
+    """Check reset options; return a plain dict.  Unknown keys and bad values raise ``ValueError``."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise ValueError(f"options must be a dict, got {type(options).__name__}")
+    out = {}
+    for key, value in options.items():
+        if key not in OPTION_KEYS:
+            raise ValueError(f"unknown reset option {key!r}; allowed: {', '.join(OPTION_KEYS)}")
+        if key == "device":
+            from ebraille_sim.physics.params import DeviceParams
+            if not isinstance(value, DeviceParams):
+                raise ValueError(f"option 'device' must be a DeviceParams, got {type(value).__name__}")
+        elif key == "passage":
+            from ebraille_sim.scenarios.passages import list_passages
+            if value not in list_passages():
+                raise ValueError(f"option 'passage' = {value!r} is not one of: {', '.join(list_passages())}")
+        elif key == "first_character":
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+                raise ValueError(f"option 'first_character' must be an integer >= 0, got {value!r}")
+            value = int(value)
+        elif key == "wpm":
+            value = _check_range("option 'wpm'", value, 0.0, 1000.0, lo_open=True)
+        elif key == "setpoint_n":
+            value = _check_range("option 'setpoint_n'", value, 0.0, safe_force_n, lo_open=True, hi_open=True)
+        elif key == "setpoint_steps":
+            if not isinstance(value, (list, tuple)) or not all(
+                    isinstance(s, (list, tuple)) and len(s) == 2 for s in value):
+                raise ValueError("option 'setpoint_steps' must be a list of (time_s, force_n) pairs")
+            steps = [(_check_range("option 'setpoint_steps' time", t, 0.0, 3600.0),
+                      _check_range("option 'setpoint_steps' force", f, 0.0, safe_force_n, lo_open=True,
+                                   hi_open=True)) for t, f in value]
+            if any(b[0] <= a[0] for a, b in zip(steps, steps[1:])):
+                raise ValueError("option 'setpoint_steps' times must increase")
+            value = tuple(steps)
+        elif key == "gap_m":
+            value = _check_range("option 'gap_m'", value, 0.0, 5e-3)
+        elif key == "drift_amplitude_m":
+            value = _check_range("option 'drift_amplitude_m'", value, 0.0, 1e-3)
+        elif key == "tremor_amplitude_m":
+            value = _check_range("option 'tremor_amplitude_m'", value, 0.0, 1e-4)
+        elif key == "supply_fraction":
+            value = _check_range("option 'supply_fraction'", value, 0.5, 1.0)
+        elif key == "disturbances":
+            if not isinstance(value, bool):
+                raise ValueError(f"option 'disturbances' must be True or False, got {value!r}")
+        out[key] = value
+    return out
+
+
+def draw_episode(ss: np.random.SeedSequence, cfg: EnvConfig, options: dict | None = None) -> Episode:
+    """Draw one episode from the episode seed ``ss`` (components spawned from it).
+
+    ``options`` (already validated by :func:`validate_options`) fix components; a fixed
+    component consumes no draws of the others.
+    """
+    from ebraille_sim.physics.noise import seed_from
+    from ebraille_sim.scenarios.passages import list_passages
+    from ebraille_sim.scenarios.population import PopulationSpec, sample_device
+    from ebraille_sim.scenarios.reading import build_schedule
+
+    opt = options or {}
+    ss_dev, ss_sensor, ss_read, ss_sp, ss_finger, ss_supply = ss.spawn(6)
+    base = cfg.base_device
+    if "device" in opt:
+        dev = dataclasses.replace(opt["device"], rates=base.rates)
+    elif cfg.randomize_device:
+        dev = sample_device(ss_dev, PopulationSpec(), base)
+    else:
+        dev = base
+    sensor_seed = seed_from(ss_sensor)
+
+    rng = np.random.default_rng(ss_read)
+    names = list_passages()
+    pick = int(rng.integers(len(names)))
+    passage = opt.get("passage", names[pick])
+    cells = _passage_cells(passage)
+    starts = [0] + [k + 1 for k, c in enumerate(cells[:-1]) if c.kind == "space"]
+    first = starts[int(rng.integers(len(starts)))]
+    first = opt.get("first_character", first)
+    if first >= len(cells):
+        raise ValueError(f"option 'first_character' = {first} is out of range [0, {len(cells) - 1}] "
+                         f"for passage {passage!r}")
+    wpm = float(rng.uniform(*cfg.wpm_range))
+    wpm = opt.get("wpm", wpm)
+    n_cells = cfg.episode_characters
+    reps = (first + n_cells) // len(cells) + 1
+    excerpt = list((cells * reps)[first:first + n_cells])
+    schedule = build_schedule(excerpt, wpm, start_s=cfg.reading_start_s)
+    dt = cfg.dt_s
+    n_steps = max(1, int(math.ceil(schedule.t_end_s / dt - 1e-9)))
+    t = np.arange(n_steps + 1) * dt
+
+    rng = np.random.default_rng(ss_sp)
+    n_levels = int(rng.integers(1, 4))
+    levels = rng.uniform(*cfg.setpoint_range_n, size=n_levels)
+    t_lo, t_hi = cfg.reading_start_s, max(cfg.reading_start_s, schedule.t_end_s - 0.5)
+    times = np.sort(rng.uniform(t_lo, t_hi, size=n_levels - 1))
+    if "setpoint_n" in opt or "setpoint_steps" in opt:
+        first_level = opt.get("setpoint_n", float(levels[0]))
+        steps = opt.get("setpoint_steps", ())
+        levels = np.array([first_level] + [f for _, f in steps])
+        times = np.array([s for s, _ in steps], dtype=float)
+    sp = np.full(n_steps + 1, float(levels[0]))
+    for t0, f in zip(times, levels[1:]):
+        sp[t >= t0] = f
+
+    rng = np.random.default_rng(ss_finger)
+    gap = float(rng.uniform(0.5e-3, 1.5e-3))
+    a_d, f_d, p_d = float(rng.uniform(0.0, 0.15e-3)), float(rng.uniform(0.05, 0.3)), float(rng.uniform(0, 2 * np.pi))
+    a_t, f_t, p_t = float(rng.uniform(0.0, 20e-6)), float(rng.uniform(8.0, 12.0)), float(rng.uniform(0, 2 * np.pi))
+    sag = float(np.random.default_rng(ss_supply).uniform(0.0, 0.15))
+    disturb = cfg.disturbances and opt.get("disturbances", True)
+    if not disturb:
+        a_d = a_t = sag = 0.0
+    gap = opt.get("gap_m", gap)
+    a_d = opt.get("drift_amplitude_m", a_d)
+    a_t = opt.get("tremor_amplitude_m", a_t)
+    supply_fraction = opt.get("supply_fraction", 1.0 - sag)
+    finger = gap + a_d * (np.sin(2 * np.pi * f_d * t + p_d) - np.sin(p_d)) + a_t * np.sin(2 * np.pi * f_t * t + p_t)
+    return Episode(device=dev, sensor_seed=sensor_seed, schedule=schedule, passage=passage, first_character=first,
+                   wpm=float(wpm), n_steps=n_steps, setpoint_n=sp, finger_m=finger,
+                   supply_v=dev.driver_supply_v * supply_fraction, gap_m=gap,
+                   char_index=schedule.index_at(t))
+
+
+def check_action(action, n: int | None = None):
+    """A float (``n`` None, shape (1,) action) or an (n, 1) float64 array; non-finite or misshapen
+    input raises ``ValueError``."""
+    if n is None and type(action) is np.ndarray and action.shape == (1,):
+        x = float(action[0])
+        if math.isfinite(x):
+            return x
+    a = np.asarray(action, dtype=np.float64)
+    want = (1,) if n is None else (n, 1)
+    if a.shape != want:
+        if n is None and a.size == 1:
+            a = a.reshape(1)
+        elif n is not None and a.shape == (n,):
+            a = a.reshape(n, 1)
+        else:
+            raise ValueError(f"action must have shape {want}, got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"action must be finite, got {action!r}" if n is None else
+                         f"action must be finite; non-finite in envs {np.nonzero(~np.isfinite(a[:, 0]))[0].tolist()}")
+    return float(a[0]) if n is None else a
+
+
+# ---------------------------------------------------------------------------------------------
+# the environment
+# ---------------------------------------------------------------------------------------------
+
+class ContactForceEnv(gym.Env):
+    __doc__ = __doc__
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
+
+    def __init__(self, render_mode: str | None = None, control_rate_hz: float = 200.0,
+                 safe_force_n: float = 3.0, warn_force_n: float = 2.0, episode_characters: int = 30,
+                 reading_start_s: float = 1.0, wpm_range=(60.0, 120.0), setpoint_range_n=(0.3, 1.5),
+                 randomize_device: bool = True, disturbances: bool = True, effort_weight: float = 0.1,
+                 violation_weight: float = 1.0, backend: str = "lumped", base_device=None):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode {render_mode!r} is not supported; allowed: None, "
+                             f"{', '.join(self.metadata['render_modes'])}")
+        self.render_mode = render_mode
+        self.config = EnvConfig(control_rate_hz=control_rate_hz, safe_force_n=safe_force_n,
+                                warn_force_n=warn_force_n, episode_characters=episode_characters,
+                                reading_start_s=reading_start_s, wpm_range=wpm_range,
+                                setpoint_range_n=setpoint_range_n, randomize_device=randomize_device,
+                                disturbances=disturbances, effort_weight=effort_weight,
+                                violation_weight=violation_weight, backend=backend, base_device=base_device)
+        from ebraille_sim.plant.loop import PLANT_BACKENDS
+        if backend not in PLANT_BACKENDS:
+            raise ValueError(f"unknown backend {backend!r}; available: {', '.join(sorted(PLANT_BACKENDS))}")
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self.observation_space = spaces.Box(OBS_LOW.copy(), OBS_HIGH.copy(), dtype=np.float32)
+        self._master: np.random.SeedSequence | None = None
+        self.plant = None
+        self.episode: Episode | None = None
+        self._z = np.zeros(N_Z)
+        self._c = self.config.config_vector(self.config.base_device.driver_supply_v)
+        self._obs = np.zeros(N_OBS, dtype=np.float32)
+        self._k = 0
+        self._renderer = None
+        self._history = None
+
+    # -- episode ---------------------------------------------------------------------------
+    def next_episode_seed(self, seed=None) -> np.random.SeedSequence:
+        """The episode's ``SeedSequence``: a child of the master seed (``seed`` re-seeds it)."""
+        if seed is not None:
+            self._master = np.random.SeedSequence(int(seed))
+        elif self._master is None:
+            self._master = np.random.SeedSequence(int(self.np_random.integers(0, 2**63)))
+        return self._master.spawn(1)[0]
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        opt = validate_options(options, self.config.safe_force_n)
+        from ebraille_sim.plant.loop import make_plant
+        ep = draw_episode(self.next_episode_seed(seed), self.config, opt)
+        dev = ep.device
+        self.plant = make_plant([dev], [ep.sensor_seed], backend=self.config.backend,
+                                models=[estimator_model(dev.estimator.model)])
+        self.plant.set_input("driver_supply_v", ep.supply_v)
+        self.plant.set_finger(ep.finger_m[0])
+        self._st = self.plant.state[0]
+        self._inp = self.plant.inputs[0]
+        self.episode = ep
+        self._c = self.config.config_vector(dev.driver_supply_v)
+        self._k = 0
+        fe = float(self._st[_I_FEST])
+        reset_features(self._z, fe)
+        write_observation(self._z, self._c, fe, ep.setpoint_n[0], float(self._st[_I_CUR]), self._obs)
+        if self.render_mode is not None:
+            self._history = {"t_s": [0.0], "force_true_n": [float(self._st[_I_FC])],
+                             "force_est_n": [fe], "setpoint_n": [float(ep.setpoint_n[0])]}
+        return self._obs.copy(), self._info(0.0)
+
+    def _info(self, violation: float) -> dict:
+        st = self._st
+        k = self._k
+        ep = self.episode
+        return {"force_true_n": float(st[_I_FC]), "force_est_n": float(st[_I_FEST]),
+                "setpoint_n": float(ep.setpoint_n[k]), "command_v": float(self._inp[_U_CMD]),
+                "violation": violation, "time_s": k * self.config.dt_s, "char_index": int(ep.char_index[k])}
+
+    def step(self, action):
+        if self.episode is None:
+            raise RuntimeError("call reset() before step()")
+        a = check_action(action)
+        a = -1.0 if a < -1.0 else (1.0 if a > 1.0 else a)
+        ep = self.episode
+        k = self._k
+        if k >= ep.n_steps:
+            raise RuntimeError("the episode has ended; call reset()")
+        st = self._st
+        self._inp[_U_FINGER] = ep.finger_m[k]
+        loop_step(self.plant, a * self._c[C_CMD_SCALE])
+        self._k = k + 1
+        ft = float(st[_I_FC])
+        if not math.isfinite(ft):
+            raise FloatingPointError("the simulation diverged (non-finite contact force)")
+        r, v, term = post_step(self._z, self._c, float(st[_I_FEST]), ft, float(st[_I_CUR]),
+                               ep.setpoint_n[k], ep.setpoint_n[k + 1], a, self._obs)
+        info = self._info(v)
+        if self._history is not None:
+            h = self._history
+            h["t_s"].append(info["time_s"])
+            h["force_true_n"].append(ft)
+            h["force_est_n"].append(info["force_est_n"])
+            h["setpoint_n"].append(info["setpoint_n"])
+        return self._obs.copy(), float(r), bool(term), self._k >= ep.n_steps, info
+
+    # -- rendering ---------------------------------------------------------------------------
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
+            return None
+        if self.episode is None:
+            raise RuntimeError("call reset() before render()")
+        from ebraille_sim.rl.render import Renderer, snapshot_from
+        if self._renderer is None:
+            self._renderer = Renderer()
+        snap = snapshot_from(self.plant.state[0], self.plant.inputs[0], self.episode, self._k,
+                             self.config.dt_s, self.config.safe_force_n, self._history)
+        return self._renderer.draw(snap)
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+def register_envs() -> None:
+    """Register ``EBraille/ContactForce-v0`` with Gymnasium (once per process, silently)."""
+    if ENV_ID in gym.registry:
+        return
+    gym.register(id=ENV_ID, entry_point="ebraille_sim.rl.env:ContactForceEnv",
+                 vector_entry_point="ebraille_sim.rl.vector_env:ContactForceVectorEnv",
+                 max_episode_steps=MAX_EPISODE_STEPS)

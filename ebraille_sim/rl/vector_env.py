@@ -1,0 +1,294 @@
+"""Native vector form of :class:`ebraille_sim.rl.env.ContactForceEnv`: N devices, one batched step.
+
+``gymnasium.make_vec("EBraille/ContactForce-v0", num_envs=N)`` builds this class (the id's
+``vector_entry_point``).  The N plants live as rows of packed arrays (state ``(N, N_STATE)``,
+parameters ``(N, N_PARAM)``, inputs ``(N, N_INPUT)``, see :mod:`ebraille_sim.plant.layout`) and one
+compiled call steps all of them: for every row it writes the command and the finger
+position, calls :func:`ebraille_sim.plant.kernel.advance` (the function that
+:meth:`ebraille_sim.plant.loop.Plant.advance` calls for one device) and then
+:func:`ebraille_sim.rl.env.post_step` (the scalar env's reward, termination and observation).
+With ``parallel=True`` (default) the rows are spread over threads with ``numba.prange``;
+rows are independent, so the result does not depend on the thread count.
+
+Sub-env ``i`` is exactly the scalar env reset with seed ``seed + i`` (or ``seeds[i]``): the
+same episode draws, the same packed rows (built by :meth:`ebraille_sim.plant.loop.Plant.from_devices`)
+and the same compiled step; ``tests/test_vector_env.py`` checks trajectories agree to 1e-9.
+
+Autoreset follows Gymnasium's ``AutoresetMode.NEXT_STEP``: the step after a sub-env
+terminates or truncates resets it (its action is ignored) and returns its first
+observation with reward 0 and ``terminated = truncated = False``.  A sub-env is also
+truncated after ``max_episode_steps`` steps (the scalar env's ``TimeLimit``).
+
+Only the ``"lumped"`` backend has packed rows; the pymunk mechanism runs through the scalar
+env.
+
+Examples
+--------
+>>> import gymnasium as gym
+>>> import numpy as np
+>>> import ebraille_sim
+>>> envs = gym.make_vec("EBraille/ContactForce-v0", num_envs=4)
+>>> obs, info = envs.reset(seed=0)
+>>> obs.shape
+(4, 7)
+>>> obs, rew, term, trunc, info = envs.step(np.zeros((4, 1), np.float32))
+>>> rew.shape, term.dtype
+((4,), dtype('bool'))
+"""
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+from ebraille_sim.base.compiled import njit, prange
+
+from ebraille_sim.plant import kernel
+from ebraille_sim.rl.env import (
+    C_CMD_SCALE,
+    N_OBS,
+    N_Z,
+    OBS_HIGH,
+    OBS_LOW,
+    Z_STEP,
+    EnvConfig,
+    check_action,
+    draw_episode,
+    estimator_model,
+    post_step,
+    reset_features,
+    validate_options,
+    write_observation,
+)
+from ebraille_sim.plant.layout import N_INPUT, N_PARAM, N_STATE, S, U
+
+__all__ = ["ContactForceVectorEnv", "step_row", "step_rows", "step_rows_serial"]
+
+_I_FC, _I_FEST, _I_CUR = S["contact_force_n"], S["force_est_n"], S["current_a"]
+_U_CMD, _U_FINGER = U["command_v"], U["finger_pos_m"]
+
+
+@njit(cache=True)
+def step_row(i, state, params, inputs, z, c, finger, setpoint, n_steps, actions, n_sub,
+             obs, reward, violation, terminated, truncated):
+    """One control period of row ``i``: command and finger inputs, physics, reward, observation."""
+    a = actions[i]
+    if a < -1.0:
+        a = -1.0
+    elif a > 1.0:
+        a = 1.0
+    k = int(z[i, Z_STEP])
+    inputs[i, _U_FINGER] = finger[i, k]
+    inputs[i, _U_CMD] = a * c[i, C_CMD_SCALE]
+    kernel.advance(state[i], params[i], inputs[i], n_sub)
+    r, v, term = post_step(z[i], c[i], state[i, _I_FEST], state[i, _I_FC], state[i, _I_CUR],
+                           setpoint[i, k], setpoint[i, k + 1], a, obs[i])
+    reward[i] = r
+    violation[i] = v
+    terminated[i] = term
+    truncated[i] = k + 1 >= n_steps[i]
+
+
+@njit(parallel=True, cache=True)
+def step_rows(state, params, inputs, z, c, finger, setpoint, n_steps, actions, active, n_sub,
+              obs, reward, violation, terminated, truncated):
+    """:func:`step_row` for every active row, rows spread over threads (``numba.prange``)."""
+    for i in prange(state.shape[0]):
+        if active[i]:
+            step_row(i, state, params, inputs, z, c, finger, setpoint, n_steps, actions, n_sub,
+                     obs, reward, violation, terminated, truncated)
+
+
+@njit(cache=True)
+def step_rows_serial(state, params, inputs, z, c, finger, setpoint, n_steps, actions, active, n_sub,
+                     obs, reward, violation, terminated, truncated):
+    """:func:`step_row` for every active row on one thread."""
+    for i in range(state.shape[0]):
+        if active[i]:
+            step_row(i, state, params, inputs, z, c, finger, setpoint, n_steps, actions, n_sub,
+                     obs, reward, violation, terminated, truncated)
+
+
+class ContactForceVectorEnv(VectorEnv):
+    """``num_envs`` contact-force envs stepped together (see the module docstring).
+
+    Parameters
+    ----------
+    num_envs : int
+        Number of sub-envs, >= 1.
+    max_episode_steps : int, optional
+        Truncate a sub-env after this many steps (Gymnasium passes the id's value).
+    render_mode : str, optional
+        None or ``"rgb_array"`` (``render()`` returns one frame per sub-env).
+    parallel : bool
+        Spread the rows over threads (numba ``prange``); False runs them on one thread.
+    **env_kwargs
+        The scalar env's arguments (:class:`ebraille_sim.rl.env.EnvConfig`); ``backend`` must be
+        ``"lumped"``.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 25, "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None, render_mode: str | None = None,
+                 parallel: bool = True, **env_kwargs):
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        if max_episode_steps is not None and (isinstance(max_episode_steps, bool) or
+                                              not isinstance(max_episode_steps, (int, np.integer)) or
+                                              max_episode_steps < 1):
+            raise ValueError(f"max_episode_steps must be an integer >= 1 or None, got {max_episode_steps!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode {render_mode!r} is not supported; allowed: None, rgb_array")
+        backend = env_kwargs.pop("backend", "lumped")
+        if backend != "lumped":
+            raise ValueError(f"the vector env steps packed lumped plants; backend {backend!r} is not supported "
+                             "(use gymnasium.make_vec(..., vectorization_mode='sync') for other backends)")
+        allowed = set(EnvConfig.__dataclass_fields__) - {"rate_filter_s", "integral_time_s", "backend"}
+        for key in env_kwargs:
+            if key not in allowed:
+                raise ValueError(f"unknown argument {key!r}; allowed: {', '.join(sorted(allowed))}")
+        self.config = EnvConfig(**env_kwargs)
+        self.num_envs = int(num_envs)
+        self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
+        self.render_mode = render_mode
+        self.parallel = bool(parallel)
+        self._step_fn = step_rows if self.parallel else step_rows_serial
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.single_observation_space = spaces.Box(OBS_LOW.copy(), OBS_HIGH.copy(), dtype=np.float32)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        n = self.num_envs
+        self.state = np.zeros((n, N_STATE))
+        self.params = np.zeros((n, N_PARAM))
+        self.inputs = np.zeros((n, N_INPUT))
+        self._z = np.zeros((n, N_Z))
+        self._c = np.tile(self.config.config_vector(self.config.base_device.driver_supply_v), (n, 1))
+        width = self.config.max_episode_steps() + 2
+        self._finger = np.zeros((n, width))
+        self._setpoint = np.zeros((n, width))
+        self._n_steps = np.zeros(n, dtype=np.int64)
+        self._obs = np.zeros((n, N_OBS), dtype=np.float32)
+        self._reward = np.zeros(n)
+        self._violation = np.zeros(n)
+        self._terminated = np.zeros(n, dtype=np.bool_)
+        self._truncated = np.zeros(n, dtype=np.bool_)
+        self._prev_done = np.zeros(n, dtype=np.bool_)
+        self._active = np.ones(n, dtype=np.bool_)
+        self._masters: list = [None] * n
+        self._rngs: list = [None] * n
+        self.episodes: list = [None] * n
+        self._renderer = None
+        self._ready = False
+
+    # -- episodes ------------------------------------------------------------------------------
+    def _load_row(self, i: int, options: dict) -> None:
+        """Draw sub-env ``i``'s next episode and write its rows (as the scalar env's reset)."""
+        from ebraille_sim.plant.loop import Plant
+        if self._masters[i] is None:
+            self._masters[i] = np.random.SeedSequence(int(self._rngs[i].integers(0, 2**63)))
+        ep = draw_episode(self._masters[i].spawn(1)[0], self.config, options)
+        dev = ep.device
+        plant = Plant.from_devices([dev], [ep.sensor_seed], models=[estimator_model(dev.estimator.model)])
+        plant.set_input("driver_supply_v", ep.supply_v)
+        plant.set_finger(ep.finger_m[0])
+        self.state[i] = plant.state[0]
+        self.params[i] = plant.params[0]
+        self.inputs[i] = plant.inputs[0]
+        if ep.n_steps + 1 > self._finger.shape[1]:
+            width = ep.n_steps + 2
+            self._finger = np.pad(self._finger, ((0, 0), (0, width - self._finger.shape[1])))
+            self._setpoint = np.pad(self._setpoint, ((0, 0), (0, width - self._setpoint.shape[1])))
+        self._finger[i, :ep.n_steps + 1] = ep.finger_m
+        self._setpoint[i, :ep.n_steps + 1] = ep.setpoint_n
+        self._n_steps[i] = ep.n_steps if self.max_episode_steps is None else min(ep.n_steps, self.max_episode_steps)
+        self._c[i] = self.config.config_vector(dev.driver_supply_v)
+        fe = float(self.state[i, _I_FEST])
+        reset_features(self._z[i], fe)
+        write_observation(self._z[i], self._c[i], fe, ep.setpoint_n[0], float(self.state[i, _I_CUR]), self._obs[i])
+        self.episodes[i] = ep
+
+    def reset(self, *, seed=None, options: dict | None = None):
+        """Reset every sub-env.
+
+        Parameters
+        ----------
+        seed : int or sequence of int, optional
+            An int gives sub-env ``i`` the seed ``seed + i``; a sequence gives one seed per
+            sub-env (None entries are left unseeded).
+        options : dict, optional
+            Reset options applied to every sub-env's first episode (keys
+            :data:`ebraille_sim.rl.env.OPTION_KEYS`); autoresets draw every component afresh.
+        """
+        opt = validate_options(options, self.config.safe_force_n)
+        n = self.num_envs
+        if seed is None:
+            seeds = [None] * n
+        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
+            seeds = [int(seed) + i for i in range(n)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != n:
+                raise ValueError(f"seed must be an int or a sequence of {n} seeds, got {len(seeds)}")
+        super().reset(seed=seeds[0] if seeds and seeds[0] is not None else None)
+        for i, s in enumerate(seeds):
+            if s is not None:
+                self._rngs[i], _ = seeding.np_random(int(s))
+                self._masters[i] = np.random.SeedSequence(int(s))
+            elif self._rngs[i] is None:
+                self._rngs[i], _ = seeding.np_random(None)
+            self._load_row(i, opt)
+        self._prev_done[:] = False
+        self._ready = True
+        return self._obs.copy(), {}
+
+    def step(self, actions):
+        """Step every sub-env; sub-envs that ended on the previous step are reset instead."""
+        if not self._ready:
+            raise RuntimeError("call reset() before step()")
+        a = check_action(actions, self.num_envs)[:, 0]
+        done = self._prev_done
+        np.logical_not(done, out=self._active)
+        self._step_fn(self.state, self.params, self.inputs, self._z, self._c, self._finger, self._setpoint,
+                      self._n_steps, a, self._active, self.config.substeps, self._obs, self._reward,
+                      self._violation, self._terminated, self._truncated)
+        if done.any():
+            for i in np.nonzero(done)[0]:
+                self._load_row(int(i), {})
+            self._reward[done] = 0.0
+            self._violation[done] = 0.0
+            self._terminated[done] = False
+            self._truncated[done] = False
+        fc = self.state[:, _I_FC]
+        if not np.all(np.isfinite(fc)):
+            raise FloatingPointError("the simulation diverged (non-finite contact force)")
+        self._prev_done = self._terminated | self._truncated
+        every = np.ones(self.num_envs, dtype=np.bool_)
+        info = {"force_true_n": fc.copy(), "_force_true_n": every, "force_est_n": self.state[:, _I_FEST].copy(),
+                "_force_est_n": every.copy(), "violation": self._violation.copy(), "_violation": every.copy()}
+        return (self._obs.copy(), self._reward.copy(), self._terminated.copy(), self._truncated.copy(), info)
+
+    def render(self):
+        """One RGB frame per sub-env (tuple of arrays), or None without a render mode."""
+        if self.render_mode is None:
+            from gymnasium import logger
+            logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
+            return None
+        if not self._ready:
+            raise RuntimeError("call reset() before render()")
+        from ebraille_sim.rl.render import Renderer, snapshot_from
+        if self._renderer is None:
+            self._renderer = Renderer()
+        dt = self.config.dt_s
+        return tuple(self._renderer.draw(snapshot_from(self.state[i], self.inputs[i], self.episodes[i],
+                                                       int(self._z[i, Z_STEP]), dt, self.config.safe_force_n))
+                     for i in range(self.num_envs))
+
+    def close_extras(self, **kwargs):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __repr__(self) -> str:
+        return f"ContactForceVectorEnv(num_envs={self.num_envs}, control_rate_hz={self.config.control_rate_hz:g})"
+

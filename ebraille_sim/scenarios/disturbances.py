@@ -1,0 +1,503 @@
+"""Disturbances of a reading session, each from its physics: the ``[disturbances]`` section.
+
+A scenario lists the disturbances it wants as sub-tables; each becomes a per-control-period
+profile of one plant input (:data:`ebraille_sim.plant.layout.INPUT_NAMES`), built before the
+loop runs by :func:`build_inputs` (called by :func:`ebraille_sim.scenarios.runner.input_profiles`)::
+
+    [disturbances.tremor]
+    rms_m = 15e-6
+
+    [disturbances.strap_slip]
+    at_s = [6.0]
+    displacement_m = 0.2e-3
+
+Pulp relaxation needs no entry: the fingertip's quasi-linear viscoelasticity is part of
+the plant (:mod:`ebraille_sim.physics.fingertip`) and acts in every scenario.  Likewise the FSR's
+creep under load and its temperature coefficient are in the sensor model
+(:mod:`ebraille_sim.physics.fsr`); the entries below drive them.
+
+==================  =======================  =================================================
+sub-table           plant input              physics
+==================  =======================  =================================================
+``tremor``          finger_pos_m (add)       physiological tremor, Gaussian, band 8-12 Hz
+``pressing``        finger_pos_m (add)       the reader pressing and relaxing: slow (0.1-1 Hz)
+                                             Gaussian excursions of the pulp
+``strap_slip``      finger_pos_m (add)       the strap resettles: steps of the pulp relative
+                                             to the frame, smoothed over the slip duration
+``orientation``     gravity_along_m_per_s2   hand rotation: -g cos(theta(t)) along the travel,
+                    (set)                    theta on a minimum-jerk path
+``fsr_temperature`` fsr_temp_offset_k (set)  skin warming the FSR: first-order approach from
+                                             the device's temperature to the skin's
+``fsr_drift``       fsr_temp_offset_k (set)  a long session: the run starts ``session_offset_s``
+                                             into continuous loading (pre-loaded creep)
+``battery``         driver_supply_v (set)    Li-ion cell: OCV(SoC) minus the drop of a
+                                             Thevenin (R0 + R1||C1) model; cut-off at 3.0 V
+==================  =======================  =================================================
+
+Finger position convention: ``finger_pos_m`` is the pulp surface relative to the device
+frame along the board travel; a positive change moves the pulp away from the board (less
+compression, less force).
+
+**Pre-loaded creep through the temperature input.**  The sensor kernel scales the film
+resistance by ``c_creep(t_load) (1 + alpha u_T)``, with ``t_load`` the plant's own load
+clock and ``u_T`` the ``fsr_temp_offset_k`` input.  A run that starts ``t_off`` into a
+session must see ``c_creep(t_off + t_load)`` instead; the ratio
+``D = c_creep(t_off + t) / c_creep(t)`` (with the load clock taken to start at t = 0,
+which the first contact follows within a few tenths of a second) is folded exactly
+into the same input: ``u_T = ((1 + alpha dT) D - 1) / alpha``, where ``dT`` is the
+temperature offset of ``fsr_temperature`` (0 without it).
+
+Every parameter, its unit, range and source are listed by :func:`parameter_table` (and in
+``docs/scenarios.md``); the class docstrings give the equations.
+
+Examples
+--------
+>>> import numpy as np
+>>> from ebraille_sim.physics.params import DeviceParams
+>>> sec = validate_section("inline", {"tremor": {"rms_m": 20e-6}})
+>>> t = np.arange(2000) * 1e-3
+>>> prof = build_inputs(sec, t, np.random.default_rng(0), DeviceParams())
+>>> mode, x = prof["finger_pos_m"]
+>>> mode, round(float(np.std(x)) * 1e6)
+('add', 20)
+>>> validate_section("inline", {"tremor": {"rms": 1}})
+Traceback (most recent call last):
+...
+ebraille_sim.scenarios.spec.ScenarioError: inline: unknown key 'rms' in [disturbances.tremor]; allowed: band_hz, rms_m, transmission
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2
+from ebraille_sim.scenarios.spec import ScenarioError
+
+__all__ = ["KINDS", "validate_section", "build_inputs", "parameter_table", "band_limited_noise",
+           "minimum_jerk", "strap_transmission", "li_ion_ocv_v", "Tremor", "Pressing", "StrapSlip",
+           "Orientation", "FSRTemperature", "FSRDrift", "Battery"]
+
+G_M_PER_S2 = STANDARD_GRAVITY_M_PER_S2
+
+
+def _q(default, unit, lo, hi, source, kind="float"):
+    return field(default=default, metadata={"unit": unit, "lo": lo, "hi": hi, "source": source, "kind": kind})
+
+
+# --------------------------------------------------------------------------------------
+# signal helpers
+# --------------------------------------------------------------------------------------
+
+def band_limited_noise(t_s: np.ndarray, f_lo_hz: float, f_hi_hz: float, rms: float,
+                       rng: np.random.Generator) -> np.ndarray:
+    """Stationary Gaussian noise with a flat spectrum in ``[f_lo_hz, f_hi_hz]``.
+
+    Synthesised in the frequency domain (independent complex Gaussian bins inside the
+    band, zero outside) over a record long enough to hold at least four periods of
+    ``f_lo_hz``, scaled to the RMS ``rms`` over that record, then cut to ``len(t_s)``.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (n,)
+        Uniformly spaced times, s.
+    f_lo_hz, f_hi_hz : float
+        Band edges, Hz (``0 <= f_lo < f_hi``, ``f_hi`` below the Nyquist frequency).
+    rms : float
+        Root-mean-square value of the process.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    n = len(t_s)
+    if n == 0 or rms == 0.0:
+        return np.zeros(n)
+    dt = float(t_s[1] - t_s[0]) if n > 1 else 1e-3
+    if not f_hi_hz < 0.5 / dt:
+        raise ValueError(f"band edge {f_hi_hz:g} Hz is above the Nyquist frequency {0.5 / dt:g} Hz")
+    n_rec = max(n, int(math.ceil(4.0 / (max(f_lo_hz, 1e-3) * dt))), int(math.ceil(4.0 / ((f_hi_hz - f_lo_hz) * dt))))
+    freqs = np.fft.rfftfreq(n_rec, dt)
+    band = (freqs >= f_lo_hz) & (freqs <= f_hi_hz) & (freqs > 0)
+    spec = np.zeros(len(freqs), dtype=complex)
+    k = int(np.count_nonzero(band))
+    spec[band] = rng.standard_normal(k) + 1j * rng.standard_normal(k)
+    x = np.fft.irfft(spec, n_rec)
+    s = float(np.std(x))
+    return (x * (rms / s))[:n] if s > 0 else np.zeros(n)
+
+
+def minimum_jerk(u) -> np.ndarray:
+    """Minimum-jerk transition 0 -> 1 (Flash & Hogan 1985): ``10u^3 - 15u^4 + 6u^5`` on [0, 1]."""
+    u = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
+    return u ** 3 * (10.0 - 15.0 * u + 6.0 * u * u)
+
+
+def strap_transmission(f_hz: float, frame_mass_kg: float, strap_stiffness_n_per_m: float,
+                       damping_ratio: float = 0.2) -> float:
+    """Relative pulp-to-frame displacement per unit finger displacement at ``f_hz``.
+
+    A frame of mass ``m`` carried by the finger through a strap of stiffness ``k`` lags
+    the finger's motion; the relative motion of base excitation is
+    ``|r^2 / (1 - r^2 + 2 j zeta r)|`` with ``r = f / f_n`` and ``f_n = sqrt(k/m) / 2 pi``.
+
+    >>> round(strap_transmission(10.0, 0.015, 10e3), 3)     # 15 g frame, 10 N/mm strap
+    0.006
+    """
+    fn = math.sqrt(strap_stiffness_n_per_m / frame_mass_kg) / (2 * math.pi)
+    r = f_hz / fn
+    return abs(r * r / complex(1 - r * r, 2 * damping_ratio * r))
+
+
+_OCV_SOC = np.array([0.0, 0.05, 0.10, 0.20, 0.30, 0.40, 0.50, 0.60, 0.70, 0.80, 0.90, 1.00])
+_OCV_V = np.array([3.00, 3.45, 3.60, 3.68, 3.73, 3.77, 3.81, 3.86, 3.92, 3.99, 4.07, 4.18])
+"""Open-circuit voltage of a LiCoO2/graphite polymer cell against state of charge [E]:
+the shape of typical 0.2C discharge curves, anchored at the datasheet values 4.2 V full,
+3.7 V nominal, 3.0 V discharge cut-off ([R] GMB 371042 and AIN 80 mAh LiPo data sheets)."""
+
+
+def li_ion_ocv_v(soc) -> np.ndarray:
+    """Open-circuit voltage (V) of one Li-ion polymer cell at state of charge ``soc`` in [0, 1]."""
+    return np.interp(np.clip(soc, 0.0, 1.0), _OCV_SOC, _OCV_V)
+
+
+# --------------------------------------------------------------------------------------
+# the disturbances
+# --------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Tremor:
+    """Physiological tremor of the finger: band-limited Gaussian pulp motion.
+
+    ``x(t) = transmission * n(t)``, ``n`` Gaussian with a flat spectrum in ``band_hz`` and
+    RMS ``rms_m`` (:func:`band_limited_noise`).  Physiological finger tremor has its peak
+    at 8-12 Hz, almost independent of the force exerted ([R] Sutton & Sykes 1967,
+    J Physiol 191:699; [R] Lakie et al. 2015, J Physiol 593:4411: 6-12 Hz, mainly a
+    mechanical resonance).  Mean finger tremor amplitude is about 30 um, doubled with the
+    hand extended ([R] Growdon et al. 2000, Electromyogr Clin Neurophysiol 40:295,
+    accelerometry, 40 subjects); the 7.5-12.5 Hz band holds about a quarter of the total
+    displacement ([R] Carignan et al. 2009, Exp Brain Res 199:299, laser displacement of
+    the index finger).  Default 15 um RMS [E] within these.
+
+    ``transmission`` is the fraction of the finger's motion that appears between the
+    pulp and the board.  1 (default) takes all of it, the bound for a frame that does not
+    follow the finger (anchored on the hand or a loose strap).  A frame strapped firmly to
+    the same phalanx follows the finger and transmits only its inertial lag,
+    :func:`strap_transmission` (0.006 at 10 Hz for a 15 g frame on a 10 N/mm strap [E],
+    strap stiffness 5-20 N/mm from parameters section 6).
+    """
+    rms_m: float = _q(15e-6, "m", 0.0, 1e-3, "[R]/[E] Growdon 2000 ~30 um mean; Carignan 2009 band share")
+    band_hz: tuple = _q((8.0, 12.0), "Hz", 0.0, 100.0, "[R] Sutton & Sykes 1967; Lakie 2015", kind="band")
+    transmission: float = _q(1.0, "-", 0.0, 1.0, "[E] 1 = frame does not follow the finger; "
+                             "strap_transmission() for a strapped frame")
+
+    def inputs(self, t_s, rng, device):
+        x = band_limited_noise(t_s, self.band_hz[0], self.band_hz[1], self.rms_m, rng)
+        return {"finger_pos_m": ("add", self.transmission * x)}
+
+
+@dataclass(frozen=True)
+class Pressing:
+    """The reader pressing and relaxing: slow Gaussian excursions of the pulp.
+
+    ``x(t)`` Gaussian, flat spectrum in ``band_hz``, RMS ``rms_m``.  Readers' contact
+    force wanders around its mean: one Braille reader on a pressure mat averaged
+    0.8-0.9 N, another about 0.1 N ([R] Niigata tactile-pressure study); searching a
+    surface, force stays near 0.5-0.64 N ([R] Smith et al. 2002).  A force excursion of
+    0.15 N RMS [E] through the pulp's tangent stiffness of 1.5 N/mm at 1 N ([E]
+    parameters table 1.2) is 0.1 mm RMS [D]; its time scale, from line-length movements
+    of a few seconds to word-scale adjustments, gives the band 0.1-1 Hz [E].
+    """
+    rms_m: float = _q(0.1e-3, "m", 0.0, 2e-3, "[D] 0.15 N RMS [E] / 1.5 N/mm [E]")
+    band_hz: tuple = _q((0.1, 1.0), "Hz", 0.0, 20.0, "[E] line- to word-scale adjustments", kind="band")
+
+    def inputs(self, t_s, rng, device):
+        return {"finger_pos_m": ("add", band_limited_noise(t_s, self.band_hz[0], self.band_hz[1], self.rms_m, rng))}
+
+
+@dataclass(frozen=True)
+class StrapSlip:
+    """The strap slips: the pulp moves relative to the frame by a step, ramped over the slip.
+
+    ``x(t) = sum_i d * s((t - t_i) / T)`` with ``s`` the minimum-jerk ramp, ``d`` =
+    ``displacement_m`` (positive: the pulp moves away from the board) and ``T`` =
+    ``duration_s``.  Slip times ``t_i`` are ``at_s``, or a Poisson process of
+    ``rate_per_min`` when ``at_s`` is empty.  The strap sits on the dorsal skin over the
+    distal phalanx, which is a few millimetres of soft tissue [M]; a resettling by a
+    fraction of it gives 0.1-0.5 mm [E] (0.2 mm default).  A strap slips as the skin
+    under it shears, taking tens of milliseconds (30 ms [E]).
+    """
+    at_s: tuple = _q((), "s", 0.0, 3600.0, "[E] scenario-chosen slip times", kind="times")
+    rate_per_min: float = _q(0.0, "1/min", 0.0, 60.0, "[E] Poisson slip rate when at_s is empty")
+    displacement_m: float = _q(0.2e-3, "m", -2e-3, 2e-3, "[E] 0.1-0.5 mm resettling of the strap")
+    duration_s: float = _q(0.03, "s", 1e-3, 5.0, "[E] skin shear under the strap, tens of ms")
+
+    def inputs(self, t_s, rng, device):
+        times = list(self.at_s)
+        if not times and self.rate_per_min > 0 and len(t_s):
+            t_end = float(t_s[-1])
+            t = float(rng.exponential(60.0 / self.rate_per_min))
+            while t < t_end:
+                times.append(t)
+                t += float(rng.exponential(60.0 / self.rate_per_min))
+        x = np.zeros(len(t_s))
+        for ti in times:
+            x += self.displacement_m * minimum_jerk((t_s - ti) / self.duration_s)
+        return {"finger_pos_m": ("add", x)}
+
+
+@dataclass(frozen=True)
+class Orientation:
+    """Hand orientation change: gravity along the board travel follows the hand's angle.
+
+    ``g_along(t) = -g cos(theta(t))``, theta moving from ``from_deg`` to ``to_deg`` on a
+    minimum-jerk path ([M] Flash & Hogan 1985) starting at ``at_s`` and lasting
+    ``duration_s``, and back from ``return_at_s`` when given.  0 deg is the scenario's
+    reference posture (travel vertical, board pressing up against gravity, as in
+    ``[device] hand_orientation_deg``); without ``from_deg`` the start is that posture.
+    Gravity acts on the board and racks (``moving_mass_kg``).  A forearm rotation of
+    60-90 deg takes about 0.4-1 s [E] (0.6 s default).
+    """
+    from_deg: float = _q(None, "deg", -180.0, 180.0, "[E] default: the device's hand_orientation_deg",
+                         kind="optional")
+    to_deg: float = _q(90.0, "deg", -180.0, 180.0, "[E] palm turned sideways")
+    at_s: float = _q(5.0, "s", 0.0, 3600.0, "[E] scenario-chosen")
+    duration_s: float = _q(0.6, "s", 0.01, 60.0, "[E] forearm rotation 0.4-1 s")
+    return_at_s: float = _q(None, "s", 0.0, 3600.0, "[E] optional return to from_deg", kind="optional")
+
+    def inputs(self, t_s, rng, device):
+        a0 = self.from_deg
+        if a0 is None:
+            a0 = math.degrees(math.acos(max(-1.0, min(1.0, device.gravity_m_per_s2 / G_M_PER_S2))))
+        th = a0 + (self.to_deg - a0) * minimum_jerk((t_s - self.at_s) / self.duration_s)
+        if self.return_at_s is not None:
+            th = th - (self.to_deg - a0) * minimum_jerk((t_s - self.return_at_s) / self.duration_s)
+        return {"gravity_along_m_per_s2": ("set", -G_M_PER_S2 * np.cos(np.radians(th)))}
+
+
+@dataclass(frozen=True)
+class FSRTemperature:
+    """Skin warming the FSR: a first-order approach to skin temperature.
+
+    ``T(t) = T_start + (T_skin - T_start)(1 - exp(-(t - t_on)/tau))`` for ``t >= t_on``;
+    the plant input is ``T - T_ref`` (the sensor model's resistance coefficient, -15 % at
+    +85 C after 1 h [R] datasheet, applies to it).  Finger skin is 29.1 +/- 0.6 C at room
+    temperature and 27-31 C with posture ([R] Shilco et al. 2019, J Therm Biol 80:82);
+    the pulp pressed against the board is at the warm end (31 C default [E]).  The film
+    (0.45 mm) sits on the board under the display; conduction through a ~1.5 mm
+    board/overlay stack (k ~ 0.3 W/m/K, rho c ~ 2 MJ/m^3/K) gives L^2/a ~ 15 s, and the
+    board's lateral heat capacity and loss to air stretch it to about a minute (60 s [E]).
+    ``reference_c`` is the temperature at which the device was calibrated (25 C [E]).
+    """
+    start_c: float = _q(25.0, "degC", -20.0, 60.0, "[E] device at room temperature")
+    skin_c: float = _q(31.0, "degC", 20.0, 40.0, "[R] Shilco 2019: fingers 27-31 C")
+    reference_c: float = _q(25.0, "degC", -20.0, 60.0, "[E] calibration temperature")
+    tau_s: float = _q(60.0, "s", 1.0, 3600.0, "[E] board/film conduction with losses")
+    at_s: float = _q(0.0, "s", 0.0, 3600.0, "[E] device put on at t = at_s")
+
+    def offset_k(self, t_s):
+        rise = np.where(t_s >= self.at_s, -np.expm1(-(t_s - self.at_s) / self.tau_s), 0.0)
+        return self.start_c - self.reference_c + (self.skin_c - self.start_c) * rise
+
+
+@dataclass(frozen=True)
+class FSRDrift:
+    """A long session: the run starts ``session_offset_s`` into continuous loading.
+
+    The sensor model's creep ``c(t) = 1 + d log10(1 + t/t0)`` (per-unit ``d`` and ``t0``
+    from the device's FSR; the seed paper's +6 % over 30 min, datasheet < 5 % per decade)
+    is advanced by the offset: the run sees ``c(t_off + t)`` instead of ``c(t)``.  Folded
+    into the temperature input (module docstring).  A reading session of 30 min to 2 h
+    [E] gives offsets of 1800-7200 s; standard FSR ink drifts about 12 % in conductance
+    over 48 h ([R] Sensitronics), the same logarithmic law.
+    """
+    session_offset_s: float = _q(1800.0, "s", 0.0, 7 * 24 * 3600.0, "[E] 30 min into a session; creep law of "
+                                 "the FSR model ([R] +6 % in 30 min, seed paper)")
+
+    def factor(self, t_s, fsr):
+        d, t0 = fsr.creep_per_decade, fsr.creep_t0_s
+        t = np.maximum(t_s, 0.0)
+        return (1.0 + d * np.log10(1.0 + (self.session_offset_s + t) / t0)) / (1.0 + d * np.log10(1.0 + t / t0))
+
+
+@dataclass(frozen=True)
+class Battery:
+    """Battery voltage sag: the H-bridge supply from one or more Li-ion polymer cells.
+
+    Thevenin model ([R] form: OCV(SoC) source, series resistance, RC pairs; e.g. the
+    ``thevenin`` package documentation): ``dSoC/dt = -I/(3600 Q)``,
+    ``dV1/dt = -V1/(R1 C1) + I/C1`` with ``tau1 = R1 C1``, terminal voltage per cell
+    ``OCV(SoC) - I R0 - V1``.  The load current ``I`` is the device's mean draw
+    (microcontroller, stimulator boost and the motor's mean current), held constant: the
+    loop's own motor current peaks (< 0.3 A at stall) would add at most ``0.3 A x R0``
+    ~ 0.1 V more, which this open-loop profile leaves out.  When a cell falls below
+    ``cutoff_v`` the protection circuit opens and the supply is 0 from then on.
+
+    Sources: capacity 105 mAh and R0 <= 380 mOhm (AC 1 kHz, 50 % SoC), 4.2 V full,
+    3.0 V cut-off ([R] GMB 371042 LiPo data sheet; a 2 g cell that fits a finger-worn
+    device); OCV curve [E] (:data:`_OCV_V`); R1 = 0.15 Ohm, tau1 = 30 s [E] (polarisation
+    of small polymer cells, of the order of R0 and tens of seconds); load 30 mA [E]
+    (ATmega328 at 16 MHz ~15 mA [M], stimulator 2 mA x 150 V x 4 ms/s x 6 electrodes
+    through a 70 % boost ~3 mA [D], motor mean ~10 mA from the closed-loop energy).
+    """
+    cells_series: int = _q(1, "-", 1, 4, "[E] one cell in a finger-worn device", kind="int")
+    capacity_mah: float = _q(105.0, "mAh", 1.0, 10000.0, "[R] GMB 371042 data sheet")
+    soc_start: float = _q(0.10, "-", 0.0, 1.0, "[E] a nearly empty cell")
+    load_current_a: float = _q(0.03, "A", 0.0, 2.0, "[E] mean device draw")
+    r0_ohm: float = _q(0.38, "ohm", 0.0, 10.0, "[R] GMB 371042: <= 380 mOhm")
+    r1_ohm: float = _q(0.15, "ohm", 0.0, 10.0, "[E] polarisation resistance")
+    tau1_s: float = _q(30.0, "s", 0.1, 3600.0, "[E] polarisation time constant")
+    cutoff_v: float = _q(3.0, "V", 2.5, 3.6, "[R] discharge cut-off voltage")
+
+    def supply_v(self, t_s):
+        i = self.load_current_a
+        soc = self.soc_start - i * t_s / (3600.0 * self.capacity_mah * 1e-3)
+        v1 = i * self.r1_ohm * -np.expm1(-np.maximum(t_s, 0.0) / self.tau1_s)
+        cell = li_ion_ocv_v(soc) - i * self.r0_ohm - v1
+        cell = np.where(soc <= 0.0, 0.0, cell)
+        dead = np.maximum.accumulate(cell < self.cutoff_v)
+        return np.where(dead, 0.0, self.cells_series * cell)
+
+    def inputs(self, t_s, rng, device):
+        return {"driver_supply_v": ("set", self.supply_v(t_s))}
+
+
+KINDS: dict[str, type] = {
+    "tremor": Tremor, "pressing": Pressing, "strap_slip": StrapSlip, "orientation": Orientation,
+    "fsr_temperature": FSRTemperature, "fsr_drift": FSRDrift, "battery": Battery,
+}
+"""Sub-tables of ``[disturbances]`` and their parameter classes.  The order fixes the
+random stream of each kind (child ``k`` of the run's input generator), so adding one
+disturbance never changes the draws of another."""
+
+
+# --------------------------------------------------------------------------------------
+# validation
+# --------------------------------------------------------------------------------------
+
+def _fmt(x):
+    return f"{x:g}"
+
+
+def _check_number(src, where, value, meta, integer=False):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ScenarioError(f"{src}: {where} must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise ScenarioError(f"{src}: {where} must be finite, got {value}")
+    if integer and int(value) != value:
+        raise ScenarioError(f"{src}: {where} must be a whole number, got {value}")
+    lo, hi = meta["lo"], meta["hi"]
+    if value < lo or value > hi:
+        raise ScenarioError(f"{src}: {where} = {value:g} is out of range [{_fmt(lo)}, {_fmt(hi)}]")
+    return int(value) if integer else float(value)
+
+
+def _check_kind(src, name, cls, table):
+    where0 = f"[disturbances.{name}]"
+    if not isinstance(table, dict):
+        raise ScenarioError(f"{src}: {where0} must be a table")
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    out = {}
+    for key, value in table.items():
+        if key not in fields:
+            raise ScenarioError(f"{src}: unknown key {key!r} in {where0}; allowed: {', '.join(sorted(fields))}")
+        meta = fields[key].metadata
+        where = f"{where0} {key}"
+        kind = meta["kind"]
+        if kind == "band":
+            if not (isinstance(value, list) and len(value) == 2):
+                raise ScenarioError(f"{src}: {where} must be a pair [low_hz, high_hz]")
+            lo_hz, hi_hz = (_check_number(src, where, v, meta) for v in value)
+            if not lo_hz < hi_hz:
+                raise ScenarioError(f"{src}: {where} must have low < high, got {value}")
+            out[key] = (lo_hz, hi_hz)
+        elif kind == "times":
+            if not isinstance(value, list):
+                raise ScenarioError(f"{src}: {where} must be a list of times in s")
+            out[key] = tuple(sorted(_check_number(src, where, v, meta) for v in value))
+        else:
+            out[key] = _check_number(src, where, value, meta, integer=(kind == "int"))
+    obj = cls(**out)
+    if isinstance(obj, Orientation) and obj.return_at_s is not None and obj.return_at_s < obj.at_s + obj.duration_s:
+        raise ScenarioError(f"{src}: {where0} return_at_s = {obj.return_at_s:g} must be at least "
+                            f"at_s + duration_s = {obj.at_s + obj.duration_s:g}")
+    return obj
+
+
+def validate_section(source: str, value) -> dict:
+    """Validate a ``[disturbances]`` table; returns ``{name: parameter object}``.
+
+    Raises :class:`~ebraille_sim.scenarios.spec.ScenarioError` (one line) naming an unknown
+    sub-table or key with the allowed ones, or a value out of range with the range.
+    """
+    if not isinstance(value, dict):
+        raise ScenarioError(f"{source}: [disturbances] must be a table")
+    out = {}
+    for name, table in value.items():
+        if name not in KINDS:
+            raise ScenarioError(f"{source}: unknown key {name!r} in [disturbances]; allowed: "
+                                f"{', '.join(sorted(KINDS))}")
+        out[name] = _check_kind(source, name, KINDS[name], table)
+    return out
+
+
+# --------------------------------------------------------------------------------------
+# profiles
+# --------------------------------------------------------------------------------------
+
+def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, device) -> dict:
+    """Per-period plant input profiles of a validated ``[disturbances]`` section.
+
+    Parameters
+    ----------
+    section : dict
+        As returned by :func:`validate_section`.
+    t_s : ndarray, shape (n,)
+        Start times of the control periods, s.
+    rng : numpy.random.Generator
+        The run's input generator; kind ``k`` of :data:`KINDS` draws from its child ``k``.
+    device : DeviceParams
+
+    Returns
+    -------
+    dict
+        ``{input_name: ("set" | "add", ndarray of shape (n,))}``.
+    """
+    t_s = np.asarray(t_s, dtype=float)
+    children = dict(zip(KINDS, rng.spawn(len(KINDS))))
+    out: dict = {}
+    for name in KINDS:
+        obj = section.get(name)
+        if obj is None or not hasattr(obj, "inputs"):
+            continue
+        for inp, (mode, arr) in obj.inputs(t_s, children[name], device).items():
+            if inp in out and mode == "add" and out[inp][0] == "add":
+                out[inp] = ("add", out[inp][1] + arr)
+            else:
+                out[inp] = (mode, arr)
+    temp, drift = section.get("fsr_temperature"), section.get("fsr_drift")
+    if temp is not None or drift is not None:
+        dtemp = temp.offset_k(t_s) if temp is not None else np.zeros(len(t_s))
+        if drift is None:
+            out["fsr_temp_offset_k"] = ("set", dtemp)
+        else:
+            alpha = device.fsr.temperature_coeff_per_k
+            if alpha == 0.0:
+                raise ScenarioError("[disturbances.fsr_drift] needs an FSR with a nonzero temperature_coeff_per_k "
+                                    "(the creep offset is applied through the temperature input)")
+            scale = (1.0 + alpha * dtemp) * drift.factor(t_s, device.fsr)
+            out["fsr_temp_offset_k"] = ("set", (scale - 1.0) / alpha)
+    return out
+
+
+def parameter_table() -> list[tuple[str, str, object, str, str, str]]:
+    """Rows ``(sub-table, key, default, unit, range, source)`` of every disturbance parameter."""
+    rows = []
+    for name, cls in KINDS.items():
+        for f in dataclasses.fields(cls):
+            m = f.metadata
+            rows.append((name, f.name, f.default, m["unit"], f"[{_fmt(m['lo'])}, {_fmt(m['hi'])}]", m["source"]))
+    return rows

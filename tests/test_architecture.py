@@ -1,0 +1,129 @@
+"""The layer rule of docs/architecture.md, checked on every import statement of the package.
+
+Layers, lowest first: base -> physics -> estimation -> plant -> scenarios -> {rl,
+identification, analysis} -> tools -> cli.  ``controllers`` sits beside the plant and may
+import base, physics and estimation only.  A module may import its own layer and the
+layers below; the three peers rl, identification and analysis do not import one another.
+Imports inside functions count as much as top-level ones.
+"""
+from __future__ import annotations
+
+import ast
+import pathlib
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+RANK = {"base": 0, "physics": 1, "estimation": 2, "controllers": 2.5, "plant": 3, "scenarios": 4,
+        "rl": 5, "identification": 5, "analysis": 5, "tools": 6, "cli": 7}
+PEERS = {"rl", "identification", "analysis"}
+
+
+def layer_of(module: str) -> str | None:
+    """Layer of a dotted module name of this project, None for third-party modules."""
+    parts = module.split(".")
+    if parts[0] == "controllers":
+        return "controllers"
+    if parts[0] != "ebraille_sim":
+        return None
+    if len(parts) == 1 or parts[1] in ("cli", "commands", "__main__", "__init__"):
+        return "cli"
+    return parts[1] if parts[1] in RANK else "cli"
+
+
+def module_name(path: pathlib.Path) -> str:
+    rel = path.relative_to(ROOT).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def project_modules() -> list[pathlib.Path]:
+    return sorted(list((ROOT / "ebraille_sim").rglob("*.py")) + list((ROOT / "controllers").rglob("*.py")))
+
+
+def imports_of(path: pathlib.Path) -> set[str]:
+    """Every project module ``path`` imports (absolute and relative, at any depth)."""
+    name = module_name(path)
+    pkg = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = pkg.split(".")[:len(pkg.split(".")) - node.level + 1]
+                mod = ".".join(base + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            out.add(mod)
+            for a in node.names:        # "from pkg import module"
+                out.add(f"{mod}.{a.name}")
+    known = {module_name(p) for p in project_modules()}
+    return {m for m in out if m in known and m != name}
+
+
+def graph() -> dict[str, set[str]]:
+    return {module_name(p): imports_of(p) for p in project_modules()}
+
+
+def test_every_module_has_a_layer():
+    for p in project_modules():
+        assert layer_of(module_name(p)) is not None, p
+
+
+def test_no_module_imports_a_layer_above_its_own():
+    bad = []
+    for mod, deps in graph().items():
+        lm = layer_of(mod)
+        for d in deps:
+            ld = layer_of(d)
+            if d == "ebraille_sim" and lm != "cli":
+                bad.append(f"{mod} -> {d}")
+            elif RANK[ld] > RANK[lm] or (lm in PEERS and ld in PEERS and ld != lm):
+                bad.append(f"{mod} ({lm}) -> {d} ({ld})")
+    assert not bad, "layer rule broken:\n" + "\n".join(sorted(bad))
+
+
+def test_controllers_see_only_physics_and_estimation():
+    for mod, deps in graph().items():
+        if layer_of(mod) == "controllers":
+            assert {layer_of(d) for d in deps} <= {"base", "physics", "estimation", "controllers"}, (mod, deps)
+
+
+def test_no_import_cycles():
+    g = graph()
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(m):
+        state[m] = 1
+        stack.append(m)
+        for d in sorted(g.get(m, ())):
+            if d == "ebraille_sim" or d.startswith("ebraille_sim.") and d.count(".") == 1 and d not in g:
+                continue
+            if state.get(d) == 1:
+                cycle = stack[stack.index(d):] + [d]
+                pytest.fail("import cycle: " + " -> ".join(cycle))
+            if state.get(d) is None:
+                visit(d)
+        stack.pop()
+        state[m] = 2
+
+    for m in sorted(g):
+        if state.get(m) is None:
+            visit(m)
+
+
+@pytest.mark.parametrize("bad, good", [("ebraille_sim.physics.motor", "ebraille_sim.plant.kernel")])
+def test_the_checker_sees_an_upward_import(tmp_path, bad, good):
+    """The rule itself can fail: an upward edge is reported."""
+    assert RANK[layer_of(good)] > RANK[layer_of(bad)]
+
+
+def test_shipped_scenarios_are_found_from_any_working_directory(tmp_path, monkeypatch):
+    from ebraille_sim.scenarios.spec import list_scenarios, scenario_dirs
+    monkeypatch.chdir(tmp_path)
+    assert scenario_dirs() == [ROOT / "scenarios"]
+    assert "steady_90wpm" in list_scenarios()
