@@ -28,6 +28,16 @@ from ebraille_sim.base.compiled import njit
 
 
 @njit(cache=True, inline="always")
+def shaft_to_rack_per_m(gear_ratio, pinion_radius_m):
+    """Gear reflection ``N/r`` (1/m): rack force per shaft torque, shaft speed per rack speed.
+
+    A shaft torque ``T`` pushes the rack with ``T N/r``; a rack speed ``v`` turns the shaft
+    at ``v N/r``; an inertia ``J`` weighs ``J (N/r)^2`` at the rack line.
+    """
+    return gear_ratio / pinion_radius_m
+
+
+@njit(cache=True, inline="always")
 def stribeck(v_abs, f_coulomb, f_static, v_stribeck):
     """Kinetic friction magnitude at speed ``v_abs`` (N), without the viscous term."""
     r = v_abs / v_stribeck
@@ -89,7 +99,7 @@ def reflected(motor, drivetrain) -> dict:
         ``coulomb_n`` T_f N/r, ``stall_force_n`` (at the nominal voltage, through the
         gear efficiency), ``no_load_speed_m_per_s``, ``force_per_volt_n_per_v``.
     """
-    g = drivetrain.gear_ratio / drivetrain.pinion_radius_m
+    g = shaft_to_rack_per_m(drivetrain.gear_ratio, drivetrain.pinion_radius_m)
     kt, ke, r = motor.torque_constant_nm_per_a, motor.back_emf_v_s_per_rad, motor.resistance_ohm
     v = motor.nominal_voltage_v
     return {

@@ -34,6 +34,16 @@ def elastic_force(d_m, b_n_per_m, m_per_m):
     return b_n_per_m / m_per_m * math.expm1(m_per_m * d_m)
 
 
+@njit(cache=True, inline="always")
+def tangent_stiffness_n_per_m(elastic_force_n, b_n_per_m, m_per_m):
+    """Tangent stiffness ``dFe/dd = b + m Fe`` (N/m) of the elastic law at force ``Fe``.
+
+    At a relaxed contact force ``F`` the pulp sits on ``Fe = F/c0``; pass that force to get
+    the stiffness a slow force change sees through the instantaneous law.
+    """
+    return b_n_per_m + m_per_m * elastic_force_n
+
+
 def prony_coefficients(h_s: float, taus_s) -> tuple[list[float], list[float]]:
     """Exact ramp-invariant decay ``a_i`` and input weights ``beta_i`` for step ``h_s``."""
     a = [math.exp(-h_s / t) for t in taus_s]

@@ -25,8 +25,10 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
+
+from ebraille_sim.base.fields import sourced
 
 __all__ = [
     "MotorParams", "DriveTrainParams", "FingerParams", "FSRParams", "CircuitParams",
@@ -36,13 +38,18 @@ __all__ = [
 ]
 
 
+TACTILE_FORCE_MIN_N = 0.2
+TACTILE_FORCE_MAX_N = 3.0
+"""Range of contact forces at which a reading finger feels the display ([R] seed paper:
+tactile forces 0.2-3 N).  Setpoints are bounded by it."""
+
 STANDARD_GRAVITY_M_PER_S2 = 9.81
 """Gravity at the reader, m/s^2 ([R] standard gravity 9.80665 (CGPM 1901) to three figures;
 local gravity on Earth spans 9.78-9.83)."""
 
 
 def _p(default: Any, unit: str, source: str):
-    return field(default=default, metadata={"unit": unit, "source": source})
+    return sourced(default, unit, source)
 
 
 FAULHABER = "[R] Faulhaber 0816 K 006 SR datasheet table"
@@ -72,11 +79,11 @@ def check_finite(obj) -> None:
 
 
 def _pos(default, unit, source):
-    return field(default=default, metadata={"unit": unit, "source": source, "positive": True})
+    return sourced(default, unit, source, positive=True)
 
 
 def _nn(default, unit, source):
-    return field(default=default, metadata={"unit": unit, "source": source, "nonneg": True})
+    return sourced(default, unit, source, nonneg=True)
 
 
 class _Checked:
