@@ -11,14 +11,52 @@ sensor fault) travel in a third vector ``U`` of length ``N_INPUT``.
 """
 from __future__ import annotations
 
+import collections
+
 from ebraille_sim.physics.fsr import N_PLAYS
 
 MAX_TF_LEN = 10          # numerator/denominator length of the estimator's linear block
 MAX_BREAKPOINTS = 12     # breakpoints of each estimator nonlinearity
 
 
-def _index(names):
-    return {n: i for i, n in enumerate(names)}
+class _Slots(tuple):
+    """Read-only record of slot indices: ``S.current_a``, ``S["current_a"]``, ``"x" in S``.
+
+    Built by :func:`slots`; compiled kernels read the attributes as constants.
+    """
+    __slots__ = ()
+
+    def __getitem__(self, key):
+        if isinstance(key, str):
+            try:
+                return getattr(self, key)
+            except AttributeError:
+                raise KeyError(f"unknown slot {key!r}") from None
+        return tuple.__getitem__(self, key)
+
+    def __contains__(self, key):
+        return key in self._fields
+
+    def keys(self):
+        return self._fields
+
+    def items(self):
+        return zip(self._fields, tuple.__iter__(self))
+
+    def values(self):
+        return tuple(tuple.__iter__(self))
+
+
+def slots(kind: str, names) -> _Slots:
+    """A record type named ``kind`` with one field per name, instantiated with the indices."""
+    names = list(names)
+    if len(set(names)) != len(names):
+        raise ValueError(f"{kind}: duplicate slot names")
+    base = collections.namedtuple(kind, names)
+    cls = type(kind, (_Slots, base), {"__slots__": ()})
+    cls.__getitem__ = _Slots.__getitem__
+    cls.__contains__ = _Slots.__contains__
+    return cls(*range(len(names)))
 
 
 STATE_NAMES = [
@@ -28,7 +66,7 @@ STATE_NAMES = [
     "aa_z1", "aa_z2", "sensor_phase", "estimator_phase", "sensor_count",
     "force_est_n", "est_raw_prev_n", "energy_j", "time_s", "tare_v",
 ] + [f"play_{j}" for j in range(N_PLAYS)] + [f"est_z{j}" for j in range(MAX_TF_LEN - 1)]
-S = _index(STATE_NAMES)
+S = slots("StateSlots", STATE_NAMES)
 N_STATE = len(STATE_NAMES)
 
 PARAM_NAMES = [
@@ -56,13 +94,13 @@ PARAM_NAMES = [
   + [f"est_num{j}" for j in range(MAX_TF_LEN)] + [f"est_den{j}" for j in range(MAX_TF_LEN)] \
   + [f"est_in_x{j}" for j in range(MAX_BREAKPOINTS)] + [f"est_in_y{j}" for j in range(MAX_BREAKPOINTS)] \
   + [f"est_out_x{j}" for j in range(MAX_BREAKPOINTS)] + [f"est_out_y{j}" for j in range(MAX_BREAKPOINTS)]
-P = _index(PARAM_NAMES)
+P = slots("ParamSlots", PARAM_NAMES)
 N_PARAM = len(PARAM_NAMES)
 
 INPUT_NAMES = ["command_v", "finger_pos_m", "gravity_along_m_per_s2", "fsr_temp_offset_k",
                "driver_supply_v", "fsr_fault", "fsr_fault_value", "motor_jammed",
                "press_offset_m", "finger_tilt_rad", "gravity_lateral_m_per_s2"]
-U = _index(INPUT_NAMES)
+U = slots("InputSlots", INPUT_NAMES)
 N_INPUT = len(INPUT_NAMES)
 
 FAULT_NONE, FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE = 0, 1, 2, 3, 4

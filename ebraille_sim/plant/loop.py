@@ -296,7 +296,7 @@ class Plant:
     def set_input(self, name: str, value) -> None:
         """Set a per-period input (see :data:`ebraille_sim.plant.layout.INPUT_NAMES`) for all devices."""
         if name not in U:
-            raise KeyError(f"unknown plant input {name!r}; allowed: {', '.join(U)}")
+            raise KeyError(f"unknown plant input {name!r}; allowed: {', '.join(U.keys())}")
         self.inputs[:, U[name]] = value
 
     def set_finger(self, finger_pos_m) -> None:
