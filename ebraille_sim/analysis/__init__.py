@@ -1,0 +1,1 @@
+"""Analysis layer: linearisation of the loop, frequency analysis, and robust tuning across readers."""

@@ -1,0 +1,1 @@
+"""Reinforcement-learning layer: the Gymnasium environment, its native vector form and rendering."""

@@ -1,0 +1,1 @@
+"""Tools layer: sweeps, the regression suite, run reports and test-suite assertions."""
