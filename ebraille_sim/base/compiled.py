@@ -31,9 +31,11 @@ _CONTROLLERS_ROOT = _PACKAGE_ROOT.parent / "controllers"
 _MARKER = b"base.compiled import"
 
 
-def compiled_sources() -> list[pathlib.Path]:
-    """The package's sources that compile with Numba, and the state layout they index."""
-    roots = [_PACKAGE_ROOT] + ([_CONTROLLERS_ROOT] if _CONTROLLERS_ROOT.is_dir() else [])
+def compiled_sources(roots=None) -> list[pathlib.Path]:
+    """The sources below ``roots`` (default: the package and ``controllers``) that compile
+    with Numba, and the state layout they index."""
+    if roots is None:
+        roots = [_PACKAGE_ROOT] + ([_CONTROLLERS_ROOT] if _CONTROLLERS_ROOT.is_dir() else [])
     out = []
     for root in roots:
         for f in sorted(root.rglob("*.py")):
@@ -46,11 +48,11 @@ def compiled_sources() -> list[pathlib.Path]:
     return out
 
 
-@functools.lru_cache(maxsize=1)
-def source_key() -> bytes:
-    """SHA-256 over the names and contents of :func:`compiled_sources` (computed once)."""
+@functools.lru_cache(maxsize=4)
+def source_key(roots: tuple | None = None) -> bytes:
+    """SHA-256 over the names and contents of :func:`compiled_sources` (computed once per process)."""
     h = hashlib.sha256()
-    for f in compiled_sources():
+    for f in compiled_sources(None if roots is None else list(roots)):
         h.update(f.name.encode())
         h.update(f.read_bytes())
     return h.digest()
