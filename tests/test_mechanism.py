@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 import controllers
-from ebraille_sim.physics.drivetrain import mesh_force
+from ebraille_sim.physics.drivetrain import mesh_force, shaft_to_rack_per_m
 from ebraille_sim.plant.loop import Plant
 from ebraille_sim.plant.mechanism import (MechanismParams, PymunkPlant, check_mechanism_step, draw_snapshot,
-                                          recording, write_animation)
+                                          mesh_flank, recording, write_animation)
 from ebraille_sim.scenarios.mechanism_section import build_inputs, load_mechanism_scenario, validate_section
-from ebraille_sim.physics.params import DeviceParams
+from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2, DeviceParams
 from ebraille_sim.scenarios.runner import run_scenario
 from ebraille_sim.scenarios.spec import ScenarioError
 
@@ -105,8 +105,9 @@ def test_mesh_spring_is_the_lumped_mesh_law():
     m = plant.mechanisms[0]
     spring = m.dampers[0]
     b, k = m.half_gap, m.k_mesh
+    assert [mesh_flank(dx, b) for dx in (-2 * b, -b, 0.0, b, 2 * b)] == [-1, 0, 0, 0, 1]
     for dx in np.linspace(-4 * b, 4 * b, 41):
-        side = 1 if dx > b else (-1 if dx < -b else 0)
+        side = mesh_flank(dx, b)
         m._mesh_state(spring._constraint, side)
         # Chipmunk's default spring force, k (rest_length - dist), at dist = L_REF - dx
         got = spring.stiffness * (spring.rest_length - (m.L_REF - dx))
@@ -128,7 +129,7 @@ def test_open_loop_travel_matches_the_lumped_drive_train():
     assert xp == pytest.approx(xl, rel=0.03)
     assert ip == pytest.approx(il, rel=0.03)
     # steady speed of the reflected motor: (V - R i) / (kE N/r)
-    g = dev.drivetrain.gear_ratio / dev.drivetrain.pinion_radius_m
+    g = shaft_to_rack_per_m(dev.drivetrain.gear_ratio, dev.drivetrain.pinion_radius_m)
     plant = PymunkPlant.from_devices([dev], seeds=[1])
     plant.set_finger(0.02)
     for _ in range(60):
@@ -279,7 +280,7 @@ def test_scenario_section_is_validated_strictly():
     inp = build_inputs(sec, t, None, DeviceParams())
     assert list(inp["press_offset_m"][1]) == [0.0, 0.0, 0.004, 0.004]
     assert inp["finger_tilt_rad"][1][-1] == pytest.approx(math.radians(2.0))
-    assert inp["gravity_lateral_m_per_s2"][1][0] == pytest.approx(-9.81)
+    assert inp["gravity_lateral_m_per_s2"][1][0] == pytest.approx(-STANDARD_GRAVITY_M_PER_S2)
 
 
 def test_picture_is_an_rgb_array_that_follows_the_mechanism(tmp_path):

@@ -70,7 +70,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ebraille_sim.physics.params import FINGERS, FSRS, DeviceParams
+from ebraille_sim.physics.params import FINGERS, FSRS, TACTILE_FORCE_MAX_N, DeviceParams
 
 from controllers.pid import DEFAULT_PID, PID, PIDConfig
 
@@ -241,7 +241,7 @@ def tracking_cost(rows, mean_setpoint_n: float) -> float:
 
 
 def scenario_cost(rows, mean_setpoint_n: float, max_setpoint_n: float | None = None,
-                  peak_limit_n: float = 3.0) -> float:
+                  peak_limit_n: float = TACTILE_FORCE_MAX_N) -> float:
     """``2 (1 - min ib) + (1 - CVaR25 ib) + (median e_rel + max e_rel)/2
     + 2 max(0, max pk / max sp - 1.15) + 2 max(0, max pk - 3 N)`` (module docstring)."""
     e = np.array([r["force_rmse_n"] for r in rows]) / mean_setpoint_n

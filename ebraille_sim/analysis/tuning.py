@@ -87,6 +87,8 @@ import numpy as np
 import scipy.linalg
 import scipy.signal
 
+from ebraille_sim.physics.drivetrain import mesh_damping_n_s_per_m, mesh_force, reflected, shaft_to_rack_per_m
+from ebraille_sim.physics.fingertip import elastic_force, tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import DeviceParams
 
 __all__ = [
@@ -141,15 +143,31 @@ class OperatingPoint:
     """Largest state-derivative residual of ``find_operating_point``'s answer."""
 
 
+# the scalar laws of the plant, evaluated in Python (the code the kernel compiles)
+_mesh_force = mesh_force.py_func
+_elastic_force = elastic_force.py_func
+_tangent_stiffness = tangent_stiffness_n_per_m.py_func
+_shaft_to_rack = shaft_to_rack_per_m.py_func
+
+
 def _constants(device: DeviceParams) -> dict:
+    """Coefficients of the contact plant at the rack line, from the physics law functions.
+
+    The gear reflection is :func:`~ebraille_sim.physics.drivetrain.shaft_to_rack_per_m`, the
+    reflected rotor mass and brush friction come from
+    :func:`~ebraille_sim.physics.drivetrain.reflected` and the mesh damping from
+    :func:`~ebraille_sim.physics.drivetrain.mesh_damping_n_s_per_m`, as the kernel's packed
+    parameters do.
+    """
     m, d, f = device.motor, device.drivetrain, device.finger
-    g = d.gear_ratio / d.pinion_radius_m
+    g = _shaft_to_rack(d.gear_ratio, d.pinion_radius_m)
+    refl = reflected(m, d)
     return dict(
         g=g, R=m.resistance_ohm, L=m.inductance_h, kt=m.torque_constant_nm_per_a,
-        ke=m.back_emf_v_s_per_rad, Mp=m.rotor_inertia_kg_m2 * g * g,
-        Fpc=m.friction_torque_nm * g, cp=m.viscous_friction_nm_s_per_rad * g * g,
+        ke=m.back_emf_v_s_per_rad, Mp=refl["mass_kg"],
+        Fpc=refl["coulomb_n"], cp=m.viscous_friction_nm_s_per_rad * g * g,
         mu=d.gear_loss_coefficient, hb=0.5 * d.backlash_m, km=d.mesh_stiffness_n_per_m,
-        cm=2.0 * d.mesh_damping_ratio * math.sqrt(d.mesh_stiffness_n_per_m * d.moving_mass_kg),
+        cm=mesh_damping_n_s_per_m(d.mesh_stiffness_n_per_m, d.moving_mass_kg, d.mesh_damping_ratio),
         Mb=d.moving_mass_kg, Fgc=d.guide_coulomb_n, cg=d.guide_viscous_n_s_per_m,
         b=f.stiffness_b_n_per_m, m=f.exponent_m_per_m,
         c=(f.relax_weight_inf, f.relax_weight_1, f.relax_weight_2, f.relax_weight_3),
@@ -180,21 +198,15 @@ def contact_plant_system(device: DeviceParams = DeviceParams(), friction: str = 
     t1, t2, t3 = k["tau"]
 
     def mesh(x):
-        dx = x[1] - x[3]
-        dv = x[2] - x[4]
-        if dx > k["hb"]:
-            return max(k["km"] * (dx - k["hb"]) + k["cm"] * dv, 0.0)
-        if dx < -k["hb"]:
-            return min(k["km"] * (dx + k["hb"]) + k["cm"] * dv, 0.0)
-        return 0.0
+        return _mesh_force(x[1] - x[3], x[2] - x[4], k["hb"], k["km"], k["cm"])
 
     def elastic(xb):
-        d = xb - finger_pos_m
-        return 0.0 if d <= 0.0 else k["b"] / k["m"] * math.expm1(k["m"] * d)
+        return _elastic_force(xb - finger_pos_m, k["b"], k["m"])
 
     def stiffness(xb):
+        # out of contact the elastic force does not change with the board position
         d = xb - finger_pos_m
-        return 0.0 if d <= 0.0 else k["b"] * math.exp(k["m"] * d)
+        return 0.0 if d <= 0.0 else _tangent_stiffness(elastic(xb), k["b"], k["m"])
 
     def contact(x):
         d = x[3] - finger_pos_m
@@ -274,8 +286,8 @@ def operating_point(device: DeviceParams = DeviceParams(), force_n: float = 1.0,
     k = _constants(device)
     c0 = k["c"][0]
     fe0 = force_n / c0
-    d0 = math.log1p(k["m"] * fe0 / k["b"]) / k["m"]
-    kk = k["b"] + k["m"] * fe0
+    d0 = math.log1p(k["m"] * fe0 / k["b"]) / k["m"]        # the elastic law solved for Fe0
+    kk = _tangent_stiffness(fe0, k["b"], k["m"])
     xb0 = finger_pos_m + d0
     fm0 = force_n - k["Mb"] * k["grav"] + sgn * k["Fgc"]
     xp0 = xb0 + k["hb"] + fm0 / k["km"]

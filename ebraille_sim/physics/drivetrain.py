@@ -89,6 +89,15 @@ def mesh_force(dx, dv, half_gap, k, c):
     return 0.0
 
 
+def mesh_damping_n_s_per_m(stiffness_n_per_m, mass_kg, damping_ratio):
+    """Damping ``c = 2 zeta sqrt(k m)`` (N s/m) of the mesh contact.
+
+    The mesh spring ``k`` against the moving mass ``m`` (racks, board and display) with the
+    damping ratio ``zeta`` of the polymer teeth; the ``c`` of :func:`mesh_force`.
+    """
+    return 2.0 * damping_ratio * math.sqrt(stiffness_n_per_m * mass_kg)
+
+
 def reflected(motor, drivetrain) -> dict:
     """Motor quantities seen at the rack line (for analysis and docs).
 

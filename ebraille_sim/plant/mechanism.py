@@ -94,28 +94,30 @@ from __future__ import annotations
 
 import contextlib
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import pymunk
 from ebraille_sim.base.compiled import njit
-
+from ebraille_sim.base.fields import sourced
+from ebraille_sim.physics.drivetrain import mesh_force, stribeck
+from ebraille_sim.physics.fingertip import elastic_force, prony_coefficients, tangent_stiffness_n_per_m
+from ebraille_sim.physics.motor import current_decay, current_step
+from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, DeviceParams, check_finite, replace_checked
 from ebraille_sim.plant import kernel
-from ebraille_sim.physics.drivetrain import stribeck
-from ebraille_sim.physics.fingertip import elastic_force, prony_coefficients
 from ebraille_sim.plant.layout import P, S, U
 from ebraille_sim.plant.loop import Plant, pack_devices
-from ebraille_sim.physics.motor import current_decay, current_step
-from ebraille_sim.physics.params import DeviceParams, check_finite, replace_checked
 
-__all__ = ["MechanismParams", "PymunkPlant", "check_mechanism_step", "draw_snapshot", "draw_mechanism",
-           "recording", "write_animation", "validate_section", "build_inputs", "load_mechanism_scenario"]
+__all__ = ["MechanismParams", "PymunkPlant", "check_mechanism_step", "stiffest_mode_rad_s", "mesh_flank",
+           "draw_snapshot", "draw_mechanism", "recording", "write_animation"]
 
 # scalar laws, called from Python on the pymunk path (the same code the kernel compiles);
-# the mesh law (drivetrain.mesh_force) is set into the mesh DampedSprings by _Mechanism._mesh_state
+# the mesh law (drivetrain.mesh_force) picks the loaded flank (mesh_flank) and is set into
+# the mesh DampedSprings by _Mechanism._mesh_state
 _stribeck = stribeck.py_func
 _elastic = elastic_force.py_func
 _current_step = current_step.py_func
+_mesh_force = mesh_force.py_func
 
 V_MAX = 10.0
 """Speed (m/s) of the pinion beyond which a run is reported as diverged (no-load speed: 0.06 m/s)."""
@@ -123,10 +125,6 @@ V_MAX = 10.0
 MAX_STEP_WH = 1.0
 """Largest ``w h`` accepted for the stiffest explicit mode (symplectic Euler: stable below 2,
 accurate below 1; the criterion of :func:`ebraille_sim.plant.loop.check_step`)."""
-
-
-def _f(default, unit, source, **flags):
-    return field(default=default, metadata={"unit": unit, "source": source, **flags})
 
 
 @dataclass(frozen=True)
@@ -137,39 +135,40 @@ class MechanismParams:
     friction, travel) come from :class:`~ebraille_sim.physics.params.DriveTrainParams`; only what
     the lumped model has no use for is here.
     """
-    rod_spacing_m: float = _f(
+    rod_spacing_m: float = sourced(
         21e-3, "m", "[D] board width 19.3 mm plus the 1.7 mm of a rack beside each edge [E]", positive=True)
-    board_width_m: float = _f(
+    board_width_m: float = sourced(
         19.3e-3, "m", "[D] FSR 402 overall diameter 18.28 mm [R datasheet] plus 0.5 mm margin each side [E]",
         positive=True)
-    board_thickness_m: float = _f(1.6e-3, "m", "[E] standard FR4 board", positive=True)
-    rack_mass_kg: float = _f(
+    board_thickness_m: float = sourced(1.6e-3, "m", "[E] standard FR4 board", positive=True)
+    rack_mass_kg: float = sourced(
         2.0e-3, "kg", "[E] a third of the 6 g moving mass each (rack with its bore and pin); the board, "
         "display and FSR get the rest", positive=True)
-    rack_length_m: float = _f(14e-3, "m", "[E] 6 mm travel plus 8 mm of engaged bore", positive=True)
-    rack_width_m: float = _f(3e-3, "m", "[E] bore for a 2 mm rod plus the teeth", positive=True)
-    bushing_length_m: float = _f(
+    rack_length_m: float = sourced(14e-3, "m", "[E] 6 mm travel plus 8 mm of engaged bore", positive=True)
+    rack_width_m: float = sourced(3e-3, "m", "[E] bore for a 2 mm rod plus the teeth", positive=True)
+    bushing_length_m: float = sourced(
         8e-3, "m", "[E] distance between the two ends of the rack's bore on the rod", positive=True)
-    mesh_offset_m: float = _f(
+    mesh_offset_m: float = sourced(
         2.0e-3, "m", "[E] tooth pitch line to rod axis: 1 mm rod radius + 0.5 mm wall + 0.5 mm tooth",
         nonneg=True)
-    rod_friction_coefficient: float = _f(
+    rod_friction_coefficient: float = sourced(
         0.2, "-", "[R] POM on steel, dry, mu_k = 0.20-0.22 (Stagnoli); the static level uses the "
         "drive train's guide_breakaway_ratio (0.25/0.2)", nonneg=True)
-    contact_width_m: float = _f(
+    contact_width_m: float = sourced(
         8e-3, "m", "[D] Hertz contact diameter 2 (3 F R / 4 E*)^(1/3) of a pad R = 8 mm [E], E = 0.1 MPa [R], "
         "nu = 0.5: 7.1 mm at 1 N, 9.0 mm at 2 N", positive=True)
-    n_contacts: int = _f(3, "-", "[E] contact strips across the width (2 or more)", positive=True)
-    physics_rate_hz: float = _f(
+    n_contacts: int = sourced(3, "-", "[E] contact strips across the width (2 or more)", positive=True)
+    physics_rate_hz: float = sourced(
         2000.0, "Hz", "[D] w h = 0.63 for the stiffest explicit mode (pulp on the free board), 0.03 for the "
         "modes of the force loop (see check_mechanism_step)", positive=True)
-    solver_iterations: int = _f(10, "-", "[E] Chipmunk's default", positive=True)
-    error_correction_per_step: float = _f(
+    solver_iterations: int = sourced(10, "-", "[E] Chipmunk's default", positive=True)
+    error_correction_per_step: float = sourced(
         0.2, "-", "[E] fraction of a joint's position error removed per step (Chipmunk's default, "
         "10 % per 1/60 s, would take 0.16 s at 2 kHz)", positive=True)
-    fsr_area_model: bool = _f(True, "-", "[E] strips conduct in parallel: G ~ sum a_j^(1-n) F_j^n")
-    max_regulated_force_n: float = _f(
-        3.0, "N", "[R] seed paper: the device regulates 0.2-3 N; used by the step check", positive=True)
+    fsr_area_model: bool = sourced(True, "-", "[E] strips conduct in parallel: G ~ sum a_j^(1-n) F_j^n")
+    max_regulated_force_n: float = sourced(
+        TACTILE_FORCE_MAX_N, "N", "[R] seed paper: the device regulates 0.2-3 N; used by the step check",
+        positive=True)
 
     def __post_init__(self):
         check_finite(self)
@@ -214,7 +213,8 @@ def stiffest_mode_rad_s(device: DeviceParams, mech: MechanismParams) -> float:
     mb = mech.board_mass_kg(d)
     ib = mb * (mech.board_width_m ** 2 + mech.board_thickness_m ** 2) / 12.0
     mass = mr * np.eye(2) + mb / 4.0 * np.ones((2, 2)) + ib / s ** 2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
-    k_tan = f.stiffness_b_n_per_m + f.exponent_m_per_m * mech.max_regulated_force_n / f.relax_weight_inf
+    k_tan = tangent_stiffness_n_per_m(mech.max_regulated_force_n / f.relax_weight_inf,
+                                      f.stiffness_b_n_per_m, f.exponent_m_per_m)
     stiff = np.zeros((2, 2))
     n = int(mech.n_contacts)
     for x in mech.contact_offsets_m():
@@ -241,12 +241,16 @@ def check_mechanism_step(device: DeviceParams, mech: MechanismParams) -> float:
 # --------------------------------------------------------------------------------------
 
 _cp = pymunk.cp
-_I = S["current_a"]; _XP = S["pinion_pos_m"]; _VP = S["pinion_vel_m_per_s"]
-_XB = S["board_pos_m"]; _VB = S["board_vel_m_per_s"]
-_H1 = S["prony_1_n"]; _H2 = S["prony_2_n"]; _H3 = S["prony_3_n"]
-_FE = S["elastic_force_n"]; _FC = S["contact_force_n"]; _EN = S["energy_j"]; _T = S["time_s"]
-_FEST = S["force_est_n"]
-_U_CMD = U["command_v"]; _U_SUP = U["driver_supply_v"]; _U_JAM = U["motor_jammed"]
+
+
+def mesh_flank(dx_m: float, half_gap_m: float) -> int:
+    """Loaded tooth flank of the mesh law at ``dx = x_pinion - x_rack``: +1 upper, -1 lower, 0 in the gap.
+
+    The sign of :func:`~ebraille_sim.physics.drivetrain.mesh_force` with unit stiffness and
+    no damping, i.e. the dead zone of the lumped law.
+    """
+    f = _mesh_force(dx_m, 0.0, half_gap_m, 1.0, 0.0)
+    return 1 if f > 0.0 else (-1 if f < 0.0 else 0)
 
 
 @njit(cache=True)
@@ -285,12 +289,12 @@ class _Mechanism:
         self.f_sensor = np.zeros(self.steps_per_control)
 
         # motor and pinion side, at the rack line (the packed values of the lumped kernel)
-        g = p[P["n_over_r_per_m"]]
+        g = p[P.n_over_r_per_m]
         decay = current_decay(h, m.resistance_ohm, m.inductance_h)
-        self.m_pinion = p[P["pinion_mass_kg"]]
-        self.half_gap = p[P["half_backlash_m"]]
-        self.k_mesh = 0.5 * p[P["mesh_k_n_per_m"]]
-        self.c_mesh = 0.5 * p[P["mesh_c_n_s_per_m"]]
+        self.m_pinion = p[P.pinion_mass_kg]
+        self.half_gap = p[P.half_backlash_m]
+        self.k_mesh = 0.5 * p[P.mesh_k_n_per_m]
+        self.c_mesh = 0.5 * p[P.mesh_c_n_s_per_m]
         # finger (QLV)
         self.fb, self.fm = fing.stiffness_b_n_per_m, fing.exponent_m_per_m
         self.c0 = fing.relax_weight_inf
@@ -315,11 +319,11 @@ class _Mechanism:
         space.add(pymunk.GrooveJoint(frame, pin, (0.0, xb - 1.0), (0.0, xb + 1.0), (0.0, 0.0)))
         pin_fric = pymunk.PinJoint(frame, pin, (0.0, xb - self.L_FAR), (0.0, 0.0))
         pin_fric.max_bias = 0.0
-        pin_fric.max_force = p[P["pinion_static_n"]]
+        pin_fric.max_force = p[P.pinion_static_n]
         space.add(pin_fric)
-        if p[P["pinion_viscous_n_s_per_m"]] > 0.0:
+        if p[P.pinion_viscous_n_s_per_m] > 0.0:
             space.add(pymunk.DampedSpring(frame, pin, (0.0, xb - self.L_FAR), (0.0, 0.0), self.L_FAR, 0.0,
-                                          p[P["pinion_viscous_n_s_per_m"]]))
+                                          p[P.pinion_viscous_n_s_per_m]))
         self.pinion, self.pin_fric = pin, pin_fric
 
         # racks on their rods
@@ -341,11 +345,11 @@ class _Mechanism:
                 bushes.append(gj)
             fr = pymunk.PinJoint(frame, rack, (x, xb - self.L_FAR), (0.0, 0.0))
             fr.max_bias = 0.0
-            fr.max_force = 0.5 * d.guide_coulomb_n * d.guide_breakaway_ratio
+            fr.max_force = 0.5 * p[P.guide_static_n]
             space.add(fr)
-            if d.guide_viscous_n_s_per_m > 0.0:
+            if p[P.guide_viscous_n_s_per_m] > 0.0:
                 space.add(pymunk.DampedSpring(frame, rack, (x, xb - self.L_FAR), (0.0, 0.0), self.L_FAR, 0.0,
-                                              0.5 * d.guide_viscous_n_s_per_m))
+                                              0.5 * p[P.guide_viscous_n_s_per_m]))
             space.add(pymunk.SlideJoint(frame, rack, (x, d.travel_min_m - self.L_REF), (0.0, 0.0),
                                         self.L_REF, self.L_REF + d.travel_max_m - d.travel_min_m))
             tooth_x = inward * mech.mesh_offset_m
@@ -402,10 +406,10 @@ class _Mechanism:
         # constants of the step loop
         self._const = (
             h, 1.0 / h, self.steps_per_control, self.sensor_sub, self.m_pinion, g,
-            p[P["motor_r_ohm"]], p[P["motor_ke"]], p[P["motor_kt"]], decay,
-            p[P["pinion_coulomb_n"]], p[P["pinion_static_n"]], p[P["gear_mu"]],
-            p[P["stribeck_v_m_per_s"]], self.half_gap, self.k_mesh,
-            0.5 * d.guide_coulomb_n, d.guide_breakaway_ratio, mech.rod_friction_coefficient,
+            p[P.motor_r_ohm], p[P.motor_ke], p[P.motor_kt], decay,
+            p[P.pinion_coulomb_n], p[P.pinion_static_n], p[P.gear_mu],
+            p[P.stribeck_v_m_per_s], self.half_gap, self.k_mesh,
+            0.5 * p[P.guide_coulomb_n], d.guide_breakaway_ratio, mech.rod_friction_coefficient,
             pin._body, pin_fric._constraint, self.racks[0]._body, self.racks[1]._body,
             self.rack_fric[0]._constraint, self.rack_fric[1]._constraint,
             self.bushings[0][0]._constraint, self.bushings[0][1]._constraint,
@@ -461,7 +465,7 @@ class _Mechanism:
     # --- inputs -----------------------------------------------------------------------
     def apply_inputs(self, u: np.ndarray) -> None:
         """Finger pose and gravity from the input vector (only when they change)."""
-        pose = (u[U["finger_pos_m"]], u[U["press_offset_m"]], u[U["finger_tilt_rad"]])
+        pose = (u[U.finger_pos_m], u[U.press_offset_m], u[U.finger_tilt_rad])
         if pose != self.pose:
             y_f, x_c, tilt = (float(v) for v in pose)
             if not all(math.isfinite(v) for v in (y_f, x_c, tilt)) or abs(tilt) >= 0.5 * math.pi:
@@ -476,7 +480,7 @@ class _Mechanism:
                 sp.anchor_b = (self.xi[j], self.L_REF + self.xi[j] * tan_t)
                 self.active[j] = abs(xj) <= half_w
             self.pose = pose
-        grav = (u[U["gravity_lateral_m_per_s2"]], u[U["gravity_along_m_per_s2"]])
+        grav = (u[U.gravity_lateral_m_per_s2], u[U.gravity_along_m_per_s2])
         if grav != self.gravity:
             gx, gy = float(grav[0]), float(grav[1])
             if not (math.isfinite(gx) and math.isfinite(gy)):
@@ -504,10 +508,10 @@ class _Mechanism:
         get_p, get_v, set_f = cp.cpBodyGetPosition, cp.cpBodyGetVelocity, cp.cpBodySetForce
         get_j, set_max, c_step = cp.cpConstraintGetImpulse, cp.cpConstraintSetMaxForce, cp.cpSpaceStep
         strib, cur = _stribeck, _current_step
-        mesh_state = self._mesh_state
-        sup = u[_U_SUP]
-        v_cmd = min(max(u[_U_CMD], -sup), sup)
-        jammed = u[_U_JAM] > 0.0
+        mesh_state, flank = self._mesh_state, mesh_flank
+        sup = u[U.driver_supply_v]
+        v_cmd = min(max(u[U.command_v], -sup), sup)
+        jammed = u[U.motor_jammed] > 0.0
         gx, gy = self.gravity
         f_pin_x = -mp * gx
         f_pin_g = -mp * gy
@@ -522,12 +526,12 @@ class _Mechanism:
             vp = get_v(pin).y
             if abs(vp) > V_MAX:
                 raise FloatingPointError(f"the mechanism diverged (pinion speed {vp:.3g} m/s)")
-            # mesh: dead zone of the lumped law by switching the mesh springs' stiffness
+            # mesh: the lumped law's dead zone decides the loaded flank of each mesh spring
             yp = get_p(pin).y
             dxa = yp - get_p(ra).y
             dxb = yp - get_p(rb).y
-            sa = 1 if dxa > half_gap else (-1 if dxa < -half_gap else 0)
-            sb = 1 if dxb > half_gap else (-1 if dxb < -half_gap else 0)
+            sa = flank(dxa, half_gap)
+            sb = flank(dxb, half_gap)
             if sa != eng_a:
                 eng_a = sa
                 mesh_state(dmp_a, sa)
@@ -574,16 +578,16 @@ class _Mechanism:
         """Copy the mechanism's state into the flat state vector (lumped layout)."""
         cp = _cp
         pin, board = self.pinion._body, self.board._body
-        s[_I] = self.current_a
-        s[_XP] = cp.cpBodyGetPosition(pin).y
-        s[_VP] = cp.cpBodyGetVelocity(pin).y
-        s[_XB] = cp.cpBodyGetPosition(board).y
-        s[_VB] = cp.cpBodyGetVelocity(board).y
-        s[_H1], s[_H2], s[_H3] = sum(self.h1), sum(self.h2), sum(self.h3)
-        s[_FE] = sum(self.fe)
-        s[_FC] = sum(self.fc)
-        s[_EN] += energy_j
-        s[_T] += dt_s
+        s[S.current_a] = self.current_a
+        s[S.pinion_pos_m] = cp.cpBodyGetPosition(pin).y
+        s[S.pinion_vel_m_per_s] = cp.cpBodyGetVelocity(pin).y
+        s[S.board_pos_m] = cp.cpBodyGetPosition(board).y
+        s[S.board_vel_m_per_s] = cp.cpBodyGetVelocity(board).y
+        s[S.prony_1_n], s[S.prony_2_n], s[S.prony_3_n] = sum(self.h1), sum(self.h2), sum(self.h3)
+        s[S.elastic_force_n] = sum(self.fe)
+        s[S.contact_force_n] = sum(self.fc)
+        s[S.energy_j] += energy_j
+        s[S.time_s] += dt_s
 
     # --- views ------------------------------------------------------------------------
     @property
@@ -595,7 +599,7 @@ class _Mechanism:
         """Plain-float picture of the mechanism for drawing and traces."""
         pose = self.pose or (0.0, 0.0, 0.0)
         out = {
-            "t_s": float(s[_T]) if s is not None else 0.0,
+            "t_s": float(s[S.time_s]) if s is not None else 0.0,
             "board_x_m": float(self.board.position.x), "board_y_m": float(self.board.position.y),
             "tilt_rad": float(self.board.angle),
             "rack_y_m": [float(r.position.y) for r in self.racks],
@@ -610,8 +614,8 @@ class _Mechanism:
             "current_a": float(self.current_a),
         }
         if s is not None:
-            out["force_est_n"] = float(s[_FEST])
-            out["force_true_n"] = float(s[_FC])
+            out["force_est_n"] = float(s[S.force_est_n])
+            out["force_true_n"] = float(s[S.contact_force_n])
         return out
 
 
@@ -656,7 +660,7 @@ class PymunkPlant(Plant):
             mech = replace_checked(mech, **overrides)
         devices, params, states, inputs = pack_devices(devices, seeds, board_pos_m, models)
         rates = devices[0].rates
-        mechs = [_Mechanism(dvc, mech, pk, sk[S["board_pos_m"]]) for dvc, pk, sk in zip(devices, params, states)]
+        mechs = [_Mechanism(dvc, mech, pk, sk[S.board_pos_m]) for dvc, pk, sk in zip(devices, params, states)]
         plant = cls(np.array(states), np.array(params), inputs, rates.substeps_per_control,
                     1.0 / rates.control_rate_hz, devices)
         plant.mechanisms = mechs
@@ -673,12 +677,12 @@ class PymunkPlant(Plant):
             c = float(command_v)
             if not math.isfinite(c):
                 raise ValueError(f"command_v must be finite, got {c}")
-            self.inputs[0, _U_CMD] = c
+            self.inputs[0, U.command_v] = c
         else:
             cmd = np.broadcast_to(np.asarray(command_v, dtype=float), (self.n,))
             if not np.all(np.isfinite(cmd)):
                 raise ValueError("command_v must be finite for every device")
-            self.inputs[:, _U_CMD] = cmd
+            self.inputs[:, U.command_v] = cmd
         for k, mech in enumerate(self.mechanisms):
             mech.run(self.state[k], self.params[k], self.inputs[k])
         for rec in _RECORDERS:
@@ -687,9 +691,9 @@ class PymunkPlant(Plant):
     def set_pose(self, press_offset_m=None, finger_tilt_rad=None) -> None:
         """Lateral offset of the press centre (m) and tilt of the pulp surface (rad)."""
         if press_offset_m is not None:
-            self.inputs[:, U["press_offset_m"]] = press_offset_m
+            self.inputs[:, U.press_offset_m] = press_offset_m
         if finger_tilt_rad is not None:
-            self.inputs[:, U["finger_tilt_rad"]] = finger_tilt_rad
+            self.inputs[:, U.finger_tilt_rad] = finger_tilt_rad
 
     @property
     def tilt_rad(self) -> np.ndarray:
@@ -745,7 +749,7 @@ class _Recorder:
     def after_step(self, plant) -> None:
         if plant is not self.plants[-1]:
             return
-        t = plant.state[self.k, S["time_s"]]
+        t = plant.state[self.k, S.time_s]
         if t >= self._next - 1e-12:
             self.frames.append(plant.snapshot(self.k))
             self._next += self.every_s
