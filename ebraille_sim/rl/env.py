@@ -21,13 +21,17 @@ passage, and must never press harder than the safe force.
 ``Box(-1, 1, shape=(1,), float32)``: the motor command as a fraction of the device's
 nominal driver supply, ``command_v = a * driver_supply_v`` (6 V for the Faulhaber drive).
 Actions outside [-1, 1] are clipped (the H-bridge saturates), a non-finite action or one
-of the wrong shape raises ``ValueError``.  A sagging supply (a disturbance) clips the
-command again inside the plant.
+of the wrong shape raises ``ValueError``.  The scale is the base device's supply in every
+episode; a sagging supply or a battery (disturbances) clips the command again inside the
+plant.
 
 ## Observation Space
 
 ``Box(low, high, shape=(7,), float32)``; only what the microcontroller sees.  Every entry
-is clipped to its bounds.  ``F_s`` is ``safe_force_n`` (3 N).
+is clipped to its bounds.  ``F_s`` is ``safe_force_n`` (3 N,
+:data:`~ebraille_sim.physics.params.TACTILE_FORCE_MAX_N`); ``i_s`` is the base device's
+stall current at its driver supply, ``driver_supply_v / resistance_ohm`` (6 V / 21.2 ohm
+= 0.283 A for the Faulhaber drive), recorded in the policy metadata.
 
 | Num | Observation                                              | Min | Max |
 |-----|----------------------------------------------------------|-----|-----|
@@ -37,7 +41,7 @@ is clipped to its bounds.  ``F_s`` is ``safe_force_n`` (3 N).
 | 3   | filtered rate of the estimate ``dF_est/dt / 10 N/s``     | -3  | 3   |
 | 4   | clipped error integral ``I``                             | -1  | 1   |
 | 5   | previous action ``a_{k-1}``                              | -1  | 1   |
-| 6   | motor current ``i / 0.283 A`` (stall current at 6 V)     | -3  | 3   |
+| 6   | motor current ``i / i_s``                                | -3  | 3   |
 
 The rate is a first-order low-pass (time constant ``rate_filter_s``, 20 ms) of the
 backward difference of the estimate; the integral is
@@ -69,13 +73,21 @@ contact onset.  The first character appears at ``reading_start_s`` (1 s).
 
 1. Termination: the true contact force exceeds ``safe_force_n`` (3.0 N).
 2. Truncation: the last character of the passage excerpt leaves the display
-   (``episode_characters`` cells after ``reading_start_s``).  At the defaults this is at
-   most 1400 steps (60 wpm), the ``max_episode_steps`` of the registered id.
+   (``episode_characters`` cells after ``reading_start_s``), after
+   ``round(t_end / dt)`` steps.  At most :meth:`EnvConfig.max_episode_steps`: 1400 steps at
+   the defaults (60 wpm, 200 Hz), 7000 at 1 kHz.  The registered id has no
+   ``max_episode_steps``: the env ends its episodes itself at any control rate.
 
 ## Episodes and domain randomisation
 
-Every reset spawns one ``SeedSequence`` child of the env's master seed for the episode,
-and from it one child per component, so fixing one component never shifts another:
+An episode is a scenario.  Every reset spawns one ``SeedSequence`` child of the env's
+master seed, and :meth:`ebraille_sim.scenarios.episodes.EpisodeDistribution.draw` turns it
+into a :class:`~ebraille_sim.scenarios.spec.ScenarioSpec` (``env.episode.spec``): the
+excerpt as ``[reading]`` text, a ``[setpoint]`` with steps, the ``[finger]`` gap, a
+``[disturbances]`` section with the scenario models and the drawn device.  The episode's
+arrays come from :func:`ebraille_sim.scenarios.inputs.build_run_inputs`, the function the
+scenario runner uses, so ``run_scenario(env.episode.spec)`` replays the same episode
+(``tests/test_episodes.py``).  One child per component, so fixing one never shifts another:
 
 ==============  ===========================================================  ==========
 component       draw                                                         source
@@ -83,16 +95,19 @@ component       draw                                                         sou
 device          reader pulp, FSR unit, motor, drive train from               population
                 :func:`ebraille_sim.scenarios.population.sample_device` (R2
                 recalibrated per FSR unit)
-sensor          seed of the counter-based ADC noise                          -
-reading         passage (shipped passages), excerpt start (a word start),    [R] paper
-                rate uniform in 60-120 wpm
+run seed        the spec's ``seed``: ADC noise and disturbance realisations  -
+reading         passage (shipped passages), excerpt start (a word start of   [R] paper
+                its text), rate uniform in 60-120 wpm
 setpoint        1-3 levels uniform in 0.3-1.5 N; steps at uniform times     [E]
                 during reading
-finger          gap 0.5-1.5 mm; slow drift ``A_d (sin(2 pi f_d t + p_d) -    [E]
-                sin p_d)``, ``A_d`` <= 0.15 mm, ``f_d`` 0.05-0.3 Hz; tremor
-                ``A_t sin(2 pi f_t t + p_t)``, ``A_t`` <= 20 um, ``f_t``
-                8-12 Hz (physiological tremor band)
-supply          driver supply sag, uniform 0-15 % for the episode            [E]
+finger          gap 0.5-1.5 mm; ``[disturbances.tremor]`` band-limited       [R]/[E]
+                Gaussian, 8-12 Hz, RMS uniform in 0-20 um;
+                ``[disturbances.pressing]`` slow drift, Gaussian 0.1-1 Hz,
+                RMS uniform in 0-0.1 mm
+supply          with probability 0.25 one Li-ion cell                        [E]
+                (``[disturbances.battery]``, state of charge uniform in
+                0.05-1: 3.4-4.2 V); otherwise the driver supply
+                (``[device] driver_supply_v``) sagged by 0-15 %
 ==============  ===========================================================  ==========
 
 ``reset(seed=..., options=...)`` fixes any of them for evaluation; the allowed option keys
@@ -101,10 +116,12 @@ naming it):
 
 ``device`` (a :class:`~ebraille_sim.physics.params.DeviceParams`; its rates are set to the env's),
 ``passage`` (a name from :func:`ebraille_sim.scenarios.passages.list_passages`), ``first_character``
-(cell index of the excerpt start), ``wpm`` (0-1000], ``setpoint_n`` (0, safe force),
-``setpoint_steps`` (list of ``(time_s, force_n)``), ``gap_m`` [0, 5 mm],
-``drift_amplitude_m`` [0, 1 mm], ``tremor_amplitude_m`` [0, 0.1 mm], ``supply_fraction``
-[0.5, 1], ``disturbances`` (False: no drift, tremor or sag).
+(character offset of the excerpt in the passage text), ``wpm`` (0-1000], ``setpoint_n``
+(0, safe force), ``setpoint_steps`` (list of ``(time_s, force_n)``), ``gap_m`` [0, 5 mm],
+``drift_amplitude_m`` [0, 1 mm] and ``tremor_amplitude_m`` [0, 0.1 mm] (the pressing and
+tremor RMS is the amplitude over sqrt 2, as for a sine), ``supply_fraction`` [0.5, 1]
+(driver supply as a fraction of the device's, no battery), ``disturbances`` (False: no
+drift, tremor, sag or battery).
 
 ## Arguments
 
@@ -112,7 +129,7 @@ naming it):
 |------------------------|-------|-----------|--------------------------------------------------------|
 | `render_mode`          | str   | None      | None or "rgb_array" (:mod:`ebraille_sim.rl.render`)       |
 | `control_rate_hz`      | float | 200.0     | env steps per second; divides the 10 kHz physics rate  |
-| `safe_force_n`         | float | 3.0       | termination threshold, N                               |
+| `safe_force_n`         | float | 3.0       | termination threshold, N (tactile maximum)             |
 | `warn_force_n`         | float | 2.0       | start of the soft penalty zone, N                      |
 | `episode_characters`   | int   | 30        | Braille cells read per episode                         |
 | `reading_start_s`      | float | 1.0       | contact onset time before the first cell, s            |
@@ -323,13 +340,20 @@ class EnvConfig:
         return int(math.ceil(self.distribution().max_duration_s() * self.control_rate_hz - 1e-9))
 
     def policy_metadata(self) -> dict:
-        """What a policy controller needs to rebuild the observation (JSON-serialisable)."""
-        return {"control_rate_hz": self.control_rate_hz, "safe_force_n": self.safe_force_n,
+        """What a policy controller needs to rebuild the observation (JSON-serialisable).
+
+        ``current_scale_a`` is recorded when it differs from
+        :data:`controllers.features.CURRENT_SCALE_A` (the nominal drive's 6 V / 21.2 ohm), the
+        value a reader of the file assumes without the key.
+        """
+        meta = {"control_rate_hz": self.control_rate_hz, "safe_force_n": self.safe_force_n,
                 "warn_force_n": self.warn_force_n, "rate_filter_s": self.rate_filter_s,
                 "integral_time_s": self.integral_time_s, "effort_weight": self.effort_weight,
                 "violation_weight": self.violation_weight,
-                "driver_supply_v": self.base_device.driver_supply_v,
-                "current_scale_a": self.current_scale_a}
+                "driver_supply_v": self.base_device.driver_supply_v}
+        if self.current_scale_a != features.CURRENT_SCALE_A:
+            meta["current_scale_a"] = self.current_scale_a
+        return meta
 
 
 @functools.lru_cache(maxsize=32)
