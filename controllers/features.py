@@ -23,7 +23,10 @@ OBS_LOW = np.array([-1.0, 0.0, -2.0, -3.0, -1.0, -1.0, -3.0], dtype=np.float32)
 OBS_HIGH = np.array([2.0, 1.0, 2.0, 3.0, 1.0, 1.0, 3.0], dtype=np.float32)
 
 CURRENT_SCALE_A = 6.0 / 21.2
-"""Stall current of the nominal Faulhaber 0816 006 SR at 6 V, A ([D] U/R)."""
+"""Default current scale of the observation: stall current of the nominal Faulhaber
+0816 006 SR at its 6 V supply, A ([D] U/R, R = 21.2 ohm).  The env passes its base device's
+``driver_supply_v / resistance_ohm`` to :func:`config_vector` and records it in the policy
+metadata (``current_scale_a``)."""
 RATE_SCALE_N_PER_S = 10.0
 ERROR_SCALE_N = 1.0
 
@@ -31,8 +34,8 @@ ERROR_SCALE_N = 1.0
 Z_EST_PREV, Z_RATE, Z_INT, Z_PREV_ACTION, Z_STEP = range(5)
 N_Z = 5
 # config slots (per env, float64)
-(C_DT, C_FS, C_WARN, C_SAFE, C_RATE_ALPHA, C_INT_GAIN, C_CMD_SCALE, C_WU, C_WV) = range(9)
-N_C = 9
+(C_DT, C_FS, C_WARN, C_SAFE, C_RATE_ALPHA, C_INT_GAIN, C_CMD_SCALE, C_WU, C_WV, C_CURRENT_SCALE) = range(10)
+N_C = 10
 
 
 @njit(cache=True, inline="always")
@@ -54,7 +57,7 @@ def write_observation(z, c, force_est_n, setpoint_n, current_a, obs):
     obs[3] = _clip(z[Z_RATE] / RATE_SCALE_N_PER_S, -3.0, 3.0)
     obs[4] = z[Z_INT]
     obs[5] = z[Z_PREV_ACTION]
-    obs[6] = _clip(current_a / CURRENT_SCALE_A, -3.0, 3.0)
+    obs[6] = _clip(current_a / c[C_CURRENT_SCALE], -3.0, 3.0)
 
 
 @njit(cache=True)
@@ -91,13 +94,16 @@ def reset_features(z, force_est_n: float) -> None:
 
 def config_vector(control_rate_hz: float, safe_force_n: float, warn_force_n: float, rate_filter_s: float,
                   integral_time_s: float, driver_supply_v: float, effort_weight: float = 0.0,
-                  violation_weight: float = 0.0) -> np.ndarray:
+                  violation_weight: float = 0.0, current_scale_a: float = CURRENT_SCALE_A) -> np.ndarray:
     """The configuration vector ``c`` of :func:`observe` (and of the env's reward).
 
     ``safe_force_n`` scales the forces, ``rate_filter_s`` is the time constant of the
     rate's low-pass, ``integral_time_s`` that of the error integral, ``driver_supply_v``
-    turns an action in [-1, 1] into volts.
+    turns an action in [-1, 1] into volts, ``current_scale_a`` (A, > 0) scales the motor
+    current (the stall current at the driver supply, :data:`CURRENT_SCALE_A` by default).
     """
+    if not (np.isfinite(current_scale_a) and current_scale_a > 0):
+        raise ValueError(f"current_scale_a must be a positive number, got {current_scale_a!r}")
     c = np.zeros(N_C)
     dt = 1.0 / control_rate_hz
     c[C_DT] = dt
@@ -109,4 +115,5 @@ def config_vector(control_rate_hz: float, safe_force_n: float, warn_force_n: flo
     c[C_CMD_SCALE] = driver_supply_v
     c[C_WU] = effort_weight
     c[C_WV] = violation_weight
+    c[C_CURRENT_SCALE] = current_scale_a
     return c

@@ -29,7 +29,7 @@ def test_import_registers_the_id_once_without_warnings():
     spec = gym.spec(ENV_ID)
     assert spec.entry_point == "ebraille_sim.rl.env:ContactForceEnv"
     assert spec.vector_entry_point == "ebraille_sim.rl.vector_env:ContactForceVectorEnv"
-    assert spec.max_episode_steps == MAX_EPISODE_STEPS == 1400
+    assert spec.max_episode_steps is None and MAX_EPISODE_STEPS == 1400   # the env truncates itself
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         register_envs()
@@ -43,6 +43,19 @@ def test_default_episode_bound_matches_the_longest_episode():
     env = ContactForceEnv()
     env.reset(seed=0, options={"wpm": 60.0})
     assert env.episode.n_steps == MAX_EPISODE_STEPS
+
+
+def test_episode_bound_follows_the_control_rate():
+    assert EnvConfig(control_rate_hz=1000.0).max_episode_steps() == 7000
+    env = gym.make(ENV_ID, control_rate_hz=1000.0)
+    env.reset(seed=0, options={"wpm": 60.0})
+    steps = 0
+    while True:
+        _, _, term, trunc, _ = env.step(np.zeros(1, np.float32))
+        steps += 1
+        if term or trunc:
+            break
+    assert steps == 7000 and trunc and not term                 # 7 s, not cut at 1.4 s
 
 
 def test_gymnasium_env_checker_passes_without_warnings():
@@ -135,16 +148,21 @@ def test_options_fix_components_without_shifting_the_others():
     free = env.episode
     env.reset(seed=7, options={"wpm": 90.0, "passage": "market", "first_character": 0, "setpoint_n": 1.0})
     fixed = env.episode
-    assert fixed.wpm == 90.0 and fixed.passage == "market" and fixed.first_character == 0
+    assert fixed.wpm == 90.0 and fixed.passage == "market" and "from character 0," in fixed.spec.description
     assert np.all(fixed.setpoint_n == 1.0)
     # the device, the sensor noise seed, the finger and the supply are drawn as before
     assert fixed.device == free.device and fixed.sensor_seed == free.sensor_seed
     assert fixed.gap_m == free.gap_m and fixed.supply_v == free.supply_v
+    assert fixed.spec.sections == free.spec.sections
     dev = DeviceParams(finger=FINGERS["stiff"])
     env.reset(seed=7, options={"device": dev, "disturbances": False, "gap_m": 1e-3})
     ep = env.episode
     assert ep.device.finger == FINGERS["stiff"] and ep.device.rates.control_rate_hz == 200.0
     assert np.all(ep.finger_m == 1e-3) and ep.supply_v == dev.driver_supply_v
+    env.reset(seed=7, options={"supply_fraction": 0.7, "tremor_amplitude_m": 0.0, "drift_amplitude_m": 0.0})
+    ep = env.episode
+    assert ep.supply_v == ep.device.driver_supply_v == pytest.approx(0.7 * 6.0)
+    assert "battery" not in ep.spec.sections.get("disturbances", {}) and np.all(ep.finger_m == ep.gap_m)
 
 
 def test_episode_draws_stay_in_their_ranges():
@@ -156,9 +174,10 @@ def test_episode_draws_stay_in_their_ranges():
         assert np.all((ep.setpoint_n >= 0.3) & (ep.setpoint_n <= 1.5))
         assert len(np.unique(ep.setpoint_n)) <= 3
         assert 0.5e-3 <= ep.gap_m <= 1.5e-3
-        assert 0.85 * 6.0 - 1e-12 <= ep.supply_v <= 6.0
+        on_battery = "battery" in ep.spec.sections.get("disturbances", {})
+        assert (3.0 < ep.supply_v < 4.2) if on_battery else (0.85 * 6.0 - 1e-12 <= ep.supply_v <= 6.0)
         assert len(ep.schedule) == 30 and ep.schedule.start_s[0] == 1.0
-        assert ep.n_steps == math.ceil(ep.schedule.t_end_s * 200 - 1e-9)
+        assert ep.n_steps == round(ep.schedule.t_end_s * 200) <= MAX_EPISODE_STEPS
 
 
 def test_truncation_at_the_end_of_the_passage():

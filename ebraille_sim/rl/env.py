@@ -21,13 +21,17 @@ passage, and must never press harder than the safe force.
 ``Box(-1, 1, shape=(1,), float32)``: the motor command as a fraction of the device's
 nominal driver supply, ``command_v = a * driver_supply_v`` (6 V for the Faulhaber drive).
 Actions outside [-1, 1] are clipped (the H-bridge saturates), a non-finite action or one
-of the wrong shape raises ``ValueError``.  A sagging supply (a disturbance) clips the
-command again inside the plant.
+of the wrong shape raises ``ValueError``.  The scale is the base device's supply in every
+episode; a sagging supply or a battery (disturbances) clips the command again inside the
+plant.
 
 ## Observation Space
 
 ``Box(low, high, shape=(7,), float32)``; only what the microcontroller sees.  Every entry
-is clipped to its bounds.  ``F_s`` is ``safe_force_n`` (3 N).
+is clipped to its bounds.  ``F_s`` is ``safe_force_n`` (3 N,
+:data:`~ebraille_sim.physics.params.TACTILE_FORCE_MAX_N`); ``i_s`` is the base device's
+stall current at its driver supply, ``driver_supply_v / resistance_ohm`` (6 V / 21.2 ohm
+= 0.283 A for the Faulhaber drive), recorded in the policy metadata.
 
 | Num | Observation                                              | Min | Max |
 |-----|----------------------------------------------------------|-----|-----|
@@ -37,7 +41,7 @@ is clipped to its bounds.  ``F_s`` is ``safe_force_n`` (3 N).
 | 3   | filtered rate of the estimate ``dF_est/dt / 10 N/s``     | -3  | 3   |
 | 4   | clipped error integral ``I``                             | -1  | 1   |
 | 5   | previous action ``a_{k-1}``                              | -1  | 1   |
-| 6   | motor current ``i / 0.283 A`` (stall current at 6 V)     | -3  | 3   |
+| 6   | motor current ``i / i_s``                                | -3  | 3   |
 
 The rate is a first-order low-pass (time constant ``rate_filter_s``, 20 ms) of the
 backward difference of the estimate; the integral is
@@ -69,13 +73,21 @@ contact onset.  The first character appears at ``reading_start_s`` (1 s).
 
 1. Termination: the true contact force exceeds ``safe_force_n`` (3.0 N).
 2. Truncation: the last character of the passage excerpt leaves the display
-   (``episode_characters`` cells after ``reading_start_s``).  At the defaults this is at
-   most 1400 steps (60 wpm), the ``max_episode_steps`` of the registered id.
+   (``episode_characters`` cells after ``reading_start_s``), after
+   ``round(t_end / dt)`` steps.  At most :meth:`EnvConfig.max_episode_steps`: 1400 steps at
+   the defaults (60 wpm, 200 Hz), 7000 at 1 kHz.  The registered id has no
+   ``max_episode_steps``: the env ends its episodes itself at any control rate.
 
 ## Episodes and domain randomisation
 
-Every reset spawns one ``SeedSequence`` child of the env's master seed for the episode,
-and from it one child per component, so fixing one component never shifts another:
+An episode is a scenario.  Every reset spawns one ``SeedSequence`` child of the env's
+master seed, and :meth:`ebraille_sim.scenarios.episodes.EpisodeDistribution.draw` turns it
+into a :class:`~ebraille_sim.scenarios.spec.ScenarioSpec` (``env.episode.spec``): the
+excerpt as ``[reading]`` text, a ``[setpoint]`` with steps, the ``[finger]`` gap, a
+``[disturbances]`` section with the scenario models and the drawn device.  The episode's
+arrays come from :func:`ebraille_sim.scenarios.inputs.build_run_inputs`, the function the
+scenario runner uses, so ``run_scenario(env.episode.spec)`` replays the same episode
+(``tests/test_episodes.py``).  One child per component, so fixing one never shifts another:
 
 ==============  ===========================================================  ==========
 component       draw                                                         source
@@ -83,16 +95,19 @@ component       draw                                                         sou
 device          reader pulp, FSR unit, motor, drive train from               population
                 :func:`ebraille_sim.scenarios.population.sample_device` (R2
                 recalibrated per FSR unit)
-sensor          seed of the counter-based ADC noise                          -
-reading         passage (shipped passages), excerpt start (a word start),    [R] paper
-                rate uniform in 60-120 wpm
+run seed        the spec's ``seed``: ADC noise and disturbance realisations  -
+reading         passage (shipped passages), excerpt start (a word start of   [R] paper
+                its text), rate uniform in 60-120 wpm
 setpoint        1-3 levels uniform in 0.3-1.5 N; steps at uniform times     [E]
                 during reading
-finger          gap 0.5-1.5 mm; slow drift ``A_d (sin(2 pi f_d t + p_d) -    [E]
-                sin p_d)``, ``A_d`` <= 0.15 mm, ``f_d`` 0.05-0.3 Hz; tremor
-                ``A_t sin(2 pi f_t t + p_t)``, ``A_t`` <= 20 um, ``f_t``
-                8-12 Hz (physiological tremor band)
-supply          driver supply sag, uniform 0-15 % for the episode            [E]
+finger          gap 0.5-1.5 mm; ``[disturbances.tremor]`` band-limited       [R]/[E]
+                Gaussian, 8-12 Hz, RMS uniform in 0-20 um;
+                ``[disturbances.pressing]`` slow drift, Gaussian 0.1-1 Hz,
+                RMS uniform in 0-0.1 mm
+supply          with probability 0.25 one Li-ion cell                        [E]
+                (``[disturbances.battery]``, state of charge uniform in
+                0.05-1: 3.4-4.2 V); otherwise the driver supply
+                (``[device] driver_supply_v``) sagged by 0-15 %
 ==============  ===========================================================  ==========
 
 ``reset(seed=..., options=...)`` fixes any of them for evaluation; the allowed option keys
@@ -101,10 +116,12 @@ naming it):
 
 ``device`` (a :class:`~ebraille_sim.physics.params.DeviceParams`; its rates are set to the env's),
 ``passage`` (a name from :func:`ebraille_sim.scenarios.passages.list_passages`), ``first_character``
-(cell index of the excerpt start), ``wpm`` (0-1000], ``setpoint_n`` (0, safe force),
-``setpoint_steps`` (list of ``(time_s, force_n)``), ``gap_m`` [0, 5 mm],
-``drift_amplitude_m`` [0, 1 mm], ``tremor_amplitude_m`` [0, 0.1 mm], ``supply_fraction``
-[0.5, 1], ``disturbances`` (False: no drift, tremor or sag).
+(character offset of the excerpt in the passage text), ``wpm`` (0-1000], ``setpoint_n``
+(0, safe force), ``setpoint_steps`` (list of ``(time_s, force_n)``), ``gap_m`` [0, 5 mm],
+``drift_amplitude_m`` [0, 1 mm] and ``tremor_amplitude_m`` [0, 0.1 mm] (the pressing and
+tremor RMS is the amplitude over sqrt 2, as for a sine), ``supply_fraction`` [0.5, 1]
+(driver supply as a fraction of the device's, no battery), ``disturbances`` (False: no
+drift, tremor, sag or battery).
 
 ## Arguments
 
@@ -112,7 +129,7 @@ naming it):
 |------------------------|-------|-----------|--------------------------------------------------------|
 | `render_mode`          | str   | None      | None or "rgb_array" (:mod:`ebraille_sim.rl.render`)       |
 | `control_rate_hz`      | float | 200.0     | env steps per second; divides the 10 kHz physics rate  |
-| `safe_force_n`         | float | 3.0       | termination threshold, N                               |
+| `safe_force_n`         | float | 3.0       | termination threshold, N (tactile maximum)             |
 | `warn_force_n`         | float | 2.0       | start of the soft penalty zone, N                      |
 | `episode_characters`   | int   | 30        | Braille cells read per episode                         |
 | `reading_start_s`      | float | 1.0       | contact onset time before the first cell, s            |
@@ -149,6 +166,7 @@ import numpy as np
 from gymnasium import spaces
 from ebraille_sim.base.compiled import njit
 
+from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
 from ebraille_sim.plant.layout import S as _S
 from ebraille_sim.plant.layout import U as _U
 from ebraille_sim.plant.loop import loop_step
@@ -239,7 +257,7 @@ class EnvConfig:
     """Constructor arguments of :class:`ContactForceEnv`, validated (see its table), and the
     time constants of the observation's rate filter and error integral."""
     control_rate_hz: float = 200.0
-    safe_force_n: float = 3.0
+    safe_force_n: float = TACTILE_FORCE_MAX_N
     warn_force_n: float = 2.0
     episode_characters: int = 30
     reading_start_s: float = 1.0
@@ -286,7 +304,12 @@ class EnvConfig:
             raise ValueError(f"control_rate_hz {self.control_rate_hz:g}: {exc}") from None
         object.__setattr__(self, "base_device", dataclasses.replace(base, rates=rates))
         object.__setattr__(self, "control_rate_hz", float(self.control_rate_hz))
+        self.distribution()                     # validates the episode ranges at this rate
 
+    def distribution(self):
+        """The :class:`~ebraille_sim.scenarios.episodes.EpisodeDistribution` of this config's
+        episodes (built once per config)."""
+        return _distribution(self)
     @property
     def dt_s(self) -> float:
         return 1.0 / self.control_rate_hz
@@ -295,62 +318,101 @@ class EnvConfig:
     def substeps(self) -> int:
         return self.base_device.rates.substeps_per_control
 
-    def config_vector(self, driver_supply_v: float) -> np.ndarray:
-        """The per-env configuration vector ``c`` of :func:`observe` and :func:`reward_of`."""
+    @property
+    def current_scale_a(self) -> float:
+        """Current scale of the observation: the base device's stall current at its driver
+        supply, ``driver_supply_v / resistance_ohm``, A ([D] 6 V / 21.2 ohm = 0.283 A)."""
+        return self.base_device.driver_supply_v / self.base_device.motor.resistance_ohm
+
+    def config_vector(self, driver_supply_v: float | None = None) -> np.ndarray:
+        """The per-env configuration vector ``c`` of :func:`observe` and :func:`reward_of`.
+
+        ``driver_supply_v`` (default: the base device's) turns an action into volts.
+        """
+        supply = self.base_device.driver_supply_v if driver_supply_v is None else driver_supply_v
         return features.config_vector(self.control_rate_hz, self.safe_force_n, self.warn_force_n,
-                                      self.rate_filter_s, self.integral_time_s, driver_supply_v,
-                                      self.effort_weight, self.violation_weight)
+                                      self.rate_filter_s, self.integral_time_s, supply,
+                                      self.effort_weight, self.violation_weight, self.current_scale_a)
 
     def max_episode_steps(self) -> int:
-        """Steps of the longest episode at the slowest rate of ``wpm_range``."""
-        from ebraille_sim.scenarios.reading import mean_dwell_s
-        t = self.reading_start_s + self.episode_characters * mean_dwell_s(self.wpm_range[0])
-        return int(math.ceil(t * self.control_rate_hz - 1e-9))
+        """Steps of the longest episode at this config's control rate: the onset and every
+        cell at the slowest rate of ``wpm_range``."""
+        return int(math.ceil(self.distribution().max_duration_s() * self.control_rate_hz - 1e-9))
 
     def policy_metadata(self) -> dict:
-        """What a policy controller needs to rebuild the observation (JSON-serialisable)."""
-        return {"control_rate_hz": self.control_rate_hz, "safe_force_n": self.safe_force_n,
+        """What a policy controller needs to rebuild the observation (JSON-serialisable).
+
+        ``current_scale_a`` is recorded when it differs from
+        :data:`controllers.features.CURRENT_SCALE_A` (the nominal drive's 6 V / 21.2 ohm), the
+        value a reader of the file assumes without the key.
+        """
+        meta = {"control_rate_hz": self.control_rate_hz, "safe_force_n": self.safe_force_n,
                 "warn_force_n": self.warn_force_n, "rate_filter_s": self.rate_filter_s,
                 "integral_time_s": self.integral_time_s, "effort_weight": self.effort_weight,
                 "violation_weight": self.violation_weight,
                 "driver_supply_v": self.base_device.driver_supply_v}
+        if self.current_scale_a != features.CURRENT_SCALE_A:
+            meta["current_scale_a"] = self.current_scale_a
+        return meta
+
+
+@functools.lru_cache(maxsize=32)
+def _distribution(cfg: EnvConfig):
+    from ebraille_sim.scenarios.episodes import EpisodeDistribution
+    from ebraille_sim.scenarios.population import PopulationSpec
+    try:
+        return EpisodeDistribution(
+            base_device=cfg.base_device, population=PopulationSpec() if cfg.randomize_device else None,
+            episode_characters=cfg.episode_characters, reading_start_s=cfg.reading_start_s,
+            wpm_range=cfg.wpm_range, setpoint_range_n=cfg.setpoint_range_n, disturbances=cfg.disturbances)
+    except ValueError as exc:
+        raise ValueError(f"control_rate_hz {cfg.control_rate_hz:g}: {exc}") from None
 
 
 MAX_EPISODE_STEPS = EnvConfig().max_episode_steps()
-"""``max_episode_steps`` of the registered id: the longest episode at the defaults (1 s of
-onset + 30 cells at 60 wpm, 0.2 s each, at 200 Hz: 1400 steps)."""
+"""The longest episode at the defaults (1 s of onset + 30 cells at 60 wpm, 0.2 s each, at
+200 Hz: 1400 steps).  Other configs: :meth:`EnvConfig.max_episode_steps` (7000 steps at
+1 kHz).  The env truncates itself when its excerpt ends, so the registered id carries no
+fixed ``TimeLimit`` that would be wrong at another control rate."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Episode:
-    """Everything drawn for one episode (inputs are arrays over the step index).
+    """One episode: its drawn scenario spec and the run inputs built from it.
 
     Attributes
     ----------
+    spec : ScenarioSpec
+        Drawn by :meth:`ebraille_sim.scenarios.episodes.EpisodeDistribution.draw`; running
+        it with :func:`ebraille_sim.scenarios.runner.run_scenario` gives the same episode.
+    run : RunInputs
+        :func:`ebraille_sim.scenarios.inputs.build_run_inputs` of ``spec``.
     device : DeviceParams
+        ``spec.device`` (rates set to the env's; a sagged supply in ``driver_supply_v``).
     sensor_seed : float
         Seed of the ADC noise (52-bit integer as float).
     schedule : ReadingSchedule
     passage : str
-    first_character : int
+        The passage the excerpt comes from (its start: ``spec.description``).
     wpm : float
     n_steps : int
-        Steps until the passage ends (truncation).
+        Steps until the excerpt ends (truncation).
     setpoint_n : ndarray, shape (n_steps + 1,)
         Setpoint at ``t_k = k dt``.
-    finger_m : ndarray, shape (n_steps + 1,)
-        Pulp surface position at ``t_k`` (held over step k).
+    finger_m : ndarray, shape (n_steps,)
+        Pulp surface position held over step k (gap, tremor, drift).
     supply_v : float
-        Driver supply for the episode (after sag), V.
+        Driver supply during the first step, V (a battery's supply varies over the episode).
     gap_m : float
     char_index : ndarray of int, shape (n_steps + 1,)
         Cell on the display at ``t_k`` (-1 before the first and after the last).
     """
+    spec: object
+    run: object
     device: object
     sensor_seed: float
     schedule: object
     passage: str
-    first_character: int
     wpm: float
     n_steps: int
     setpoint_n: np.ndarray
@@ -358,13 +420,6 @@ class Episode:
     supply_v: float
     gap_m: float
     char_index: np.ndarray
-
-
-@functools.lru_cache(maxsize=16)
-def _passage_cells(name: str):
-    from ebraille_sim.scenarios.braille import text_to_cells
-    from ebraille_sim.scenarios.passages import load_passage
-    return tuple(text_to_cells(load_passage(name)))
 
 
 @functools.lru_cache(maxsize=4)
@@ -425,80 +480,27 @@ def validate_options(options, safe_force_n: float) -> dict:
     return out
 
 
+def episode_from_spec(spec) -> Episode:
+    """The episode of a scenario spec: its run inputs (:func:`ebraille_sim.scenarios.inputs.build_run_inputs`,
+    the runner's function) and the arrays the env steps through."""
+    from ebraille_sim.scenarios.inputs import build_run_inputs
+    run = build_run_inputs(spec)
+    n = run.n_steps
+    finger = run.profiles.get("finger_pos_m")
+    if finger is None:
+        finger = np.full(n, run.base_inputs[_U_FINGER])
+    return Episode(spec=spec, run=run, device=spec.device, sensor_seed=run.sensor_seed, schedule=run.schedule,
+                   passage=spec.reading.passage, wpm=float(spec.reading.wpm),
+                   n_steps=n, setpoint_n=run.setpoint_n, finger_m=finger,
+                   supply_v=run.input_at("driver_supply_v", 0), gap_m=float(spec.finger.gap_m),
+                   char_index=run.schedule.index_at(run.t_s))
+
+
 def draw_episode(ss: np.random.SeedSequence, cfg: EnvConfig, options: dict | None = None) -> Episode:
-    """Draw one episode from the episode seed ``ss`` (components spawned from it).
-
-    ``options`` (already validated by :func:`validate_options`) fix components; a fixed
-    component consumes no draws of the others.
-    """
-    from ebraille_sim.physics.noise import seed_from
-    from ebraille_sim.scenarios.passages import list_passages
-    from ebraille_sim.scenarios.population import PopulationSpec, sample_device
-    from ebraille_sim.scenarios.reading import build_schedule
-
-    opt = options or {}
-    ss_dev, ss_sensor, ss_read, ss_sp, ss_finger, ss_supply = ss.spawn(6)
-    base = cfg.base_device
-    if "device" in opt:
-        dev = dataclasses.replace(opt["device"], rates=base.rates)
-    elif cfg.randomize_device:
-        dev = sample_device(ss_dev, PopulationSpec(), base)
-    else:
-        dev = base
-    sensor_seed = seed_from(ss_sensor)
-
-    rng = np.random.default_rng(ss_read)
-    names = list_passages()
-    pick = int(rng.integers(len(names)))
-    passage = opt.get("passage", names[pick])
-    cells = _passage_cells(passage)
-    starts = [0] + [k + 1 for k, c in enumerate(cells[:-1]) if c.kind == "space"]
-    first = starts[int(rng.integers(len(starts)))]
-    first = opt.get("first_character", first)
-    if first >= len(cells):
-        raise ValueError(f"option 'first_character' = {first} is out of range [0, {len(cells) - 1}] "
-                         f"for passage {passage!r}")
-    wpm = float(rng.uniform(*cfg.wpm_range))
-    wpm = opt.get("wpm", wpm)
-    n_cells = cfg.episode_characters
-    reps = (first + n_cells) // len(cells) + 1
-    excerpt = list((cells * reps)[first:first + n_cells])
-    schedule = build_schedule(excerpt, wpm, start_s=cfg.reading_start_s)
-    dt = cfg.dt_s
-    n_steps = max(1, int(math.ceil(schedule.t_end_s / dt - 1e-9)))
-    t = np.arange(n_steps + 1) * dt
-
-    rng = np.random.default_rng(ss_sp)
-    n_levels = int(rng.integers(1, 4))
-    levels = rng.uniform(*cfg.setpoint_range_n, size=n_levels)
-    t_lo, t_hi = cfg.reading_start_s, max(cfg.reading_start_s, schedule.t_end_s - 0.5)
-    times = np.sort(rng.uniform(t_lo, t_hi, size=n_levels - 1))
-    if "setpoint_n" in opt or "setpoint_steps" in opt:
-        first_level = opt.get("setpoint_n", float(levels[0]))
-        steps = opt.get("setpoint_steps", ())
-        levels = np.array([first_level] + [f for _, f in steps])
-        times = np.array([s for s, _ in steps], dtype=float)
-    sp = np.full(n_steps + 1, float(levels[0]))
-    for t0, f in zip(times, levels[1:]):
-        sp[t >= t0] = f
-
-    rng = np.random.default_rng(ss_finger)
-    gap = float(rng.uniform(0.5e-3, 1.5e-3))
-    a_d, f_d, p_d = float(rng.uniform(0.0, 0.15e-3)), float(rng.uniform(0.05, 0.3)), float(rng.uniform(0, 2 * np.pi))
-    a_t, f_t, p_t = float(rng.uniform(0.0, 20e-6)), float(rng.uniform(8.0, 12.0)), float(rng.uniform(0, 2 * np.pi))
-    sag = float(np.random.default_rng(ss_supply).uniform(0.0, 0.15))
-    disturb = cfg.disturbances and opt.get("disturbances", True)
-    if not disturb:
-        a_d = a_t = sag = 0.0
-    gap = opt.get("gap_m", gap)
-    a_d = opt.get("drift_amplitude_m", a_d)
-    a_t = opt.get("tremor_amplitude_m", a_t)
-    supply_fraction = opt.get("supply_fraction", 1.0 - sag)
-    finger = gap + a_d * (np.sin(2 * np.pi * f_d * t + p_d) - np.sin(p_d)) + a_t * np.sin(2 * np.pi * f_t * t + p_t)
-    return Episode(device=dev, sensor_seed=sensor_seed, schedule=schedule, passage=passage, first_character=first,
-                   wpm=float(wpm), n_steps=n_steps, setpoint_n=sp, finger_m=finger,
-                   supply_v=dev.driver_supply_v * supply_fraction, gap_m=gap,
-                   char_index=schedule.index_at(t))
+    """Draw one episode from the episode seed ``ss``: a spec from the config's
+    :meth:`~EnvConfig.distribution` (``options``, validated by :func:`validate_options`,
+    fix components), then its inputs (:func:`episode_from_spec`)."""
+    return episode_from_spec(cfg.distribution().draw(ss, options))
 
 
 def check_action(action, n: int | None = None):
@@ -533,7 +535,7 @@ class ContactForceEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
 
     def __init__(self, render_mode: str | None = None, control_rate_hz: float = 200.0,
-                 safe_force_n: float = 3.0, warn_force_n: float = 2.0, episode_characters: int = 30,
+                 safe_force_n: float = TACTILE_FORCE_MAX_N, warn_force_n: float = 2.0, episode_characters: int = 30,
                  reading_start_s: float = 1.0, wpm_range=(60.0, 120.0), setpoint_range_n=(0.3, 1.5),
                  randomize_device: bool = True, disturbances: bool = True, effort_weight: float = 0.1,
                  violation_weight: float = 1.0, backend: str = "lumped", base_device=None):
@@ -556,9 +558,10 @@ class ContactForceEnv(gym.Env):
         self.plant = None
         self.episode: Episode | None = None
         self._z = np.zeros(N_Z)
-        self._c = self.config.config_vector(self.config.base_device.driver_supply_v)
+        self._c = self.config.config_vector()
         self._obs = np.zeros(N_OBS, dtype=np.float32)
         self._k = 0
+        self._varying = []
         self._renderer = None
         self._history = None
 
@@ -579,12 +582,11 @@ class ContactForceEnv(gym.Env):
         dev = ep.device
         self.plant = make_plant([dev], [ep.sensor_seed], backend=self.config.backend,
                                 models=[estimator_model(dev.estimator.model)])
-        self.plant.set_input("driver_supply_v", ep.supply_v)
-        self.plant.set_finger(ep.finger_m[0])
+        self.plant.inputs[0] = ep.run.initial_inputs()
         self._st = self.plant.state[0]
         self._inp = self.plant.inputs[0]
+        self._varying = [(_U[name], arr) for name, arr in ep.run.profiles.items()]
         self.episode = ep
-        self._c = self.config.config_vector(dev.driver_supply_v)
         self._k = 0
         fe = float(self._st[_I_FEST])
         reset_features(self._z, fe)
@@ -612,7 +614,9 @@ class ContactForceEnv(gym.Env):
         if k >= ep.n_steps:
             raise RuntimeError("the episode has ended; call reset()")
         st = self._st
-        self._inp[_U_FINGER] = ep.finger_m[k]
+        inp = self._inp
+        for j, arr in self._varying:
+            inp[j] = arr[k]
         loop_step(self.plant, a * self._c[C_CMD_SCALE])
         self._k = k + 1
         ft = float(st[_I_FC])
@@ -650,9 +654,13 @@ class ContactForceEnv(gym.Env):
 
 
 def register_envs() -> None:
-    """Register ``EBraille/ContactForce-v0`` with Gymnasium (once per process, silently)."""
+    """Register ``EBraille/ContactForce-v0`` with Gymnasium (once per process, silently).
+
+    No ``max_episode_steps`` is registered: the env truncates itself when the excerpt ends,
+    which bounds an episode by :meth:`EnvConfig.max_episode_steps` at whatever control rate
+    it is made with (a registered step count would cut a 1 kHz episode after 1.4 s).
+    """
     if ENV_ID in gym.registry:
         return
     gym.register(id=ENV_ID, entry_point="ebraille_sim.rl.env:ContactForceEnv",
-                 vector_entry_point="ebraille_sim.rl.vector_env:ContactForceVectorEnv",
-                 max_episode_steps=MAX_EPISODE_STEPS)
+                 vector_entry_point="ebraille_sim.rl.vector_env:ContactForceVectorEnv")

@@ -3,8 +3,9 @@
 ``gymnasium.make_vec("EBraille/ContactForce-v0", num_envs=N)`` builds this class (the id's
 ``vector_entry_point``).  The N plants live as rows of packed arrays (state ``(N, N_STATE)``,
 parameters ``(N, N_PARAM)``, inputs ``(N, N_INPUT)``, see :mod:`ebraille_sim.plant.layout`) and one
-compiled call steps all of them: for every row it writes the command and the finger
-position, calls :func:`ebraille_sim.plant.kernel.advance` (the function that
+compiled call steps all of them: for every row it writes the command and the period's
+plant inputs (finger position, driver supply, ... as built for the episode's spec by
+:func:`ebraille_sim.scenarios.inputs.build_run_inputs`), calls :func:`ebraille_sim.plant.kernel.advance` (the function that
 :meth:`ebraille_sim.plant.loop.Plant.advance` calls for one device) and then
 :func:`ebraille_sim.rl.env.post_step` (the scalar env's reward, termination and observation).
 With ``parallel=True`` (default) the rows are spread over threads with ``numba.prange``;
@@ -17,7 +18,8 @@ and the same compiled step; ``tests/test_vector_env.py`` checks trajectories agr
 Autoreset follows Gymnasium's ``AutoresetMode.NEXT_STEP``: the step after a sub-env
 terminates or truncates resets it (its action is ignored) and returns its first
 observation with reward 0 and ``terminated = truncated = False``.  A sub-env is also
-truncated after ``max_episode_steps`` steps (the scalar env's ``TimeLimit``).
+truncated after ``max_episode_steps`` steps (the scalar env's ``TimeLimit``; default: the
+config's :meth:`~ebraille_sim.rl.env.EnvConfig.max_episode_steps`, which no episode exceeds).
 
 Only the ``"lumped"`` backend has packed rows; the pymunk mechanism runs through the scalar
 env.
@@ -66,20 +68,25 @@ from ebraille_sim.plant.layout import N_INPUT, N_PARAM, N_STATE, S, U
 __all__ = ["ContactForceVectorEnv", "step_row", "step_rows", "step_rows_serial"]
 
 _I_FC, _I_FEST, _I_CUR = S["contact_force_n"], S["force_est_n"], S["current_a"]
-_U_CMD, _U_FINGER = U["command_v"], U["finger_pos_m"]
+_U_CMD = U["command_v"]
 
 
 @njit(cache=True)
-def step_row(i, state, params, inputs, z, c, finger, setpoint, n_steps, actions, n_sub,
+def step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_sub,
              obs, reward, violation, terminated, truncated):
-    """One control period of row ``i``: command and finger inputs, physics, reward, observation."""
+    """One control period of row ``i``: command and period inputs, physics, reward, observation.
+
+    ``seq[i, k]`` is row ``i``'s plant input row for period ``k`` (the command slot unused).
+    """
     a = actions[i]
     if a < -1.0:
         a = -1.0
     elif a > 1.0:
         a = 1.0
     k = int(z[i, Z_STEP])
-    inputs[i, _U_FINGER] = finger[i, k]
+    for j in range(inputs.shape[1]):
+        if j != _U_CMD:
+            inputs[i, j] = seq[i, k, j]
     inputs[i, _U_CMD] = a * c[i, C_CMD_SCALE]
     kernel.advance(state[i], params[i], inputs[i], n_sub)
     r, v, term = post_step(z[i], c[i], state[i, _I_FEST], state[i, _I_FC], state[i, _I_CUR],
@@ -91,22 +98,22 @@ def step_row(i, state, params, inputs, z, c, finger, setpoint, n_steps, actions,
 
 
 @njit(parallel=True, cache=True)
-def step_rows(state, params, inputs, z, c, finger, setpoint, n_steps, actions, active, n_sub,
+def step_rows(state, params, inputs, z, c, seq, setpoint, n_steps, actions, active, n_sub,
               obs, reward, violation, terminated, truncated):
     """:func:`step_row` for every active row, rows spread over threads (``numba.prange``)."""
     for i in prange(state.shape[0]):
         if active[i]:
-            step_row(i, state, params, inputs, z, c, finger, setpoint, n_steps, actions, n_sub,
+            step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_sub,
                      obs, reward, violation, terminated, truncated)
 
 
 @njit(cache=True)
-def step_rows_serial(state, params, inputs, z, c, finger, setpoint, n_steps, actions, active, n_sub,
+def step_rows_serial(state, params, inputs, z, c, seq, setpoint, n_steps, actions, active, n_sub,
                      obs, reward, violation, terminated, truncated):
     """:func:`step_row` for every active row on one thread."""
     for i in range(state.shape[0]):
         if active[i]:
-            step_row(i, state, params, inputs, z, c, finger, setpoint, n_steps, actions, n_sub,
+            step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_sub,
                      obs, reward, violation, terminated, truncated)
 
 
@@ -118,7 +125,8 @@ class ContactForceVectorEnv(VectorEnv):
     num_envs : int
         Number of sub-envs, >= 1.
     max_episode_steps : int, optional
-        Truncate a sub-env after this many steps (Gymnasium passes the id's value).
+        Truncate a sub-env after this many steps (default: the config's
+        :meth:`~ebraille_sim.rl.env.EnvConfig.max_episode_steps`).
     render_mode : str, optional
         None or ``"rgb_array"`` (``render()`` returns one frame per sub-env).
     parallel : bool
@@ -150,7 +158,8 @@ class ContactForceVectorEnv(VectorEnv):
                 raise ValueError(f"unknown argument {key!r}; allowed: {', '.join(sorted(allowed))}")
         self.config = EnvConfig(**env_kwargs)
         self.num_envs = int(num_envs)
-        self.max_episode_steps = None if max_episode_steps is None else int(max_episode_steps)
+        self.max_episode_steps = (self.config.max_episode_steps() if max_episode_steps is None
+                                  else int(max_episode_steps))
         self.render_mode = render_mode
         self.parallel = bool(parallel)
         self._step_fn = step_rows if self.parallel else step_rows_serial
@@ -163,9 +172,9 @@ class ContactForceVectorEnv(VectorEnv):
         self.params = np.zeros((n, N_PARAM))
         self.inputs = np.zeros((n, N_INPUT))
         self._z = np.zeros((n, N_Z))
-        self._c = np.tile(self.config.config_vector(self.config.base_device.driver_supply_v), (n, 1))
+        self._c = np.tile(self.config.config_vector(), (n, 1))
         width = self.config.max_episode_steps() + 2
-        self._finger = np.zeros((n, width))
+        self._seq = np.zeros((n, width, N_INPUT))
         self._setpoint = np.zeros((n, width))
         self._n_steps = np.zeros(n, dtype=np.int64)
         self._obs = np.zeros((n, N_OBS), dtype=np.float32)
@@ -189,20 +198,21 @@ class ContactForceVectorEnv(VectorEnv):
             self._masters[i] = np.random.SeedSequence(int(self._rngs[i].integers(0, 2**63)))
         ep = draw_episode(self._masters[i].spawn(1)[0], self.config, options)
         dev = ep.device
+        run = ep.run
         plant = Plant.from_devices([dev], [ep.sensor_seed], models=[estimator_model(dev.estimator.model)])
-        plant.set_input("driver_supply_v", ep.supply_v)
-        plant.set_finger(ep.finger_m[0])
         self.state[i] = plant.state[0]
         self.params[i] = plant.params[0]
-        self.inputs[i] = plant.inputs[0]
-        if ep.n_steps + 1 > self._finger.shape[1]:
-            width = ep.n_steps + 2
-            self._finger = np.pad(self._finger, ((0, 0), (0, width - self._finger.shape[1])))
+        self.inputs[i] = run.initial_inputs()
+        n = ep.n_steps
+        if n + 1 > self._setpoint.shape[1]:
+            width = n + 2
+            self._seq = np.pad(self._seq, ((0, 0), (0, width - self._seq.shape[1]), (0, 0)))
             self._setpoint = np.pad(self._setpoint, ((0, 0), (0, width - self._setpoint.shape[1])))
-        self._finger[i, :ep.n_steps + 1] = ep.finger_m
-        self._setpoint[i, :ep.n_steps + 1] = ep.setpoint_n
-        self._n_steps[i] = ep.n_steps if self.max_episode_steps is None else min(ep.n_steps, self.max_episode_steps)
-        self._c[i] = self.config.config_vector(dev.driver_supply_v)
+        self._seq[i, :n] = run.base_inputs
+        for name, arr in run.profiles.items():
+            self._seq[i, :n, U[name]] = arr
+        self._setpoint[i, :n + 1] = ep.setpoint_n
+        self._n_steps[i] = min(n, self.max_episode_steps)
         fe = float(self.state[i, _I_FEST])
         reset_features(self._z[i], fe)
         write_observation(self._z[i], self._c[i], fe, ep.setpoint_n[0], float(self.state[i, _I_CUR]), self._obs[i])
@@ -249,7 +259,7 @@ class ContactForceVectorEnv(VectorEnv):
         a = check_action(actions, self.num_envs)[:, 0]
         done = self._prev_done
         np.logical_not(done, out=self._active)
-        self._step_fn(self.state, self.params, self.inputs, self._z, self._c, self._finger, self._setpoint,
+        self._step_fn(self.state, self.params, self.inputs, self._z, self._c, self._seq, self._setpoint,
                       self._n_steps, a, self._active, self.config.substeps, self._obs, self._reward,
                       self._violation, self._terminated, self._truncated)
         if done.any():

@@ -1,0 +1,312 @@
+"""Everything a closed-loop run needs before its first period, built from a scenario spec.
+
+:func:`build_run_inputs` is the one place where a :class:`~ebraille_sim.scenarios.spec.ScenarioSpec`
+and a seed become the reading schedule, the setpoint profile, the per-period plant input
+arrays (finger position, driver supply, gravity, FSR temperature, faults, ...) and the
+seed of the sensor noise.  The scenario runner (:func:`ebraille_sim.scenarios.runner.run_scenario`)
+and the reinforcement-learning environment (:mod:`ebraille_sim.rl.env`, which draws a spec
+per episode from :class:`ebraille_sim.scenarios.episodes.EpisodeDistribution`) both call
+it, so a policy trains on the disturbance models it is evaluated on.
+
+Seeds: the run's seed gives ``SeedSequence(seed).spawn(3)``, children in the order
+sensor noise, reading schedule (dwell jitter), plant inputs (disturbance draws).
+
+Times: control period ``k`` (``k = 0 .. n - 1``) starts at ``t_k = (k + 1) dt - dt`` (the
+runner's sample time minus one period, written so that the runner's historic arrays are
+reproduced bit for bit); the setpoint is also given at ``t_n`` (the end of the run),
+which the environment's last observation shows.
+
+Examples
+--------
+>>> from ebraille_sim.scenarios.spec import parse_scenario
+>>> spec = parse_scenario({"name": "x", "reading": {"text": "ab", "wpm": 120, "start_s": 0.5},
+...                        "disturbances": {"tremor": {"rms_m": 10e-6}}}, source="inline")
+>>> run = build_run_inputs(spec, seed=1)
+>>> run.n_steps, run.t_s.shape, sorted(run.profiles)
+(700, (701,), ['finger_pos_m'])
+"""
+from __future__ import annotations
+
+import functools
+import importlib
+import math
+import pathlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from ebraille_sim.physics.noise import seed_from
+from ebraille_sim.plant.layout import N_INPUT, U
+from ebraille_sim.scenarios.spec import DELEGATES, ScenarioError, ScenarioSpec
+
+__all__ = ["RunInputs", "SCHEDULE_CELL_MARGIN", "base_input_row", "build_run_inputs", "build_schedule_for",
+           "input_profiles", "reading_text", "refresh_phases", "run_length", "setpoint_profile"]
+
+SCHEDULE_CELL_MARGIN = 1.6
+"""Cells transcribed per nominal dwell of a scenario with ``duration_s``, as a multiple.
+
+A scenario that reads for ``duration_s`` repeats its text to ``ceil(1.6 (duration_s -
+start_s) / mean_dwell) + 1`` cells.  Without jitter every dwell is at least the nominal
+one (pauses only lengthen it), so a margin of 1 would fill the duration.  A jittered
+dwell is ``mean (1 + j z)``, ``z ~ N(0, 1)``, clipped to ``[0.5, 1.5] mean``
+(:func:`ebraille_sim.scenarios.reading.build_schedule`); its mean is the nominal dwell
+and its standard deviation at most ``0.5 mean`` (``j <= 0.5``, the scenario bound).  The
+``M = 1.6 N`` cells fall short of ``N`` nominal dwells only if their average dwell is
+below ``1/1.6 = 0.625`` of nominal, ``0.375 / (0.5 / sqrt(M)) = 0.75 sqrt(M)`` standard
+deviations below its mean: more than 3 for ``M >= 17``, i.e. any run longer than about
+ten cells.  The bound without statistics (every dwell clipped to ``0.5 mean``) would be 2;
+1.6 is what every shipped scenario's schedule was built with, so it stays."""
+
+
+@dataclass(frozen=True, eq=False)
+class RunInputs:
+    """Everything drawn and computed for one run of a spec, before its first period.
+
+    Attributes
+    ----------
+    spec : ScenarioSpec
+    seed : int
+        The run's master seed.
+    sensor_seed : float
+        Seed of the plant's counter-based ADC noise (52-bit integer as float).
+    schedule : ReadingSchedule
+    dt_s : float
+        Control period, s.
+    n_steps : int
+        Control periods of the run (``duration_s``, or the end of the schedule).
+    t_s : ndarray, shape (n_steps + 1,)
+        Start time of period ``k`` at index ``k``; the last entry is the end of the run, s.
+    setpoint_n : ndarray, shape (n_steps + 1,)
+        Force setpoint at ``t_s``, N.
+    base_inputs : ndarray, shape (N_INPUT,)
+        Constant plant inputs (:data:`ebraille_sim.plant.layout.INPUT_NAMES`): the device's
+        gravity along the travel and driver supply, the finger at ``gap_m``, zero command.
+    profiles : dict of str to ndarray
+        Inputs that vary, each of shape ``(n_steps,)`` (value held over period ``k``),
+        already combined with ``base_inputs`` (absolute values).
+    """
+    spec: ScenarioSpec
+    seed: int
+    sensor_seed: float
+    schedule: object
+    dt_s: float
+    n_steps: int
+    t_s: np.ndarray
+    setpoint_n: np.ndarray
+    base_inputs: np.ndarray
+    profiles: dict
+
+    def input_at(self, name: str, k: int) -> float:
+        """Plant input ``name`` during period ``k``."""
+        arr = self.profiles.get(name)
+        return float(self.base_inputs[U[name]] if arr is None else arr[k])
+
+    def initial_inputs(self) -> np.ndarray:
+        """The plant's input row for period 0 (``base_inputs`` with the varying inputs' first values)."""
+        row = self.base_inputs.copy()
+        for name, arr in self.profiles.items():
+            row[U[name]] = arr[0]
+        return row
+
+
+def reading_text(spec: ScenarioSpec) -> str:
+    """The text a scenario reads (passage, inline text or file)."""
+    r = spec.reading
+    if r.text is not None:
+        return r.text
+    if r.file is not None:
+        p = pathlib.Path(r.file)
+        if not p.is_absolute():
+            p = pathlib.Path(spec.base_dir) / p
+        try:
+            return p.read_text(encoding="utf-8")
+        except OSError as exc:
+            raise ScenarioError(f"{spec.source}: cannot read [reading] file {str(p)!r}: {exc.strerror}") from None
+    from ebraille_sim.scenarios.passages import load_passage
+    try:
+        return load_passage(r.passage)
+    except ValueError as exc:
+        raise ScenarioError(f"{spec.source}: {exc}") from None
+
+
+@functools.lru_cache(maxsize=64)
+def _cells_of(text: str) -> tuple:
+    from ebraille_sim.scenarios.braille import text_to_cells
+    return tuple(text_to_cells(text))
+
+
+def build_schedule_for(spec: ScenarioSpec, rng: np.random.Generator):
+    """Reading schedule of a scenario, repeating the text to fill ``duration_s``.
+
+    The number of cells is :data:`SCHEDULE_CELL_MARGIN` times the nominal count for the
+    duration (see there).  Transcriptions are cached per text.
+    """
+    from ebraille_sim.scenarios.reading import build_schedule, mean_dwell_s
+    r = spec.reading
+    try:
+        cells = list(_cells_of(reading_text(spec)))
+    except ValueError as exc:
+        raise ScenarioError(f"{spec.source}: {exc}") from None
+    if not cells:
+        raise ScenarioError(f"{spec.source}: the reading text is empty")
+    if spec.duration_s is not None:
+        need = int(math.ceil((spec.duration_s - r.start_s) / mean_dwell_s(r.wpm) * SCHEDULE_CELL_MARGIN)) + 1
+        reps = max(1, int(math.ceil(need / len(cells))))
+        cells = (cells * reps)[:max(need, 1)]
+    if r.max_characters is not None:
+        cells = cells[:r.max_characters]
+    return build_schedule(cells, r.wpm, start_s=r.start_s, jitter_fraction=r.jitter_fraction,
+                          word_pause_s=r.word_pause_s, line_pause_s=r.line_pause_s,
+                          rng=rng if r.jitter_fraction > 0 else None)
+
+
+def setpoint_profile(spec: ScenarioSpec, t_s: np.ndarray, schedule=None) -> np.ndarray:
+    """Force setpoint at the times ``t_s`` (steps, optionally ramped over ``ramp_s``).
+
+    In refresh mode (``[reading] mode = "refresh"``) the ``schedule`` is required and the
+    setpoint drops to ``refresh_lift_force_n`` while each character is lifted or
+    released (see :func:`refresh_phases`).
+    """
+    sp = _base_setpoint(spec, t_s)
+    if spec.reading.mode == "refresh":
+        if schedule is None:
+            raise ValueError("setpoint_profile: refresh mode needs the reading schedule")
+        pressed, _ = refresh_phases(spec, schedule, t_s)
+        lift = np.minimum(spec.reading.refresh_lift_force_n, sp)
+        sp = np.where(pressed, sp, lift)
+    return sp
+
+
+def refresh_phases(spec: ScenarioSpec, schedule, t_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-character refresh phases at the times ``t_s``.
+
+    Each dwell ``[s, s + d)`` is split into lift ``[0, l)``, press ``[l, l + p)``, hold
+    ``[l + p, 1 - r)`` and release ``[1 - r, 1)`` in units of ``d``, with ``l``, ``p``,
+    ``r`` the ``refresh_*_fraction`` keys of ``[reading]``: the display leaves the skin
+    (setpoint at the lift force) while the pattern changes at the character boundary,
+    presses during ``p`` (the time allowed to reach the band) and holds.
+
+    Returns
+    -------
+    pressed : ndarray of bool, shape t_s.shape
+        True during press and hold, and outside the schedule.
+    hold : ndarray of bool, shape t_s.shape
+        True during the hold part of a dwell (the character's in-band window).
+    """
+    r = spec.reading
+    k = np.asarray(schedule.index_at(t_s))
+    inside = k >= 0
+    kk = np.where(inside, k, 0)
+    start = np.asarray(schedule.start_s)[kk] if len(schedule) else np.zeros_like(t_s)
+    dwell = np.asarray(schedule.dwell_s)[kk] if len(schedule) else np.ones_like(t_s)
+    u = (t_s - start) / dwell
+    lo = r.refresh_lift_fraction
+    hold_lo = lo + r.refresh_press_fraction
+    hold_hi = 1.0 - r.refresh_release_fraction
+    pressed = ~inside | ((u >= lo) & (u < hold_hi))
+    hold = inside & (u >= hold_lo) & (u < hold_hi)
+    return pressed, hold
+
+
+def _base_setpoint(spec: ScenarioSpec, t_s: np.ndarray) -> np.ndarray:
+    sp = np.full_like(t_s, spec.setpoint.force_n, dtype=float)
+    prev = spec.setpoint.force_n
+    ramp = spec.setpoint.ramp_s
+    for t0, f in spec.setpoint.steps:
+        if ramp > 0:
+            frac = np.clip((t_s - t0) / ramp, 0.0, 1.0)
+            sp = np.where(t_s >= t0, prev + (f - prev) * frac, sp)
+        else:
+            sp = np.where(t_s >= t0, f, sp)
+        prev = f
+    return sp
+
+
+def base_input_row(device, gap_m: float) -> np.ndarray:
+    """Constant plant inputs of a run: the rows :func:`ebraille_sim.plant.loop.pack_devices`
+    fills (gravity along the travel, driver supply), the finger at ``gap_m``, all else 0."""
+    row = np.zeros(N_INPUT)
+    row[U.gravity_along_m_per_s2] = -device.gravity_m_per_s2
+    row[U.driver_supply_v] = device.driver_supply_v
+    row[U.finger_pos_m] = gap_m
+    return row
+
+
+def input_profiles(spec: ScenarioSpec, t_s: np.ndarray, rng: np.random.Generator, base_inputs) -> dict:
+    """Per-period plant inputs from the scenario's delegate sections, as arrays over ``t_s``.
+
+    Each section's module returns ``{input_name: ("set" | "add", array)}``; "add" profiles
+    are added to the constant input (e.g. finger motion around the gap).  Only inputs that
+    vary are returned.
+
+    Parameters
+    ----------
+    spec : ScenarioSpec
+    t_s : ndarray, shape (n,)
+        Start times of the control periods, s.
+    rng : numpy.random.Generator
+        The run's input generator.
+    base_inputs : ndarray, shape (N_INPUT,), or a plant
+        The constant inputs (:func:`base_input_row`); a plant's first input row is used
+        when a plant is given.
+    """
+    row = base_inputs.inputs[0] if hasattr(base_inputs, "inputs") else np.asarray(base_inputs, dtype=float)
+    base = {name: np.full(len(t_s), row[j]) for name, j in U.items() if name != "command_v"}
+    touched = set()
+    for key, section in spec.sections.items():
+        mod = importlib.import_module(DELEGATES[key])
+        build = getattr(mod, "build_inputs", None)
+        if build is None:
+            continue
+        for name, (mode, arr) in build(section, t_s, rng, spec.device).items():
+            if name not in base:
+                raise ScenarioError(f"{spec.source}: [{key}] drives unknown input {name!r}")
+            base[name] = base[name] + arr if mode == "add" else np.broadcast_to(arr, t_s.shape).astype(float)
+            touched.add(name)
+    return {name: base[name] for name in sorted(touched)}
+
+
+def run_length(spec: ScenarioSpec, schedule) -> tuple[float, int]:
+    """Control period and number of periods of a run: ``duration_s`` or the schedule's end."""
+    dt = 1.0 / spec.device.rates.control_rate_hz
+    t_end = spec.duration_s if spec.duration_s is not None else schedule.t_end_s
+    n = int(round(t_end / dt))
+    if n < 1:
+        raise ScenarioError(f"{spec.source}: duration {t_end:g} s is shorter than one control period")
+    return dt, n
+
+
+def build_run_inputs(spec: ScenarioSpec, seed: int | None = None) -> RunInputs:
+    """Reading schedule, setpoint, plant input profiles and sensor seed of one run.
+
+    Parameters
+    ----------
+    spec : ScenarioSpec
+        A validated scenario (a parsed file or one drawn by
+        :meth:`ebraille_sim.scenarios.episodes.EpisodeDistribution.draw`).
+    seed : int, optional
+        The run's master seed (default ``spec.seed``); children of ``SeedSequence(seed)``
+        in the order sensor, reading, inputs (module docstring).
+
+    Returns
+    -------
+    RunInputs
+
+    Raises
+    ------
+    ScenarioError
+        For a negative seed, an unreadable or empty text, a run shorter than one period, or
+        a section that drives an unknown input.
+    """
+    seed = spec.seed if seed is None else int(seed)
+    if seed < 0:
+        raise ScenarioError(f"seed must be >= 0, got {seed}")
+    ss_sensor, ss_reading, ss_inputs = np.random.SeedSequence(seed).spawn(3)
+    schedule = build_schedule_for(spec, np.random.default_rng(ss_reading))
+    dt, n = run_length(spec, schedule)
+    t_start = (np.arange(n + 1) + 1) * dt - dt
+    sp = setpoint_profile(spec, t_start, schedule)
+    base = base_input_row(spec.device, spec.finger.gap_m)
+    profiles = input_profiles(spec, t_start[:n], np.random.default_rng(ss_inputs), base)
+    return RunInputs(spec=spec, seed=seed, sensor_seed=seed_from(ss_sensor), schedule=schedule, dt_s=dt,
+                     n_steps=n, t_s=t_start, setpoint_n=sp, base_inputs=base, profiles=profiles)
