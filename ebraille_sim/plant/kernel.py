@@ -35,7 +35,7 @@ from __future__ import annotations
 
 from ebraille_sim.base.compiled import njit
 
-from ebraille_sim.estimation.blockmodels import biquad_step, estimator_step, pwl_eval, tared_v  # noqa: F401
+from ebraille_sim.estimation.blockmodels import biquad_step, estimator_step, tared_v
 from ebraille_sim.physics.drivetrain import (end_stop, friction_velocity_update, gear_loss_n, loaded_friction_n,
                                              mesh_force, shaft_speed_rad_per_s, stribeck, viscous_force_n,
                                              weight_along_n)
