@@ -26,8 +26,8 @@ Faults (open circuit, short, stuck ADC, forced voltage) replace the divider outp
 Examples
 --------
 >>> from ebraille_sim.physics.params import FSRS, CircuitParams
->>> round(static_voltage(1.0, FSRS["nominal"], CircuitParams(r2_ohm=10e3)), 3)
-2.5
+>>> round(static_voltage(1.0, FSRS["nominal"], CircuitParams(r2_ohm=10e3)), 3)   # 10 kOhm || 10 MOhm
+2.501
 """
 from __future__ import annotations
 

@@ -17,7 +17,7 @@ Examples
 >>> round(m.stall_torque_at(6.0) * 1e3, 2)     # mN m, datasheet 1.13
 1.13
 >>> round(m.no_load_speed_at(6.0) * 60 / (2 * 3.141592653589793))   # rpm, datasheet 13 500
-13510
+13514
 """
 from __future__ import annotations
 
