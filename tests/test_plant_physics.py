@@ -1,5 +1,4 @@
 """Each law of the lumped plant against an analytic case."""
-import dataclasses
 import math
 
 import numpy as np
@@ -7,7 +6,7 @@ import pytest
 
 from ebraille_sim.physics.drivetrain import reflected
 from ebraille_sim.physics.fingertip import relaxation_function
-from ebraille_sim.plant.layout import U
+from ebraille_sim.plant.layout import S
 from ebraille_sim.plant.loop import Plant
 from ebraille_sim.physics.params import (DRIVETRAINS, FINGERS, FSRS, MOTORS, CircuitParams, DeviceParams,
                                  DriveTrainParams, EstimatorParams, FingerParams, RateParams, describe, source_of)
@@ -76,7 +75,7 @@ def test_free_running_board_reaches_the_friction_limited_no_load_speed():
     plant = _plant(dev, finger_pos_m=1.0)
     for _ in range(250):                                 # 0.25 s >> 6.5 ms time constant
         plant.advance(3.0)
-    v_meas = plant.state[0][4]
+    v_meas = plant.state[0][S.board_vel_m_per_s]
     g = dt.gear_ratio / dt.pinion_radius_m
     m = FAULHABER
     mu = dt.gear_loss_coefficient
@@ -164,11 +163,11 @@ def test_backlash_dead_zone_delays_the_board_on_reversal():
     for _ in range(50):
         plant.advance(1.0)
     xb0 = plant.board_pos_m[0]
-    xp0 = plant.state[0][1]
+    xp0 = plant.state[0][S.pinion_pos_m]
     moved_pinion = 0.0
     for _ in range(200):
         plant.advance(-1.0)
-        moved_pinion = xp0 - plant.state[0][1]
+        moved_pinion = xp0 - plant.state[0][S.pinion_pos_m]
         if plant.board_pos_m[0] < xb0 - 1e-6:
             break
     # the pinion crossed the whole gap (0.2 mm) before the rack followed
@@ -221,4 +220,4 @@ def test_driver_saturates_at_the_supply():
     for _ in range(10):
         plant.advance(100.0)
     assert plant.motor_current_a[0] == pytest.approx(6.0 / 21.2, rel=1e-9)
-    assert U["command_v"] == 0
+    

@@ -1,5 +1,4 @@
 """FSR forward model, ADC, anti-alias filter and the in-loop estimator against analytic cases."""
-import dataclasses
 import math
 
 import numpy as np

@@ -167,7 +167,7 @@ def _constants(device: DeviceParams) -> dict:
         ke=m.back_emf_v_s_per_rad, Mp=refl["mass_kg"],
         Fpc=refl["coulomb_n"], cp=m.viscous_friction_nm_s_per_rad * g * g,
         mu=d.gear_loss_coefficient, hb=0.5 * d.backlash_m, km=d.mesh_stiffness_n_per_m,
-        cm=mesh_damping_n_s_per_m(d.mesh_stiffness_n_per_m, d.moving_mass_kg, d.mesh_damping_ratio),
+        cm=mesh_damping_n_s_per_m(d.mesh_damping_ratio, d.mesh_stiffness_n_per_m, d.moving_mass_kg),
         Mb=d.moving_mass_kg, Fgc=d.guide_coulomb_n, cg=d.guide_viscous_n_s_per_m,
         b=f.stiffness_b_n_per_m, m=f.exponent_m_per_m,
         c=(f.relax_weight_inf, f.relax_weight_1, f.relax_weight_2, f.relax_weight_3),

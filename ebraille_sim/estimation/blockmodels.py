@@ -15,6 +15,11 @@ The structure follows MATLAB's ``idnlhw`` with ``pwlinear`` nonlinearities.
 All functions are pure; the classes are frozen dataclasses that hold data and
 delegate to the module-level helpers.
 
+The compiled closed loop evaluates a model one sample at a time with
+:func:`estimator_step` (on the flat arrays of :meth:`BlockModel.kernel_arrays`),
+after the anti-alias filter :func:`biquad_step`; these Numba functions are the one
+home of the in-loop estimator, and equal :meth:`BlockModel.simulate` sample by sample.
+
 Examples
 --------
 >>> lin = LinearBF(b=(0.5,), f=(-0.5,), nk=1)
@@ -37,7 +42,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.signal import lfilter
+
+from ebraille_sim.base.compiled import njit
 
 __all__ = [
     "PiecewiseLinear",
@@ -47,7 +53,32 @@ __all__ = [
     "DEFAULT_UNIT_ROOT_TOL",
     "BLOCK_MODEL_FORMAT",
     "BLOCK_MODEL_VERSION",
+    "pwl_eval",
+    "df2t_step",
+    "biquad_step",
+    "estimator_step",
 ]
+
+MAX_TF_LEN = 10
+"""Longest numerator/denominator of a linear block the compiled loop evaluates."""
+
+MAX_BREAKPOINTS = 12
+"""Most breakpoints of each nonlinearity the compiled loop evaluates."""
+
+ANTIALIAS_SLOTS = ("aa_z1", "aa_z2")
+"""State slots of the anti-alias biquad (direct form II transposed)."""
+
+OUTPUT_SLOTS = ("force_est_n", "est_raw_prev_n")
+"""State slots of the estimate and of the previous raw model output (two-sample mean)."""
+
+TARE_SLOTS = ("tare_v",)
+"""State slot of the no-load voltage subtracted from the input."""
+
+FILTER_SLOTS = tuple(f"est_z{j}" for j in range(MAX_TF_LEN - 1))
+"""State slots of the linear block (direct form II transposed)."""
+
+OWNED_STATE_SLOTS = ANTIALIAS_SLOTS + OUTPUT_SLOTS + TARE_SLOTS + FILTER_SLOTS
+"""Every state slot the in-loop estimator declares (see :mod:`ebraille_sim.plant.layout`)."""
 
 #: Default absolute tolerance on the remainders ``B(1)`` and ``F(1)`` of a
 #: division by ``(1 - z^-1)``. It suits coefficients known to machine precision;
@@ -532,6 +563,7 @@ class LinearBF:
             zi = np.array(zi, dtype=float)
             if zi.shape != (self.order,):
                 raise ValueError(f"state must have shape ({self.order},), got {zi.shape}")
+        from scipy.signal import lfilter
         y, zf = lfilter(num, den, u, zi=zi)
         return y, zf
 
@@ -854,6 +886,79 @@ class BlockModel:
             "out_y": np.asarray(onl.y_bp, dtype=np.float64),
             "order": int(L - 1),
         }
+
+
+# ---------------------------------------------------------------------------
+# compiled per-sample evaluator (the in-loop estimator)
+# ---------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def pwl_eval(x, p, x0, y0, n):
+    """Piecewise-linear map with breakpoints ``p[x0:x0+n]``, ``p[y0:y0+n]``.
+
+    Beyond the end breakpoints the end segments are continued (linear extrapolation),
+    as :class:`PiecewiseLinear` does.
+    """
+    j = 0
+    while j < n - 2 and x > p[x0 + j + 1]:
+        j += 1
+    xa = p[x0 + j]
+    xb = p[x0 + j + 1]
+    ya = p[y0 + j]
+    yb = p[y0 + j + 1]
+    return ya + (yb - ya) * (x - xa) / (xb - xa)
+
+
+@njit(cache=True, inline="always")
+def df2t_step(x, s, z0, p, num0, den0, n):
+    """One sample of ``num/den`` (length ``n``, ``den[0] = 1``) in direct form II transposed.
+
+    The state ``s[z0:z0+n-1]`` is advanced in place; returns the output, exactly as
+    :func:`scipy.signal.lfilter` computes it.
+    """
+    y = p[num0] * x + s[z0]
+    for j in range(n - 2):
+        s[z0 + j] = p[num0 + j + 1] * x + s[z0 + j + 1] - p[den0 + j + 1] * y
+    if n >= 2:
+        s[z0 + n - 2] = p[num0 + n - 1] * x - p[den0 + n - 1] * y
+    return y
+
+
+@njit(cache=True, inline="always")
+def biquad_step(x, s, z1, z2, b0, b1, b2, a1, a2):
+    """One sample of a second-order section (DF2T, ``a0 = 1``); ``s[z1]``, ``s[z2]`` advanced."""
+    y = b0 * x + s[z1]
+    s[z1] = b1 * x - a1 * y + s[z2]
+    s[z2] = b2 * x - a2 * y
+    return y
+
+
+@njit(cache=True, inline="always")
+def tared_v(v, tare_v):
+    """Estimator input: the voltage less the no-load voltage (V)."""
+    return v - tare_v
+
+
+@njit(cache=True, inline="always")
+def estimator_step(u, s, z0, raw_prev, p, in_x0, in_y0, n_in, num0, den0, n, out_x0, out_y0, n_out,
+                   nyquist_average, clamp_nonnegative):
+    """One sample of the block-oriented estimator: input map, linear block, output map.
+
+    With ``nyquist_average`` the output is the mean of the last two model outputs
+    (``s[raw_prev]`` keeps the previous one): a zero at z = -1 that removes the
+    sample-to-sample ringing of a model pole near -1 (the paper's fifth-order Wiener has
+    one at -0.967), at the price of half a sample of delay.  With ``clamp_nonnegative`` a
+    negative estimate reads 0.
+    """
+    x = pwl_eval(u, p, in_x0, in_y0, n_in)
+    y = df2t_step(x, s, z0, p, num0, den0, n)
+    f = pwl_eval(y, p, out_x0, out_y0, n_out)
+    if nyquist_average:
+        f_raw = f
+        f = 0.5 * (f + s[raw_prev])
+        s[raw_prev] = f_raw
+    if clamp_nonnegative and f < 0.0:
+        f = 0.0
+    return f
 
 
 # ---------------------------------------------------------------------------

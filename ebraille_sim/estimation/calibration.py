@@ -31,7 +31,7 @@ import numpy as np
 import scipy.optimize
 
 from ebraille_sim.estimation.models import cached_model
-from ebraille_sim.physics.fsr import play_widths, static_resistance
+from ebraille_sim.physics.fsr import adc_code, adc_voltage, divider_voltage, play_widths, static_conductance
 
 DEFAULT_FORCES_N = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0)
 DEFAULT_HOLDS_S = (5.0, 20.0, 60.0)
@@ -40,22 +40,30 @@ DEFAULT_HOLDS_S = (5.0, 20.0, 60.0)
 def loading_branch_factor(fsr) -> float:
     """Force seen by the conduction law on the loading branch, as a fraction of the force.
 
-    After a monotone press from zero every play operator of the hysteresis model sits at
-    its lower edge, so ``F_eff = F exp(-sum_j weight_j width_j)``.
+    After a monotone press from zero every play operator of the hysteresis model
+    (:func:`ebraille_sim.physics.fsr.hysteresis`) sits at its lower edge, so
+    ``F_eff + F_eps = (F + F_eps) exp(-sum_j weight_j width_j)``; for ``F >> F_eps`` (1 mN)
+    that is ``F_eff = F exp(-sum_j weight_j width_j)``.
     """
     widths, weights = play_widths(fsr)
     return math.exp(-sum(w * r for w, r in zip(weights, widths)))
 
 
 def loading_voltage(force_n: float, fsr, circuit, hold_s: float) -> float:
-    """Noise-free divider voltage after pressing to ``force_n`` and holding ``hold_s``."""
+    """Noise-free divider voltage after pressing to ``force_n`` and holding ``hold_s``.
+
+    The conduction, creep and divider laws are those of the compiled loop
+    (:func:`ebraille_sim.physics.fsr.static_conductance`,
+    :func:`ebraille_sim.physics.fsr.divider_voltage`).
+    """
     f_eff = force_n * loading_branch_factor(fsr)
-    return circuit.divider_v(static_resistance(f_eff, fsr, load_time_s=hold_s))
+    return divider_voltage(static_conductance(f_eff, fsr, load_time_s=hold_s), circuit.r2_ohm, circuit.supply_v)
 
 
 def _tare(fsr, circuit) -> float:
-    v0 = circuit.divider_v(static_resistance(0.0, fsr))
-    return math.floor(v0 / circuit.adc_lsb_v) * circuit.adc_lsb_v
+    """The no-load voltage as the ADC reads it (V), the tare of the estimator's input."""
+    v0 = divider_voltage(static_conductance(0.0, fsr), circuit.r2_ohm, circuit.supply_v)
+    return adc_voltage(adc_code(v0, circuit.adc_lsb_v, circuit.adc_max_code), circuit.adc_lsb_v)
 
 
 def steady_estimate(model, force_n: float, fsr, circuit, hold_s: float) -> float:

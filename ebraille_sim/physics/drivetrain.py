@@ -26,6 +26,12 @@ import math
 
 from ebraille_sim.base.compiled import njit
 
+STATE_SLOTS = ("pinion_pos_m", "pinion_vel_m_per_s", "board_pos_m", "board_vel_m_per_s")
+"""State slots of the drive train, all at the rack line (see :mod:`ebraille_sim.plant.layout`)."""
+
+OWNED_STATE_SLOTS = STATE_SLOTS
+"""Every state slot this module declares."""
+
 
 @njit(cache=True, inline="always")
 def shaft_to_rack_per_m(gear_ratio, pinion_radius_m):
@@ -38,10 +44,67 @@ def shaft_to_rack_per_m(gear_ratio, pinion_radius_m):
 
 
 @njit(cache=True, inline="always")
+def shaft_speed_rad_per_s(rack_velocity_m_per_s, shaft_to_rack):
+    """Motor shaft speed (rad/s) for a rack-line speed, ``v N/r``."""
+    return rack_velocity_m_per_s * shaft_to_rack
+
+
+@njit(cache=True, inline="always")
+def reflected_inertia_kg(inertia_kg_m2, shaft_to_rack):
+    """A shaft inertia (or rotary damping) seen at the rack line, ``J (N/r)^2``."""
+    return inertia_kg_m2 * shaft_to_rack * shaft_to_rack
+
+
+@njit(cache=True, inline="always")
+def reflected_force_n(torque_nm, shaft_to_rack):
+    """A shaft torque seen at the rack line, ``T N/r`` (N)."""
+    return torque_nm * shaft_to_rack
+
+
+@njit(cache=True, inline="always")
+def mesh_damping_n_s_per_m(damping_ratio, stiffness_n_per_m, mass_kg):
+    """Mesh damping coefficient ``2 zeta sqrt(k m)`` for a damping ratio ``zeta``."""
+    return 2.0 * damping_ratio * math.sqrt(stiffness_n_per_m * mass_kg)
+
+
+@njit(cache=True, inline="always")
+def gear_loss_n(gear_mu, mesh_force_n):
+    """Load-dependent Coulomb friction of the gearhead, ``mu |F_mesh|`` (N)."""
+    return gear_mu * abs(mesh_force_n)
+
+
+@njit(cache=True, inline="always")
+def viscous_force_n(c_n_s_per_m, v_m_per_s):
+    """Viscous friction ``sigma v`` (N), opposing the motion when subtracted."""
+    return c_n_s_per_m * v_m_per_s
+
+
+@njit(cache=True, inline="always")
+def weight_along_n(mass_kg, gravity_along_m_per_s2):
+    """Weight of a body along the travel axis, ``m g_along`` (N)."""
+    return mass_kg * gravity_along_m_per_s2
+
+
+@njit(cache=True, inline="always")
 def stribeck(v_abs, f_coulomb, f_static, v_stribeck):
     """Kinetic friction magnitude at speed ``v_abs`` (N), without the viscous term."""
     r = v_abs / v_stribeck
     return f_coulomb + (f_static - f_coulomb) * math.exp(-r * r)
+
+
+@njit(cache=True, inline="always")
+def loaded_friction_n(v_abs, f_coulomb, f_static, v_stribeck, load_n):
+    """Kinetic and break-away friction (N) of a contact whose friction grows by ``load_n``.
+
+    The gear loss adds to both the Coulomb and the break-away level of the pinion side.
+
+    Returns
+    -------
+    (float, float)
+        Kinetic friction at ``v_abs`` and the break-away level.
+    """
+    fs = f_static + load_n
+    return stribeck(v_abs, f_coulomb + load_n, fs, v_stribeck), fs
 
 
 @njit(cache=True, inline="always")
@@ -89,13 +152,20 @@ def mesh_force(dx, dv, half_gap, k, c):
     return 0.0
 
 
-def mesh_damping_n_s_per_m(stiffness_n_per_m, mass_kg, damping_ratio):
-    """Damping ``c = 2 zeta sqrt(k m)`` (N s/m) of the mesh contact.
+@njit(cache=True, inline="always")
+def end_stop(x_m, v_m_per_s, x_min_m, x_max_m):
+    """Inelastic end stops: position clipped to the travel, velocity into the stop removed.
 
-    The mesh spring ``k`` against the moving mass ``m`` (racks, board and display) with the
-    damping ratio ``zeta`` of the polymer teeth; the ``c`` of :func:`mesh_force`.
+    Returns
+    -------
+    (float, float)
+        Position and velocity after the stops.
     """
-    return 2.0 * damping_ratio * math.sqrt(stiffness_n_per_m * mass_kg)
+    if x_m < x_min_m:
+        return x_min_m, (0.0 if v_m_per_s < 0.0 else v_m_per_s)
+    if x_m > x_max_m:
+        return x_max_m, (0.0 if v_m_per_s > 0.0 else v_m_per_s)
+    return x_m, v_m_per_s
 
 
 def reflected(motor, drivetrain) -> dict:
@@ -112,10 +182,10 @@ def reflected(motor, drivetrain) -> dict:
     kt, ke, r = motor.torque_constant_nm_per_a, motor.back_emf_v_s_per_rad, motor.resistance_ohm
     v = motor.nominal_voltage_v
     return {
-        "mass_kg": motor.rotor_inertia_kg_m2 * g * g,
-        "back_emf_damping_n_s_per_m": kt * ke / r * g * g,
-        "coulomb_n": motor.friction_torque_nm * g,
-        "stall_force_n": motor.stall_torque_at(v) * g * drivetrain.gear_efficiency,
+        "mass_kg": reflected_inertia_kg(motor.rotor_inertia_kg_m2, g),
+        "back_emf_damping_n_s_per_m": reflected_inertia_kg(kt * ke / r, g),
+        "coulomb_n": reflected_force_n(motor.friction_torque_nm, g),
+        "stall_force_n": reflected_force_n(motor.stall_torque_at(v), g) * drivetrain.gear_efficiency,
         "no_load_speed_m_per_s": motor.no_load_speed_at(v) / g,
-        "force_per_volt_n_per_v": kt / r * g * drivetrain.gear_efficiency,
+        "force_per_volt_n_per_v": reflected_force_n(kt / r, g) * drivetrain.gear_efficiency,
     }

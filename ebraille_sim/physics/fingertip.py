@@ -25,6 +25,19 @@ import math
 
 from ebraille_sim.base.compiled import njit
 
+STATE_SLOTS = ("prony_1_n", "prony_2_n", "prony_3_n", "elastic_force_n", "contact_force_n")
+"""State slots of the pulp: the three Prony states, the instantaneous elastic force and the
+contact force (see :mod:`ebraille_sim.plant.layout`)."""
+
+OWNED_STATE_SLOTS = STATE_SLOTS
+"""Every state slot this module declares."""
+
+
+@njit(cache=True, inline="always")
+def compression_m(board_pos_m, finger_pos_m):
+    """Pulp compression (m): how far the board has risen past the pulp surface."""
+    return board_pos_m - finger_pos_m
+
 
 @njit(cache=True, inline="always")
 def elastic_force(d_m, b_n_per_m, m_per_m):
@@ -32,6 +45,33 @@ def elastic_force(d_m, b_n_per_m, m_per_m):
     if d_m <= 0.0:
         return 0.0
     return b_n_per_m / m_per_m * math.expm1(m_per_m * d_m)
+
+
+@njit(cache=True, inline="always")
+def compression_at_force_m(elastic_force_n, b_n_per_m, m_per_m):
+    """Inverse of :func:`elastic_force`: compression (m) at which the elastic force is ``Fe``."""
+    return math.log1p(m_per_m * elastic_force_n / b_n_per_m) / m_per_m
+
+
+@njit(cache=True, inline="always")
+def relaxed_elastic_force_n(contact_force_n, c0):
+    """Elastic force ``Fe = F/c0`` under which a fully relaxed contact pushes with ``F``."""
+    return contact_force_n / c0
+
+
+@njit(cache=True, inline="always")
+def prony_step(h_n, a, c, beta, d_elastic_force_n):
+    """One exact step of a Prony state: ``h <- a h + c beta (Fe_new - Fe_old)`` (N)."""
+    return a * h_n + c * beta * d_elastic_force_n
+
+
+@njit(cache=True, inline="always")
+def contact_force(d_m, elastic_force_n, c0, h1_n, h2_n, h3_n):
+    """QLV contact force ``c0 Fe + h1 + h2 + h3`` (N), zero off the pulp or when it would pull."""
+    f = c0 * elastic_force_n + h1_n + h2_n + h3_n
+    if d_m <= 0.0 or f < 0.0:
+        return 0.0
+    return f
 
 
 @njit(cache=True, inline="always")

@@ -17,13 +17,32 @@ Examples
 >>> round(m.stall_torque_at(6.0) * 1e3, 2)     # mN m, datasheet 1.13
 1.13
 >>> round(m.no_load_speed_at(6.0) * 60 / (2 * 3.141592653589793))   # rpm, datasheet 13 500
-13510
+13514
 """
 from __future__ import annotations
 
 import math
 
 from ebraille_sim.base.compiled import njit
+
+STATE_SLOTS = ("current_a",)
+"""State slots of the armature (see :mod:`ebraille_sim.plant.layout`)."""
+
+ENERGY_SLOTS = ("energy_j",)
+"""State slot of the electrical energy drawn from the driver."""
+
+OWNED_STATE_SLOTS = STATE_SLOTS + ENERGY_SLOTS
+"""Every state slot this module declares."""
+
+
+@njit(cache=True, inline="always")
+def driver_voltage(command_v, supply_v):
+    """Terminal voltage of the H-bridge: the command clipped to +/- the supply (V)."""
+    if command_v > supply_v:
+        return supply_v
+    if command_v < -supply_v:
+        return -supply_v
+    return command_v
 
 
 @njit(cache=True, inline="always")
@@ -45,6 +64,18 @@ def current_step(i_a, v_v, omega_rad_s, r_ohm, ke_v_s, decay):
     """
     i_ss = (v_v - ke_v_s * omega_rad_s) / r_ohm
     return i_ss + (i_a - i_ss) * decay
+
+
+@njit(cache=True, inline="always")
+def rack_force_n(i_a, kt_nm_per_a, shaft_to_rack_per_m):
+    """Motor force at the rack line, ``kM i N/r`` (N), before any friction or gear loss."""
+    return kt_nm_per_a * i_a * shaft_to_rack_per_m
+
+
+@njit(cache=True, inline="always")
+def electrical_power_w(v_v, i_a):
+    """Power drawn from the driver, ``V i`` (W)."""
+    return v_v * i_a
 
 
 def current_decay(h_s: float, r_ohm: float, l_h: float) -> float:

@@ -17,6 +17,12 @@ _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
 _INV53 = 1.0 / 9007199254740992.0
 
+STATE_SLOTS = ("sensor_count",)
+"""State slot of the sample counter that indexes the noise sequence."""
+
+OWNED_STATE_SLOTS = STATE_SLOTS
+"""Every state slot this module declares (see :mod:`ebraille_sim.plant.layout`)."""
+
 
 @njit(cache=True, inline="always")
 def splitmix64(x):
@@ -35,6 +41,12 @@ def normal_at(seed, index):
     u1 = (float(z1 >> np.uint64(11)) + 1.0) * _INV53
     u2 = float(z2 >> np.uint64(11)) * _INV53
     return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+
+
+@njit(cache=True, inline="always")
+def noise_v(rms_v, seed, index):
+    """Gaussian noise sample ``index`` of a device with ``seed``, scaled to ``rms_v`` (V)."""
+    return rms_v * normal_at(seed, index)
 
 
 def seed_from(seed_sequence: np.random.SeedSequence) -> float:

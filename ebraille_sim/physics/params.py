@@ -9,7 +9,10 @@ Every parameter set is a frozen dataclass whose field names carry SI units
 ``[E]``  engineering estimate (the reasoning is named; calibrate before trusting).
 
 Derived quantities (reflected mass, reflected friction, Prony decay factors...)
-are computed by properties or by :mod:`ebraille_sim.plant.layout`, never stored.
+are computed by properties or by :func:`ebraille_sim.plant.loop.pack_params`, never stored.
+The static helpers here (``elastic_force_n``, ``resistance_ohm``, ``divider_v``...) call
+the very law functions of :mod:`~ebraille_sim.physics.fingertip` and
+:mod:`~ebraille_sim.physics.fsr` that the compiled loop runs.
 
 Examples
 --------
@@ -29,6 +32,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from ebraille_sim.base.fields import sourced
+from ebraille_sim.physics import fingertip as _fingertip
+from ebraille_sim.physics import fsr as _fsr
 
 __all__ = [
     "MotorParams", "DriveTrainParams", "FingerParams", "FSRParams", "CircuitParams",
@@ -286,16 +291,12 @@ class FingerParams(_Checked):
 
     def elastic_force_n(self, d_m: float) -> float:
         """Instantaneous elastic force at compression ``d_m`` (0 for d <= 0)."""
-        if d_m <= 0.0:
-            return 0.0
-        b, m = self.stiffness_b_n_per_m, self.exponent_m_per_m
-        return b / m * math.expm1(m * d_m)
+        return _fingertip.elastic_force(float(d_m), self.stiffness_b_n_per_m, self.exponent_m_per_m)
 
     def compression_at_m(self, force_n: float, relaxed: bool = False) -> float:
         """Compression that gives ``force_n``; ``relaxed`` uses the long-time force c0 Fe."""
-        f = force_n / self.relax_weight_inf if relaxed else force_n
-        b, m = self.stiffness_b_n_per_m, self.exponent_m_per_m
-        return math.log1p(m * f / b) / m
+        f = _fingertip.relaxed_elastic_force_n(float(force_n), self.relax_weight_inf) if relaxed else float(force_n)
+        return _fingertip.compression_at_force_m(f, self.stiffness_b_n_per_m, self.exponent_m_per_m)
 
 
 FINGERS: dict[str, FingerParams] = {
@@ -338,7 +339,7 @@ class FSRParams(_Checked):
     @property
     def creep_per_decade(self) -> float:
         """Creep slope per decade of load time so that 30 min gives creep_fraction_30min."""
-        return self.creep_fraction_30min / math.log10(1.0 + 1800.0 / self.creep_t0_s)
+        return _fsr.creep_per_decade_for(self.creep_fraction_30min, 1800.0, self.creep_t0_s)
 
     @property
     def hysteresis_log_halfwidth(self) -> float:
@@ -347,10 +348,8 @@ class FSRParams(_Checked):
 
     def resistance_ohm(self, force_n: float) -> float:
         """Static resistance without hysteresis or creep."""
-        g = 1.0 / self.standoff_resistance_ohm
-        if force_n > 0.0:
-            g += force_n ** self.exponent / self.resistance_at_1n_ohm
-        return 1.0 / g
+        return 1.0 / _fsr.conductance_s(float(force_n), self.resistance_at_1n_ohm, self.exponent,
+                                        1.0 / self.standoff_resistance_ohm, 1.0)
 
 
 FSRS: dict[str, FSRParams] = {
@@ -374,19 +373,30 @@ class CircuitParams(_Checked):
     adc_ref_v: float = _pos(5.0, "V", "[R] ATmega328 AVcc reference")
 
     def divider_v(self, resistance_ohm: float) -> float:
-        """Paper eq. 1: V_o = V_in R2/(R2 + R_FSR)."""
-        return self.supply_v * self.r2_ohm / (self.r2_ohm + resistance_ohm)
+        """Paper eq. 1: V_o = V_in R2/(R2 + R_FSR), through :func:`ebraille_sim.physics.fsr.divider_voltage`."""
+        return _fsr.divider_voltage(1.0 / resistance_ohm, self.r2_ohm, self.supply_v)
 
     @property
     def adc_lsb_v(self) -> float:
+        """Voltage of one ADC step, V_ref / 2^bits (V)."""
         return self.adc_ref_v / (2 ** self.adc_bits)
+
+    @property
+    def adc_max_code(self) -> float:
+        """Largest ADC code, 2^bits - 1."""
+        return float(2 ** self.adc_bits - 1)
 
 
 @dataclass(frozen=True)
 class EstimatorParams(_Checked):
-    """In-loop force estimator: anti-alias filter, decimation, block-oriented model."""
+    """In-loop force estimator: anti-alias filter, decimation, block-oriented model.
+
+    The estimator runs at its model's own sample rate, ``1/dt_s`` of the block model (the
+    paper's models: 100 Hz, the rate they were identified at); there is no separate rate
+    setting.  The sensor rate must be a whole multiple of it
+    (:func:`ebraille_sim.plant.loop.pack_params` raises otherwise).
+    """
     model: str = _p("paper:wiener:5", "-", "seed paper, Appendix 2-3, fifth-order Wiener")
-    rate_hz: float = _pos(100.0, "Hz", "[R] seed paper: models identified at 100 Hz")
     antialias_cutoff_hz: float = _pos(20.0, "Hz", "[E] the paper band-limited its data below 40 Hz; "
                                       "the model gain grows 9x at 40 Hz and 300x at 50 Hz")
     tare_at_start: bool = _p(True, "-", "[E] the no-load voltage is subtracted (the paper detrends)")

@@ -8,15 +8,32 @@ compiled code.  This module names every slot once; nothing else hard-codes an in
 Inputs that may change every control period (the motor command, the finger position,
 gravity along the travel, the FSR temperature offset, the driver supply and an injected
 sensor fault) travel in a third vector ``U`` of length ``N_INPUT``.
+
+State slots are declared by the module whose law advances them (``STATE_SLOTS`` and
+friends in :mod:`~ebraille_sim.physics.motor`, :mod:`~ebraille_sim.physics.drivetrain`,
+:mod:`~ebraille_sim.physics.fingertip`, :mod:`~ebraille_sim.physics.fsr`,
+:mod:`~ebraille_sim.physics.noise` and :mod:`~ebraille_sim.estimation.blockmodels`);
+the loop itself owns only its clock and sample phases (:data:`LOOP_STATE_SLOTS`).
+:data:`STATE_BLOCKS` puts those declarations in their order in the state vector.
+
+The FSR fault codes ``FAULT_*`` for the ``fsr_fault`` input are those of
+:mod:`ebraille_sim.physics.fsr`: open circuit (divider reads 0 V), short (reads the supply),
+stuck (the ADC repeats its last code), forced value (reads ``fsr_fault_value`` volts).
+``motor_jammed`` > 0 locks the pinion (a stalled gearmotor).
 """
 from __future__ import annotations
 
 import collections
 
-from ebraille_sim.physics.fsr import N_PLAYS
-
-MAX_TF_LEN = 10          # numerator/denominator length of the estimator's linear block
-MAX_BREAKPOINTS = 12     # breakpoints of each estimator nonlinearity
+from ebraille_sim.estimation import blockmodels as _est
+from ebraille_sim.estimation.blockmodels import MAX_BREAKPOINTS, MAX_TF_LEN
+from ebraille_sim.physics import drivetrain as _drivetrain
+from ebraille_sim.physics import fingertip as _fingertip
+from ebraille_sim.physics import fsr as _fsr
+from ebraille_sim.physics import motor as _motor
+from ebraille_sim.physics import noise as _noise
+from ebraille_sim.physics.fsr import (FAULT_NONE, FAULT_OPEN, FAULT_SHORT, FAULT_STUCK,  # noqa: F401
+                                      FAULT_VALUE, N_PLAYS)
 
 
 class _Slots(tuple):
@@ -59,13 +76,24 @@ def slots(kind: str, names) -> _Slots:
     return cls(*range(len(names)))
 
 
-STATE_NAMES = [
-    "current_a", "pinion_pos_m", "pinion_vel_m_per_s", "board_pos_m", "board_vel_m_per_s",
-    "prony_1_n", "prony_2_n", "prony_3_n", "elastic_force_n", "contact_force_n",
-    "fsr_force_lagged_n", "fsr_load_time_s", "fsr_voltage_v", "fsr_code",
-    "aa_z1", "aa_z2", "sensor_phase", "estimator_phase", "sensor_count",
-    "force_est_n", "est_raw_prev_n", "energy_j", "time_s", "tare_v",
-] + [f"play_{j}" for j in range(N_PLAYS)] + [f"est_z{j}" for j in range(MAX_TF_LEN - 1)]
+LOOP_STATE_SLOTS = ("sensor_phase", "estimator_phase", "time_s")
+"""State slots of the loop itself: physics steps since the last sensor sample, sensor
+samples since the last estimate, and the simulated time."""
+
+STATE_BLOCKS = (
+    _motor.STATE_SLOTS, _drivetrain.STATE_SLOTS, _fingertip.STATE_SLOTS, _fsr.STATE_SLOTS,
+    _est.ANTIALIAS_SLOTS, LOOP_STATE_SLOTS[:2], _noise.STATE_SLOTS, _est.OUTPUT_SLOTS,
+    _motor.ENERGY_SLOTS, LOOP_STATE_SLOTS[2:], _est.TARE_SLOTS, _fsr.HYSTERESIS_SLOTS, _est.FILTER_SLOTS,
+)
+"""The modules' slot declarations in state-vector order."""
+
+STATE_OWNERS = {"motor": _motor.OWNED_STATE_SLOTS, "drivetrain": _drivetrain.OWNED_STATE_SLOTS,
+                "fingertip": _fingertip.OWNED_STATE_SLOTS, "fsr": _fsr.OWNED_STATE_SLOTS,
+                "noise": _noise.OWNED_STATE_SLOTS, "estimator": _est.OWNED_STATE_SLOTS,
+                "loop": LOOP_STATE_SLOTS}
+"""Every state slot by the module that declares it."""
+
+STATE_NAMES = [name for block in STATE_BLOCKS for name in block]
 S = slots("StateSlots", STATE_NAMES)
 N_STATE = len(STATE_NAMES)
 
@@ -102,8 +130,3 @@ INPUT_NAMES = ["command_v", "finger_pos_m", "gravity_along_m_per_s2", "fsr_temp_
                "press_offset_m", "finger_tilt_rad", "gravity_lateral_m_per_s2"]
 U = slots("InputSlots", INPUT_NAMES)
 N_INPUT = len(INPUT_NAMES)
-
-FAULT_NONE, FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE = 0, 1, 2, 3, 4
-"""FSR fault codes for the ``fsr_fault`` input: open circuit (divider reads 0 V), short
-(reads the supply), stuck (the ADC repeats its last code), forced value (reads
-``fsr_fault_value`` volts).  ``motor_jammed`` > 0 locks the pinion (a stalled gearmotor)."""

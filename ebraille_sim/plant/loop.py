@@ -11,8 +11,7 @@ state is ``(n, N_STATE)``, the parameters ``(n, N_PARAM)``, the inputs ``(n, N_I
 
 Examples
 --------
->>> from ebraille_sim.estimation.models import load_estimator
-from ebraille_sim.physics.params import DeviceParams
+>>> from ebraille_sim.physics.params import DeviceParams
 >>> plant = Plant.from_devices([DeviceParams()], seeds=[1])
 >>> plant.set_finger(1.0e-3)
 >>> for _ in range(200):
@@ -26,15 +25,18 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.signal
 
-from ebraille_sim.plant import kernel
-from ebraille_sim.physics.fingertip import prony_coefficients
-from ebraille_sim.physics.fsr import play_widths, static_voltage
-from ebraille_sim.plant.layout import (MAX_BREAKPOINTS, MAX_TF_LEN, N_INPUT, N_PARAM, N_PLAYS, N_STATE, P, S, U)
-from ebraille_sim.physics.motor import current_decay
+from ebraille_sim.estimation.blockmodels import pwl_eval
 from ebraille_sim.estimation.models import load_estimator
+from ebraille_sim.physics.drivetrain import (mesh_damping_n_s_per_m, reflected_force_n, reflected_inertia_kg,
+                                             shaft_to_rack_per_m)
+from ebraille_sim.physics.fingertip import prony_coefficients, tangent_stiffness_n_per_m
+from ebraille_sim.physics.fsr import (adc_code, adc_voltage, lag_alpha, log_force, play_widths, recovery_decay,
+                                      static_voltage)
+from ebraille_sim.physics.motor import current_decay
 from ebraille_sim.physics.params import DeviceParams
+from ebraille_sim.plant import kernel
+from ebraille_sim.plant.layout import (MAX_BREAKPOINTS, MAX_TF_LEN, N_INPUT, N_PARAM, N_PLAYS, N_STATE, P, S, U)
 
 __all__ = ["Plant", "loop_step", "make_plant", "PLANT_BACKENDS", "pack_params", "pack_devices", "initial_state",
            "check_step", "load_estimator"]
@@ -48,7 +50,8 @@ def check_step(device: DeviceParams, max_force_n: float = 10.0) -> float:
     accurate for ``w h < 1``.
     """
     dt = device.drivetrain
-    k_pulp = device.finger.stiffness_b_n_per_m + device.finger.exponent_m_per_m * max_force_n
+    k_pulp = tangent_stiffness_n_per_m(float(max_force_n), device.finger.stiffness_b_n_per_m,
+                                       device.finger.exponent_m_per_m)
     w = math.sqrt((dt.mesh_stiffness_n_per_m + k_pulp) / dt.moving_mass_kg)
     wh = w / device.rates.physics_rate_hz
     if wh > 1.0:
@@ -59,7 +62,13 @@ def check_step(device: DeviceParams, max_force_n: float = 10.0) -> float:
 
 
 def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
-    """Flat parameter vector ``(N_PARAM,)`` of one device for the kernel."""
+    """Flat parameter vector ``(N_PARAM,)`` of one device for the kernel.
+
+    The estimator runs at its model's own rate, ``1/model.dt_s`` (the rate it was
+    identified at); the sensor rate must be a whole multiple of it.
+    """
+    import scipy.signal
+
     m, d, f, s, c, e, r = (device.motor, device.drivetrain, device.finger, device.fsr, device.circuit,
                            device.estimator, device.rates)
     check_step(device)
@@ -72,7 +81,7 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
                          f"estimator model's rate ({est_rate:g} Hz)")
     p = np.zeros(N_PARAM)
     h = 1.0 / r.physics_rate_hz
-    g = d.gear_ratio / d.pinion_radius_m
+    g = shaft_to_rack_per_m(d.gear_ratio, d.pinion_radius_m)
     p[P["h_s"]] = h
     p[P["substeps_per_sensor"]] = r.substeps_per_sensor
     p[P["sensors_per_estimate"]] = round(ratio)
@@ -81,14 +90,15 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     p[P["motor_kt"]] = m.torque_constant_nm_per_a
     p[P["motor_ke"]] = m.back_emf_v_s_per_rad
     p[P["n_over_r_per_m"]] = g
-    p[P["pinion_mass_kg"]] = m.rotor_inertia_kg_m2 * g * g
-    p[P["pinion_coulomb_n"]] = m.friction_torque_nm * g
-    p[P["pinion_static_n"]] = m.friction_torque_nm * g * m.breakaway_ratio
-    p[P["pinion_viscous_n_s_per_m"]] = m.viscous_friction_nm_s_per_rad * g * g
+    p[P["pinion_mass_kg"]] = reflected_inertia_kg(m.rotor_inertia_kg_m2, g)
+    p[P["pinion_coulomb_n"]] = reflected_force_n(m.friction_torque_nm, g)
+    p[P["pinion_static_n"]] = reflected_force_n(m.friction_torque_nm, g) * m.breakaway_ratio
+    p[P["pinion_viscous_n_s_per_m"]] = reflected_inertia_kg(m.viscous_friction_nm_s_per_rad, g)
     p[P["gear_mu"]] = d.gear_loss_coefficient
     p[P["half_backlash_m"]] = 0.5 * d.backlash_m
     p[P["mesh_k_n_per_m"]] = d.mesh_stiffness_n_per_m
-    p[P["mesh_c_n_s_per_m"]] = 2.0 * d.mesh_damping_ratio * math.sqrt(d.mesh_stiffness_n_per_m * d.moving_mass_kg)
+    p[P["mesh_c_n_s_per_m"]] = mesh_damping_n_s_per_m(d.mesh_damping_ratio, d.mesh_stiffness_n_per_m,
+                                                       d.moving_mass_kg)
     p[P["board_mass_kg"]] = d.moving_mass_kg
     p[P["guide_coulomb_n"]] = d.guide_coulomb_n
     p[P["guide_static_n"]] = d.guide_coulomb_n * d.guide_breakaway_ratio
@@ -106,14 +116,14 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     for j in range(3):
         p[P[f"relax_a{j + 1}"]] = a[j]
         p[P[f"relax_beta{j + 1}"]] = beta[j]
-    p[P["fsr_lag_alpha"]] = 1.0 - math.exp(-h / s.mechanical_lag_s)
+    p[P["fsr_lag_alpha"]] = lag_alpha(h, s.mechanical_lag_s)
     p[P["fsr_k_ohm"]] = s.resistance_at_1n_ohm
     p[P["fsr_n"]] = s.exponent
     p[P["fsr_g_standoff_s"]] = 1.0 / s.standoff_resistance_ohm
     p[P["fsr_creep_per_decade"]] = s.creep_per_decade
     p[P["fsr_creep_t0_s"]] = s.creep_t0_s
     dt_sensor = 1.0 / r.sensor_rate_hz
-    p[P["fsr_recovery_decay"]] = math.exp(-dt_sensor / s.creep_recovery_s)
+    p[P["fsr_recovery_decay"]] = recovery_decay(dt_sensor, s.creep_recovery_s)
     p[P["fsr_load_threshold_n"]] = s.load_threshold_n
     p[P["fsr_tempco_per_k"]] = s.temperature_coeff_per_k
     p[P["fsr_noise_v"]] = s.noise_v_rms
@@ -121,7 +131,7 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     p[P["r2_ohm"]] = c.r2_ohm
     p[P["divider_supply_v"]] = c.supply_v
     p[P["adc_lsb_v"]] = c.adc_lsb_v
-    p[P["adc_max_code"]] = 2 ** c.adc_bits - 1
+    p[P["adc_max_code"]] = c.adc_max_code
     widths, weights = play_widths(s)
     for j in range(N_PLAYS):
         p[P[f"play_w{j}"]] = widths[j]
@@ -169,21 +179,23 @@ def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None
     xb = device.drivetrain.travel_min_m if board_pos_m is None else float(board_pos_m)
     s[S["board_pos_m"]] = xb
     s[S["pinion_pos_m"]] = xb
-    lf = math.log(0.0 + 1e-3)
+    lf = log_force(0.0)
     for j in range(N_PLAYS):
         s[S[f"play_{j}"]] = lf
     v0 = static_voltage(0.0, device.fsr, device.circuit)
     lsb = device.circuit.adc_lsb_v
-    code0 = math.floor(v0 / lsb)
+    code0 = adc_code(v0, lsb, float(device.circuit.adc_max_code))
+    v_read = adc_voltage(code0, lsb)
     s[S["fsr_code"]] = code0
-    s[S["fsr_voltage_v"]] = code0 * lsb
-    s[S["tare_v"]] = code0 * lsb if device.estimator.tare_at_start else 0.0
-    _estimator_steady_state(s, p, code0 * lsb - s[S["tare_v"]])
+    s[S["fsr_voltage_v"]] = v_read
+    s[S["tare_v"]] = v_read if device.estimator.tare_at_start else 0.0
+    _estimator_steady_state(s, p, v_read - s[S["tare_v"]])
     return s
 
 
 def _estimator_steady_state(s: np.ndarray, p: np.ndarray, u0: float) -> None:
     """Fill the anti-alias and estimator states for a constant input ``u0``."""
+    import scipy.signal
     bb = np.array([p[P["aa_b0"]], p[P["aa_b1"]], p[P["aa_b2"]]])
     aa = np.array([1.0, p[P["aa_a1"]], p[P["aa_a2"]]])
     zi = scipy.signal.lfilter_zi(bb, aa) * u0
@@ -191,12 +203,12 @@ def _estimator_steady_state(s: np.ndarray, p: np.ndarray, u0: float) -> None:
     n = int(p[P["est_len"]])
     num = p[P["est_num0"]:P["est_num0"] + n]
     den = p[P["est_den0"]:P["est_den0"] + n]
-    x0 = kernel.pwl_eval(u0, p, P["est_in_x0"], P["est_in_y0"], int(p[P["est_n_in"]]))
+    x0 = pwl_eval(u0, p, P["est_in_x0"], P["est_in_y0"], int(p[P["est_n_in"]]))
     if n >= 2:
         zi = scipy.signal.lfilter_zi(num, den) * x0
         s[S["est_z0"]:S["est_z0"] + n - 1] = zi
     y0 = num.sum() / den.sum() * x0 if abs(den.sum()) > 1e-12 else 0.0
-    f0 = kernel.pwl_eval(y0, p, P["est_out_x0"], P["est_out_y0"], int(p[P["est_n_out"]]))
+    f0 = pwl_eval(y0, p, P["est_out_x0"], P["est_out_y0"], int(p[P["est_n_out"]]))
     s[S["est_raw_prev_n"]] = f0
     s[S["force_est_n"]] = max(f0, 0.0) if p[P["est_clamp"]] > 0 else f0
 
@@ -281,10 +293,10 @@ class Plant:
         """Advance every device by one control period (see :func:`loop_step`)."""
         inp = self.inputs
         if self.state.shape[0] == 1:
-            c = float(command_v) if np.ndim(command_v) == 0 else float(command_v[0])
+            c = float(command_v) if isinstance(command_v, (float, int)) else float(np.ravel(command_v)[0])
             if not math.isfinite(c):
                 raise ValueError(f"command_v must be finite, got {c}")
-            inp[0, 0] = c
+            inp[0, U.command_v] = c
             kernel.advance(self.state[0], self.params[0], inp[0], self.substeps)
         else:
             cmd = np.broadcast_to(np.asarray(command_v, dtype=float), (self.n,))

@@ -1,0 +1,142 @@
+"""Does every law have a test that catches a 5 % change of it?
+
+For each law this script copies the package (and its tests) to a temporary directory,
+multiplies every value the law's function returns by 1.05 in the copied source, runs
+``pytest`` on the law tests against the copy, and prints a Markdown table: the law, its
+``file:function``, how many tests failed, and which of the law's own tests failed.  A law
+whose own tests all pass under the change is reported as not caught, and the script exits
+with status 1.
+
+Numba recompiles the whole kernel for every copy (each copy gets its own
+``NUMBA_CACHE_DIR``), so a run takes a few minutes per law.
+
+Run:  python tests/law_perturbation.py [--law NAME ...] [--tests FILE ...] [--keep]
+"""
+from __future__ import annotations
+
+import argparse
+import ast
+import os
+import pathlib
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+COPY = ("ebraille_sim", "controllers", "tests", "scenarios", "pyproject.toml")
+DEFAULT_TESTS = ("tests/test_laws.py", "tests/test_plant_physics.py", "tests/test_sensor_chain.py")
+FACTOR = "1.05"
+
+LAWS = [
+    # (law, file, function, own tests in tests/test_laws.py)
+    ("motor current step", "ebraille_sim/physics/motor.py", "current_step",
+     ["test_motor_current_step_follows_the_closed_form_exponential"]),
+    ("mesh force", "ebraille_sim/physics/drivetrain.py", "mesh_force",
+     ["test_mesh_force_in_and_out_of_the_backlash_gap"]),
+    ("Stribeck friction", "ebraille_sim/physics/drivetrain.py", "stribeck",
+     ["test_stribeck_curve_at_rest_at_vs_and_far_above"]),
+    ("pulp elastic force", "ebraille_sim/physics/fingertip.py", "elastic_force",
+     ["test_pulp_elastic_force_at_the_paper_derived_compressions"]),
+    ("QLV relaxation", "ebraille_sim/physics/fingertip.py", "prony_step",
+     ["test_qlv_step_response_relaxes_to_c0_fe_with_the_three_time_constants",
+      "test_qlv_ramp_is_exact_and_contact_only_pushes"]),
+    ("FSR conductance", "ebraille_sim/physics/fsr.py", "conductance_s", ["test_fsr_conductance_power_law"]),
+    ("creep", "ebraille_sim/physics/fsr.py", "creep_factor",
+     ["test_creep_factor_after_thirty_minutes_and_per_decade"]),
+    ("hysteresis", "ebraille_sim/physics/fsr.py", "hysteresis", ["test_hysteresis_loading_branch_and_loop_width"]),
+    ("divider", "ebraille_sim/physics/fsr.py", "divider_voltage", ["test_divider_is_paper_eq_1"]),
+    ("ADC", "ebraille_sim/physics/fsr.py", "adc_code", ["test_adc_rounds_down_and_clips_at_the_rails"]),
+    ("estimator step", "ebraille_sim/estimation/blockmodels.py", "estimator_step",
+     ["test_estimator_step_equals_lfilter_and_interp_on_a_random_input"]),
+]
+
+_RETURN = re.compile(r"^(\s*)return (.+)$")
+
+
+def perturb_source(text: str, function: str, factor: str = FACTOR) -> tuple[str, int]:
+    """``text`` with every ``return X`` of top-level ``function`` made ``return factor * (X)``."""
+    tree = ast.parse(text)
+    node = next((n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == function), None)
+    if node is None:
+        raise ValueError(f"no function {function!r} in the source")
+    lines = text.splitlines(keepends=True)
+    count = 0
+    for k in range(node.lineno - 1, node.end_lineno):
+        m = _RETURN.match(lines[k].rstrip("\n"))
+        if m:
+            lines[k] = f"{m.group(1)}return {factor} * ({m.group(2)})\n"
+            count += 1
+    if count == 0:
+        raise ValueError(f"{function!r} has no single-line return to perturb")
+    return "".join(lines), count
+
+
+def copy_tree(dest: pathlib.Path) -> None:
+    ignore = shutil.ignore_patterns("__pycache__", "*.pyc", "*.nbi", "*.nbc")
+    for name in COPY:
+        src = ROOT / name
+        if src.is_dir():
+            shutil.copytree(src, dest / name, ignore=ignore)
+        else:
+            shutil.copy2(src, dest / name)
+
+
+def run_tests(tree: pathlib.Path, tests) -> tuple[list[str], str]:
+    env = dict(os.environ, PYTHONPATH=str(tree), NUMBA_CACHE_DIR=str(tree / ".numba_cache"))
+    out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--tb=no", "-rf",
+                          *tests], cwd=tree, env=env, capture_output=True, text=True)
+    failed = re.findall(r"^FAILED (\S+?)(?: - |$)", out.stdout, flags=re.M)
+    return failed, out.stdout.strip().splitlines()[-1] if out.stdout.strip() else out.stderr[-300:]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--law", action="append", help="only these laws (by name; repeatable)")
+    ap.add_argument("--tests", action="append", help=f"test files to run (default: {', '.join(DEFAULT_TESTS)})")
+    ap.add_argument("--baseline", action="store_true", help="also run the unperturbed copy first")
+    a = ap.parse_args(argv)
+    tests = a.tests or list(DEFAULT_TESTS)
+    laws = [law for law in LAWS if not a.law or law[0] in a.law]
+    unknown = set(a.law or ()) - {law[0] for law in LAWS}
+    if unknown:
+        raise SystemExit(f"unknown law(s): {', '.join(sorted(unknown))}; known: {', '.join(x[0] for x in LAWS)}")
+    rows, missed = [], []
+    with tempfile.TemporaryDirectory(prefix="law_perturbation_") as tmp:
+        if a.baseline:
+            base = pathlib.Path(tmp) / "baseline"
+            copy_tree(base)
+            failed, summary = run_tests(base, tests)
+            print(f"baseline (no change): {summary}", file=sys.stderr, flush=True)
+            if failed:
+                raise SystemExit(f"the unperturbed copy already fails: {', '.join(failed)}")
+        for k, (law, rel, function, own) in enumerate(laws):
+            t0 = time.perf_counter()
+            tree = pathlib.Path(tmp) / f"law{k}"
+            copy_tree(tree)
+            path = tree / rel
+            text, n_returns = perturb_source(path.read_text(), function)
+            path.write_text(text)
+            failed, summary = run_tests(tree, tests)
+            names = [f.split("::")[-1] for f in failed]
+            caught = [t for t in own if t in names]
+            if not caught:
+                missed.append(law)
+            rows.append((law, f"{rel.split('/', 1)[1]}:{function}", len(failed), caught))
+            print(f"{law}: {len(failed)} failed ({summary}) in {time.perf_counter() - t0:.0f} s",
+                  file=sys.stderr, flush=True)
+            shutil.rmtree(tree, ignore_errors=True)
+    print(f"| law (return value x {FACTOR}) | file:function | failing tests | failing tests of that law |")
+    print("|---|---|---|---|")
+    for law, where, n, caught in rows:
+        print(f"| {law} | `{where}` | {n} | {', '.join(caught) if caught else '**none: not caught**'} |")
+    if missed:
+        print(f"\nnot caught by their own tests: {', '.join(missed)}")
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,513 @@
+"""Every law of the plant and the sensor, through the very function the compiled kernel calls.
+
+Each test drives one law function (a Numba dispatcher, called here from Python) against an
+analytic case, with tolerances far below 5 %: a 5 % change of any law fails its own test
+(``tests/law_perturbation.py`` checks that).  The last tests check that the kernel is
+nothing but the composition of these functions, and that the static helpers use them too.
+"""
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import scipy.signal
+
+from ebraille_sim.estimation import blockmodels
+from ebraille_sim.estimation.blockmodels import (BlockModel, LinearBF, PiecewiseLinear, biquad_step, df2t_step,
+                                                 estimator_step, pwl_eval, tared_v)
+from ebraille_sim.estimation.calibration import loading_branch_factor, loading_voltage
+from ebraille_sim.estimation.paper_models import paper_model
+from ebraille_sim.physics import drivetrain, fingertip, fsr, motor, noise
+from ebraille_sim.physics.drivetrain import (end_stop, friction_velocity_update, gear_loss_n, loaded_friction_n,
+                                             mesh_force, reflected, shaft_speed_rad_per_s, shaft_to_rack_per_m,
+                                             stribeck, viscous_force_n, weight_along_n)
+from ebraille_sim.physics.fingertip import (compression_m, contact_force, elastic_force, prony_coefficients,
+                                            prony_step, tangent_stiffness_n_per_m)
+from ebraille_sim.physics.fsr import (F_EPS_N, FAULT_NONE, FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE,
+                                      N_PLAYS, adc_code, adc_sample, adc_voltage, conductance_s, creep_clock_step,
+                                      creep_factor, divider_voltage, hysteresis, lag_step, log_force, play_widths,
+                                      sensor_voltage, static_conductance, static_voltage, temperature_factor)
+from ebraille_sim.physics.motor import current_decay, current_step, driver_voltage, electrical_power_w, rack_force_n
+from ebraille_sim.physics.noise import noise_v, normal_at
+from ebraille_sim.physics.params import (FINGERS, MOTORS, CircuitParams, DeviceParams, DriveTrainParams,
+                                         EstimatorParams, FSRParams)
+from ebraille_sim.plant import kernel, layout
+from ebraille_sim.plant.layout import N_INPUT, P, S, U
+from ebraille_sim.plant.loop import Plant, check_step, initial_state, pack_params
+
+FAULHABER = MOTORS["faulhaber_0816_006sr"]
+NOMINAL = FINGERS["nominal"]
+
+
+# ---------------------------------------------------------------------------- motor
+def test_motor_current_step_follows_the_closed_form_exponential():
+    r, l_h, ke = FAULHABER.resistance_ohm, FAULHABER.inductance_h, FAULHABER.back_emf_v_s_per_rad
+    h = 2e-6
+    decay = current_decay(h, r, l_h)
+    v, w, i0 = 6.0, 400.0, 0.05
+    i_ss = (v - ke * w) / r
+    i = i0
+    for k in range(1, 31):
+        i = current_step(i, v, w, r, ke, decay)
+        t = k * h
+        assert i == pytest.approx(i_ss + (i0 - i_ss) * math.exp(-t * r / l_h), rel=1e-12)
+    # far past L/R the current is the quasi-static (V - kE w)/R
+    for _ in range(1000):
+        i = current_step(i, v, w, r, ke, decay)
+    assert i == pytest.approx(i_ss, rel=1e-12)
+
+
+def test_motor_force_driver_clip_and_power():
+    g = shaft_to_rack_per_m(64.0, 2.5e-3)
+    assert g == pytest.approx(25600.0, rel=1e-15)
+    assert rack_force_n(0.1, FAULHABER.torque_constant_nm_per_a, g) == pytest.approx(0.1 * 4.12e-3 * 25600.0,
+                                                                                     rel=1e-15)
+    assert driver_voltage(7.5, 6.0) == 6.0
+    assert driver_voltage(-9.0, 6.0) == -6.0
+    assert driver_voltage(2.5, 6.0) == 2.5
+    assert electrical_power_w(6.0, 0.25) == 1.5
+    assert shaft_speed_rad_per_s(0.01, g) == pytest.approx(256.0, rel=1e-15)
+
+
+# ---------------------------------------------------------------------------- drive train
+def test_mesh_force_in_and_out_of_the_backlash_gap():
+    b, k, c = 5e-5, 3e4, 8.0
+    for dx in (0.0, 3e-5, -5e-5, 5e-5):
+        assert mesh_force(dx, 0.01, b, k, c) == 0.0                   # inside the gap: no force
+    assert mesh_force(1.5e-4, 0.0, b, k, c) == pytest.approx(k * 1e-4, rel=1e-12)
+    assert mesh_force(1.5e-4, 0.02, b, k, c) == pytest.approx(k * 1e-4 + c * 0.02, rel=1e-12)
+    assert mesh_force(-1.5e-4, -0.02, b, k, c) == pytest.approx(-(k * 1e-4 + c * 0.02), rel=1e-12)
+    # contact can push but never pull: a fast separation leaves zero, not a negative force
+    assert mesh_force(1.5e-4, -1.0, b, k, c) == 0.0
+    assert mesh_force(-1.5e-4, 1.0, b, k, c) == 0.0
+
+
+def test_stribeck_curve_at_rest_at_vs_and_far_above():
+    fc, fs, vs = 0.1, 0.125, 0.5e-3
+    assert stribeck(0.0, fc, fs, vs) == pytest.approx(fs, rel=1e-12)
+    assert stribeck(vs, fc, fs, vs) == pytest.approx(fc + (fs - fc) / math.e, rel=1e-12)
+    assert stribeck(100 * vs, fc, fs, vs) == pytest.approx(fc, rel=1e-12)
+
+
+def test_gear_loss_reproduces_the_forward_efficiency():
+    dt = DriveTrainParams()
+    mu = dt.gear_loss_coefficient
+    # steady forward drive: F_in = F_out + mu |F_out|  ->  F_out = eta F_in
+    f_out = 0.9
+    f_in = f_out + gear_loss_n(mu, f_out)
+    assert f_out / f_in == pytest.approx(dt.gear_efficiency, rel=1e-12)
+    assert gear_loss_n(mu, -f_out) == gear_loss_n(mu, f_out)
+    fk, fs_ = loaded_friction_n(0.0, 0.8, 1.0, 1e-3, 0.5)
+    assert (fk, fs_) == (pytest.approx(1.5, rel=1e-12), pytest.approx(1.5, rel=1e-12))
+
+
+def test_friction_sticks_below_breakaway_and_slips_above():
+    m, h, fk, fs_ = 0.01, 1e-4, 0.1, 0.125
+    assert friction_velocity_update(0.0, 0.12, m, h, fk, fs_) == 0.0           # stuck
+    assert friction_velocity_update(0.0, -0.12, m, h, fk, fs_) == 0.0
+    assert friction_velocity_update(0.0, 0.2, m, h, fk, fs_) == pytest.approx(h * (0.2 - fk) / m, rel=1e-12)
+    assert friction_velocity_update(0.0, -0.2, m, h, fk, fs_) == pytest.approx(-h * (0.2 - fk) / m, rel=1e-12)
+    # sliding: friction removes h fk/m of speed and never reverses the motion
+    assert friction_velocity_update(0.01, 0.0, m, h, fk, fs_) == pytest.approx(0.01 - h * fk / m, rel=1e-12)
+    assert friction_velocity_update(1e-4, 0.0, m, h, fk, fs_) == 0.0
+    assert friction_velocity_update(-0.01, 0.05, m, h, fk, fs_) == pytest.approx(-0.01 + h * (0.05 + fk) / m,
+                                                                                  rel=1e-12)
+
+
+def test_end_stops_viscous_and_weight():
+    assert end_stop(-1e-4, -0.01, 0.0, 6e-3) == (0.0, 0.0)
+    assert end_stop(-1e-4, 0.01, 0.0, 6e-3) == (0.0, 0.01)
+    assert end_stop(7e-3, 0.01, 0.0, 6e-3) == (6e-3, 0.0)
+    assert end_stop(3e-3, 0.01, 0.0, 6e-3) == (3e-3, 0.01)
+    assert viscous_force_n(2.0, 0.5) == 1.0
+    assert weight_along_n(6e-3, -9.81) == pytest.approx(-0.05886, rel=1e-12)
+
+
+def test_reflected_quantities_use_the_gear_reflection():
+    d = DriveTrainParams()
+    g = d.gear_ratio / d.pinion_radius_m
+    r = reflected(FAULHABER, d)
+    assert r["mass_kg"] == pytest.approx(FAULHABER.rotor_inertia_kg_m2 * g ** 2, rel=1e-12)
+    assert r["coulomb_n"] == pytest.approx(FAULHABER.friction_torque_nm * g, rel=1e-12)
+    p = pack_params(DeviceParams(), 0.0)
+    assert p[P.pinion_mass_kg] == r["mass_kg"]
+    assert p[P.pinion_coulomb_n] == r["coulomb_n"]
+    assert p[P.n_over_r_per_m] == shaft_to_rack_per_m(d.gear_ratio, d.pinion_radius_m)
+
+
+# ---------------------------------------------------------------------------- fingertip
+def test_pulp_elastic_force_at_the_paper_derived_compressions():
+    b, m = NOMINAL.stiffness_b_n_per_m, NOMINAL.exponent_m_per_m
+    d1 = math.log1p(m * 1.0 / b) / m                       # exact compression at 1 N
+    assert elastic_force(d1, b, m) == pytest.approx(1.0, rel=1e-12)
+    assert elastic_force(d1, b, m) == pytest.approx(b / m * (math.exp(m * d1) - 1.0), rel=1e-12)
+    # the parameters were solved through 1.4 mm at 1 N and 2.4 mm at 4 N
+    assert elastic_force(1.4e-3, b, m) == pytest.approx(1.0, rel=0.01)
+    assert elastic_force(2.4e-3, b, m) == pytest.approx(4.0, rel=0.01)
+    assert elastic_force(0.0, b, m) == 0.0 and elastic_force(-1e-3, b, m) == 0.0
+    # tangent stiffness b + m Fe is the derivative of the law
+    dd = 1e-9
+    slope = (elastic_force(d1 + dd, b, m) - elastic_force(d1 - dd, b, m)) / (2 * dd)
+    assert tangent_stiffness_n_per_m(1.0, b, m) == pytest.approx(slope, rel=1e-5)
+    assert compression_m(2.0e-3, 0.6e-3) == pytest.approx(1.4e-3, rel=1e-12)
+
+
+def test_qlv_step_response_relaxes_to_c0_fe_with_the_three_time_constants():
+    f = NOMINAL
+    taus = (f.relax_tau_1_s, f.relax_tau_2_s, f.relax_tau_3_s)
+    cs = (f.relax_weight_1, f.relax_weight_2, f.relax_weight_3)
+    h = 1e-4
+    a, beta = prony_coefficients(h, taus)
+    fe, d = 1.0, 1.4e-3
+    hs = [0.0, 0.0, 0.0]
+    fe_old = 0.0
+    for k in range(1, 40001):                               # 4 s held step
+        hs = [prony_step(hs[j], a[j], cs[j], beta[j], fe - fe_old) for j in range(3)]
+        fe_old = fe
+        fc = contact_force(d, fe, f.relax_weight_inf, *hs)
+        t = k * h
+        if k in (1, 40, 700, 3000, 14000, 40000):
+            # exact for the ramp-invariant step: the step enters over the first interval
+            expected = fe * (f.relax_weight_inf + sum(c * b_ * math.exp(-(t - h) / tau)
+                                                      for c, b_, tau in zip(cs, beta, taus)))
+            assert fc == pytest.approx(expected, rel=1e-10)
+            # and the continuous relaxation function G(t) to within the step's smearing
+            g_t = f.relax_weight_inf + sum(c * math.exp(-t / tau) for c, tau in zip(cs, taus))
+            assert fc == pytest.approx(fe * g_t, rel=0.03)
+    assert fc == pytest.approx(f.relax_weight_inf * fe + 0.1 * math.exp(-4.0 / 1.4), rel=1e-3)
+
+
+def test_qlv_ramp_is_exact_and_contact_only_pushes():
+    """Fe rising at r: h_i(t) = c_i tau_i r (1 - exp(-t/tau_i)) exactly, for any step."""
+    f = NOMINAL
+    taus = (f.relax_tau_1_s, f.relax_tau_2_s, f.relax_tau_3_s)
+    cs = (f.relax_weight_1, f.relax_weight_2, f.relax_weight_3)
+    h, rate = 1e-3, 2.0
+    a, beta = prony_coefficients(h, taus)
+    hs = [0.0, 0.0, 0.0]
+    for k in range(1, 301):
+        hs = [prony_step(hs[j], a[j], cs[j], beta[j], rate * h) for j in range(3)]
+    t = 300 * h
+    for j in range(3):
+        assert hs[j] == pytest.approx(cs[j] * taus[j] * rate * (1 - math.exp(-t / taus[j])), rel=1e-9)
+    assert contact_force(1e-3, 1.0, 0.4, 0.1, 0.1, 0.1) == pytest.approx(0.7, rel=1e-12)
+    assert contact_force(-1e-6, 1.0, 0.4, 0.1, 0.1, 0.1) == 0.0          # board below the pulp
+    assert contact_force(1e-3, 0.1, 0.4, -0.3, 0.0, 0.0) == 0.0          # would pull
+
+
+# ---------------------------------------------------------------------------- FSR
+def test_fsr_conductance_power_law():
+    k, n, gso = 10e3, 0.9, 1e-7
+    for force in (0.2, 1.0, 2.0, 3.0):
+        assert conductance_s(force, k, n, gso, 1.0) - gso == pytest.approx(force ** n / k, rel=1e-9)
+    # doubling the force multiplies the conduction path by 2^n; the scale divides it
+    g1 = conductance_s(1.0, k, n, 0.0, 1.0)
+    assert conductance_s(2.0, k, n, 0.0, 1.0) / g1 == pytest.approx(2 ** n, rel=1e-12)
+    assert conductance_s(1.0, k, n, 0.0, 1.25) == pytest.approx(g1 / 1.25, rel=1e-12)
+    assert conductance_s(0.0, k, n, gso, 1.0) == gso and conductance_s(-1.0, k, n, gso, 1.0) == gso
+    # the nominal FSR 402 reads 10 kOhm at 1 N
+    assert 1.0 / conductance_s(1.0, k, n, 0.0, 1.0) == pytest.approx(10e3, rel=1e-12)
+
+
+def test_creep_factor_after_thirty_minutes_and_per_decade():
+    s = FSRParams()
+    d, t0 = s.creep_per_decade, s.creep_t0_s
+    assert creep_factor(1800.0, d, t0) == pytest.approx(1.0 + s.creep_fraction_30min, rel=1e-12)
+    assert creep_factor(0.0, d, t0) == 1.0
+    assert creep_factor(99.0 * t0, d, t0) == pytest.approx(1.0 + 2 * d, rel=1e-12)    # two decades
+    # the creep clock counts while loaded and decays while unloaded
+    assert creep_clock_step(5.0, 0.5, 0.02, 1e-3, 0.99) == pytest.approx(5.001, rel=1e-15)
+    assert creep_clock_step(5.0, 0.01, 0.02, 1e-3, 0.99) == pytest.approx(4.95, rel=1e-15)
+    # temperature: datasheet -15 % at +60 K
+    assert temperature_factor(60.0, s.temperature_coeff_per_k) == pytest.approx(0.85, rel=1e-12)
+
+
+def test_mechanical_lag_is_a_first_order_step():
+    tau, h = 1.5e-3, 1e-4
+    alpha = fsr.lag_alpha(h, tau)
+    f = 0.0
+    for k in range(1, 51):
+        f = lag_step(f, 2.0, alpha)
+    assert f == pytest.approx(2.0 * (1 - math.exp(-50 * h / tau)), rel=1e-12)
+
+
+def _press(forces, s_fsr=FSRParams()):
+    widths, weights = play_widths(s_fsr)
+    p = np.array(widths + weights)
+    s = np.full(N_PLAYS, log_force(0.0))
+    out = 0.0
+    for force in forces:
+        out = hysteresis(float(force), s, 0, p, 0, N_PLAYS, N_PLAYS)
+    return out
+
+
+def test_hysteresis_loading_branch_and_loop_width():
+    s_fsr = FSRParams()
+    w_total = s_fsr.hysteresis_log_halfwidth
+    # monotone press from zero: every play at its lower edge, ln(F_eff + eps) = ln(F + eps) - W
+    up = _press(np.linspace(0.0, 1.0, 21), s_fsr)
+    assert up + F_EPS_N == pytest.approx((1.0 + F_EPS_N) * math.exp(-w_total), rel=1e-12)
+    assert up == pytest.approx(loading_branch_factor(s_fsr), rel=1e-4)
+    # up to 3 N and back to 1 N: every play at its upper edge
+    down = _press(np.concatenate([np.linspace(0.0, 3.0, 61), np.linspace(3.0, 1.0, 41)]), s_fsr)
+    assert down + F_EPS_N == pytest.approx((1.0 + F_EPS_N) * math.exp(w_total), rel=1e-12)
+    # loop width in resistance: (R_up - R_down)/R_up = 1 - (F_up/F_down)^n = h
+    width = 1.0 - ((up + F_EPS_N) / (down + F_EPS_N)) ** s_fsr.exponent
+    assert width == pytest.approx(s_fsr.hysteresis_fraction, rel=1e-12)
+
+
+def test_divider_is_paper_eq_1():
+    for r_fsr, r2, vs in ((10e3, 10e3, 5.0), (30e3, 10e3, 5.0), (6.0e3, 1310.0, 5.0), (1e7, 1310.0, 3.3)):
+        assert divider_voltage(1.0 / r_fsr, r2, vs) == pytest.approx(vs * r2 / (r2 + r_fsr), rel=1e-12)
+    assert divider_voltage(0.0, 1310.0, 5.0) == 0.0
+    assert CircuitParams(r2_ohm=10e3).divider_v(10e3) == pytest.approx(2.5, rel=1e-12)
+
+
+def test_adc_rounds_down_and_clips_at_the_rails():
+    c = CircuitParams()
+    lsb, top = c.adc_lsb_v, c.adc_max_code
+    assert lsb == 5.0 / 1024 and top == 1023.0
+    assert adc_code(100.5 * lsb, lsb, top) == 100.0
+    assert adc_code(100.0 * lsb + 1e-9, lsb, top) == 100.0
+    assert adc_code(99.999 * lsb, lsb, top) == 99.0
+    assert adc_code(-0.2, lsb, top) == 0.0
+    assert adc_code(5.5, lsb, top) == top
+    assert adc_voltage(512.0, lsb) == 2.5
+    assert adc_sample(77.0, 1.0, lsb, top, FAULT_STUCK) == 77.0
+    assert adc_sample(77.0, 1.0, lsb, top, FAULT_NONE) == 204.0
+
+
+def test_fault_switch_replaces_the_divider():
+    g, r2, vs = 1e-4, 1310.0, 5.0
+    assert sensor_voltage(FAULT_NONE, g, r2, vs, 9.0) == divider_voltage(g, r2, vs)
+    assert sensor_voltage(FAULT_STUCK, g, r2, vs, 9.0) == divider_voltage(g, r2, vs)
+    assert sensor_voltage(FAULT_OPEN, g, r2, vs, 9.0) == 0.0
+    assert sensor_voltage(FAULT_SHORT, g, r2, vs, 9.0) == vs
+    assert sensor_voltage(FAULT_VALUE, g, r2, vs, 1.25) == 1.25
+
+
+def test_noise_is_scaled_counter_based_gaussian():
+    assert noise_v(2e-3, 7.0, 12.0) == 2e-3 * normal_at(7.0, 12.0)
+    x = np.array([noise_v(1.0, 3.0, float(k)) for k in range(20000)])
+    assert abs(x.mean()) < 0.03 and x.std() == pytest.approx(1.0, rel=0.03)
+
+
+# ---------------------------------------------------------------------------- estimator
+def _pwl_ref(x, xs, ys):
+    """np.interp inside the breakpoints, end-segment slopes outside."""
+    y = np.interp(x, xs, ys)
+    y = np.where(x < xs[0], ys[0] + (ys[1] - ys[0]) / (xs[1] - xs[0]) * (x - xs[0]), y)
+    return np.where(x > xs[-1], ys[-1] + (ys[-1] - ys[-2]) / (xs[-1] - xs[-2]) * (x - xs[-1]), y)
+
+
+def _packed(model):
+    arr = model.kernel_arrays()
+    n = len(arr["num"])
+    parts = [arr["num"], arr["den"], arr["in_x"], arr["in_y"], arr["out_x"], arr["out_y"]]
+    offs = np.cumsum([0] + [len(a) for a in parts])
+    return np.concatenate(parts), offs, n, len(arr["in_x"]), len(arr["out_x"])
+
+
+def _run_estimator(model, u, average=False, clamp=False):
+    p, o, n, n_in, n_out = _packed(model)
+    s = np.zeros(n)                                 # z0..z(n-2), then the previous raw output
+    out = []
+    for x in u:
+        out.append(estimator_step(float(x), s, 0, n - 1, p, o[2], o[3], n_in, o[0], o[1], n, o[4], o[5], n_out,
+                                  average, clamp))
+    return np.array(out)
+
+
+def test_estimator_step_equals_lfilter_and_interp_on_a_random_input():
+    rng = np.random.default_rng(3)
+    lin = LinearBF(b=(0.2, -0.1, 0.05), f=(-0.9, 0.2), nk=1)
+    model = BlockModel(lin, PiecewiseLinear((-1.0, 0.0, 0.5, 1.0), (-0.5, 0.0, 0.8, 1.1)),
+                       PiecewiseLinear((-2.0, 0.0, 0.3, 1.0, 2.0), (-1.0, 0.0, 0.5, 2.0, 2.2)), dt_s=0.01)
+    u = rng.uniform(-1.3, 1.3, 400)
+    w = _pwl_ref(u, np.array(model.input_nl.x_bp), np.array(model.input_nl.y_bp))
+    x = scipy.signal.lfilter(lin.numerator(), lin.denominator(), w)
+    ref = _pwl_ref(x, np.array(model.output_nl.x_bp), np.array(model.output_nl.y_bp))
+    got = _run_estimator(model, u)
+    np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-12)
+    # the paper's fifth-order Wiener, with the two-sample mean and the clamp
+    paper = paper_model("wiener", 5)
+    u = 0.3 + 0.2 * rng.standard_normal(300)
+    raw, _ = paper.simulate(u)
+    avg = np.maximum(0.5 * (raw + np.concatenate([[0.0], raw[:-1]])), 0.0)
+    np.testing.assert_allclose(_run_estimator(paper, u, True, True), avg, rtol=1e-12, atol=1e-12)
+
+
+def test_antialias_biquad_and_pwl_and_df2t_pieces():
+    b, a = scipy.signal.butter(2, 20.0, fs=1000.0)
+    rng = np.random.default_rng(4)
+    x = rng.standard_normal(500)
+    s = np.zeros(2)
+    y = [biquad_step(float(v), s, 0, 1, b[0], b[1], b[2], a[1], a[2]) for v in x]
+    np.testing.assert_allclose(y, scipy.signal.lfilter(b, a, x), rtol=1e-12, atol=1e-14)
+    p = np.array([0.0, 1.0, 3.0, 0.0, 2.0, 3.0])
+    assert [pwl_eval(v, p, 0, 3, 3) for v in (0.5, 2.0, -1.0, 5.0)] == pytest.approx([1.0, 2.5, -2.0, 4.0],
+                                                                                      rel=1e-15)
+    num, den = np.array([0.5, 0.25]), np.array([1.0, -0.5])
+    p = np.concatenate([num, den])
+    s = np.zeros(1)
+    y = [df2t_step(float(v), s, 0, p, 0, 2, 2) for v in x]
+    np.testing.assert_allclose(y, scipy.signal.lfilter(num, den, x), rtol=1e-12, atol=1e-14)
+    assert tared_v(1.25, 0.25) == 1.0
+
+
+# ---------------------------------------------------------------------------- composition
+def test_state_layout_is_composed_from_the_module_declarations():
+    declared = [n for names in layout.STATE_OWNERS.values() for n in names]
+    assert len(declared) == len(set(declared)), "a state slot is declared twice"
+    assert sorted(declared) == sorted(layout.STATE_NAMES)
+    assert len(layout.STATE_NAMES) == len(set(layout.STATE_NAMES)) == layout.N_STATE
+    assert [n for block in layout.STATE_BLOCKS for n in block] == layout.STATE_NAMES
+    assert layout.STATE_OWNERS["motor"] == motor.OWNED_STATE_SLOTS
+    assert layout.STATE_OWNERS["drivetrain"] == drivetrain.OWNED_STATE_SLOTS
+    assert layout.STATE_OWNERS["fingertip"] == fingertip.OWNED_STATE_SLOTS
+    assert layout.STATE_OWNERS["fsr"] == fsr.OWNED_STATE_SLOTS
+    assert layout.STATE_OWNERS["noise"] == noise.OWNED_STATE_SLOTS
+    assert layout.STATE_OWNERS["estimator"] == blockmodels.OWNED_STATE_SLOTS
+    # the order the state vector always had
+    assert layout.STATE_NAMES[:5] == ["current_a", "pinion_pos_m", "pinion_vel_m_per_s", "board_pos_m",
+                                      "board_vel_m_per_s"]
+    assert S.tare_v == 23 and S.play_0 == 24 and S.est_z0 == 28
+
+
+def _device_mid_press():
+    """A device pressing the pulp, with the next physics step due to sample and estimate."""
+    dev = DeviceParams()
+    plant = Plant.from_devices([dev], seeds=[5])
+    plant.set_finger(1.0e-3)
+    plant.set_input("fsr_temp_offset_k", 4.0)
+    for _ in range(150):
+        plant.advance(2.5)
+    s, p, u = plant.state[0].copy(), plant.params[0].copy(), plant.inputs[0].copy()
+    u[U.command_v] = 3.0
+    s[S.sensor_phase] = p[P.substeps_per_sensor] - 1.0
+    s[S.estimator_phase] = p[P.sensors_per_estimate] - 1.0
+    assert s[S.contact_force_n] > 0.3 and s[S.pinion_vel_m_per_s] != 0.0
+    return s, p, u
+
+
+def _substep_by_hand(s, p, u):
+    """One physics step composed from the law functions alone (the kernel's order)."""
+    s = s.copy()
+    h = p[P.h_s]
+    g = p[P.n_over_r_per_m]
+    v_cmd = driver_voltage(u[U.command_v], u[U.driver_supply_v])
+    vp, vb = s[S.pinion_vel_m_per_s], s[S.board_vel_m_per_s]
+    i = current_step(s[S.current_a], v_cmd, shaft_speed_rad_per_s(vp, g), p[P.motor_r_ohm], p[P.motor_ke],
+                     p[P.motor_current_decay])
+    f_motor = rack_force_n(i, p[P.motor_kt], g)
+    f_mesh = mesh_force(s[S.pinion_pos_m] - s[S.board_pos_m], vp - vb, p[P.half_backlash_m], p[P.mesh_k_n_per_m],
+                        p[P.mesh_c_n_s_per_m])
+    fk_p, fs_p = loaded_friction_n(abs(vp), p[P.pinion_coulomb_n], p[P.pinion_static_n], p[P.stribeck_v_m_per_s],
+                                   gear_loss_n(p[P.gear_mu], f_mesh))
+    vp_new = friction_velocity_update(vp, f_motor - f_mesh - viscous_force_n(p[P.pinion_viscous_n_s_per_m], vp),
+                                      p[P.pinion_mass_kg], h, fk_p, fs_p)
+    f_b = (f_mesh - s[S.contact_force_n] + weight_along_n(p[P.board_mass_kg], u[U.gravity_along_m_per_s2])
+           - viscous_force_n(p[P.guide_viscous_n_s_per_m], vb))
+    fk_b = stribeck(abs(vb), p[P.guide_coulomb_n], p[P.guide_static_n], p[P.stribeck_v_m_per_s])
+    vb_new = friction_velocity_update(vb, f_b, p[P.board_mass_kg], h, fk_b, p[P.guide_static_n])
+    xp = s[S.pinion_pos_m] + h * vp_new
+    xb, vb_new = end_stop(s[S.board_pos_m] + h * vb_new, vb_new, p[P.travel_min_m], p[P.travel_max_m])
+    d = compression_m(xb, u[U.finger_pos_m])
+    fe = elastic_force(d, p[P.finger_b_n_per_m], p[P.finger_m_per_m])
+    dfe = fe - s[S.elastic_force_n]
+    h1 = prony_step(s[S.prony_1_n], p[P.relax_a1], p[P.relax_c1], p[P.relax_beta1], dfe)
+    h2 = prony_step(s[S.prony_2_n], p[P.relax_a2], p[P.relax_c2], p[P.relax_beta2], dfe)
+    h3 = prony_step(s[S.prony_3_n], p[P.relax_a3], p[P.relax_c3], p[P.relax_beta3], dfe)
+    fc = contact_force(d, fe, p[P.relax_c0], h1, h2, h3)
+    s[S.current_a], s[S.pinion_pos_m], s[S.pinion_vel_m_per_s] = i, xp, vp_new
+    s[S.board_pos_m], s[S.board_vel_m_per_s] = xb, vb_new
+    s[S.prony_1_n], s[S.prony_2_n], s[S.prony_3_n], s[S.elastic_force_n], s[S.contact_force_n] = h1, h2, h3, fe, fc
+    s[S.energy_j] += electrical_power_w(v_cmd, i) * h
+    s[S.time_s] += h
+    # sensor: lag, then (due) a sample and (due) an estimate
+    s[S.fsr_force_lagged_n] = lag_step(s[S.fsr_force_lagged_n], fc, p[P.fsr_lag_alpha])
+    s[S.sensor_phase] = 0.0
+    f_lag = s[S.fsr_force_lagged_n]
+    s[S.fsr_load_time_s] = creep_clock_step(s[S.fsr_load_time_s], f_lag, p[P.fsr_load_threshold_n], p[P.fsr_dt_s],
+                                            p[P.fsr_recovery_decay])
+    f_eff = hysteresis(f_lag, s, S.play_0, p, P.play_w0, P.play_weight0, N_PLAYS)
+    scale = (creep_factor(s[S.fsr_load_time_s], p[P.fsr_creep_per_decade], p[P.fsr_creep_t0_s])
+             * temperature_factor(u[U.fsr_temp_offset_k], p[P.fsr_tempco_per_k]))
+    gs = conductance_s(f_eff, p[P.fsr_k_ohm], p[P.fsr_n], p[P.fsr_g_standoff_s], scale)
+    fault = int(u[U.fsr_fault])
+    v = sensor_voltage(fault, gs, p[P.r2_ohm], p[P.divider_supply_v], u[U.fsr_fault_value])
+    v += noise_v(p[P.fsr_noise_v], p[P.seed], s[S.sensor_count])
+    s[S.sensor_count] += 1.0
+    s[S.fsr_code] = adc_sample(s[S.fsr_code], v, p[P.adc_lsb_v], p[P.adc_max_code], fault)
+    s[S.fsr_voltage_v] = adc_voltage(s[S.fsr_code], p[P.adc_lsb_v])
+    y = biquad_step(tared_v(s[S.fsr_voltage_v], s[S.tare_v]), s, S.aa_z1, S.aa_z2,
+                    p[P.aa_b0], p[P.aa_b1], p[P.aa_b2], p[P.aa_a1], p[P.aa_a2])
+    s[S.estimator_phase] = 0.0
+    s[S.force_est_n] = estimator_step(y, s, S.est_z0, S.est_raw_prev_n, p, P.est_in_x0, P.est_in_y0,
+                                      int(p[P.est_n_in]), P.est_num0, P.est_den0, int(p[P.est_len]),
+                                      P.est_out_x0, P.est_out_y0, int(p[P.est_n_out]),
+                                      p[P.est_nyquist_average] > 0.0, p[P.est_clamp] > 0.0)
+    return s
+
+
+def test_one_kernel_step_is_exactly_the_composition_of_the_law_functions():
+    s, p, u = _device_mid_press()
+    expected = _substep_by_hand(s, p, u)
+    kernel.advance(s, p, u, 1)
+    np.testing.assert_array_equal(s, expected)
+    # reversing into the gap, with a forced sensor voltage in place of the divider
+    s2, p2, u2 = _device_mid_press()
+    u2[U.command_v], u2[U.fsr_fault], u2[U.fsr_fault_value] = -4.0, FAULT_VALUE, 0.7
+    expected = _substep_by_hand(s2, p2, u2)
+    kernel.advance(s2, p2, u2, 1)
+    np.testing.assert_array_equal(s2, expected)
+
+
+def test_static_helpers_call_the_same_law_functions():
+    f = NOMINAL
+    for d in (0.0, 3e-4, 1.4e-3, 2.4e-3):
+        assert f.elastic_force_n(d) == elastic_force(d, f.stiffness_b_n_per_m, f.exponent_m_per_m)
+    assert f.elastic_force_n(f.compression_at_m(2.0)) == pytest.approx(2.0, rel=1e-12)
+    assert f.relax_weight_inf * f.elastic_force_n(f.compression_at_m(1.0, relaxed=True)) == pytest.approx(1.0,
+                                                                                                          rel=1e-12)
+    s_fsr, c = FSRParams(), CircuitParams()
+    for force in (0.0, 0.3, 1.0, 2.5):
+        gs = conductance_s(force, s_fsr.resistance_at_1n_ohm, s_fsr.exponent, 1 / s_fsr.standoff_resistance_ohm, 1.0)
+        assert s_fsr.resistance_ohm(force) == 1.0 / gs
+        assert static_conductance(force, s_fsr) == gs
+        assert static_voltage(force, s_fsr, c) == divider_voltage(gs, c.r2_ohm, c.supply_v)
+    scale = creep_factor(20.0, s_fsr.creep_per_decade, s_fsr.creep_t0_s)
+    f_eff = 1.0 * loading_branch_factor(s_fsr)
+    g20 = conductance_s(f_eff, s_fsr.resistance_at_1n_ohm, s_fsr.exponent, 1 / s_fsr.standoff_resistance_ohm, scale)
+    assert loading_voltage(1.0, s_fsr, c, 20.0) == divider_voltage(g20, c.r2_ohm, c.supply_v)
+    dev = DeviceParams()
+    k_pulp = tangent_stiffness_n_per_m(10.0, f.stiffness_b_n_per_m, f.exponent_m_per_m)
+    w = math.sqrt((dev.drivetrain.mesh_stiffness_n_per_m + k_pulp) / dev.drivetrain.moving_mass_kg)
+    assert check_step(dev) == pytest.approx(w / dev.rates.physics_rate_hz, rel=1e-15)
+
+
+def test_kernel_adc_reads_the_static_voltage_exactly_without_memory_or_noise():
+    s_fsr = FSRParams(noise_v_rms=0.0, hysteresis_fraction=0.0, creep_fraction_30min=0.0)
+    c = CircuitParams(adc_bits=24)
+    dev = DeviceParams(fsr=s_fsr, circuit=c)
+    p = pack_params(dev, 0.0)
+    s = initial_state(dev, p)
+    u = np.zeros(N_INPUT)
+    kernel.advance_sensor_only(s, p, u, 1.2, 2000)
+    v = static_voltage(1.2, s_fsr, c)
+    assert s[S.fsr_voltage_v] == adc_voltage(adc_code(v, c.adc_lsb_v, c.adc_max_code), c.adc_lsb_v)
+
+
+def test_estimator_rate_is_the_models_own():
+    assert not hasattr(EstimatorParams(), "rate_hz")
+    from ebraille_sim.physics.params import RateParams
+    dev = DeviceParams(rates=RateParams(control_rate_hz=150.0, sensor_rate_hz=150.0, physics_rate_hz=10500.0))
+    with pytest.raises(ValueError, match="whole multiple of the estimator model's rate"):
+        pack_params(dev, 0.0)
+
+
+def test_importing_the_plant_does_not_import_scipy_signal():
+    code = "import sys, ebraille_sim.plant.loop, ebraille_sim.plant.kernel; print('scipy.signal' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
