@@ -101,7 +101,8 @@ import pymunk
 from ebraille_sim.base.compiled import njit
 from ebraille_sim.base.fields import sourced
 from ebraille_sim.physics.drivetrain import mesh_force, stribeck
-from ebraille_sim.physics.fingertip import elastic_force, prony_coefficients, tangent_stiffness_n_per_m
+from ebraille_sim.physics.fingertip import (contact_force, elastic_force, prony_coefficients, prony_step,
+                                            tangent_stiffness_n_per_m)
 from ebraille_sim.physics.motor import current_decay, current_step
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, DeviceParams, check_finite, replace_checked
 from ebraille_sim.plant import kernel
@@ -116,6 +117,8 @@ __all__ = ["MechanismParams", "PymunkPlant", "check_mechanism_step", "stiffest_m
 # the mesh DampedSprings by _Mechanism._mesh_state
 _stribeck = stribeck.py_func
 _elastic = elastic_force.py_func
+_prony_step = prony_step.py_func
+_contact_force = contact_force.py_func
 _current_step = current_step.py_func
 _mesh_force = mesh_force.py_func
 
@@ -301,7 +304,8 @@ class _Mechanism:
         cw = (fing.relax_weight_1, fing.relax_weight_2, fing.relax_weight_3)
         a, beta = prony_coefficients(h, (fing.relax_tau_1_s, fing.relax_tau_2_s, fing.relax_tau_3_s))
         self.pa = tuple(a)
-        self.pcb = tuple(c * b for c, b in zip(cw, beta))
+        self.pc = cw
+        self.pbeta = tuple(beta)
 
         s_half = 0.5 * mech.rod_spacing_m
         self.rod_x = (-s_half, s_half)
@@ -423,10 +427,11 @@ class _Mechanism:
         """force_func of contact strip ``j``: its share of the QLV law at ``d = rest - dist``."""
         fb, fm, c0 = self.fb, self.fm, self.c0
         a1, a2, a3 = self.pa
-        k1, k2, k3 = self.pcb
+        c1, c2, c3 = self.pc
+        b1, b2, b3 = self.pbeta
         share = self.share
         fe, h1, h2, h3, fc, active = self.fe, self.h1, self.h2, self.h3, self.fc, self.active
-        elastic = _elastic
+        elastic, step, contact = _elastic, _prony_step, _contact_force
         rest = self.L_REF
 
         def force(spring, dist):
@@ -434,13 +439,11 @@ class _Mechanism:
             fe_new = share * elastic(d, fb, fm) if active[j] else 0.0
             dfe = fe_new - fe[j]
             fe[j] = fe_new
-            x1 = a1 * h1[j] + k1 * dfe
-            x2 = a2 * h2[j] + k2 * dfe
-            x3 = a3 * h3[j] + k3 * dfe
+            x1 = step(h1[j], a1, c1, b1, dfe)
+            x2 = step(h2[j], a2, c2, b2, dfe)
+            x3 = step(h3[j], a3, c3, b3, dfe)
             h1[j], h2[j], h3[j] = x1, x2, x3
-            f = c0 * fe_new + x1 + x2 + x3
-            if d <= 0.0 or f < 0.0 or not active[j]:
-                f = 0.0
+            f = contact(d, fe_new, c0, x1, x2, x3) if active[j] else 0.0
             fc[j] = f
             return f
         return force
