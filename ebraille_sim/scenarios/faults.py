@@ -171,7 +171,7 @@ class FaultyController:
         return u
 
 
-def wrap_controller(section: list, controller, dt_s: float):
-    """Apply the ``controller_nan`` entries (other kinds act on the plant inputs)."""
+def wrap_controller(section: list, controller, dt_s: float, device=None):
+    """Apply the ``controller_nan`` entries (other kinds act on the plant inputs; ``device`` is unused)."""
     wins = [(e["start_s"], e["start_s"] + e["duration_s"]) for e in section if e["kind"] == "controller_nan"]
     return FaultyController(controller, wins) if wins else controller
