@@ -14,7 +14,9 @@ failure                             message
 not a real number (or a bool)       ``NAME must be a number >= 0, got '2'``
 not finite                          ``NAME must be finite, got nan; admissible: a finite
                                     number in R``
-not whole (``integer=True``)        ``NAME must be an int >= 1, got 1.5``
+not whole (``integer=True``)        ``NAME must be a whole number, got 1.5; admissible:
+                                    an int >= 1``
+an int out of range                 ``NAME must be an int >= 1, got 0``
 outside a one-sided bound           ``NAME must be > 0, got -1.0``
 outside a two-sided range           ``NAME = -3 is out of range (0, 1000]``
 not a bool                          ``NAME must be true or false, got 1``
@@ -113,19 +115,19 @@ def check_number(name: str, value: Any, lo: float | None = None, hi: float | Non
     want = f"{noun} {adm}".rstrip()
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{name} must be {want}, got {value!r}")
-    v = float(value)
-    if math.isnan(v) or (finite or integer) and not math.isfinite(v):
+    v = int(value) if isinstance(value, numbers.Integral) else float(value)
+    if isinstance(v, float) and math.isnan(v) or (finite or integer) and not math.isfinite(v):
         raise ValueError(f"{name} must be finite, got {value!r}; admissible: "
                          f"{'an int' if integer else 'a finite number'} {adm}".rstrip())
-    if integer and v != int(v):
-        raise ValueError(f"{name} must be {want}, got {value!r}")
+    if integer and isinstance(v, float) and v != int(v):
+        raise ValueError(f"{name} must be a whole number, got {value!r}; admissible: {want}")
     bad = (lo is not None and (v < lo or (lo_open and v == lo))) or \
           (hi is not None and (v > hi or (hi_open and v == hi)))
     if bad:
-        if lo is not None and hi is not None:
+        if lo is not None and hi is not None and not integer:
             raise ValueError(f"{name} = {_g(v)} is out of range {_interval(lo, hi, lo_open, hi_open)}")
         raise ValueError(f"{name} must be {want if integer else adm}, got {value!r}")
-    return int(v) if integer else v
+    return int(v) if integer else float(v)
 
 
 def check_range(name: str, value: Any, lo: float, hi: float, lo_open: bool = False,
@@ -199,7 +201,7 @@ def check_pair(name: str, value: Any, lo: float | None = None, hi: float | None 
     ValueError: band_hz must have low <= high, got [12, 8]
     """
     if isinstance(value, (str, bytes)) or not isinstance(value, (tuple, list)) or len(value) != 2:
-        raise ValueError(f"{name} must be a (low, high) pair, got {value!r}")
+        raise ValueError(f"{name} must be a pair (low, high), got {value!r}")
     a = check_number(f"{name}[0]", value[0], lo, hi, lo_open, hi_open)
     b = check_number(f"{name}[1]", value[1], lo, hi, lo_open, hi_open)
     if a > b or (strict and a == b):

@@ -74,6 +74,8 @@ import numpy as np
 import scipy.optimize
 from scipy.signal import lfilter
 
+from ebraille_sim.base.validation import check_number
+
 from ebraille_sim.estimation.blockmodels import BlockModel, LinearBF, PiecewiseLinear, fitness
 from ebraille_sim.estimation.paper_models import KINDS, ORDERS, SAMPLE_TIME_S, paper_model
 
@@ -663,10 +665,7 @@ def _check_signal(x: Any, name: str) -> np.ndarray:
 
 
 def _check_int(v: Any, name: str, lo: int, hi: int | None = None) -> int:
-    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo or (hi is not None and v > hi):
-        rng = f">= {lo}" if hi is None else f"in {lo}..{hi}"
-        raise ValueError(f"{name} must be an int {rng}, got {v!r}")
-    return int(v)
+    return check_number(name, v, lo, hi, integer=True)
 
 
 def fit_report(kind: str, u: Any, y: Any, order: int, nk: int | None = None, *, dt_s: float = SAMPLE_TIME_S,
