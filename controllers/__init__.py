@@ -36,6 +36,8 @@ import os
 from collections.abc import Callable
 from typing import Any
 
+from ebraille_sim.base.validation import check_keys
+
 from controllers.base import Controller
 from controllers.pid import DEFAULT_PID, PID, PIDConfig, pid_from_dict
 
@@ -121,9 +123,7 @@ def _load_config_file(path: str) -> dict[str, Any]:
                 raise ValueError(f"invalid JSON in {path}: {exc}") from None
     if not isinstance(data, dict):
         raise ValueError(f"controller config {path} must be a table/object, got {type(data).__name__}")
-    for key in data:
-        if key not in _FILE_KEYS:
-            raise ValueError(f"unknown key {key!r} in {path}; allowed keys: {', '.join(_FILE_KEYS)}")
+    check_keys(path, data, _FILE_KEYS)
     if "controller" not in data:
         raise ValueError(f"controller config {path} has no 'controller' key")
     gains = data.get("gains", {})

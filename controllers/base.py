@@ -30,7 +30,12 @@ from __future__ import annotations
 import math
 from typing import Protocol, runtime_checkable
 
-__all__ = ["Controller", "check_dt", "check_finite"]
+from ebraille_sim.base.validation import check_finite, check_positive
+
+__all__ = ["Controller", "check_dt", "check_finite", "check_update_args", "check_reset_args"]
+
+_INF = math.inf
+_isfinite = math.isfinite
 
 
 @runtime_checkable
@@ -115,7 +120,7 @@ def check_dt(dt_s: float) -> float:
     Raises
     ------
     ValueError
-        If ``dt_s`` is NaN, infinite, zero or negative.
+        If ``dt_s`` is not a number, NaN, infinite, zero or negative.
 
     Examples
     --------
@@ -124,43 +129,9 @@ def check_dt(dt_s: float) -> float:
     >>> check_dt(0.0)
     Traceback (most recent call last):
     ...
-    ValueError: dt_s must be finite and > 0, got 0.0
+    ValueError: dt_s must be > 0, got 0.0
     """
-    if not 0.0 < dt_s < math.inf:
-        raise ValueError(f"dt_s must be finite and > 0, got {dt_s!r}")
-    return float(dt_s)
-
-
-def check_finite(name: str, value: float) -> float:
-    """Return ``value`` as a float if it is finite.
-
-    Parameters
-    ----------
-    name : str
-        Argument name used in the error message.
-    value : float
-        Value to check.
-
-    Returns
-    -------
-    float
-        ``float(value)``.
-
-    Raises
-    ------
-    ValueError
-        If ``value`` is NaN or infinite.
-
-    Examples
-    --------
-    >>> check_finite("force_est_n", float("nan"))
-    Traceback (most recent call last):
-    ...
-    ValueError: force_est_n must be finite, got nan
-    """
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    return float(value)
+    return check_positive("dt_s", dt_s)
 
 
 def check_update_args(force_est_n: float, setpoint_n: float, dt_s: float) -> tuple[float, float, float]:
@@ -171,5 +142,22 @@ def check_update_args(force_est_n: float, setpoint_n: float, dt_s: float) -> tup
     ValueError
         One line naming the first bad argument (non-finite force or setpoint, dt_s not > 0).
     """
+    try:
+        if 0.0 < dt_s < _INF and _isfinite(force_est_n) and _isfinite(setpoint_n):
+            return float(force_est_n), float(setpoint_n), float(dt_s)
+    except TypeError:
+        pass
     return (check_finite("force_est_n", force_est_n), check_finite("setpoint_n", setpoint_n),
             check_dt(dt_s))
+
+
+def check_reset_args(force_est_n: float, setpoint_n: float, command_v: float) -> tuple[float, float, float]:
+    """Validate the arguments of :meth:`Controller.reset`; return them as floats.
+
+    Raises
+    ------
+    ValueError
+        One line naming the first non-finite argument.
+    """
+    return (check_finite("force_est_n", force_est_n), check_finite("setpoint_n", setpoint_n),
+            check_finite("command_v", command_v))

@@ -43,7 +43,9 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from controllers.base import check_update_args
+from ebraille_sim.base.validation import check_keys, check_number
+
+from controllers.base import check_reset_args, check_update_args
 
 __all__ = ["LQGConfig", "LQG", "design", "config_from"]
 
@@ -63,13 +65,22 @@ class LQGConfig:
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"{f.name} must be a finite number, got {v!r}")
-            if f.name not in ("u_min_v", "u_max_v") and v <= 0:
-                raise ValueError(f"{f.name} must be > 0, got {v!r}")
+            limits = {} if f.name in ("u_min_v", "u_max_v") else {"lo": 0.0, "lo_open": True}
+            object.__setattr__(self, f.name, check_number(f.name, getattr(self, f.name), **limits))
         if not self.u_min_v < self.u_max_v:
-            raise ValueError("u_min_v must be < u_max_v")
+            raise ValueError(f"u_min_v must be < u_max_v, got u_min_v={self.u_min_v!r}, u_max_v={self.u_max_v!r}")
+
+    @classmethod
+    def from_dict(cls, d, *, base: LQGConfig | None = None) -> LQGConfig:
+        """A config from field values; omitted fields from ``base`` (default ``LQGConfig()``).
+
+        Raises
+        ------
+        ValueError
+            On an unknown key (named, with the allowed ones) or an invalid value.
+        """
+        check_keys("LQGConfig", d, [f.name for f in dataclasses.fields(cls)])
+        return dataclasses.replace(cls() if base is None else base, **d)
 
 
 def design(config: LQGConfig, plant: control.StateSpace, command_v: float, estimate_n: float) -> dict:
@@ -149,9 +160,7 @@ class LQG:
         return control.ss(Ac, Bc, Cc, Dc, dt=ts, inputs=["setpoint_n", "force_est_n"], outputs=["command_v"])
 
     def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
-        for n, v in (("force_est_n", force_est_n), ("setpoint_n", setpoint_n), ("command_v", command_v)):
-            if not math.isfinite(v):
-                raise ValueError(f"{n} must be finite, got {v!r}")
+        force_est_n, setpoint_n, command_v = check_reset_args(force_est_n, setpoint_n, command_v)
         self._clear()
         c = self.config
         u0 = min(max(command_v, c.u_min_v), c.u_max_v)
@@ -187,8 +196,4 @@ class LQG:
 
 def config_from(**gains) -> LQGConfig:
     """:class:`LQGConfig` from keyword arguments; an unknown key is a one-line error."""
-    names = {f.name for f in dataclasses.fields(LQGConfig)}
-    for k in gains:
-        if k not in names:
-            raise ValueError(f"unknown gain key {k!r}; allowed keys: {', '.join(sorted(names))}")
-    return LQGConfig(**gains)
+    return LQGConfig.from_dict(gains)

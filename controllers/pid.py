@@ -71,24 +71,144 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import numbers
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["DEFAULT_PID", "PID", "PIDConfig", "pid_from_dict"]
+from ebraille_sim.base.validation import check_finite, check_keys, check_number
+
+from controllers.base import check_update_args
+
+__all__ = ["DEFAULT_PID", "PID", "PIDConfig", "PIDCore", "pid_from_dict", "tracking_time_s"]
 
 _INF = math.inf
-_isfinite = math.isfinite
 
 
-def _as_real(name: str, value: Any) -> float:
-    """Return ``value`` as a float; reject bools, non-real values and NaN."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
-        raise ValueError(f"{name} must be a real number, got {value!r}")
-    value = float(value)
-    if math.isnan(value):
-        raise ValueError(f"{name} must not be NaN, got {value!r}")
-    return value
+def tracking_time_s(kp: float, ki: float, kd: float, explicit: float | None = None) -> float:
+    """Back-calculation time constant ``Tt`` of the gains (module docstring), s.
+
+    Parameters
+    ----------
+    kp, ki, kd : float
+        Proportional (V/N), integral (V/(N s)) and derivative (V s/N) gains, >= 0.
+    explicit : float or None, optional
+        A given ``Tt`` (``math.inf`` disables back-calculation); None derives it.
+
+    Returns
+    -------
+    float
+        ``math.inf`` when ``ki == 0``; else ``explicit`` if given; else ``sqrt(kd/ki)``
+        when ``kd > 0``, otherwise ``kp/ki``.
+
+    Examples
+    --------
+    >>> tracking_time_s(2.0, 8.0, 0.0)
+    0.25
+    >>> tracking_time_s(2.0, 0.0, 0.1)
+    inf
+    """
+    if ki == 0.0:
+        return _INF
+    if explicit is not None:
+        return explicit
+    if kd > 0.0:
+        return math.sqrt(kd / ki)
+    return kp / ki
+
+
+def tracking_gain_per_s(tt_s: float) -> float:
+    """``1/Tt`` as used by :meth:`PIDCore.step`: 0 for ``Tt = inf``, inf for ``Tt = 0``."""
+    return 0.0 if tt_s == _INF else (_INF if tt_s == 0.0 else 1.0 / tt_s)
+
+
+class PIDCore:
+    """The discrete PID recursion of the module docstring, with its state.
+
+    One step of: P on the weighted setpoint ``b r - y``, forward-Euler integral with
+    back-calculation anti-windup (tracking gain ``min(h / Tt, 1)``), backward-difference
+    filtered derivative of ``c r - y``, output clamped to ``[u_min, u_max]``.  The gains
+    are arguments of every step, so a caller may schedule them; :class:`PID` passes
+    constants, :class:`controllers.schedule.ScheduledPID` scheduled gains, a feedforward
+    and a mapped reference.  Arguments are not validated here (the callers do it once).
+
+    Attributes
+    ----------
+    i : float
+        Integrator ``I``, V.
+    d : float
+        Derivative term ``D``, V.
+    w_prev : float
+        ``c r - y`` of the last sample, N (meaningful once ``primed``).
+    e_prev : float
+        ``r - y`` of the last sample, N.
+    res_prev : float
+        Saturation residual ``u - v`` of the last sample, V.
+    primed : bool
+        False until the derivative memory holds a sample (no derivative kick).
+
+    Examples
+    --------
+    >>> core = PIDCore()
+    >>> core.step(0.0, 0.25, 1e-3, 2.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0, 1.0)
+    0.5
+    """
+
+    __slots__ = ("i", "d", "w_prev", "e_prev", "res_prev", "primed")
+
+    def __init__(self) -> None:
+        self.clear()
+
+    def clear(self) -> None:
+        """Zero the state; the next step takes its measurement as derivative memory."""
+        self.i = 0.0
+        self.d = 0.0
+        self.w_prev = 0.0
+        self.e_prev = 0.0
+        self.res_prev = 0.0
+        self.primed = False
+
+    def reset(self, y: float, r: float, u0: float, kp: float, b: float, c: float, ff: float) -> None:
+        """Bumpless start: the next step with the same ``y, r`` (and gains) returns ``u0``.
+
+        ``u0`` must already lie within the output limits.
+        """
+        self.i = u0 - kp * (b * r - y) - ff
+        self.d = 0.0
+        self.w_prev = c * r - y
+        self.e_prev = 0.0
+        self.res_prev = 0.0
+        self.primed = True
+
+    def step(self, y: float, r: float, h: float, kp: float, ki: float, kd: float, tf: float,
+             b: float, c: float, inv_tt: float, ff: float, umin: float, umax: float) -> float:
+        """Advance one sample of length ``h`` (s) and return the clamped command (V).
+
+        ``inv_tt`` is ``1/Tt`` (:func:`tracking_gain_per_s`), ``ff`` the feedforward added
+        before the saturation, ``tf`` the derivative filter time constant (s).
+        """
+        a = h * inv_tt
+        if a > 1.0:
+            a = 1.0
+        i = self.i + ki * h * self.e_prev + a * self.res_prev
+
+        w = c * r - y
+        if not self.primed:
+            self.w_prev = w
+            self.primed = True
+        d = (tf * self.d + kd * (w - self.w_prev)) / (tf + h)
+
+        v = kp * (b * r - y) + i + d + ff
+        u = v
+        if u > umax:
+            u = umax
+        elif u < umin:
+            u = umin
+
+        self.i = i
+        self.d = d
+        self.w_prev = w
+        self.e_prev = r - y
+        self.res_prev = u - v
+        return u
 
 
 @dataclasses.dataclass(frozen=True)
@@ -163,20 +283,14 @@ class PIDConfig:
             "setpoint_weight_d",
         )
         for name in nonneg + ("u_min_v", "u_max_v", "feedforward_v"):
-            value = _as_real(name, getattr(self, name))
-            if not _isfinite(value):
-                raise ValueError(f"{name} must be finite, got {value!r}")
-            if name in nonneg and value < 0.0:
-                raise ValueError(f"{name} must be >= 0, got {value!r}")
-            object.__setattr__(self, name, value)
+            lo = 0.0 if name in nonneg else None
+            object.__setattr__(self, name, check_number(name, getattr(self, name), lo=lo))
         if not self.u_min_v < self.u_max_v:
             raise ValueError(
                 f"u_min_v must be < u_max_v, got u_min_v={self.u_min_v!r}, u_max_v={self.u_max_v!r}"
             )
         if self.tracking_time_s is not None:
-            tt = _as_real("tracking_time_s", self.tracking_time_s)
-            if tt < 0.0:
-                raise ValueError(f"tracking_time_s must be >= 0 (inf disables), got {tt!r}")
+            tt = check_number("tracking_time_s", self.tracking_time_s, lo=0.0, finite=False)
             object.__setattr__(self, "tracking_time_s", tt)
 
     @property
@@ -190,13 +304,7 @@ class PIDConfig:
             back-calculation); else ``tracking_time_s`` if given; else
             ``sqrt(kd/ki)`` when ``kd > 0``, otherwise ``kp/ki``.
         """
-        if self.ki_v_per_ns == 0.0:
-            return _INF
-        if self.tracking_time_s is not None:
-            return self.tracking_time_s
-        if self.kd_vs_per_n > 0.0:
-            return math.sqrt(self.kd_vs_per_n / self.ki_v_per_ns)
-        return self.kp_v_per_n / self.ki_v_per_ns
+        return tracking_time_s(self.kp_v_per_n, self.ki_v_per_ns, self.kd_vs_per_n, self.tracking_time_s)
 
     def to_dict(self) -> dict[str, float | None]:
         """Return the fields as a plain dict (inverse of :meth:`from_dict`).
@@ -240,14 +348,11 @@ class PIDConfig:
         >>> PIDConfig.from_dict({"kp": 1.5})  # doctest: +ELLIPSIS
         Traceback (most recent call last):
         ...
-        ValueError: unknown PID gain key 'kp'; allowed keys: kp_v_per_n, ki_v_per_ns, ...
+        ValueError: unknown key 'kp' in PID gains; allowed: kp_v_per_n, ki_v_per_ns, ...
         """
         if not isinstance(d, Mapping):
             raise TypeError(f"PID gains must be a mapping, got {type(d).__name__}")
-        allowed = _FIELD_NAMES
-        for key in d:
-            if key not in allowed:
-                raise ValueError(f"unknown PID gain key {key!r}; allowed keys: {', '.join(allowed)}")
+        check_keys("PID gains", d, _FIELD_NAMES)
         return dataclasses.replace(DEFAULT_PID if base is None else base, **d)
 
 
@@ -321,12 +426,7 @@ class PID:
         "_umax",
         "_ff",
         "_inv_tt",
-        "_i",
-        "_d",
-        "_w_prev",
-        "_e_prev",
-        "_res_prev",
-        "_primed",
+        "_core",
     )
 
     def __init__(self, config: PIDConfig) -> None:
@@ -342,14 +442,8 @@ class PID:
         self._umin = config.u_min_v
         self._umax = config.u_max_v
         self._ff = config.feedforward_v
-        tt = config.effective_tracking_time_s
-        self._inv_tt = 0.0 if tt == _INF else (_INF if tt == 0.0 else 1.0 / tt)
-        self._i = 0.0
-        self._d = 0.0
-        self._w_prev = 0.0
-        self._e_prev = 0.0
-        self._res_prev = 0.0
-        self._primed = False
+        self._inv_tt = tracking_gain_per_s(config.effective_tracking_time_s)
+        self._core = PIDCore()
 
     @property
     def config(self) -> PIDConfig:
@@ -391,21 +485,10 @@ class PID:
         >>> round(pid.update(1.0, 1.0, 1e-3), 12)   # P = -1 V absorbed by I
         1.3
         """
-        if not _isfinite(force_est_n):
-            raise ValueError(f"force_est_n must be finite, got {force_est_n!r}")
-        if not _isfinite(setpoint_n):
-            raise ValueError(f"setpoint_n must be finite, got {setpoint_n!r}")
-        if not _isfinite(command_v):
-            raise ValueError(f"command_v must be finite, got {command_v!r}")
-        y = float(force_est_n)
-        r = float(setpoint_n)
-        u0 = min(max(float(command_v), self._umin), self._umax)
-        self._i = u0 - self._kp * (self._b * r - y) - self._ff
-        self._d = 0.0
-        self._w_prev = self._c * r - y
-        self._e_prev = 0.0
-        self._res_prev = 0.0
-        self._primed = True
+        y = check_finite("force_est_n", force_est_n)
+        r = check_finite("setpoint_n", setpoint_n)
+        u0 = min(max(check_finite("command_v", command_v), self._umin), self._umax)
+        self._core.reset(y, r, u0, self._kp, self._b, self._c, self._ff)
 
     def update(
         self,
@@ -437,41 +520,9 @@ class PID:
         ValueError
             If ``dt_s`` is not finite and > 0, or a force is not finite.
         """
-        if not 0.0 < dt_s < _INF:
-            raise ValueError(f"dt_s must be finite and > 0, got {dt_s!r}")
-        if not _isfinite(force_est_n):
-            raise ValueError(f"force_est_n must be finite, got {force_est_n!r}")
-        if not _isfinite(setpoint_n):
-            raise ValueError(f"setpoint_n must be finite, got {setpoint_n!r}")
-        h = float(dt_s)
-        y = float(force_est_n)
-        r = float(setpoint_n)
-
-        a = h * self._inv_tt
-        if a > 1.0:
-            a = 1.0
-        i = self._i + self._ki * h * self._e_prev + a * self._res_prev
-
-        w = self._c * r - y
-        if not self._primed:
-            self._w_prev = w
-            self._primed = True
-        tf = self._tf
-        d = (tf * self._d + self._kd * (w - self._w_prev)) / (tf + h)
-
-        v = self._kp * (self._b * r - y) + i + d + self._ff
-        u = v
-        if u > self._umax:
-            u = self._umax
-        elif u < self._umin:
-            u = self._umin
-
-        self._i = i
-        self._d = d
-        self._w_prev = w
-        self._e_prev = r - y
-        self._res_prev = u - v
-        return u
+        y, r, h = check_update_args(force_est_n, setpoint_n, dt_s)
+        return self._core.step(y, r, h, self._kp, self._ki, self._kd, self._tf, self._b, self._c,
+                               self._inv_tt, self._ff, self._umin, self._umax)
 
     def state(self) -> dict[str, float | None]:
         """Return the internal state as a small dict of floats.
@@ -492,12 +543,13 @@ class PID:
         >>> pid.state()["integrator_v"]
         0.2
         """
+        core = self._core
         return {
-            "integrator_v": self._i,
-            "derivative_v": self._d,
-            "prev_derivative_input_n": self._w_prev if self._primed else None,
-            "prev_error_n": self._e_prev,
-            "prev_saturation_residual_v": self._res_prev,
+            "integrator_v": core.i,
+            "derivative_v": core.d,
+            "prev_derivative_input_n": core.w_prev if core.primed else None,
+            "prev_error_n": core.e_prev,
+            "prev_saturation_residual_v": core.res_prev,
         }
 
     def set_state(self, state: Mapping[str, float | None]) -> None:
@@ -515,9 +567,7 @@ class PID:
         ValueError
             On an unknown or missing key, or a non-finite value.
         """
-        for key in state:
-            if key not in _STATE_KEYS:
-                raise ValueError(f"unknown PID state key {key!r}; allowed keys: {', '.join(_STATE_KEYS)}")
+        check_keys("PID state", state, _STATE_KEYS)
         for key in _STATE_KEYS:
             if key not in state:
                 raise ValueError(f"missing PID state key {key!r}; required keys: {', '.join(_STATE_KEYS)}")
@@ -527,17 +577,15 @@ class PID:
             if key == "prev_derivative_input_n" and value is None:
                 values[key] = None
                 continue
-            value = _as_real(key, value)
-            if not _isfinite(value):
-                raise ValueError(f"{key} must be finite, got {value!r}")
-            values[key] = value
+            values[key] = check_finite(key, value)
         w_prev = values["prev_derivative_input_n"]
-        self._i = values["integrator_v"]
-        self._d = values["derivative_v"]
-        self._w_prev = 0.0 if w_prev is None else w_prev
-        self._e_prev = values["prev_error_n"]
-        self._res_prev = values["prev_saturation_residual_v"]
-        self._primed = w_prev is not None
+        core = self._core
+        core.i = values["integrator_v"]
+        core.d = values["derivative_v"]
+        core.w_prev = 0.0 if w_prev is None else w_prev
+        core.e_prev = values["prev_error_n"]
+        core.res_prev = values["prev_saturation_residual_v"]
+        core.primed = w_prev is not None
 
 
 def pid_from_dict(d: Mapping[str, Any], *, base: PIDConfig | None = None) -> PID:

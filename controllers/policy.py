@@ -39,6 +39,8 @@ import os
 
 import numpy as np
 
+from ebraille_sim.base.validation import check_keys, check_number
+
 from controllers.base import check_dt, check_finite
 from controllers.features import N_OBS, N_Z, Z_PREV_ACTION, config_vector, observe, reset_features, write_observation
 
@@ -72,9 +74,7 @@ def read_metadata(json_path: str) -> dict:
             raise ValueError(f"invalid JSON in {json_path}: {exc}") from None
     if not isinstance(meta, dict):
         raise ValueError(f"{json_path} must hold a JSON object")
-    for key in meta:
-        if key not in _META_KEYS:
-            raise ValueError(f"unknown key {key!r} in {json_path}; allowed: {', '.join(_META_KEYS)}")
+    check_keys(json_path, meta, _META_KEYS)
     if meta.get("format") != POLICY_FORMAT:
         raise ValueError(f"{json_path}: format must be {POLICY_FORMAT!r}, got {meta.get('format')!r}")
     if meta.get("algo") not in ALGORITHMS:
@@ -82,13 +82,9 @@ def read_metadata(json_path: str) -> dict:
     env = meta.get("env")
     if not isinstance(env, dict):
         raise ValueError(f"{json_path}: 'env' must be an object")
-    for key in env:
-        if key not in _ENV_KEYS:
-            raise ValueError(f"unknown key {key!r} in {json_path} 'env'; allowed: {', '.join(_ENV_KEYS)}")
+    check_keys(f"{json_path} 'env'", env, _ENV_KEYS)
     for key in _ENV_KEYS:
-        v = env.get(key)
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise ValueError(f"{json_path}: env.{key} must be a finite number, got {v!r}")
+        check_number(f"{json_path}: env.{key}", env.get(key))
     return meta
 
 

@@ -1,8 +1,11 @@
 """PID with gain scheduling on force, feedforward, and a static reference map.
 
-Three additions to the plain PID of :mod:`controllers.pid` (same discretisation: forward
-Euler integral with back-calculation anti-windup, backward-difference filtered
-derivative on the measurement, output saturation), each switchable:
+Three additions to the plain PID of :mod:`controllers.pid`, each switchable.  The PID
+recursion itself (forward-Euler integral with back-calculation anti-windup, backward-
+difference filtered derivative of ``c r - y``, output saturation) is the same object,
+:class:`controllers.pid.PIDCore`: with the schedule, the feedforward and the reference map
+off, a :class:`ScheduledPID` returns exactly the commands of a :class:`controllers.pid.PID`
+with the same gains.
 
 **Gain scheduling on force.**  The loop gain grows with the pulp's tangent stiffness,
 ``K(F) = b + m F / c0`` at a relaxed equilibrium (:mod:`ebraille_sim.analysis.tuning`), which is why
@@ -10,8 +13,10 @@ one set of gains that is fast at 0.6 N oscillates at 2 N.  The scheduled gains a
 
     kp(F) = kp_ref K(F_ref) / K(F),  and the same factor for ki and kd,
 
-with ``F`` the scheduling force clipped to [0.2, 3] N and ``b, m, c0`` the nominal
-reader's.  The scheduling force is the setpoint (``schedule_on = "setpoint"``, default):
+with ``F`` the scheduling force clipped to the tactile range
+[``TACTILE_FORCE_MIN_N``, ``TACTILE_FORCE_MAX_N``] = [0.2, 3] N and ``b, m, c0`` the
+device's (:func:`ebraille_sim.physics.fingertip.tangent_stiffness_n_per_m` at the elastic
+force ``F / c0``).  The scheduling force is the setpoint (``schedule_on = "setpoint"``, default):
 it is noise-free and known ahead from the reading schedule; ``schedule_on = "estimate"``
 uses the measured force.
 
@@ -53,23 +58,37 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from ebraille_sim.physics.params import DeviceParams
+from ebraille_sim.base.validation import check_bool, check_choice, check_keys, check_number
+from ebraille_sim.physics.drivetrain import shaft_to_rack_per_m
+from ebraille_sim.physics.fingertip import tangent_stiffness_n_per_m
+from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N, DeviceParams
 
-from controllers.base import check_update_args
+from controllers.base import check_reset_args, check_update_args
+from controllers.pid import PIDConfig, PIDCore, tracking_gain_per_s, tracking_time_s
 
 __all__ = ["ScheduleConfig", "ScheduledPID", "make_scheduled", "make_feedforward", "stiffness_ratio",
-           "RECOMMENDED", "MS_1_6", "HAND"]
+           "pulp_stiffness_n_per_m", "RECOMMENDED", "MS_1_6", "HAND"]
 
-F_MIN_N, F_MAX_N = 0.2, 3.0
+F_MIN_N, F_MAX_N = TACTILE_FORCE_MIN_N, TACTILE_FORCE_MAX_N
+
+_NONNEG = ("kp_v_per_n", "ki_v_per_ns", "kd_vs_per_n", "derivative_filter_s", "setpoint_weight_p",
+           "setpoint_weight_d", "rate_deadband_n_per_s")
+_SWITCHES = ("schedule", "feedforward", "reference_map")
 
 
 @dataclass(frozen=True)
 class ScheduleConfig:
     """Gains at ``reference_force_n`` and the switches (see the module docstring).
+
+    The PID fields mean what they mean in :class:`controllers.pid.PIDConfig`
+    (``setpoint_weight_d`` is ``c``, ``tracking_time_s`` is ``Tt``; None derives it from the
+    scheduled gains at every sample).
 
     The default gains are the design docs/tuning.md recommends (:data:`RECOMMENDED`):
     ``ebraille-sim tune setpoint_steps --population 6 --evaluations 36 --ms-gain 0.5`` (family
@@ -79,6 +98,11 @@ class ScheduleConfig:
     sliding linearisation their Ms is at most 2.45 over the tuning population (2.0 or less
     at 63 of its 66 points); the design that meets the issue's Ms <= 1.6 there is
     :data:`MS_1_6`.
+
+    Raises
+    ------
+    ValueError
+        One line naming the offending field, its value and the admissible range.
     """
     kp_v_per_n: float = 0.81
     ki_v_per_ns: float = 1.8
@@ -93,27 +117,38 @@ class ScheduleConfig:
     rate_deadband_n_per_s: float = 0.05
     u_min_v: float = -6.0
     u_max_v: float = 6.0
+    setpoint_weight_d: float = 0.0
+    tracking_time_s: float | None = None
 
     def __post_init__(self):
-        if self.schedule_on not in ("estimate", "setpoint"):
-            raise ValueError(f"schedule_on must be 'estimate' or 'setpoint', got {self.schedule_on!r}")
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if f.name == "schedule_on":
-                continue
-            if f.type in ("bool", bool):
-                if not isinstance(v, bool):
-                    raise ValueError(f"{f.name} must be true or false, got {v!r}")
-                continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ValueError(f"{f.name} must be a finite number, got {v!r}")
-            if f.name not in ("u_min_v", "u_max_v") and v < 0:
-                raise ValueError(f"{f.name} must be >= 0, got {v!r}")
+        check_choice("schedule_on", self.schedule_on, ("estimate", "setpoint"))
+        for name in _SWITCHES:
+            check_bool(name, getattr(self, name))
+        for name in _NONNEG + ("u_min_v", "u_max_v"):
+            object.__setattr__(self, name, check_number(name, getattr(self, name),
+                                                        lo=0.0 if name in _NONNEG else None))
         if not self.u_min_v < self.u_max_v:
-            raise ValueError("u_min_v must be < u_max_v")
-        if not F_MIN_N <= self.reference_force_n <= F_MAX_N:
-            raise ValueError(f"reference_force_n must be in [{F_MIN_N}, {F_MAX_N}] N, got {self.reference_force_n}")
+            raise ValueError(f"u_min_v must be < u_max_v, got u_min_v={self.u_min_v!r}, u_max_v={self.u_max_v!r}")
+        object.__setattr__(self, "reference_force_n",
+                           check_number("reference_force_n", self.reference_force_n, F_MIN_N, F_MAX_N))
+        if self.tracking_time_s is not None:
+            object.__setattr__(self, "tracking_time_s",
+                               check_number("tracking_time_s", self.tracking_time_s, lo=0.0, finite=False))
 
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], *, base: ScheduleConfig | None = None) -> ScheduleConfig:
+        """A config from field values; omitted fields from ``base`` (default :data:`RECOMMENDED`).
+
+        Raises
+        ------
+        ValueError
+            On an unknown key (named, with the allowed ones) or an invalid value.
+        """
+        check_keys("ScheduleConfig", d, _FIELD_NAMES)
+        return dataclasses.replace(RECOMMENDED if base is None else base, **d)
+
+
+_FIELD_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(ScheduleConfig))
 
 RECOMMENDED = ScheduleConfig()
 """The design docs/tuning.md recommends shipping (the defaults of :class:`ScheduleConfig`)."""
@@ -128,43 +163,55 @@ HAND = ScheduleConfig(kp_v_per_n=2.0, ki_v_per_ns=8.0, kd_vs_per_n=0.0)
 """The default PID's gains at 1 N, scheduled, with the reference map (a hand design)."""
 
 
-def stiffness_ratio(force_n: float, reference_force_n: float, device: DeviceParams = DeviceParams()) -> float:
-    """``K(F_ref) / K(F)`` with ``K(F) = b + m F / c0`` (relaxed tangent stiffness)."""
+def pulp_stiffness_n_per_m(force_n: float, device: DeviceParams = DeviceParams()) -> float:
+    """Relaxed tangent stiffness of the pulp at contact force ``force_n``, N/m.
+
+    ``K(F) = b + m F / c0``: the tangent stiffness of the elastic law
+    (:func:`ebraille_sim.physics.fingertip.tangent_stiffness_n_per_m`) at the elastic force
+    ``F / c0`` on which a relaxed contact force ``F`` sits.
+    """
     f = device.finger
-    k = lambda x: f.stiffness_b_n_per_m + f.exponent_m_per_m * x / f.relax_weight_inf  # noqa: E731
-    return k(reference_force_n) / k(min(max(force_n, F_MIN_N), F_MAX_N))
+    return tangent_stiffness_n_per_m(force_n / f.relax_weight_inf, f.stiffness_b_n_per_m, f.exponent_m_per_m)
+
+
+def stiffness_ratio(force_n: float, reference_force_n: float, device: DeviceParams = DeviceParams()) -> float:
+    """``K(F_ref) / K(F)`` with ``K`` from :func:`pulp_stiffness_n_per_m`, ``F`` clipped to the tactile range."""
+    return (pulp_stiffness_n_per_m(reference_force_n, device)
+            / pulp_stiffness_n_per_m(min(max(force_n, F_MIN_N), F_MAX_N), device))
 
 
 class ScheduledPID:
-    """PID with optional gain schedule, feedforward and reference map (module docstring)."""
+    """PID with optional gain schedule, feedforward and reference map (module docstring).
+
+    The recursion is :class:`controllers.pid.PIDCore`; this class only chooses its gains
+    (the schedule), its feedforward and its reference (the map) at every sample.
+    """
 
     def __init__(self, config: ScheduleConfig = ScheduleConfig(), device: DeviceParams = DeviceParams(),
                  name: str = "pid_scheduled"):
+        if not isinstance(config, ScheduleConfig):
+            raise TypeError(f"config must be a ScheduleConfig, got {type(config).__name__}")
         self.config = config
         self.name = name
         self._dev = device
         m, d = device.motor, device.drivetrain
-        g = d.gear_ratio / d.pinion_radius_m
+        g = shaft_to_rack_per_m(d.gear_ratio, d.pinion_radius_m)
         self._v_per_n = m.resistance_ohm / (m.torque_constant_nm_per_a * g)
         self._mu = d.gear_loss_coefficient
         self._fc = m.friction_torque_nm * g + d.guide_coulomb_n
         self._ke_g = m.back_emf_v_s_per_rad * g
         if config.reference_map:
-            from ebraille_sim.estimation.calibration import steady_estimate
+            from ebraille_sim.estimation.calibration import calibrate_device, steady_estimate
             from ebraille_sim.estimation.models import load_estimator
-            from ebraille_sim.estimation.calibration import calibrate_device
             dev = calibrate_device(device)
             model = load_estimator(dev.estimator.model)
             self._map_f = np.linspace(F_MIN_N, F_MAX_N, 57)
             self._map_e = np.array([steady_estimate(model, f, dev.fsr, dev.circuit, 20.0) for f in self._map_f])
+        self._core = PIDCore()
         self._clear()
 
     def _clear(self):
-        self._i = 0.0
-        self._d = 0.0
-        self._y_prev = None
-        self._e_prev = 0.0
-        self._res_prev = 0.0
+        self._core.clear()
         self._r_prev = None
         self._dir = 1.0
 
@@ -174,13 +221,13 @@ class ScheduledPID:
         a = stiffness_ratio(force_n, c.reference_force_n, self._dev) if c.schedule else 1.0
         return c.kp_v_per_n * a, c.ki_v_per_ns * a, c.kd_vs_per_n * a
 
-    def pid_config_at(self, force_n: float):
+    def pid_config_at(self, force_n: float) -> PIDConfig:
         """The equivalent fixed :class:`~controllers.pid.PIDConfig` at ``force_n`` (for analysis)."""
-        from controllers.pid import PIDConfig
         kp, ki, kd = self.gains_at(force_n)
         c = self.config
         return PIDConfig(kp_v_per_n=kp, ki_v_per_ns=ki, kd_vs_per_n=kd, derivative_filter_s=c.derivative_filter_s,
-                         setpoint_weight_p=c.setpoint_weight_p, u_min_v=c.u_min_v, u_max_v=c.u_max_v)
+                         setpoint_weight_p=c.setpoint_weight_p, setpoint_weight_d=c.setpoint_weight_d,
+                         u_min_v=c.u_min_v, u_max_v=c.u_max_v, tracking_time_s=c.tracking_time_s)
 
     def reference(self, setpoint_n: float) -> float:
         """The estimate regulated for the true-force setpoint (identity without the map)."""
@@ -197,52 +244,37 @@ class ScheduledPID:
             return 0.0
         r = max(setpoint_n, 0.0)
         s = direction if abs(rate_n_per_s) < self.config.rate_deadband_n_per_s else math.copysign(1.0, rate_n_per_s)
-        f = self._dev.finger
-        k = f.stiffness_b_n_per_m + f.exponent_m_per_m * max(r, F_MIN_N) / f.relax_weight_inf
+        k = pulp_stiffness_n_per_m(max(r, F_MIN_N), self._dev)
         return self._v_per_n * ((1.0 + s * self._mu) * r + s * self._fc) + self._ke_g * rate_n_per_s / k
 
     def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
-        for n, v in (("force_est_n", force_est_n), ("setpoint_n", setpoint_n), ("command_v", command_v)):
-            if not math.isfinite(v):
-                raise ValueError(f"{n} must be finite, got {v!r}")
+        """Bumpless start from ``command_v`` (see :meth:`controllers.pid.PID.reset`)."""
+        y, sp, u = check_reset_args(force_est_n, setpoint_n, command_v)
         self._clear()
         c = self.config
-        kp, _, _ = self.gains_at(force_est_n if c.schedule_on == "estimate" else setpoint_n)
-        r = self.reference(setpoint_n)
-        u0 = min(max(command_v, c.u_min_v), c.u_max_v)
-        self._i = u0 - kp * (c.setpoint_weight_p * r - force_est_n) - self.feedforward_v(setpoint_n, 0.0)
-        self._y_prev = float(force_est_n)
-        self._r_prev = float(setpoint_n)
+        kp, _, _ = self.gains_at(y if c.schedule_on == "estimate" else sp)
+        u0 = min(max(u, c.u_min_v), c.u_max_v)
+        self._core.reset(y, self.reference(sp), u0, kp, c.setpoint_weight_p, c.setpoint_weight_d,
+                         self.feedforward_v(sp, 0.0))
+        self._r_prev = sp
 
     def update(self, force_est_n: float, setpoint_n: float, dt_s: float, motor_current_a=None) -> float:
-        check_update_args(force_est_n, setpoint_n, dt_s)
+        """One sample: schedule the gains, map the reference, add the feedforward, run the PID step."""
+        y, sp, h = check_update_args(force_est_n, setpoint_n, dt_s)
         c = self.config
-        h, y = float(dt_s), float(force_est_n)
-        rate = 0.0 if self._r_prev is None else (setpoint_n - self._r_prev) / h
-        self._r_prev = float(setpoint_n)
+        rate = 0.0 if self._r_prev is None else (sp - self._r_prev) / h
+        self._r_prev = sp
         if abs(rate) >= c.rate_deadband_n_per_s:
             self._dir = math.copysign(1.0, rate)
-        kp, ki, kd = self.gains_at(y if c.schedule_on == "estimate" else setpoint_n)
-        r = self.reference(setpoint_n)
-        tt = math.sqrt(kd / ki) if (kd > 0 and ki > 0) else (kp / ki if ki > 0 else math.inf)
-        a = min(h / tt, 1.0) if tt > 0 else 1.0
-        i = self._i + ki * h * self._e_prev + (a * self._res_prev if ki > 0 else 0.0)
-        if self._y_prev is None:
-            self._y_prev = y
-        d = (c.derivative_filter_s * self._d - kd * (y - self._y_prev)) / (c.derivative_filter_s + h)
-        v = kp * (c.setpoint_weight_p * r - y) + i + d + self.feedforward_v(setpoint_n, rate, self._dir)
-        u = min(max(v, c.u_min_v), c.u_max_v)
-        self._i, self._d, self._y_prev = i, d, y
-        self._e_prev = r - y
-        self._res_prev = u - v
-        return u
+        kp, ki, kd = self.gains_at(y if c.schedule_on == "estimate" else sp)
+        inv_tt = tracking_gain_per_s(tracking_time_s(kp, ki, kd, c.tracking_time_s))
+        return self._core.step(y, self.reference(sp), h, kp, ki, kd, c.derivative_filter_s,
+                               c.setpoint_weight_p, c.setpoint_weight_d, inv_tt,
+                               self.feedforward_v(sp, rate, self._dir), c.u_min_v, c.u_max_v)
 
 
 def _config(defaults: dict, gains: dict) -> ScheduleConfig:
-    names = {f.name for f in dataclasses.fields(ScheduleConfig)}
-    for k in gains:
-        if k not in names:
-            raise ValueError(f"unknown gain key {k!r}; allowed keys: {', '.join(sorted(names))}")
+    check_keys("the gains of a scheduled PID", gains, _FIELD_NAMES)
     return ScheduleConfig(**{**defaults, **gains})
 
 

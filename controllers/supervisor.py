@@ -66,28 +66,56 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import deque
+from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
-__all__ = ["SupervisorConfig", "Supervisor", "validate_section", "wrap_controller"]
+from ebraille_sim.base.validation import check_bool, check_keys, check_number
+from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, DeviceParams
 
-_SRC_MOTOR = "[R] Faulhaber 0816 006 SR datasheet"
+from controllers.base import check_dt
+
+__all__ = ["SupervisorConfig", "Supervisor", "RATED_CURRENT_A", "RATED_TO_STALL", "rated_current_a"]
+
+_NOMINAL = DeviceParams()
+
+RATED_CURRENT_A: dict[str, float] = {"faulhaber_0816_006sr": 0.19}
+"""Continuous (rated) motor current by motor preset, A ([R] Faulhaber 0816 006 SR datasheet).
+A motor without an entry is rated at :data:`RATED_TO_STALL` of its stall current."""
+
+RATED_TO_STALL = 0.19 / (6.0 / 21.2)
+"""Rated over stall current at the nominal supply, [E] the Faulhaber 0816's ratio (0.67)."""
+
+
+def rated_current_a(device: DeviceParams) -> float:
+    """Continuous current of ``device``'s motor, A (:data:`RATED_CURRENT_A`, else the ratio)."""
+    m = device.motor
+    if m.name in RATED_CURRENT_A:
+        return RATED_CURRENT_A[m.name]
+    return RATED_TO_STALL * device.driver_supply_v / m.resistance_ohm
 
 
 @dataclass(frozen=True)
 class SupervisorConfig:
-    """Limits and detector settings of :class:`Supervisor` (SI units in the names)."""
-    force_cap_n: float = 3.0
-    """Cap on the estimated force (upper end of the 0.2-3 N reading range, seed paper)."""
+    """Limits and detector settings of :class:`Supervisor` (SI units in the names).
+
+    The motor limits default to the nominal device's (:class:`DeviceParams`);
+    :meth:`for_device` derives them from another device.  Every numeric field must be a
+    positive finite number.
+    """
+    force_cap_n: float = TACTILE_FORCE_MAX_N
+    """Cap on the estimated force (upper end of the tactile range, [R] seed paper)."""
     cap_margin_n: float = 0.3
     slew_v_per_s: float = 600.0
     """Full scale (6 V) in 10 ms, one estimator period."""
-    rated_current_a: float = 0.19
-    """Continuous current [R] Faulhaber 0816 006 SR."""
-    stall_current_a: float = 6.0 / 21.2
-    """Stall current at the 6 V supply, [D] U / R with R = 21.2 ohm."""
+    rated_current_a: float = rated_current_a(_NOMINAL)
+    """Continuous motor current (:func:`rated_current_a`)."""
+    stall_current_a: float = _NOMINAL.driver_supply_v / _NOMINAL.motor.resistance_ohm
+    """Stall current at the driver supply, [D] U / R."""
     overload_time_s: float = 0.5
     """Time allowed at the stall current before the I^2 t trip [E]."""
-    motor_resistance_ohm: float = 21.2
+    motor_resistance_ohm: float = _NOMINAL.motor.resistance_ohm
+    """Armature resistance R of the device's motor (back-EMF ``u - R i`` and motion detection)."""
     retract_v: float = 2.0
     retract_s: float = 0.6
     retract_moving_s: float = 0.05
@@ -109,29 +137,55 @@ class SupervisorConfig:
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
             if f.name == "enabled":
-                if not isinstance(v, bool):
-                    raise ValueError(f"supervisor enabled must be true or false, got {v!r}")
+                check_bool(f.name, self.enabled)
                 continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-                raise ValueError(f"supervisor {f.name} must be a positive finite number, got {v!r}")
-            object.__setattr__(self, f.name, float(v))
+            object.__setattr__(self, f.name, check_number(f.name, getattr(self, f.name), lo=0.0, lo_open=True))
         if self.cap_margin_n >= self.force_cap_n:
-            raise ValueError(f"supervisor cap_margin_n ({self.cap_margin_n:g}) must be below force_cap_n "
+            raise ValueError(f"cap_margin_n ({self.cap_margin_n:g}) must be below force_cap_n "
                              f"({self.force_cap_n:g})")
         if self.out_of_range_n <= self.force_cap_n:
-            raise ValueError(f"supervisor out_of_range_n ({self.out_of_range_n:g}) must exceed force_cap_n "
+            raise ValueError(f"out_of_range_n ({self.out_of_range_n:g}) must exceed force_cap_n "
                              f"({self.force_cap_n:g})")
         if self.contact_lost_n >= self.contact_on_n:
-            raise ValueError("supervisor contact_lost_n must be below contact_on_n")
+            raise ValueError(f"contact_lost_n ({self.contact_lost_n:g}) must be below contact_on_n "
+                             f"({self.contact_on_n:g})")
         if self.stall_current_a <= self.rated_current_a:
-            raise ValueError("supervisor stall_current_a must exceed rated_current_a")
+            raise ValueError(f"stall_current_a ({self.stall_current_a:g}) must exceed rated_current_a "
+                             f"({self.rated_current_a:g})")
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], device: DeviceParams | None = None) -> SupervisorConfig:
+        """:meth:`for_device` with the fields of a mapping; an unknown key is a one-line error."""
+        check_keys("SupervisorConfig", d, _FIELD_NAMES)
+        return cls.for_device(_NOMINAL if device is None else device, **d)
+
+    @classmethod
+    def for_device(cls, device: DeviceParams, **overrides: Any) -> SupervisorConfig:
+        """The defaults with the motor limits of ``device``, then ``overrides``.
+
+        ``motor_resistance_ohm`` is the motor's R, ``stall_current_a`` the driver supply
+        over R and ``rated_current_a`` from :func:`rated_current_a`.
+
+        Examples
+        --------
+        >>> SupervisorConfig.for_device(DeviceParams()) == SupervisorConfig()
+        True
+        """
+        check_keys("SupervisorConfig", overrides, _FIELD_NAMES)
+        m = device.motor
+        derived = {"motor_resistance_ohm": m.resistance_ohm,
+                   "stall_current_a": device.driver_supply_v / m.resistance_ohm,
+                   "rated_current_a": rated_current_a(device)}
+        return cls(**{**derived, **overrides})
 
     @property
     def i2t_limit_a2s(self) -> float:
         """Trip level of the I^2 t integral, A^2 s."""
         return (self.stall_current_a ** 2 - self.rated_current_a ** 2) * self.overload_time_s
+
+
+_FIELD_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(SupervisorConfig))
 
 
 class _Window:
@@ -233,7 +287,7 @@ class Supervisor:
         """One period: run the detectors, then pass, shape or replace the inner command."""
         c = self.config
         if not 0.0 < dt_s < math.inf:
-            raise ValueError(f"dt_s must be finite and > 0, got {dt_s!r}")
+            check_dt(dt_s)
         if not c.enabled:
             return self.inner.update(force_est_n, setpoint_n, dt_s, motor_current_a)
         self.t += dt_s

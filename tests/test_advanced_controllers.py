@@ -1,4 +1,5 @@
 """Gain-scheduled PID, feedforward, LQG: registry, laws, loop robustness and closed-loop comparison."""
+import dataclasses
 import math
 import subprocess
 import sys
@@ -9,7 +10,7 @@ import pytest
 
 import controllers
 from ebraille_sim.analysis.tuning import make_lqg
-from controllers.pid import DEFAULT_PID, PID
+from controllers.pid import DEFAULT_PID, PID, PIDConfig
 from ebraille_sim.analysis.robust import evaluate, linearisation_points, population_ms, summarise, tuning_population
 from controllers.schedule import ScheduleConfig, ScheduledPID, stiffness_ratio
 from ebraille_sim.physics.params import DeviceParams
@@ -28,9 +29,9 @@ def test_registered_and_listed():
 
 
 def test_unknown_gain_is_rejected():
-    with pytest.raises(ValueError, match="unknown gain key 'kp'"):
+    with pytest.raises(ValueError, match="unknown key 'kp' in the gains of a scheduled PID; allowed: kp_v_per_n"):
         controllers.make("pid_scheduled", kp=1.0)
-    with pytest.raises(ValueError, match="unknown gain key"):
+    with pytest.raises(ValueError, match="unknown key 'q' in LQGConfig"):
         controllers.make("lqg", q=1.0)
 
 
@@ -42,6 +43,82 @@ def test_schedule_follows_the_pulp_stiffness():
     assert kp2 == pytest.approx(ScheduleConfig().kp_v_per_n * k(1.0) / k(2.0))
     assert c.gains_at(5.0) == c.gains_at(3.0)                     # clipped to the reading range
     assert stiffness_ratio(1.0, 1.0) == 1.0
+
+
+# Commands of the shipped factories recorded before the PID recursion was shared with
+# controllers.pid (reset from 0.4 N / 0.5 N / 0.3 V, then the inputs of _reference_inputs).
+# They agree to the last bits: the pulp stiffness is now the law's b + m (F/c0) instead of
+# b + (m F)/c0, and the tracking gain h (1/Tt) instead of h/Tt (as in the plain PID).
+_RECORDED = {
+    "pid_scheduled": [
+        0.3, -0.0044083929270098965, -0.24319995145306944, -0.14698915585182593, -0.33137295469817657,
+        -0.25336609312165104, -0.3560386379408197, -0.47453659570566065, -0.36914429375799485,
+        -0.4155332772803569, -0.32133410953298713, -0.4044579711041879, -0.4282435749448003,
+        -0.21184228335244656, -0.18627578230071726, 0.006744490527551633, -0.0027202647289234216,
+        -0.014621649812008322, 0.14423100260721158, 0.10909810969898806, 0.25719624536738844,
+        0.19780260556631585, 0.1504761261214767, 0.29914829768261114],
+    "pid_feedforward": [
+        0.3, 2.676890955898181, 2.26028618611469, 1.4378630044550267, 1.8908657398714275, 1.856528052576393,
+        1.0188886742253995, 1.45210022023379, 1.482372407724029, 0.8249004065118926, 1.4053500920868611,
+        1.2702747878650145, 0.7244769178778903, -1.2779227916937947, -1.2638441243320462,
+        -0.882174802864063, -1.1043665486321337, -1.1288986880651255, -0.7713048923215877,
+        -1.0317372910370435, -0.8976173847169555, -0.7470486577799135, -1.0338340334357357,
+        -0.9007440155925022],
+}
+
+
+def _reference_inputs():
+    for k in range(24):
+        r = 0.5 + 0.05 * k if k < 12 else 1.1 - 0.02 * (k - 12)
+        yield r - 0.1 + 0.013 * ((k * 7) % 5), r, (1e-3 if k % 3 else 1.5e-3)
+
+
+@pytest.mark.parametrize("name", sorted(_RECORDED))
+def test_shipped_schedules_give_the_recorded_commands(name):
+    c = controllers.make(name)
+    c.reset(force_est_n=0.4, setpoint_n=0.5, command_v=0.3)
+    got = [c.update(y, r, h) for y, r, h in _reference_inputs()]
+    assert got == pytest.approx(_RECORDED[name], rel=0.0, abs=1e-14)
+
+
+@pytest.mark.parametrize("extra", [
+    {},
+    {"setpoint_weight_p": 0.6, "setpoint_weight_d": 0.3},
+    {"tracking_time_s": 0.05},
+    {"tracking_time_s": math.inf},
+    {"kd_vs_per_n": 0.0},
+    {"ki_v_per_ns": 0.0},
+])
+def test_scheduled_pid_with_everything_off_is_the_plain_pid_bit_for_bit(extra):
+    gains = {"kp_v_per_n": 1.7, "ki_v_per_ns": 9.0, "kd_vs_per_n": 0.02, "derivative_filter_s": 0.004,
+             "u_min_v": -2.0, "u_max_v": 2.5, **extra}
+    sched = ScheduledPID(ScheduleConfig(schedule=False, feedforward=False, reference_map=False, **gains))
+    pid = PID(PIDConfig(**gains))
+    rng = np.random.default_rng(11)
+    for c in (sched, pid):
+        c.reset(force_est_n=0.3, setpoint_n=0.8, command_v=0.7)
+    a, b, saturated = [], [], 0
+    for k in range(4000):
+        r = float(rng.uniform(0.2, 3.0)) if k % 40 == 0 else r
+        y = float(r + rng.normal(0.0, 0.8))
+        h = float(rng.uniform(0.5e-3, 2e-3))
+        a.append(sched.update(y, r, h))
+        b.append(pid.update(y, r, h))
+        saturated += b[-1] in (-2.0, 2.5)
+    assert a == b
+    assert 100 < saturated < 3900          # the anti-windup path is exercised
+
+
+def test_schedule_and_supervisor_limits_come_from_the_laws():
+    from ebraille_sim.physics.fingertip import tangent_stiffness_n_per_m
+    from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N
+    from controllers.schedule import F_MAX_N, F_MIN_N, pulp_stiffness_n_per_m
+    f = DeviceParams().finger
+    assert (F_MIN_N, F_MAX_N) == (TACTILE_FORCE_MIN_N, TACTILE_FORCE_MAX_N)
+    assert pulp_stiffness_n_per_m(1.5) == tangent_stiffness_n_per_m(1.5 / f.relax_weight_inf,
+                                                                     f.stiffness_b_n_per_m, f.exponent_m_per_m)
+    soft = DeviceParams(finger=dataclasses.replace(f, stiffness_b_n_per_m=2 * f.stiffness_b_n_per_m))
+    assert stiffness_ratio(2.0, 1.0, soft) > stiffness_ratio(2.0, 1.0)   # a larger b flattens K(F)
 
 
 def test_feedforward_static_and_rate_terms():

@@ -158,7 +158,8 @@ def test_cli_bad_scenario_file_writes_nothing(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "ebraille_sim", "run", str(bad), "--out", str(out)],
                           capture_output=True, text=True, cwd=ROOT)
     assert proc.returncode == 2
-    assert proc.stderr.strip() == f"error: {bad.name}: [reading] wpm must be finite, got nan"
+    assert proc.stderr.strip() == (f"error: {bad.name}: [reading] wpm must be finite, got nan; "
+                                   "admissible: a finite number in (0, 1000]")
     assert "Traceback" not in proc.stderr
     assert not out.exists()
 

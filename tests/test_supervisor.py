@@ -144,7 +144,8 @@ def test_disabled_supervisor_passes_through():
 
 @pytest.mark.parametrize("section,msg", [
     ({"force_cap": 3.0}, "unknown key 'force_cap' in \\[supervisor\\]"),
-    ({"force_cap_n": -1.0}, "force_cap_n must be a positive finite number"),
+    ({"force_cap_n": -1.0}, "force_cap_n must be > 0, got -1.0"),
+    ({"retract_v": float("nan")}, "retract_v must be finite, got nan"),
     ({"cap_margin_n": 5.0}, "cap_margin_n"),
     ({"enabled": 1}, "enabled must be true or false"),
 ])
@@ -156,3 +157,22 @@ def test_validate_section_errors(section, msg):
 def test_wrap_controller_uses_the_section():
     sup = wrap_controller(validate_section("x.toml", {"force_cap_n": 2.0, "cap_margin_n": 0.2}), Const(1.0), 1e-3)
     assert isinstance(sup, Supervisor) and sup.config.force_cap_n == 2.0
+
+
+def test_motor_limits_follow_the_device():
+    from ebraille_sim.physics.params import MOTORS, TACTILE_FORCE_MAX_N, DeviceParams
+    nominal = SupervisorConfig()
+    assert nominal == SupervisorConfig.for_device(DeviceParams())
+    assert (nominal.motor_resistance_ohm, nominal.stall_current_a, nominal.rated_current_a) == (21.2, 6.0 / 21.2, 0.19)
+    assert nominal.force_cap_n == TACTILE_FORCE_MAX_N
+    for name, motor in MOTORS.items():
+        dev = DeviceParams(motor=motor, driver_supply_v=motor.nominal_voltage_v)
+        c = SupervisorConfig.for_device(dev)
+        assert c.motor_resistance_ohm == motor.resistance_ohm
+        assert c.stall_current_a == pytest.approx(motor.nominal_voltage_v / motor.resistance_ohm)
+        assert 0 < c.rated_current_a < c.stall_current_a
+    maxon = DeviceParams(motor=MOTORS["maxon_dcx6m_3v"], driver_supply_v=3.0)
+    assert SupervisorConfig.for_device(maxon).motor_resistance_ohm == 8.9
+    sup = wrap_controller({"force_cap_n": 2.0, "cap_margin_n": 0.2}, Const(1.0), 1e-3, device=maxon)
+    assert sup.config.motor_resistance_ohm == 8.9 and sup.config.force_cap_n == 2.0
+    assert SupervisorConfig.for_device(maxon, motor_resistance_ohm=9.5).motor_resistance_ohm == 9.5

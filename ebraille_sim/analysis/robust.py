@@ -329,7 +329,8 @@ def gains_document(cfg, family: str) -> dict:
     g = {}
     for f in dataclasses.fields(cfg):
         v = getattr(cfg, f.name)
-        g[f.name] = v if isinstance(v, (bool, str)) else float(v)
+        if v is not None:                  # None = derived (e.g. tracking_time_s); TOML has no null
+            g[f.name] = v if isinstance(v, (bool, str)) else float(v)
     return {"controller": family, "gains": g}
 
 

@@ -58,6 +58,8 @@ import numpy as np
 import scipy.interpolate
 import scipy.signal
 from ebraille_sim.base.compiled import njit
+from ebraille_sim.base.fields import sourced
+from ebraille_sim.base.validation import check_number
 
 from ebraille_sim.plant.kernel import advance_sensor_only
 from ebraille_sim.plant.layout import N_INPUT, S, U
@@ -94,10 +96,6 @@ ACTUATED_MASS_KG = 0.0491e-3
 _I_VF = S["fsr_voltage_v"]
 
 
-def _meta(default: Any, unit: str, source: str, **flags):
-    return field(default=default, metadata={"unit": unit, "source": source, **flags})
-
-
 # ---------------------------------------------------------------------------
 # instrument parameters
 # ---------------------------------------------------------------------------
@@ -107,13 +105,13 @@ class ActuatorParams:
 
     The servo follows the (quantised) command as ``y'' = wn^2 (y_cmd - y) - 2 zeta wn y'``.
     """
-    resolution_m: float = _meta(1.5e-6, "m", "[R] seed paper: minimum controllable displacement 1.5e-3 mm",
+    resolution_m: float = sourced(1.5e-6, "m", "[R] seed paper: minimum controllable displacement 1.5e-3 mm",
                                 nonneg=True)
-    servo_natural_hz: float = _meta(100.0, "Hz", "[E] position loop of a moving-magnet bench actuator at "
+    servo_natural_hz: float = sourced(100.0, "Hz", "[E] position loop of a moving-magnet bench actuator at "
                                     "strokes of tens of micrometres; well above the 20 Hz chirp end",
                                     positive=True)
-    servo_damping_ratio: float = _meta(0.7, "-", "[E] a tuned position loop", positive=True)
-    displacement_resolution_m: float = _meta(0.2e-6, "m", "[E] displacement transducer read by a 16-bit "
+    servo_damping_ratio: float = sourced(0.7, "-", "[E] a tuned position loop", positive=True)
+    displacement_resolution_m: float = sourced(0.2e-6, "m", "[E] displacement transducer read by a 16-bit "
                                              "channel over a +/-6.5 mm stroke", nonneg=True)
 
     def __post_init__(self):
@@ -123,11 +121,11 @@ class ActuatorParams:
 @dataclass(frozen=True)
 class LoadCellParams:
     """Miniature load cell in series with the FSR, read by the bench's acquisition channel."""
-    range_n: float = _meta(22.24, "N", "[R] seed paper: low-range 5 lb (about 22 N) Honeywell miniature cell",
+    range_n: float = sourced(22.24, "N", "[R] seed paper: low-range 5 lb (about 22 N) Honeywell miniature cell",
                            positive=True)
-    noise_n_rms: float = _meta(2.2e-3, "N", "[E] 0.01 % of full scale, typical of a miniature strain-gauge "
+    noise_n_rms: float = sourced(2.2e-3, "N", "[E] 0.01 % of full scale, typical of a miniature strain-gauge "
                                "cell through a lab amplifier at 100 Hz", nonneg=True)
-    resolution_n: float = _meta(2.0 * 22.24 / 2 ** 16, "N", "[E] 16-bit acquisition over +/- full scale "
+    resolution_n: float = sourced(2.0 * 22.24 / 2 ** 16, "N", "[E] 16-bit acquisition over +/- full scale "
                                 "(0.68 mN)", nonneg=True)
 
     def __post_init__(self):
@@ -148,10 +146,10 @@ class FilmParams:
     ("a second-order system whose parameters are functions of the exciting frequency"):
     a profile declares its excitation frequency (:func:`profile_signal`).
     """
-    source: str = _meta("table3", "-", "[R] seed paper Table 3 / eqs. 3-4")
-    mass_kg: float = _meta(ACTUATED_MASS_KG, "kg", "[R] seed paper eq. 2, m_ac = 0.0491 g", nonneg=True)
-    stiffness_scale: float = _meta(1.0, "-", "[E] multiplier for other FSR units or fixtures", positive=True)
-    damping_scale: float = _meta(1.0, "-", "[E] multiplier for other FSR units or fixtures", nonneg=True)
+    source: str = sourced("table3", "-", "[R] seed paper Table 3 / eqs. 3-4")
+    mass_kg: float = sourced(ACTUATED_MASS_KG, "kg", "[R] seed paper eq. 2, m_ac = 0.0491 g", nonneg=True)
+    stiffness_scale: float = sourced(1.0, "-", "[E] multiplier for other FSR units or fixtures", positive=True)
+    damping_scale: float = sourced(1.0, "-", "[E] multiplier for other FSR units or fixtures", nonneg=True)
 
     def __post_init__(self):
         check_finite(self)
@@ -209,20 +207,20 @@ class BenchParams:
     load_cell: LoadCellParams = LoadCellParams()
     film: FilmParams = FilmParams()
     device: DeviceParams = field(default_factory=default_bench_device)
-    sample_rate_hz: float = _meta(100.0, "Hz", "[R] seed paper: all loadings sampled at 100 Hz", positive=True)
-    internal_rate_hz: float = _meta(1000.0, "Hz", "[E] servo, film and FSR sample rate inside the bench; "
+    sample_rate_hz: float = sourced(100.0, "Hz", "[R] seed paper: all loadings sampled at 100 Hz", positive=True)
+    internal_rate_hz: float = sourced(1000.0, "Hz", "[E] servo, film and FSR sample rate inside the bench; "
                                     "a whole multiple of sample_rate_hz and the device's sensor rate",
                                     positive=True)
-    cutoff_hz: float = _meta(40.0, "Hz", "[R] seed paper: content above 40 Hz filtered out", positive=True)
-    min_force_n: float = _meta(0.2, "N", "[R] seed paper: tactile forces 0.2-3 N; the preload",
+    cutoff_hz: float = sourced(40.0, "Hz", "[R] seed paper: content above 40 Hz filtered out", positive=True)
+    min_force_n: float = sourced(0.2, "N", "[R] seed paper: tactile forces 0.2-3 N; the preload",
                                positive=True)
-    max_force_n: float = _meta(3.0, "N", "[R] seed paper: tactile forces 0.2-3 N", positive=True)
-    ramp_s: float = _meta(1.0, "s", "[E] positioning the effector onto the FSR with the micro-adjuster",
+    max_force_n: float = sourced(3.0, "N", "[R] seed paper: tactile forces 0.2-3 N", positive=True)
+    ramp_s: float = sourced(1.0, "s", "[E] positioning the effector onto the FSR with the micro-adjuster",
                           positive=True)
-    settle_s: float = _meta(10.0, "s", "[E] time at preload before a recording starts", nonneg=True)
-    baseline_s: float = _meta(2.0, "s", "[E] recorded at preload before the excitation; its mean is the "
+    settle_s: float = sourced(10.0, "s", "[E] time at preload before a recording starts", nonneg=True)
+    baseline_s: float = sourced(2.0, "s", "[E] recorded at preload before the excitation; its mean is the "
                               "offset removed by detrending", positive=True)
-    tail_s: float = _meta(1.0, "s", "[E] recorded at preload after the excitation", nonneg=True)
+    tail_s: float = sourced(1.0, "s", "[E] recorded at preload after the excitation", nonneg=True)
 
     def __post_init__(self):
         check_finite(self)
@@ -287,9 +285,7 @@ class Profile:
         if self.shape not in _SHAPES:
             raise ValueError(f"unknown profile shape {self.shape!r}; allowed: {', '.join(_SHAPES)}")
         for name in ("frequency_hz", "periods", "hold_s", "hold_fraction"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise ValueError(f"Profile.{name} must be a finite number >= 0, got {v!r}")
+            check_number(f"Profile.{name}", getattr(self, name), lo=0.0)
         if self.shape in ("sine", "square", "triangle", "step") and not (self.frequency_hz > 0 and self.periods > 0):
             raise ValueError(f"a {self.shape} profile needs frequency_hz > 0 and periods > 0")
         if self.shape == "hold" and not self.hold_s > 0:

@@ -45,6 +45,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ebraille_sim.base.validation import check_number
 from ebraille_sim.identification.bench import (ACTUATED_MASS_KG, EQ3_DAMPING_COEFFS, EQ4_STIFFNESS_COEFFS, TABLE3_DAMPING_N_S_PER_M,
                     TABLE3_FREQUENCIES_HZ, TABLE3_STIFFNESS_N_PER_M, BenchParams, BenchRecord, Profile,
                     _seed_sequence, run_profile)
@@ -226,8 +227,7 @@ def dma_test(bench: BenchParams | None = None, frequencies_hz=DMA_FREQUENCIES_HZ
     if not freqs or any(not (math.isfinite(f) and f > 0) for f in freqs):
         raise ValueError(f"frequencies_hz must be positive numbers, got {frequencies_hz!r}")
     for name, v, lo in (("cycles", cycles, 1), ("settle_cycles", settle_cycles, 0)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-            raise ValueError(f"{name} must be an int >= {lo}, got {v!r}")
+        check_number(name, v, lo=lo, integer=True)
     children = _seed_sequence(seed).spawn(len(freqs))
     points = []
     for f, ch in zip(freqs, children):

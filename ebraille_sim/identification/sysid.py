@@ -74,6 +74,8 @@ import numpy as np
 import scipy.optimize
 from scipy.signal import lfilter
 
+from ebraille_sim.base.validation import check_number
+
 from ebraille_sim.estimation.blockmodels import BlockModel, LinearBF, PiecewiseLinear, fitness
 from ebraille_sim.estimation.paper_models import KINDS, ORDERS, SAMPLE_TIME_S, paper_model
 
@@ -663,10 +665,7 @@ def _check_signal(x: Any, name: str) -> np.ndarray:
 
 
 def _check_int(v: Any, name: str, lo: int, hi: int | None = None) -> int:
-    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < lo or (hi is not None and v > hi):
-        rng = f">= {lo}" if hi is None else f"in {lo}..{hi}"
-        raise ValueError(f"{name} must be an int {rng}, got {v!r}")
-    return int(v)
+    return check_number(name, v, lo, hi, integer=True)
 
 
 def fit_report(kind: str, u: Any, y: Any, order: int, nk: int | None = None, *, dt_s: float = SAMPLE_TIME_S,
@@ -734,10 +733,8 @@ def fit_report(kind: str, u: Any, y: Any, order: int, nk: int | None = None, *, 
     if not (fix_b == "largest" or (isinstance(fix_b, (int, np.integer)) and not isinstance(fix_b, bool)
                                    and 0 <= fix_b < order)):
         raise ValueError(f"fix_b must be 'largest' or an index 0..{order - 1}, got {fix_b!r}")
-    if not (isinstance(margin, (int, float)) and 0 < margin < 0.5):
-        raise ValueError(f"margin must be a number in (0, 0.5), got {margin!r}")
-    if not (isinstance(dt_s, (int, float)) and math.isfinite(dt_s) and dt_s > 0):
-        raise ValueError(f"dt_s must be a positive number, got {dt_s!r}")
+    margin = check_number("margin", margin, 0.0, 0.5, lo_open=True, hi_open=True)
+    dt_s = check_number("dt_s", dt_s, lo=0.0, lo_open=True)
     nks = list(range(max_nk + 1)) if nk is None else [_check_int(nk, "nk", 0, 50)]
     n_par = 2 * order + (2 * nbp if kind != "linear" else 0) * (2 if kind == "hammerstein-wiener" else 1)
     if u.size < 10 * (n_par + max(nks) + 1):

@@ -69,10 +69,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
+from ebraille_sim.base.fields import sourced
+from ebraille_sim.base.validation import check_keys, check_number, check_pair
 from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2
 from ebraille_sim.scenarios.spec import ScenarioError
 
@@ -81,10 +83,6 @@ __all__ = ["KINDS", "validate_section", "build_inputs", "parameter_table", "band
            "Orientation", "FSRTemperature", "FSRDrift", "Battery"]
 
 G_M_PER_S2 = STANDARD_GRAVITY_M_PER_S2
-
-
-def _q(default, unit, lo, hi, source, kind="float"):
-    return field(default=default, metadata={"unit": unit, "lo": lo, "hi": hi, "source": source, "kind": kind})
 
 
 # --------------------------------------------------------------------------------------
@@ -189,10 +187,12 @@ class Tremor:
     :func:`strap_transmission` (0.006 at 10 Hz for a 15 g frame on a 10 N/mm strap [E],
     strap stiffness 5-20 N/mm from parameters section 6).
     """
-    rms_m: float = _q(15e-6, "m", 0.0, 1e-3, "[R]/[E] Growdon 2000 ~30 um mean; Carignan 2009 band share")
-    band_hz: tuple = _q((8.0, 12.0), "Hz", 0.0, 100.0, "[R] Sutton & Sykes 1967; Lakie 2015", kind="band")
-    transmission: float = _q(1.0, "-", 0.0, 1.0, "[E] 1 = frame does not follow the finger; "
-                             "strap_transmission() for a strapped frame")
+    rms_m: float = sourced(15e-6, "m", "[R]/[E] Growdon 2000 ~30 um mean; Carignan 2009 band share",
+                           lo=0.0, hi=1e-3, kind="float")
+    band_hz: tuple = sourced((8.0, 12.0), "Hz", "[R] Sutton & Sykes 1967; Lakie 2015",
+                             lo=0.0, hi=100.0, kind="band")
+    transmission: float = sourced(1.0, "-", "[E] 1 = frame does not follow the finger; "
+                             "strap_transmission() for a strapped frame", lo=0.0, hi=1.0, kind="float")
 
     def inputs(self, t_s, rng, device):
         x = band_limited_noise(t_s, self.band_hz[0], self.band_hz[1], self.rms_m, rng)
@@ -211,8 +211,8 @@ class Pressing:
     parameters table 1.2) is 0.1 mm RMS [D]; its time scale, from line-length movements
     of a few seconds to word-scale adjustments, gives the band 0.1-1 Hz [E].
     """
-    rms_m: float = _q(0.1e-3, "m", 0.0, 2e-3, "[D] 0.15 N RMS [E] / 1.5 N/mm [E]")
-    band_hz: tuple = _q((0.1, 1.0), "Hz", 0.0, 20.0, "[E] line- to word-scale adjustments", kind="band")
+    rms_m: float = sourced(0.1e-3, "m", "[D] 0.15 N RMS [E] / 1.5 N/mm [E]", lo=0.0, hi=2e-3, kind="float")
+    band_hz: tuple = sourced((0.1, 1.0), "Hz", "[E] line- to word-scale adjustments", lo=0.0, hi=20.0, kind="band")
 
     def inputs(self, t_s, rng, device):
         return {"finger_pos_m": ("add", band_limited_noise(t_s, self.band_hz[0], self.band_hz[1], self.rms_m, rng))}
@@ -230,10 +230,13 @@ class StrapSlip:
     fraction of it gives 0.1-0.5 mm [E] (0.2 mm default).  A strap slips as the skin
     under it shears, taking tens of milliseconds (30 ms [E]).
     """
-    at_s: tuple = _q((), "s", 0.0, 3600.0, "[E] scenario-chosen slip times", kind="times")
-    rate_per_min: float = _q(0.0, "1/min", 0.0, 60.0, "[E] Poisson slip rate when at_s is empty")
-    displacement_m: float = _q(0.2e-3, "m", -2e-3, 2e-3, "[E] 0.1-0.5 mm resettling of the strap")
-    duration_s: float = _q(0.03, "s", 1e-3, 5.0, "[E] skin shear under the strap, tens of ms")
+    at_s: tuple = sourced((), "s", "[E] scenario-chosen slip times", lo=0.0, hi=3600.0, kind="times")
+    rate_per_min: float = sourced(0.0, "1/min", "[E] Poisson slip rate when at_s is empty",
+                                  lo=0.0, hi=60.0, kind="float")
+    displacement_m: float = sourced(0.2e-3, "m", "[E] 0.1-0.5 mm resettling of the strap",
+                                    lo=-2e-3, hi=2e-3, kind="float")
+    duration_s: float = sourced(0.03, "s", "[E] skin shear under the strap, tens of ms",
+                                lo=1e-3, hi=5.0, kind="float")
 
     def inputs(self, t_s, rng, device):
         times = list(self.at_s)
@@ -261,12 +264,12 @@ class Orientation:
     Gravity acts on the board and racks (``moving_mass_kg``).  A forearm rotation of
     60-90 deg takes about 0.4-1 s [E] (0.6 s default).
     """
-    from_deg: float = _q(None, "deg", -180.0, 180.0, "[E] default: the device's hand_orientation_deg",
-                         kind="optional")
-    to_deg: float = _q(90.0, "deg", -180.0, 180.0, "[E] palm turned sideways")
-    at_s: float = _q(5.0, "s", 0.0, 3600.0, "[E] scenario-chosen")
-    duration_s: float = _q(0.6, "s", 0.01, 60.0, "[E] forearm rotation 0.4-1 s")
-    return_at_s: float = _q(None, "s", 0.0, 3600.0, "[E] optional return to from_deg", kind="optional")
+    from_deg: float = sourced(None, "deg", "[E] default: the device's hand_orientation_deg",
+                              lo=-180.0, hi=180.0, kind="optional")
+    to_deg: float = sourced(90.0, "deg", "[E] palm turned sideways", lo=-180.0, hi=180.0, kind="float")
+    at_s: float = sourced(5.0, "s", "[E] scenario-chosen", lo=0.0, hi=3600.0, kind="float")
+    duration_s: float = sourced(0.6, "s", "[E] forearm rotation 0.4-1 s", lo=0.01, hi=60.0, kind="float")
+    return_at_s: float = sourced(None, "s", "[E] optional return to from_deg", lo=0.0, hi=3600.0, kind="optional")
 
     def inputs(self, t_s, rng, device):
         a0 = self.from_deg
@@ -292,11 +295,11 @@ class FSRTemperature:
     board's lateral heat capacity and loss to air stretch it to about a minute (60 s [E]).
     ``reference_c`` is the temperature at which the device was calibrated (25 C [E]).
     """
-    start_c: float = _q(25.0, "degC", -20.0, 60.0, "[E] device at room temperature")
-    skin_c: float = _q(31.0, "degC", 20.0, 40.0, "[R] Shilco 2019: fingers 27-31 C")
-    reference_c: float = _q(25.0, "degC", -20.0, 60.0, "[E] calibration temperature")
-    tau_s: float = _q(60.0, "s", 1.0, 3600.0, "[E] board/film conduction with losses")
-    at_s: float = _q(0.0, "s", 0.0, 3600.0, "[E] device put on at t = at_s")
+    start_c: float = sourced(25.0, "degC", "[E] device at room temperature", lo=-20.0, hi=60.0, kind="float")
+    skin_c: float = sourced(31.0, "degC", "[R] Shilco 2019: fingers 27-31 C", lo=20.0, hi=40.0, kind="float")
+    reference_c: float = sourced(25.0, "degC", "[E] calibration temperature", lo=-20.0, hi=60.0, kind="float")
+    tau_s: float = sourced(60.0, "s", "[E] board/film conduction with losses", lo=1.0, hi=3600.0, kind="float")
+    at_s: float = sourced(0.0, "s", "[E] device put on at t = at_s", lo=0.0, hi=3600.0, kind="float")
 
     def offset_k(self, t_s):
         rise = np.where(t_s >= self.at_s, -np.expm1(-(t_s - self.at_s) / self.tau_s), 0.0)
@@ -314,8 +317,9 @@ class FSRDrift:
     [E] gives offsets of 1800-7200 s; standard FSR ink drifts about 12 % in conductance
     over 48 h ([R] Sensitronics), the same logarithmic law.
     """
-    session_offset_s: float = _q(1800.0, "s", 0.0, 7 * 24 * 3600.0, "[E] 30 min into a session; creep law of "
-                                 "the FSR model ([R] +6 % in 30 min, seed paper)")
+    session_offset_s: float = sourced(1800.0, "s", "[E] 30 min into a session; creep law of "
+                                 "the FSR model ([R] +6 % in 30 min, seed paper)",
+                                     lo=0.0, hi=7 * 24 * 3600.0, kind="float")
 
     def factor(self, t_s, fsr):
         d, t0 = fsr.creep_per_decade, fsr.creep_t0_s
@@ -343,14 +347,14 @@ class Battery:
     (ATmega328 at 16 MHz ~15 mA [M], stimulator 2 mA x 150 V x 4 ms/s x 6 electrodes
     through a 70 % boost ~3 mA [D], motor mean ~10 mA from the closed-loop energy).
     """
-    cells_series: int = _q(1, "-", 1, 4, "[E] one cell in a finger-worn device", kind="int")
-    capacity_mah: float = _q(105.0, "mAh", 1.0, 10000.0, "[R] GMB 371042 data sheet")
-    soc_start: float = _q(0.10, "-", 0.0, 1.0, "[E] a nearly empty cell")
-    load_current_a: float = _q(0.03, "A", 0.0, 2.0, "[E] mean device draw")
-    r0_ohm: float = _q(0.38, "ohm", 0.0, 10.0, "[R] GMB 371042: <= 380 mOhm")
-    r1_ohm: float = _q(0.15, "ohm", 0.0, 10.0, "[E] polarisation resistance")
-    tau1_s: float = _q(30.0, "s", 0.1, 3600.0, "[E] polarisation time constant")
-    cutoff_v: float = _q(3.0, "V", 2.5, 3.6, "[R] discharge cut-off voltage")
+    cells_series: int = sourced(1, "-", "[E] one cell in a finger-worn device", lo=1, hi=4, kind="int")
+    capacity_mah: float = sourced(105.0, "mAh", "[R] GMB 371042 data sheet", lo=1.0, hi=10000.0, kind="float")
+    soc_start: float = sourced(0.10, "-", "[E] a nearly empty cell", lo=0.0, hi=1.0, kind="float")
+    load_current_a: float = sourced(0.03, "A", "[E] mean device draw", lo=0.0, hi=2.0, kind="float")
+    r0_ohm: float = sourced(0.38, "ohm", "[R] GMB 371042: <= 380 mOhm", lo=0.0, hi=10.0, kind="float")
+    r1_ohm: float = sourced(0.15, "ohm", "[E] polarisation resistance", lo=0.0, hi=10.0, kind="float")
+    tau1_s: float = sourced(30.0, "s", "[E] polarisation time constant", lo=0.1, hi=3600.0, kind="float")
+    cutoff_v: float = sourced(3.0, "V", "[R] discharge cut-off voltage", lo=2.5, hi=3.6, kind="float")
 
     def supply_v(self, t_s):
         i = self.load_current_a
@@ -382,44 +386,28 @@ def _fmt(x):
     return f"{x:g}"
 
 
-def _check_number(src, where, value, meta, integer=False):
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ScenarioError(f"{src}: {where} must be a number, got {value!r}")
-    if not math.isfinite(value):
-        raise ScenarioError(f"{src}: {where} must be finite, got {value}")
-    if integer and int(value) != value:
-        raise ScenarioError(f"{src}: {where} must be a whole number, got {value}")
-    lo, hi = meta["lo"], meta["hi"]
-    if value < lo or value > hi:
-        raise ScenarioError(f"{src}: {where} = {value:g} is out of range [{_fmt(lo)}, {_fmt(hi)}]")
-    return int(value) if integer else float(value)
-
-
 def _check_kind(src, name, cls, table):
     where0 = f"[disturbances.{name}]"
     if not isinstance(table, dict):
         raise ScenarioError(f"{src}: {where0} must be a table")
     fields = {f.name: f for f in dataclasses.fields(cls)}
     out = {}
-    for key, value in table.items():
-        if key not in fields:
-            raise ScenarioError(f"{src}: unknown key {key!r} in {where0}; allowed: {', '.join(sorted(fields))}")
-        meta = fields[key].metadata
-        where = f"{where0} {key}"
-        kind = meta["kind"]
-        if kind == "band":
-            if not (isinstance(value, list) and len(value) == 2):
-                raise ScenarioError(f"{src}: {where} must be a pair [low_hz, high_hz]")
-            lo_hz, hi_hz = (_check_number(src, where, v, meta) for v in value)
-            if not lo_hz < hi_hz:
-                raise ScenarioError(f"{src}: {where} must have low < high, got {value}")
-            out[key] = (lo_hz, hi_hz)
-        elif kind == "times":
-            if not isinstance(value, list):
-                raise ScenarioError(f"{src}: {where} must be a list of times in s")
-            out[key] = tuple(sorted(_check_number(src, where, v, meta) for v in value))
-        else:
-            out[key] = _check_number(src, where, value, meta, integer=(kind == "int"))
+    try:
+        check_keys(where0, table, sorted(fields))
+        for key, value in table.items():
+            meta = fields[key].metadata
+            where = f"{where0} {key}"
+            kind = meta["kind"]
+            if kind == "band":
+                out[key] = check_pair(where, value, meta["lo"], meta["hi"], strict=True)
+            elif kind == "times":
+                if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)):
+                    raise ValueError(f"{where} must be a list of times in s, got {value!r}")
+                out[key] = tuple(sorted(check_number(where, v, meta["lo"], meta["hi"]) for v in value))
+            else:
+                out[key] = check_number(where, value, meta["lo"], meta["hi"], integer=(kind == "int"))
+    except ValueError as exc:
+        raise ScenarioError(f"{src}: {exc}") from None
     obj = cls(**out)
     if isinstance(obj, Orientation) and obj.return_at_s is not None and obj.return_at_s < obj.at_s + obj.duration_s:
         raise ScenarioError(f"{src}: {where0} return_at_s = {obj.return_at_s:g} must be at least "
@@ -435,11 +423,12 @@ def validate_section(source: str, value) -> dict:
     """
     if not isinstance(value, dict):
         raise ScenarioError(f"{source}: [disturbances] must be a table")
+    try:
+        check_keys("[disturbances]", value, sorted(KINDS))
+    except ValueError as exc:
+        raise ScenarioError(f"{source}: {exc}") from None
     out = {}
     for name, table in value.items():
-        if name not in KINDS:
-            raise ScenarioError(f"{source}: unknown key {name!r} in [disturbances]; allowed: "
-                                f"{', '.join(sorted(KINDS))}")
         out[name] = _check_kind(source, name, KINDS[name], table)
     return out
 

@@ -38,6 +38,7 @@ import math
 
 import numpy as np
 
+from ebraille_sim.base.validation import check_choice, check_keys, check_number
 from ebraille_sim.plant.layout import FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE
 
 __all__ = ["KINDS", "validate_section", "build_inputs", "wrap_controller", "FaultyController"]
@@ -55,8 +56,9 @@ KINDS = {
 
 _COMMON = {"kind", "start_s", "duration_s"}
 _EXTRA = {"fsr_value": {"value_v"}, "finger_withdrawn": {"distance_m", "move_s"}}
-_RANGES = {"start_s": (0.0, 3600.0), "duration_s": (0.0, 3600.0), "value_v": (-1.0, 10.0),
-           "distance_m": (0.0, 0.02), "move_s": (0.0, 10.0)}
+_RANGES = {"start_s": (0.0, 3600.0, False), "duration_s": (0.0, 3600.0, True), "value_v": (-1.0, 10.0, False),
+           "distance_m": (0.0, 0.02, True), "move_s": (0.0, 10.0, True)}
+"""``(lo, hi, lo_open)`` of every numeric key."""
 
 
 def validate_section(source: str, value) -> list[dict]:
@@ -67,28 +69,20 @@ def validate_section(source: str, value) -> list[dict]:
     out = []
     for j, entry in enumerate(value):
         where = f"[[faults]] entry {j + 1}"
-        kind = entry.get("kind")
-        if kind not in KINDS:
-            raise ScenarioError(f"{source}: {where} kind = {kind!r} is not one of: {', '.join(KINDS)}")
-        allowed = _COMMON | _EXTRA.get(kind, set())
-        for key in entry:
-            if key not in allowed:
-                raise ScenarioError(f"{source}: unknown key {key!r} in {where} ({kind}); "
-                                    f"allowed: {', '.join(sorted(allowed))}")
-        if "start_s" not in entry:
-            raise ScenarioError(f"{source}: {where} ({kind}) needs start_s")
-        if kind == "fsr_value" and "value_v" not in entry:
-            raise ScenarioError(f"{source}: {where} (fsr_value) needs value_v")
-        e = {"kind": kind}
-        for key, v in entry.items():
-            if key == "kind":
-                continue
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise ScenarioError(f"{source}: {where} {key} must be a finite number, got {v!r}")
-            lo, hi = _RANGES[key]
-            if not lo <= v <= hi or (key in ("duration_s", "move_s", "distance_m") and v <= 0):
-                raise ScenarioError(f"{source}: {where} {key} = {v:g} is out of range ({lo:g}, {hi:g}]")
-            e[key] = float(v)
+        try:
+            kind = check_choice(f"{where} kind", entry.get("kind"), KINDS)
+            check_keys(f"{where} ({kind})", entry, sorted(_COMMON | _EXTRA.get(kind, set())))
+            if "start_s" not in entry:
+                raise ValueError(f"{where} ({kind}) needs start_s")
+            if kind == "fsr_value" and "value_v" not in entry:
+                raise ValueError(f"{where} (fsr_value) needs value_v")
+            e = {"kind": kind}
+            for key, v in entry.items():
+                if key != "kind":
+                    lo, hi, lo_open = _RANGES[key]
+                    e[key] = check_number(f"{where} {key}", v, lo, hi, lo_open=lo_open)
+        except ValueError as exc:
+            raise ScenarioError(f"{source}: {exc}") from None
         e.setdefault("duration_s", math.inf)
         if kind == "finger_withdrawn":
             e.setdefault("distance_m", 3e-3)
@@ -171,7 +165,7 @@ class FaultyController:
         return u
 
 
-def wrap_controller(section: list, controller, dt_s: float):
-    """Apply the ``controller_nan`` entries (other kinds act on the plant inputs)."""
+def wrap_controller(section: list, controller, dt_s: float, device=None):
+    """Apply the ``controller_nan`` entries (other kinds act on the plant inputs; ``device`` is unused)."""
     wins = [(e["start_s"], e["start_s"] + e["duration_s"]) for e in section if e["kind"] == "controller_nan"]
     return FaultyController(controller, wins) if wins else controller

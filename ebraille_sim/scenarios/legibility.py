@@ -63,6 +63,7 @@ dynamic range DR        2.0         [M] fingertip discomfort/threshold current r
 Examples
 --------
 >>> import numpy as np
+
 >>> round(float(contact_radius_m(1.0)) * 1e3, 2)          # mm at 1 N
 3.56
 >>> ratio = relative_intensity(np.array([1.0, 0.3]), np.array([1.0, 1.0]))
@@ -74,9 +75,11 @@ Examples
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
+
+from ebraille_sim.base.fields import sourced
 
 __all__ = ["LegibilityParams", "LEGIBLE_REQUIRED", "METRIC_NAMES", "contact_radius_m", "electrode_centres_m",
            "coverage", "impedance_ohm", "relative_intensity", "character_legibility", "legibility_metrics"]
@@ -90,27 +93,23 @@ of characters with a constant-current stimulator (the default, :data:`DEFAULT`) 
 constant-voltage one (:data:`CONSTANT_VOLTAGE`)."""
 
 
-def _p(default, unit, source):
-    return field(default=default, metadata={"unit": unit, "source": source})
-
-
 @dataclass(frozen=True)
 class LegibilityParams:
     """Electrode array, skin contact and stimulator (sources in the module table)."""
-    pulp_radius_m: float = _p(8e-3, "m", "[E] parameters table 1.5")
-    pulp_modulus_pa: float = _p(0.1e6, "Pa", "[R] 0.07-0.2 MPa Hertzian fit")
-    poisson_ratio: float = _p(0.5, "-", "[E] nearly incompressible tissue")
-    pitch_m: float = _p(2.4e-3, "m", "[E] 2.3-2.5 mm; Braille dot spacing 2.34 mm [R]")
-    electrode_diameter_m: float = _p(1.2e-3, "m", "[E] 1-1.5 mm")
-    array_offset_x_m: float = _p(0.0, "m", "[E] array centred on the contact patch")
-    array_offset_y_m: float = _p(0.0, "m", "[E] array centred on the contact patch")
-    impedance_touch_ohm: float = _p(400e3, "ohm", "[M] Kaczmarek 1991, 10 k-1 M dry fingertip")
-    impedance_pressed_ohm: float = _p(30e3, "ohm", "[M] same range, pressed end")
-    impedance_force_scale_n: float = _p(0.5, "N", "[E] F_z 0.3-1 N, parameters table 4.2")
-    mode: str = _p("constant_current", "-", "constant_current | constant_voltage")
-    current_a: float = _p(2e-3, "A", "[R] Akhtar et al. 2018")
-    compliance_v: float = _p(300.0, "V", "[M] 50-300 V")
-    dynamic_range: float = _p(2.0, "-", "[M] discomfort/threshold ratio on the fingertip")
+    pulp_radius_m: float = sourced(8e-3, "m", "[E] parameters table 1.5")
+    pulp_modulus_pa: float = sourced(0.1e6, "Pa", "[R] 0.07-0.2 MPa Hertzian fit")
+    poisson_ratio: float = sourced(0.5, "-", "[E] nearly incompressible tissue")
+    pitch_m: float = sourced(2.4e-3, "m", "[E] 2.3-2.5 mm; Braille dot spacing 2.34 mm [R]")
+    electrode_diameter_m: float = sourced(1.2e-3, "m", "[E] 1-1.5 mm")
+    array_offset_x_m: float = sourced(0.0, "m", "[E] array centred on the contact patch")
+    array_offset_y_m: float = sourced(0.0, "m", "[E] array centred on the contact patch")
+    impedance_touch_ohm: float = sourced(400e3, "ohm", "[M] Kaczmarek 1991, 10 k-1 M dry fingertip")
+    impedance_pressed_ohm: float = sourced(30e3, "ohm", "[M] same range, pressed end")
+    impedance_force_scale_n: float = sourced(0.5, "N", "[E] F_z 0.3-1 N, parameters table 4.2")
+    mode: str = sourced("constant_current", "-", "constant_current | constant_voltage")
+    current_a: float = sourced(2e-3, "A", "[R] Akhtar et al. 2018")
+    compliance_v: float = sourced(300.0, "V", "[M] 50-300 V")
+    dynamic_range: float = sourced(2.0, "-", "[M] discomfort/threshold ratio on the fingertip")
 
     def __post_init__(self):
         if self.mode not in ("constant_current", "constant_voltage"):

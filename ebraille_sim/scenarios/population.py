@@ -41,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ebraille_sim.base.validation import check_bool, check_keys, check_number, check_pair
 from ebraille_sim.estimation.calibration import calibrate_device
 from ebraille_sim.physics.params import FINGERS, DeviceParams, replace_checked
 
@@ -64,15 +65,26 @@ class PopulationSpec:
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            vals = v if isinstance(v, tuple) else (v,)
-            for x in vals:
-                if isinstance(x, bool):
-                    continue
-                if not math.isfinite(x) or x < 0:
-                    raise ValueError(f"PopulationSpec.{f.name} must be finite and >= 0, got {v}")
-            if isinstance(v, tuple) and not v[0] <= v[1]:
-                raise ValueError(f"PopulationSpec.{f.name} must be (low, high) with low <= high, got {v}")
+            v, name = getattr(self, f.name), f"PopulationSpec.{f.name}"
+            if f.name == "calibrate":
+                check_bool(name, v)
+            elif isinstance(f.default, tuple):
+                check_pair(name, v, lo=0.0)
+            else:
+                check_number(name, v, lo=0.0)
+
+    @classmethod
+    def from_dict(cls, d, *, base: PopulationSpec | None = None) -> PopulationSpec:
+        """A spec from field values (pairs as lists or tuples); omitted fields from ``base``.
+
+        Raises
+        ------
+        ValueError
+            On an unknown key (named, with the allowed ones) or an invalid value.
+        """
+        check_keys("PopulationSpec", d, [f.name for f in dataclasses.fields(cls)])
+        d = {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
+        return dataclasses.replace(cls() if base is None else base, **d)
 
 
 def _log_uniform(rng, lo, hi):
@@ -144,6 +156,5 @@ def sample_device(rng_or_seed, spec: PopulationSpec = PopulationSpec(), base: De
 def sample_devices(seed: int, n: int, spec: PopulationSpec = PopulationSpec(),
                    base: DeviceParams = DeviceParams()) -> list[DeviceParams]:
     """``n`` devices from one master seed (child ``k`` of ``SeedSequence(seed)`` for device k)."""
-    if n < 0:
-        raise ValueError(f"n must be >= 0, got {n}")
+    check_number("n", n, lo=0, integer=True)
     return [sample_device(c, spec, base) for c in np.random.SeedSequence(seed).spawn(n)]

@@ -72,7 +72,7 @@ def wrap_controller(spec: ScenarioSpec, ctrl, dt_s: float):
         mod = importlib.import_module(DELEGATES[key])
         wrap = getattr(mod, "wrap_controller", None)
         if wrap is not None:
-            ctrl = wrap(section, ctrl, dt_s)
+            ctrl = wrap(section, ctrl, dt_s, device=spec.device)
     return ctrl
 
 

@@ -2,9 +2,12 @@
 
 A scenario names a reading passage and rate, a force setpoint profile, the device
 (presets plus field overrides), the rates, the estimator, the reader's finger and the
-controller.  Every table accepts only the keys in :data:`SCHEMA`; an unknown key is an
-error that names it and lists the allowed ones, a value out of range names the value and
-the range.  See ``docs/scenarios.md`` for the full reference.
+controller.  Every table accepts only the keys in :data:`SCHEMA`, which is derived from
+the field declarations of the table dataclasses (:class:`ScenarioFile`, :class:`ReadingSpec`,
+:class:`SetpointSpec`, :class:`DeviceSpec`, :class:`RatesSpec`, :class:`EstimatorSpec`,
+:class:`FingerSpec`, :class:`ControllerSpec`, :class:`CriteriaSpec`): each key is declared
+once, with its default, unit, kind and range.  An unknown key is an error that names it and
+lists the allowed ones, a value out of range names the value and the range.  See ``docs/scenarios.md`` for the full reference.
 
 Example (``scenarios/steady_90wpm.toml``)::
 
@@ -39,19 +42,38 @@ try:
 except ModuleNotFoundError:  # Python < 3.11
     import tomli as tomllib  # type: ignore[no-redef]
 
+from ebraille_sim.base.fields import sourced
+from ebraille_sim.base.validation import check_bool, check_choice, check_keys, check_number
 from ebraille_sim.physics import params as _params
 
 
 class ScenarioError(ValueError):
-    """A scenario file that cannot be used; the message is one line naming the problem."""
+    """A scenario file that cannot be used; the message is one line naming the problem.
+
+    A ``ValueError`` subclass, so the checks of :mod:`ebraille_sim.base.validation` are
+    re-raised as a ``ScenarioError`` with the file name in front.
+    """
 
 
-def _num(lo=None, hi=None, lo_open=False, hi_open=False, integer=False):
-    return {"type": "int" if integer else "float", "lo": lo, "hi": hi, "lo_open": lo_open, "hi_open": hi_open}
+_SETTING = "scenario setting"
 
 
-_STR = {"type": "str"}
-_BOOL = {"type": "bool"}
+def _key(default: Any, unit: str, kind: str, source: str = _SETTING, **rule) -> Any:
+    """A scenario key: a :func:`~ebraille_sim.base.fields.sourced` field whose metadata is its rule.
+
+    ``kind`` is ``"float"``, ``"int"``, ``"str"``, ``"bool"``, ``"choice"`` (``choices=``),
+    ``"steps"``, ``"table"`` (``table=`` the dataclass of the sub-table), ``"overrides"``
+    (``target=`` the parameter dataclass) or ``"free"`` (any table).  Numbers take ``lo``,
+    ``hi``, ``lo_open``, ``hi_open``.
+    """
+    return sourced(default, unit, source, kind=kind, **rule)
+
+
+def _table(cls) -> Any:
+    return field(default=None, metadata={"unit": "-", "source": _SETTING, "kind": "table", "table": cls})
+
+
+_TACTILE = "[R] seed paper: tactile forces 0.2-3 N (physics.params.TACTILE_FORCE_MAX_N)"
 
 DELEGATES: dict[str, str] = {
     "disturbances": "ebraille_sim.scenarios.disturbances",
@@ -64,87 +86,32 @@ DELEGATES: dict[str, str] = {
 Each module provides ``validate_section(source, value) -> object`` (raising
 :class:`ScenarioError` with a one-line message) and is used by the runner through
 ``build_inputs(section, t_s, rng, device) -> dict`` (per-period plant inputs) and/or
-``wrap_controller(section, controller, dt_s) -> Controller``.  Wrappers are applied in
-the order of this dict, so an injected controller fault (``faults``) always sits inside
-the safety supervisor (``supervisor``)."""
-
-SCHEMA: dict[str, dict[str, Any]] = {
-    "": {
-        "name": _STR, "description": _STR, "seed": _num(0, 2**52, integer=True),
-        "duration_s": _num(0, 3600, lo_open=True),
-        "reading": "table", "setpoint": "table", "device": "table", "rates": "table",
-        "estimator": "table", "finger": "table", "controller": "table", "criteria": "table",
-        **{k: "delegate" for k in DELEGATES},
-    },
-    "reading": {
-        "passage": _STR, "text": _STR, "file": _STR,
-        "wpm": _num(0, 1000, lo_open=True), "start_s": _num(0, 600),
-        "jitter_fraction": _num(0, 0.5), "word_pause_s": _num(0, 5), "line_pause_s": _num(0, 10),
-        "max_characters": _num(1, 10**6, integer=True),
-        # per-character refresh mode (see ebraille_sim.scenarios.runner.refresh_phases)
-        "mode": {"type": "choice", "choices": ["continuous", "refresh"]},
-        "refresh_lift_fraction": _num(0, 1), "refresh_press_fraction": _num(0, 1),
-        "refresh_release_fraction": _num(0, 1), "refresh_lift_force_n": _num(0, 3.0),
-    },
-    "setpoint": {
-        "force_n": _num(0, 3.0, lo_open=True), "band_fraction": _num(0, 1, lo_open=True),
-        "steps": {"type": "steps"}, "ramp_s": _num(0, 10),
-    },
-    "device": {
-        "motor": {"type": "choice", "choices": sorted(_params.MOTORS)},
-        "drivetrain": {"type": "choice", "choices": sorted(_params.DRIVETRAINS)},
-        "finger": {"type": "choice", "choices": sorted(_params.FINGERS)},
-        "fsr": {"type": "choice", "choices": sorted(_params.FSRS)},
-        "driver_supply_v": _num(0, 48, lo_open=True),
-        "hand_orientation_deg": _num(-180, 180),
-        "motor_overrides": "overrides", "drivetrain_overrides": "overrides",
-        "finger_overrides": "overrides", "fsr_overrides": "overrides", "circuit_overrides": "overrides",
-    },
-    "rates": {
-        "control_hz": _num(0, 1e6, lo_open=True), "sensor_hz": _num(0, 1e6, lo_open=True),
-        "physics_hz": _num(0, 1e7, lo_open=True),
-    },
-    "estimator": {
-        "model": _STR, "antialias_cutoff_hz": _num(0, 1e5, lo_open=True), "tare_at_start": _BOOL,
-        "clamp_nonnegative": _BOOL, "nyquist_average": _BOOL,
-    },
-    "finger": {
-        "gap_m": _num(-0.01, 0.01),
-    },
-    "controller": {
-        "name": _STR, "gains": "free",
-    },
-    "criteria": {
-        "onset_overshoot_max": _num(0, 10), "in_band_min": _num(0, 1), "peak_force_max_n": _num(0, 100),
-    },
-}
-
-_OVERRIDE_TARGET = {
-    "motor_overrides": _params.MotorParams, "drivetrain_overrides": _params.DriveTrainParams,
-    "finger_overrides": _params.FingerParams, "fsr_overrides": _params.FSRParams,
-    "circuit_overrides": _params.CircuitParams,
-}
+``wrap_controller(section, controller, dt_s, device=None) -> Controller``.  Wrappers are
+applied in the order of this dict, so an injected controller fault (``faults``) always sits
+inside the safety supervisor (``supervisor``)."""
 
 
 @dataclass(frozen=True)
 class ReadingSpec:
-    passage: str = "default"
-    text: str | None = None
-    file: str | None = None
-    wpm: float = 90.0
-    start_s: float = 1.5
-    jitter_fraction: float = 0.0
-    word_pause_s: float = 0.0
-    line_pause_s: float = 0.0
-    max_characters: int | None = None
+    """``[reading]``: the passage and the reading schedule."""
+    passage: str = _key("default", "-", "str")
+    text: str | None = _key(None, "-", "str")
+    file: str | None = _key(None, "-", "str")
+    wpm: float = _key(90.0, "1/min", "float", lo=0, hi=1000, lo_open=True)
+    start_s: float = _key(1.5, "s", "float", lo=0, hi=600)
+    jitter_fraction: float = _key(0.0, "-", "float", lo=0, hi=0.5)
+    word_pause_s: float = _key(0.0, "s", "float", lo=0, hi=5)
+    line_pause_s: float = _key(0.0, "s", "float", lo=0, hi=10)
+    max_characters: int | None = _key(None, "-", "int", lo=1, hi=10**6)
     # per-character refresh: each dwell is lift | press | hold | release, as fractions of
     # the dwell; the setpoint is refresh_lift_force_n while lifted or released and the
     # force setpoint from the press on; only the hold part counts as the character's window
-    mode: str = "continuous"
-    refresh_lift_fraction: float = 0.10
-    refresh_press_fraction: float = 0.30
-    refresh_release_fraction: float = 0.15
-    refresh_lift_force_n: float = 0.1
+    # (see ebraille_sim.scenarios.runner.refresh_phases)
+    mode: str = _key("continuous", "-", "choice", choices=("continuous", "refresh"))
+    refresh_lift_fraction: float = _key(0.10, "-", "float", lo=0, hi=1)
+    refresh_press_fraction: float = _key(0.30, "-", "float", lo=0, hi=1)
+    refresh_release_fraction: float = _key(0.15, "-", "float", lo=0, hi=1)
+    refresh_lift_force_n: float = _key(0.1, "N", "float", _TACTILE, lo=0, hi=_params.TACTILE_FORCE_MAX_N)
 
     def __post_init__(self):
         if self.mode == "refresh":
@@ -156,21 +123,115 @@ class ReadingSpec:
 
 @dataclass(frozen=True)
 class SetpointSpec:
-    force_n: float = 1.0
-    band_fraction: float = 0.10
-    steps: tuple[tuple[float, float], ...] = ()
-    ramp_s: float = 0.0
+    """``[setpoint]``: the force setpoint profile."""
+    force_n: float = _key(1.0, "N", "float", _TACTILE, lo=0, hi=_params.TACTILE_FORCE_MAX_N, lo_open=True)
+    band_fraction: float = _key(0.10, "-", "float", lo=0, hi=1, lo_open=True)
+    steps: tuple[tuple[float, float], ...] = _key((), "s, N", "steps")
+    ramp_s: float = _key(0.0, "s", "float", lo=0, hi=10)
 
 
 @dataclass(frozen=True)
 class ControllerSpec:
-    name: str = "pid"
-    gains: dict = field(default_factory=dict)
+    """``[controller]``: a registered name (or gains file) and its keyword gains."""
+    name: str = _key("pid", "-", "str")
+    gains: dict = field(default_factory=dict, metadata={"unit": "-", "source": _SETTING, "kind": "free"})
 
 
 @dataclass(frozen=True)
 class FingerSpec:
-    gap_m: float = 1.0e-3
+    """``[finger]``: where the reader's pulp rests."""
+    gap_m: float = _key(1.0e-3, "m", "float", lo=-0.01, hi=0.01)
+
+
+@dataclass(frozen=True)
+class DeviceSpec:
+    """``[device]``: presets and field overrides (None: the preset's or the motor's value)."""
+    motor: str = _key("faulhaber_0816_006sr", "-", "choice", choices=tuple(sorted(_params.MOTORS)))
+    drivetrain: str = _key("planetary_64", "-", "choice", choices=tuple(sorted(_params.DRIVETRAINS)))
+    finger: str = _key("nominal", "-", "choice", choices=tuple(sorted(_params.FINGERS)))
+    fsr: str = _key("nominal", "-", "choice", choices=tuple(sorted(_params.FSRS)))
+    driver_supply_v: float | None = _key(None, "V", "float", lo=0, hi=48, lo_open=True)
+    hand_orientation_deg: float = _key(0.0, "deg", "float", lo=-180, hi=180)
+    motor_overrides: dict | None = _key(None, "-", "overrides", target=_params.MotorParams)
+    drivetrain_overrides: dict | None = _key(None, "-", "overrides", target=_params.DriveTrainParams)
+    finger_overrides: dict | None = _key(None, "-", "overrides", target=_params.FingerParams)
+    fsr_overrides: dict | None = _key(None, "-", "overrides", target=_params.FSRParams)
+    circuit_overrides: dict | None = _key(None, "-", "overrides", target=_params.CircuitParams)
+
+
+@dataclass(frozen=True)
+class RatesSpec:
+    """``[rates]``: control, sensor and physics rates."""
+    control_hz: float = _key(1000.0, "Hz", "float", lo=0, hi=1e6, lo_open=True)
+    sensor_hz: float = _key(1000.0, "Hz", "float", lo=0, hi=1e6, lo_open=True)
+    physics_hz: float = _key(10000.0, "Hz", "float", lo=0, hi=1e7, lo_open=True)
+
+
+@dataclass(frozen=True)
+class EstimatorSpec:
+    """``[estimator]``: overrides of :class:`ebraille_sim.physics.params.EstimatorParams` (None keeps its value)."""
+    model: str | None = _key(None, "-", "str")
+    antialias_cutoff_hz: float | None = _key(None, "Hz", "float", lo=0, hi=1e5, lo_open=True)
+    tare_at_start: bool | None = _key(None, "-", "bool")
+    clamp_nonnegative: bool | None = _key(None, "-", "bool")
+    nyquist_average: bool | None = _key(None, "-", "bool")
+
+
+@dataclass(frozen=True)
+class CriteriaSpec:
+    """``[criteria]``: pass/fail limits checked by the regression suite (None: not checked)."""
+    onset_overshoot_max: float | None = _key(None, "-", "float", lo=0, hi=10)
+    in_band_min: float | None = _key(None, "-", "float", lo=0, hi=1)
+    peak_force_max_n: float | None = _key(None, "N", "float", lo=0, hi=100)
+
+
+@dataclass(frozen=True)
+class ScenarioFile:
+    """The top level of a scenario file (the sections of :data:`DELEGATES` come on top)."""
+    name: str | None = _key(None, "-", "str")
+    description: str = _key("", "-", "str")
+    seed: int = _key(0, "-", "int", lo=0, hi=2**52)
+    duration_s: float | None = _key(None, "s", "float", lo=0, hi=3600, lo_open=True)
+    reading: ReadingSpec | None = _table(ReadingSpec)
+    setpoint: SetpointSpec | None = _table(SetpointSpec)
+    device: DeviceSpec | None = _table(DeviceSpec)
+    rates: RatesSpec | None = _table(RatesSpec)
+    estimator: EstimatorSpec | None = _table(EstimatorSpec)
+    finger: FingerSpec | None = _table(FingerSpec)
+    controller: ControllerSpec | None = _table(ControllerSpec)
+    criteria: CriteriaSpec | None = _table(CriteriaSpec)
+
+
+def _rule(f: dataclasses.Field) -> Any:
+    """The validation rule of one key, from its field metadata."""
+    m = f.metadata
+    kind = m["kind"]
+    if kind in ("float", "int"):
+        return {"type": kind, "lo": m.get("lo"), "hi": m.get("hi"), "lo_open": m.get("lo_open", False),
+                "hi_open": m.get("hi_open", False)}
+    if kind == "choice":
+        return {"type": "choice", "choices": list(m["choices"])}
+    if kind in ("str", "bool", "steps"):
+        return {"type": kind}
+    return kind                                            # table, overrides, free
+
+
+def _derive_schema() -> dict[str, dict[str, Any]]:
+    top = {f.name: _rule(f) for f in dataclasses.fields(ScenarioFile)}
+    top.update({k: "delegate" for k in DELEGATES})
+    schema = {"": top}
+    for f in dataclasses.fields(ScenarioFile):
+        if f.metadata["kind"] == "table":
+            schema[f.name] = {g.name: _rule(g) for g in dataclasses.fields(f.metadata["table"])}
+    return schema
+
+
+SCHEMA: dict[str, dict[str, Any]] = _derive_schema()
+"""Every table's keys and their rules, derived from the field metadata of :class:`ScenarioFile`
+and its table dataclasses (:class:`ReadingSpec`, :class:`SetpointSpec`, :class:`DeviceSpec`, ...)."""
+
+_OVERRIDE_TARGET = {f.name: f.metadata["target"] for f in dataclasses.fields(DeviceSpec)
+                    if f.metadata["kind"] == "overrides"}
 
 
 @dataclass(frozen=True)
@@ -191,64 +252,43 @@ class ScenarioSpec:
     base_dir: str = "."
 
 
-def _fmt_range(s):
-    lo = "(" if s["lo_open"] else "["
-    hi = ")" if s["hi_open"] else "]"
-    a = "-inf" if s["lo"] is None else f"{s['lo']:g}"
-    b = "inf" if s["hi"] is None else f"{s['hi']:g}"
-    return f"{lo}{a}, {b}{hi}"
-
-
 def _check_value(src, table, key, value, rule):
     where = f"[{table}] {key}" if table else key
     t = rule["type"]
-    if t == "str":
-        if not isinstance(value, str):
-            raise ScenarioError(f"{src}: {where} must be a string, got {value!r}")
-        return value
-    if t == "bool":
-        if not isinstance(value, bool):
-            raise ScenarioError(f"{src}: {where} must be true or false, got {value!r}")
-        return value
-    if t == "choice":
-        if value not in rule["choices"]:
-            raise ScenarioError(f"{src}: {where} = {value!r} is not one of: {', '.join(rule['choices'])}")
-        return value
-    if t == "steps":
-        if not isinstance(value, list) or not all(isinstance(r, list) and len(r) == 2 for r in value):
-            raise ScenarioError(f"{src}: {where} must be a list of [time_s, force_n] pairs")
-        out = []
-        for t_s, f_n in value:
-            t_s = _check_value(src, table, key + " time", t_s, _num(0, 3600))
-            f_n = _check_value(src, table, key + " force", f_n, _num(0, 3.0, lo_open=True))
-            out.append((t_s, f_n))
-        if any(b[0] <= a[0] for a, b in zip(out, out[1:])):
-            raise ScenarioError(f"{src}: {where} times must increase")
-        return tuple(out)
-    # numbers
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ScenarioError(f"{src}: {where} must be a number, got {value!r}")
-    if not math.isfinite(value):
-        raise ScenarioError(f"{src}: {where} must be finite, got {value}")
-    if t == "int" and int(value) != value:
-        raise ScenarioError(f"{src}: {where} must be a whole number, got {value}")
-    lo, hi = rule["lo"], rule["hi"]
-    bad = (lo is not None and (value < lo or (rule["lo_open"] and value == lo))) or \
-          (hi is not None and (value > hi or (rule["hi_open"] and value == hi)))
-    if bad:
-        raise ScenarioError(f"{src}: {where} = {value:g} is out of range {_fmt_range(rule)}")
-    return int(value) if t == "int" else float(value)
+    try:
+        if t == "str":
+            if not isinstance(value, str):
+                raise ValueError(f"{where} must be a string, got {value!r}")
+            return value
+        if t == "bool":
+            return check_bool(where, value)
+        if t == "choice":
+            return check_choice(where, value, rule["choices"])
+        if t == "steps":
+            if not isinstance(value, list) or not all(isinstance(r, list) and len(r) == 2 for r in value):
+                raise ValueError(f"{where} must be a list of [time_s, force_n] pairs")
+            out = tuple((check_number(where + " time", t_s, 0, 3600),
+                         check_number(where + " force", f_n, 0, _params.TACTILE_FORCE_MAX_N, lo_open=True))
+                        for t_s, f_n in value)
+            if any(b[0] <= a[0] for a, b in zip(out, out[1:])):
+                raise ValueError(f"{where} times must increase")
+            return out
+        return check_number(where, value, rule["lo"], rule["hi"], rule["lo_open"], rule["hi_open"],
+                            integer=(t == "int"))
+    except ValueError as exc:
+        raise ScenarioError(f"{src}: {exc}") from None
 
 
 def _check_table(src, name, data):
     allowed = SCHEMA[name]
     if not isinstance(data, dict):
         raise ScenarioError(f"{src}: [{name}] must be a table")
+    try:
+        check_keys(f"[{name}]" if name else "the top level", data, sorted(allowed))
+    except ValueError as exc:
+        raise ScenarioError(f"{src}: {exc}") from None
     out = {}
     for key, value in data.items():
-        if key not in allowed:
-            where = f"[{name}]" if name else "the top level"
-            raise ScenarioError(f"{src}: unknown key {key!r} in {where}; allowed: {', '.join(sorted(allowed))}")
         rule = allowed[key]
         if rule == "table":
             out[key] = _check_table(src, key, value)
@@ -273,23 +313,23 @@ def _check_table(src, name, data):
 def _check_overrides(src, where, data, cls):
     if not isinstance(data, dict):
         raise ScenarioError(f"{src}: [{where}] must be a table")
-    names = {f.name: f for f in dataclasses.fields(cls) if f.name not in ("name", "sources")}
-    for key, value in data.items():
-        if key not in names:
-            raise ScenarioError(f"{src}: unknown key {key!r} in [{where}]; allowed: {', '.join(sorted(names))}")
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ScenarioError(f"{src}: [{where}] {key} must be a number, got {value!r}")
-        if not math.isfinite(value):
-            raise ScenarioError(f"{src}: [{where}] {key} must be finite, got {value}")
+    names = sorted(f.name for f in dataclasses.fields(cls) if f.name not in ("name", "sources"))
+    try:
+        check_keys(f"[{where}]", data, names)
+        for key, value in data.items():
+            check_number(f"[{where}] {key}", value)
+    except ValueError as exc:
+        raise ScenarioError(f"{src}: {exc}") from None
     return dict(data)
 
 
 def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -> _params.DeviceParams:
     try:
-        motor = _params.MOTORS[dev.get("motor", "faulhaber_0816_006sr")]
-        drivetrain = _params.DRIVETRAINS[dev.get("drivetrain", "planetary_64")]
-        finger = _params.FINGERS[dev.get("finger", "nominal")]
-        fsr = _params.FSRS[dev.get("fsr", "nominal")]
+        d0, r0 = DeviceSpec(), RatesSpec()
+        motor = _params.MOTORS[dev.get("motor", d0.motor)]
+        drivetrain = _params.DRIVETRAINS[dev.get("drivetrain", d0.drivetrain)]
+        finger = _params.FINGERS[dev.get("finger", d0.finger)]
+        fsr = _params.FSRS[dev.get("fsr", d0.fsr)]
         circuit = _params.CircuitParams()
         motor = _params.replace_checked(motor, **dev.get("motor_overrides", {}))
         drivetrain = _params.replace_checked(drivetrain, **dev.get("drivetrain_overrides", {}))
@@ -297,9 +337,9 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
         fsr = _params.replace_checked(fsr, **dev.get("fsr_overrides", {}))
         circuit = _params.replace_checked(circuit, **dev.get("circuit_overrides", {}))
         r = _params.RateParams(
-            control_rate_hz=rates.get("control_hz", 1000.0),
-            sensor_rate_hz=rates.get("sensor_hz", 1000.0),
-            physics_rate_hz=rates.get("physics_hz", 10000.0))
+            control_rate_hz=rates.get("control_hz", r0.control_hz),
+            sensor_rate_hz=rates.get("sensor_hz", r0.sensor_hz),
+            physics_rate_hz=rates.get("physics_hz", r0.physics_hz))
         e = _params.replace_checked(_params.EstimatorParams(), **{
             k2: est[k1] for k1, k2 in (("model", "model"), ("antialias_cutoff_hz", "antialias_cutoff_hz"),
                                        ("tare_at_start", "tare_at_start"),
@@ -312,7 +352,7 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
             if not mp.exists():
                 raise ScenarioError(f"{src}: [estimator] model file {str(mp)!r} not found")
             e = _params.replace_checked(e, model=str(mp))
-        angle = math.radians(dev.get("hand_orientation_deg", 0.0))
+        angle = math.radians(dev.get("hand_orientation_deg", d0.hand_orientation_deg))
         g = _params.STANDARD_GRAVITY_M_PER_S2 * math.cos(angle)
         return _params.DeviceParams(motor=motor, drivetrain=drivetrain, finger=finger, fsr=fsr,
                                     circuit=circuit, estimator=e, rates=r,

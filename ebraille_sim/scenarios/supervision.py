@@ -4,25 +4,30 @@ from __future__ import annotations
 import dataclasses
 
 from controllers.supervisor import Supervisor, SupervisorConfig
+from ebraille_sim.base.validation import check_keys
+from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.scenarios.spec import ScenarioError
+
+_NAMES = sorted(f.name for f in dataclasses.fields(SupervisorConfig))
+
 
 def validate_section(source: str, value) -> dict:
     """Check a ``[supervisor]`` table; raise ``ScenarioError`` naming a bad key or value."""
     if not isinstance(value, dict):
         raise ScenarioError(f"{source}: [supervisor] must be a table")
-    names = [f.name for f in dataclasses.fields(SupervisorConfig)]
-    for key in value:
-        if key not in names:
-            raise ScenarioError(f"{source}: unknown key {key!r} in [supervisor]; allowed: {', '.join(sorted(names))}")
     try:
+        check_keys("[supervisor]", value, _NAMES)
         SupervisorConfig(**value)
     except ValueError as exc:
         msg = str(exc)
-        msg = msg[len("supervisor "):] if msg.startswith("supervisor ") else msg
-        raise ScenarioError(f"{source}: [supervisor] {msg}") from None
+        raise ScenarioError(f"{source}: {msg if msg.startswith('unknown key') else '[supervisor] ' + msg}") from None
     return dict(value)
 
 
-def wrap_controller(section: dict, controller, dt_s: float):
-    """Wrap ``controller`` in a :class:`Supervisor` configured by the ``[supervisor]`` section."""
-    return Supervisor(controller, SupervisorConfig(**section))
+def wrap_controller(section: dict, controller, dt_s: float, device: DeviceParams | None = None):
+    """Wrap ``controller`` in a :class:`Supervisor` configured by the ``[supervisor]`` section.
+
+    The motor limits come from ``device`` (:meth:`SupervisorConfig.for_device`; the nominal
+    device when None); the section's keys override them.
+    """
+    return Supervisor(controller, SupervisorConfig.for_device(device or DeviceParams(), **section))
