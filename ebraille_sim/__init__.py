@@ -18,6 +18,6 @@ def __getattr__(name):
     raise AttributeError(f"module 'ebraille_sim' has no attribute {name!r}")
 
 
-from ebraille_sim.rl.env import register_envs as _register_envs  # noqa: E402
+from ebraille_sim.rl.registration import register_envs as _register_envs  # noqa: E402
 
 _register_envs()

@@ -136,3 +136,24 @@ def test_architecture_doc_names_every_module():
                if p.name not in ("__init__.py", "__main__.py") and p.parent.name != "commands"
                and f"`{p.name}`" not in doc]
     assert not missing, f"modules missing from docs/architecture.md: {missing}"
+
+
+def _modules_after(statement: str) -> set[str]:
+    import subprocess
+    import sys
+    code = f"{statement}\nimport sys\nprint(' '.join(sorted(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True).stdout
+    return set(out.split())
+
+
+def test_importing_the_package_is_light():
+    """``import ebraille_sim`` registers the env id but loads no heavy dependency."""
+    mods = _modules_after("import ebraille_sim, gymnasium as gym\nassert 'EBraille/ContactForce-v0' in gym.registry")
+    heavy = {"numba", "scipy", "matplotlib", "pymunk", "control", "ebraille_sim.rl.env", "ebraille_sim.plant.kernel"}
+    assert not heavy & mods, heavy & mods
+
+
+def test_a_scenario_run_loads_no_plotting_or_analysis_library():
+    mods = _modules_after("import ebraille_sim.scenarios.runner")
+    assert not {"scipy.signal", "matplotlib", "pymunk", "control"} & mods, \
+        {"scipy.signal", "matplotlib", "pymunk", "control"} & mods

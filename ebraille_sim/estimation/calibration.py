@@ -28,7 +28,6 @@ import dataclasses
 import math
 
 import numpy as np
-import scipy.optimize
 
 from ebraille_sim.estimation.models import cached_model
 from ebraille_sim.physics.fsr import adc_code, adc_voltage, divider_voltage, play_widths, static_conductance
@@ -75,7 +74,7 @@ def steady_estimate(model, force_n: float, fsr, circuit, hold_s: float) -> float
 def calibrate_r2(model, fsr, circuit, forces_n=DEFAULT_FORCES_N, holds_s=DEFAULT_HOLDS_S,
                  r2_range_ohm=(1000.0, 20000.0)) -> float:
     """R2 (ohm) that makes ``model`` read ``fsr`` best under the calibration protocol."""
-    import dataclasses
+    import scipy.optimize
 
     def cost(log_r2):
         c = dataclasses.replace(circuit, r2_ohm=math.exp(log_r2))
@@ -106,6 +105,7 @@ def calibrate_device(device: DeviceParams, force_n: float = 1.0, hold_s: float =
     One-point assembly calibration (the estimator is fixed; the potentiometer is turned):
     solved by Brent's method on ln R2 in [ln 500, ln 50 000] ohm.
     """
+    import scipy.optimize
     model = cached_model(device.estimator.model)
     fsr, circuit = device.fsr, device.circuit
 
