@@ -32,6 +32,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ebraille_sim.base.fields import sourced
+from ebraille_sim.base.validation import check_keys
 from ebraille_sim.physics import fingertip as _fingertip
 from ebraille_sim.physics import fsr as _fsr
 
@@ -483,8 +484,5 @@ def describe(obj) -> list[tuple[str, Any, str, str]]:
 
 def replace_checked(obj, **changes):
     """``dataclasses.replace`` that rejects unknown field names with a one-line error."""
-    names = {f.name for f in dataclasses.fields(obj)}
-    for k in changes:
-        if k not in names:
-            raise ValueError(f"unknown key {k!r} for {type(obj).__name__}; allowed: {', '.join(sorted(names))}")
+    check_keys(type(obj).__name__, changes, sorted(f.name for f in dataclasses.fields(obj)))
     return dataclasses.replace(obj, **changes)

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from ebraille_sim.base.validation import check_keys, check_range
 from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2
 from ebraille_sim.scenarios.spec import ScenarioError
 
@@ -33,11 +34,12 @@ def validate_section(source: str, value) -> dict:
     """
     if not isinstance(value, dict):
         raise ScenarioError(f"{source}: [mechanism] must be a table")
+    try:
+        check_keys("[mechanism]", value, sorted(_SECTION_KEYS))
+    except ValueError as exc:
+        raise ScenarioError(f"{source}: {exc}") from None
     out = {}
     for key, v in value.items():
-        if key not in _SECTION_KEYS:
-            raise ScenarioError(f"{source}: unknown key {key!r} in [mechanism]; allowed: "
-                                f"{', '.join(sorted(_SECTION_KEYS))}")
         if key == "pose_steps":
             if not isinstance(v, list) or not all(isinstance(r, list) and len(r) == 3 for r in v):
                 raise ScenarioError(f"{source}: [mechanism] pose_steps must be a list of "
@@ -57,12 +59,10 @@ def validate_section(source: str, value) -> dict:
 
 
 def _number(source, key, v, bounds):
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise ScenarioError(f"{source}: [mechanism] {key} must be a finite number, got {v!r}")
-    lo, hi = bounds
-    if not lo <= v <= hi:
-        raise ScenarioError(f"{source}: [mechanism] {key} = {v:g} is out of range [{lo:g}, {hi:g}]")
-    return float(v)
+    try:
+        return check_range(key, v, *bounds)
+    except ValueError as exc:
+        raise ScenarioError(f"{source}: [mechanism] {exc}") from None
 
 
 def build_inputs(section: dict, t_s: np.ndarray, rng, device) -> dict:
