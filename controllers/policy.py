@@ -42,7 +42,8 @@ import numpy as np
 from ebraille_sim.base.validation import check_keys, check_number
 
 from controllers.base import check_dt, check_finite
-from controllers.features import N_OBS, N_Z, Z_PREV_ACTION, config_vector, observe, reset_features, write_observation
+from controllers.features import (CURRENT_SCALE_A, N_OBS, N_Z, Z_PREV_ACTION, config_vector, observe, reset_features,
+                                  write_observation)
 
 __all__ = ["ALGORITHMS", "POLICY_FORMAT", "PolicyController", "load_policy"]
 
@@ -51,6 +52,7 @@ ALGORITHMS = ("ppo", "sac")
 _META_KEYS = ("format", "algo", "env_id", "env", "training")
 _ENV_KEYS = ("control_rate_hz", "safe_force_n", "warn_force_n", "rate_filter_s", "integral_time_s",
              "effort_weight", "violation_weight", "driver_supply_v")
+_ENV_OPTIONAL_KEYS = ("current_scale_a",)
 _PERIOD_TOL = 1e-6
 
 
@@ -82,9 +84,11 @@ def read_metadata(json_path: str) -> dict:
     env = meta.get("env")
     if not isinstance(env, dict):
         raise ValueError(f"{json_path}: 'env' must be an object")
-    check_keys(f"{json_path} 'env'", env, _ENV_KEYS)
+    check_keys(f"{json_path} 'env'", env, _ENV_KEYS + _ENV_OPTIONAL_KEYS)
     for key in _ENV_KEYS:
         check_number(f"{json_path}: env.{key}", env.get(key))
+    if "current_scale_a" in env:
+        check_number(f"{json_path}: env.current_scale_a", env["current_scale_a"], lo=0.0, lo_open=True)
     return meta
 
 
@@ -110,6 +114,8 @@ class PolicyController:
         observation of shape (7,) float32 and returning an action of shape (1,).
     env_settings : dict
         The ``env`` entry of ``policy.json`` (:meth:`ebraille_sim.rl.env.EnvConfig.policy_metadata`).
+        ``current_scale_a`` is optional (default :data:`controllers.features.CURRENT_SCALE_A`,
+        the nominal drive's stall current, for files written before it was recorded).
     deterministic : bool
         Use the policy's mean action (default True).
     """
@@ -131,7 +137,8 @@ class PolicyController:
         if not self.supply_v > 0:
             raise ValueError(f"driver_supply_v must be > 0, got {self.supply_v}")
         self.period_s = 1.0 / rate
-        self._c = config_vector(rate, driver_supply_v=self.supply_v, **settings)
+        current_scale_a = float(env_settings.get("current_scale_a", CURRENT_SCALE_A))
+        self._c = config_vector(rate, driver_supply_v=self.supply_v, current_scale_a=current_scale_a, **settings)
         self._z = np.zeros(N_Z)
         self._obs = np.zeros(N_OBS, dtype=np.float32)
         self._since_s = 0.0

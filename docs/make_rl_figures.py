@@ -48,7 +48,7 @@ def env_episode(ctrl, seed: int) -> dict:
     env = ContactForceEnv()
     _, info = env.reset(seed=seed)
     dt = env.config.dt_s
-    supply = env.episode.device.driver_supply_v
+    supply = env.config.base_device.driver_supply_v   # volts per unit action, whatever the drawn supply
     ctrl.reset(force_est_n=info["force_est_n"], setpoint_n=info["setpoint_n"])
     total, errors, peak, current = 0.0, [], 0.0, 0.0
     while True:

@@ -115,7 +115,7 @@ def test_unknown_option_and_bad_values_are_one_line_errors():
     msg = str(exc.value)
     assert "unknown reset option 'wmp'" in msg and ", ".join(OPTION_KEYS) in msg and "\n" not in msg
     for bad, text in [({"wpm": -3.0}, "out of range"), ({"setpoint_n": 3.0}, "out of range"),
-                      ({"passage": "nope"}, "not one of"), ({"first_character": 10**9}, "out of range"), ({"gap_m": float("nan")}, "out of range"),
+                      ({"passage": "nope"}, "not one of"), ({"first_character": 10**9}, "out of range"), ({"gap_m": float("nan")}, "option 'gap_m' must be finite"),
                       ({"device": "nominal"}, "DeviceParams"), ({"setpoint_steps": [(2.0, 1.0), (1.0, 0.5)]},
                                                                 "increase")]:
         with pytest.raises(ValueError, match=text):

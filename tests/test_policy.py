@@ -1,6 +1,7 @@
 """The learned-policy controller: same observation as the env, lazy imports, loading, errors."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -51,16 +52,16 @@ def test_policy_in_a_1khz_loop_matches_the_200hz_env_exactly():
     plant.set_finger(1e-3)
     ctrl = PolicyController(policy, EnvConfig().policy_metadata())
     st = plant.state[0]
-    ctrl.reset(force_est_n=float(st[S["force_est_n"]]), setpoint_n=0.7)
+    ctrl.reset(force_est_n=float(st[S.force_est_n]), setpoint_n=0.7)
     loop_forces, loop_commands = [], []
     for k in range(2500):
         sp = ep.setpoint_n[k // 5]
-        u = ctrl.update(float(st[S["force_est_n"]]), sp, 1e-3, float(st[S["current_a"]]))
+        u = ctrl.update(float(st[S.force_est_n]), sp, 1e-3, float(st[S.current_a]))
         plant.advance(u)
         if k % 5 == 0:
             loop_commands.append(u)
         if k % 5 == 4:
-            loop_forces.append(float(st[S["contact_force_n"]]))
+            loop_forces.append(float(st[S.contact_force_n]))
     assert np.max(np.abs(np.array(loop_commands) / 6.0 - env_actions)) <= 1e-9
     assert np.max(np.abs(np.array(loop_forces) - env_forces)) <= 1e-9
     assert max(env_forces) > 0.5                                  # the policy did press
@@ -97,6 +98,36 @@ def test_bad_policy_paths_and_metadata_are_one_line_errors(tmp_path):
         read_metadata(_write_meta(tmp_path, algo="dqn"))
     with pytest.raises(ValueError, match="unknown option 'gain'"):
         load_policy(tmp_path, gain=2)
+
+
+def test_policy_metadata_carries_a_non_default_current_scale(tmp_path):
+    """A base device with a 15 ohm winding: the controller built from the saved metadata
+    shows the policy the current the env showed (obs[6] = I / (6 V / 15 ohm))."""
+    motor = dataclasses.replace(DeviceParams().motor, resistance_ohm=15.0)
+    dev = DeviceParams(motor=motor)
+    env = ContactForceEnv(randomize_device=False, base_device=dev)
+    env.reset(seed=3, options={"disturbances": False, "gap_m": 0.0, "setpoint_n": 0.7})
+    for _ in range(3):
+        obs, *_ = env.step(np.array([0.5], np.float32))
+    st = env.plant.state[0]
+    current_a = float(st[S.current_a])
+    assert abs(current_a) > 0.01 and obs[6] == pytest.approx(current_a / (6.0 / 15.0), rel=1e-6)
+
+    meta = read_metadata(_write_meta(tmp_path, env=env.config.policy_metadata()))
+    assert meta["env"]["current_scale_a"] == pytest.approx(0.4)
+    ctrl = PolicyController(LinearPolicy(), meta["env"])
+    ctrl.reset(force_est_n=float(st[S.force_est_n]), setpoint_n=0.7)
+    ctrl.update(float(st[S.force_est_n]), 0.7, 5e-3, current_a)
+    assert ctrl.last_observation[6] == obs[6]
+
+    older = {k: v for k, v in meta["env"].items() if k != "current_scale_a"}
+    assert read_metadata(_write_meta(tmp_path, env=older))["env"] == older   # the key is optional
+    nominal = PolicyController(LinearPolicy(), older)
+    nominal.reset(force_est_n=0.0, setpoint_n=0.7)
+    nominal.update(0.0, 0.7, 5e-3, current_a)
+    assert nominal.last_observation[6] == pytest.approx(current_a / (6.0 / 21.2), rel=1e-6)
+    with pytest.raises(ValueError, match="current_scale_a"):
+        read_metadata(_write_meta(tmp_path, env={**older, "current_scale_a": -1.0}))
 
 
 def test_trained_policy_loads_and_runs_a_scenario(tmp_path):

@@ -93,8 +93,6 @@ EQ4_STIFFNESS_COEFFS = (23.82e3, 94.32e3)
 ACTUATED_MASS_KG = 0.0491e-3
 """[R] seed paper, eq. 2: mass of the actuated film segment ``m_ac = m_c (D_ac/D_c)^2`` = 0.0491 g."""
 
-_I_VF = S["fsr_voltage_v"]
-
 
 # ---------------------------------------------------------------------------
 # instrument parameters
@@ -531,7 +529,7 @@ def _sensor_run(s, p, u, force_n, n_sub, out_v):
     """
     for i in range(force_n.size):
         advance_sensor_only(s, p, u, force_n[i], n_sub)
-        out_v[i] = s[_I_VF]
+        out_v[i] = s[S.fsr_voltage_v]
 
 
 def _servo(y_cmd: np.ndarray, dt_s: float, act: ActuatorParams):
@@ -620,7 +618,7 @@ def run_profile(profile: Profile, bench: BenchParams | None = None, seed=0) -> B
     p = pack_params(device, seed_from(ss_fsr), model)
     s = initial_state(device, p)
     u = np.zeros(N_INPUT)
-    u[U["driver_supply_v"]] = device.driver_supply_v
+    u[U.driver_supply_v] = device.driver_supply_v
     volts = np.empty(n)
     _sensor_run(s, p, u, force, int(device.rates.substeps_per_sensor), volts)
 

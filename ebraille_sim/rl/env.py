@@ -165,10 +165,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from ebraille_sim.base.compiled import njit
+from ebraille_sim.base.validation import check_bool, check_choice, check_number, check_pair, check_range
 
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
-from ebraille_sim.plant.layout import S as _S
-from ebraille_sim.plant.layout import U as _U
+from ebraille_sim.plant.layout import S, U
 from ebraille_sim.plant.loop import loop_step
 from controllers import features
 from controllers.features import (C_CMD_SCALE, C_DT, C_FS, C_INT_GAIN, C_RATE_ALPHA, C_SAFE, C_WARN, C_WU, C_WV,
@@ -198,9 +198,6 @@ ENV_ID = "EBraille/ContactForce-v0"
 OPTION_KEYS = ("device", "passage", "first_character", "wpm", "setpoint_n", "setpoint_steps", "gap_m",
                "drift_amplitude_m", "tremor_amplitude_m", "supply_fraction", "disturbances")
 
-_I_FC, _I_FEST, _I_CUR = _S["contact_force_n"], _S["force_est_n"], _S["current_a"]
-_U_CMD, _U_FINGER = _U["command_v"], _U["finger_pos_m"]
-
 @njit(cache=True)
 def reward_of(c, force_true_n, setpoint_n, action):
     """Reward and degree of violation ``(r, v)`` of one step (formula in the module docstring)."""
@@ -229,29 +226,6 @@ def post_step(z, c, force_est_n, force_true_n, current_a, setpoint_shown_n, setp
 # configuration and episodes
 # ---------------------------------------------------------------------------------------------
 
-def _check_range(name, value, lo, hi, lo_open=False, hi_open=False):
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValueError(f"{name} must be a number, got {value!r}")
-    value = float(value)
-    bad = not math.isfinite(value) or value < lo or value > hi or (lo_open and value == lo) or \
-        (hi_open and value == hi)
-    if bad:
-        lb = "(" if lo_open else "["
-        rb = ")" if hi_open else "]"
-        raise ValueError(f"{name} = {value!r} is out of range {lb}{lo:g}, {hi:g}{rb}")
-    return value
-
-
-def _check_pair(name, value, lo, hi):
-    if not isinstance(value, (tuple, list)) or len(value) != 2:
-        raise ValueError(f"{name} must be a (low, high) pair, got {value!r}")
-    a = _check_range(f"{name}[0]", value[0], lo, hi)
-    b = _check_range(f"{name}[1]", value[1], lo, hi)
-    if a > b:
-        raise ValueError(f"{name} must have low <= high, got {value!r}")
-    return (a, b)
-
-
 @dataclass(frozen=True)
 class EnvConfig:
     """Constructor arguments of :class:`ContactForceEnv`, validated (see its table), and the
@@ -274,23 +248,21 @@ class EnvConfig:
 
     def __post_init__(self):
         from ebraille_sim.physics.params import DeviceParams, RateParams
-        _check_range("control_rate_hz", self.control_rate_hz, 1.0, 1e5)
-        _check_range("safe_force_n", self.safe_force_n, 0.0, 20.0, lo_open=True)
-        _check_range("warn_force_n", self.warn_force_n, 0.0, self.safe_force_n, hi_open=True)
-        if isinstance(self.episode_characters, bool) or not isinstance(self.episode_characters, (int, np.integer)):
-            raise ValueError(f"episode_characters must be an integer, got {self.episode_characters!r}")
-        _check_range("episode_characters", self.episode_characters, 1, 100000)
-        _check_range("reading_start_s", self.reading_start_s, 0.0, 60.0)
-        object.__setattr__(self, "wpm_range", _check_pair("wpm_range", self.wpm_range, 1.0, 1000.0))
+        check_range("control_rate_hz", self.control_rate_hz, 1.0, 1e5)
+        check_range("safe_force_n", self.safe_force_n, 0.0, 20.0, lo_open=True)
+        check_range("warn_force_n", self.warn_force_n, 0.0, self.safe_force_n, hi_open=True)
+        object.__setattr__(self, "episode_characters",
+                           check_number("episode_characters", self.episode_characters, 1, 100000, integer=True))
+        check_range("reading_start_s", self.reading_start_s, 0.0, 60.0)
+        object.__setattr__(self, "wpm_range", check_pair("wpm_range", self.wpm_range, 1.0, 1000.0))
         object.__setattr__(self, "setpoint_range_n",
-                           _check_pair("setpoint_range_n", self.setpoint_range_n, 0.01, self.warn_force_n))
-        for name in ("randomize_device", "disturbances"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
-        _check_range("effort_weight", self.effort_weight, 0.0, 100.0)
-        _check_range("violation_weight", self.violation_weight, 0.0, 100.0)
-        _check_range("rate_filter_s", self.rate_filter_s, 0.0, 10.0)
-        _check_range("integral_time_s", self.integral_time_s, 0.0, 100.0, lo_open=True)
+                           check_pair("setpoint_range_n", self.setpoint_range_n, 0.01, self.warn_force_n))
+        check_bool("randomize_device", self.randomize_device)
+        check_bool("disturbances", self.disturbances)
+        check_range("effort_weight", self.effort_weight, 0.0, 100.0)
+        check_range("violation_weight", self.violation_weight, 0.0, 100.0)
+        check_range("rate_filter_s", self.rate_filter_s, 0.0, 10.0)
+        check_range("integral_time_s", self.integral_time_s, 0.0, 100.0, lo_open=True)
         if not isinstance(self.backend, str):
             raise ValueError(f"backend must be a string, got {self.backend!r}")
         base = DeviceParams() if self.base_device is None else self.base_device
@@ -342,18 +314,15 @@ class EnvConfig:
     def policy_metadata(self) -> dict:
         """What a policy controller needs to rebuild the observation (JSON-serialisable).
 
-        ``current_scale_a`` is recorded when it differs from
-        :data:`controllers.features.CURRENT_SCALE_A` (the nominal drive's 6 V / 21.2 ohm), the
-        value a reader of the file assumes without the key.
+        Always records ``current_scale_a`` (:attr:`current_scale_a`); a reader of a file
+        written without it assumes :data:`controllers.features.CURRENT_SCALE_A` (the nominal
+        drive's 6 V / 21.2 ohm).
         """
-        meta = {"control_rate_hz": self.control_rate_hz, "safe_force_n": self.safe_force_n,
+        return {"control_rate_hz": self.control_rate_hz, "safe_force_n": self.safe_force_n,
                 "warn_force_n": self.warn_force_n, "rate_filter_s": self.rate_filter_s,
                 "integral_time_s": self.integral_time_s, "effort_weight": self.effort_weight,
                 "violation_weight": self.violation_weight,
-                "driver_supply_v": self.base_device.driver_supply_v}
-        if self.current_scale_a != features.CURRENT_SCALE_A:
-            meta["current_scale_a"] = self.current_scale_a
-        return meta
+                "driver_supply_v": self.base_device.driver_supply_v, "current_scale_a": self.current_scale_a}
 
 
 @functools.lru_cache(maxsize=32)
@@ -445,37 +414,33 @@ def validate_options(options, safe_force_n: float) -> dict:
                 raise ValueError(f"option 'device' must be a DeviceParams, got {type(value).__name__}")
         elif key == "passage":
             from ebraille_sim.scenarios.passages import list_passages
-            if value not in list_passages():
-                raise ValueError(f"option 'passage' = {value!r} is not one of: {', '.join(list_passages())}")
+            check_choice("option 'passage'", value, list_passages())
         elif key == "first_character":
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
-                raise ValueError(f"option 'first_character' must be an integer >= 0, got {value!r}")
-            value = int(value)
+            value = check_number("option 'first_character'", value, lo=0, integer=True)
         elif key == "wpm":
-            value = _check_range("option 'wpm'", value, 0.0, 1000.0, lo_open=True)
+            value = check_range("option 'wpm'", value, 0.0, 1000.0, lo_open=True)
         elif key == "setpoint_n":
-            value = _check_range("option 'setpoint_n'", value, 0.0, safe_force_n, lo_open=True, hi_open=True)
+            value = check_range("option 'setpoint_n'", value, 0.0, safe_force_n, lo_open=True, hi_open=True)
         elif key == "setpoint_steps":
             if not isinstance(value, (list, tuple)) or not all(
                     isinstance(s, (list, tuple)) and len(s) == 2 for s in value):
                 raise ValueError("option 'setpoint_steps' must be a list of (time_s, force_n) pairs")
-            steps = [(_check_range("option 'setpoint_steps' time", t, 0.0, 3600.0),
-                      _check_range("option 'setpoint_steps' force", f, 0.0, safe_force_n, lo_open=True,
-                                   hi_open=True)) for t, f in value]
+            steps = [(check_range("option 'setpoint_steps' time", t, 0.0, 3600.0),
+                      check_range("option 'setpoint_steps' force", f, 0.0, safe_force_n, lo_open=True,
+                                  hi_open=True)) for t, f in value]
             if any(b[0] <= a[0] for a, b in zip(steps, steps[1:])):
                 raise ValueError("option 'setpoint_steps' times must increase")
             value = tuple(steps)
         elif key == "gap_m":
-            value = _check_range("option 'gap_m'", value, 0.0, 5e-3)
+            value = check_range("option 'gap_m'", value, 0.0, 5e-3)
         elif key == "drift_amplitude_m":
-            value = _check_range("option 'drift_amplitude_m'", value, 0.0, 1e-3)
+            value = check_range("option 'drift_amplitude_m'", value, 0.0, 1e-3)
         elif key == "tremor_amplitude_m":
-            value = _check_range("option 'tremor_amplitude_m'", value, 0.0, 1e-4)
+            value = check_range("option 'tremor_amplitude_m'", value, 0.0, 1e-4)
         elif key == "supply_fraction":
-            value = _check_range("option 'supply_fraction'", value, 0.5, 1.0)
+            value = check_range("option 'supply_fraction'", value, 0.5, 1.0)
         elif key == "disturbances":
-            if not isinstance(value, bool):
-                raise ValueError(f"option 'disturbances' must be True or False, got {value!r}")
+            check_bool("option 'disturbances'", value)
         out[key] = value
     return out
 
@@ -488,7 +453,7 @@ def episode_from_spec(spec) -> Episode:
     n = run.n_steps
     finger = run.profiles.get("finger_pos_m")
     if finger is None:
-        finger = np.full(n, run.base_inputs[_U_FINGER])
+        finger = np.full(n, run.base_inputs[U.finger_pos_m])
     return Episode(spec=spec, run=run, device=spec.device, sensor_seed=run.sensor_seed, schedule=run.schedule,
                    passage=spec.reading.passage, wpm=float(spec.reading.wpm),
                    n_steps=n, setpoint_n=run.setpoint_n, finger_m=finger,
@@ -585,14 +550,14 @@ class ContactForceEnv(gym.Env):
         self.plant.inputs[0] = ep.run.initial_inputs()
         self._st = self.plant.state[0]
         self._inp = self.plant.inputs[0]
-        self._varying = [(_U[name], arr) for name, arr in ep.run.profiles.items()]
+        self._varying = [(U[name], arr) for name, arr in ep.run.profiles.items()]
         self.episode = ep
         self._k = 0
-        fe = float(self._st[_I_FEST])
+        fe = float(self._st[S.force_est_n])
         reset_features(self._z, fe)
-        write_observation(self._z, self._c, fe, ep.setpoint_n[0], float(self._st[_I_CUR]), self._obs)
+        write_observation(self._z, self._c, fe, ep.setpoint_n[0], float(self._st[S.current_a]), self._obs)
         if self.render_mode is not None:
-            self._history = {"t_s": [0.0], "force_true_n": [float(self._st[_I_FC])],
+            self._history = {"t_s": [0.0], "force_true_n": [float(self._st[S.contact_force_n])],
                              "force_est_n": [fe], "setpoint_n": [float(ep.setpoint_n[0])]}
         return self._obs.copy(), self._info(0.0)
 
@@ -600,8 +565,8 @@ class ContactForceEnv(gym.Env):
         st = self._st
         k = self._k
         ep = self.episode
-        return {"force_true_n": float(st[_I_FC]), "force_est_n": float(st[_I_FEST]),
-                "setpoint_n": float(ep.setpoint_n[k]), "command_v": float(self._inp[_U_CMD]),
+        return {"force_true_n": float(st[S.contact_force_n]), "force_est_n": float(st[S.force_est_n]),
+                "setpoint_n": float(ep.setpoint_n[k]), "command_v": float(self._inp[U.command_v]),
                 "violation": violation, "time_s": k * self.config.dt_s, "char_index": int(ep.char_index[k])}
 
     def step(self, action):
@@ -619,10 +584,10 @@ class ContactForceEnv(gym.Env):
             inp[j] = arr[k]
         loop_step(self.plant, a * self._c[C_CMD_SCALE])
         self._k = k + 1
-        ft = float(st[_I_FC])
+        ft = float(st[S.contact_force_n])
         if not math.isfinite(ft):
             raise FloatingPointError("the simulation diverged (non-finite contact force)")
-        r, v, term = post_step(self._z, self._c, float(st[_I_FEST]), ft, float(st[_I_CUR]),
+        r, v, term = post_step(self._z, self._c, float(st[S.force_est_n]), ft, float(st[S.current_a]),
                                ep.setpoint_n[k], ep.setpoint_n[k + 1], a, self._obs)
         info = self._info(v)
         if self._history is not None:

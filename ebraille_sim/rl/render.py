@@ -67,13 +67,13 @@ def snapshot_from(state_row, input_row, episode, step: int, dt_s: float, safe_fo
         dots, char = dots_grid(cell), cell.unicode
     else:
         dots, char = np.zeros((3, 2), bool), ""
-    return RenderSnapshot(time_s=float(time_s), board_pos_m=float(state_row[S["board_pos_m"]]),
-                          finger_pos_m=float(input_row[U["finger_pos_m"]]),
+    return RenderSnapshot(time_s=float(time_s), board_pos_m=float(state_row[S.board_pos_m]),
+                          finger_pos_m=float(input_row[U.finger_pos_m]),
                           travel_max_m=float(episode.device.drivetrain.travel_max_m),
-                          force_true_n=float(state_row[S["contact_force_n"]]),
-                          force_est_n=float(state_row[S["force_est_n"]]),
+                          force_true_n=float(state_row[S.contact_force_n]),
+                          force_est_n=float(state_row[S.force_est_n]),
                           setpoint_n=float(episode.setpoint_n[min(step, episode.n_steps)]),
-                          safe_force_n=float(safe_force_n), command_v=float(input_row[U["command_v"]]),
+                          safe_force_n=float(safe_force_n), command_v=float(input_row[U.command_v]),
                           dots=dots, character=char, history=history)
 
 

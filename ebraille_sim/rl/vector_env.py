@@ -67,9 +67,6 @@ from ebraille_sim.plant.layout import N_INPUT, N_PARAM, N_STATE, S, U
 
 __all__ = ["ContactForceVectorEnv", "step_row", "step_rows", "step_rows_serial"]
 
-_I_FC, _I_FEST, _I_CUR = S["contact_force_n"], S["force_est_n"], S["current_a"]
-_U_CMD = U["command_v"]
-
 
 @njit(cache=True)
 def step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_sub,
@@ -85,11 +82,11 @@ def step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_
         a = 1.0
     k = int(z[i, Z_STEP])
     for j in range(inputs.shape[1]):
-        if j != _U_CMD:
+        if j != U.command_v:
             inputs[i, j] = seq[i, k, j]
-    inputs[i, _U_CMD] = a * c[i, C_CMD_SCALE]
+    inputs[i, U.command_v] = a * c[i, C_CMD_SCALE]
     kernel.advance(state[i], params[i], inputs[i], n_sub)
-    r, v, term = post_step(z[i], c[i], state[i, _I_FEST], state[i, _I_FC], state[i, _I_CUR],
+    r, v, term = post_step(z[i], c[i], state[i, S.force_est_n], state[i, S.contact_force_n], state[i, S.current_a],
                            setpoint[i, k], setpoint[i, k + 1], a, obs[i])
     reward[i] = r
     violation[i] = v
@@ -213,9 +210,9 @@ class ContactForceVectorEnv(VectorEnv):
             self._seq[i, :n, U[name]] = arr
         self._setpoint[i, :n + 1] = ep.setpoint_n
         self._n_steps[i] = min(n, self.max_episode_steps)
-        fe = float(self.state[i, _I_FEST])
+        fe = float(self.state[i, S.force_est_n])
         reset_features(self._z[i], fe)
-        write_observation(self._z[i], self._c[i], fe, ep.setpoint_n[0], float(self.state[i, _I_CUR]), self._obs[i])
+        write_observation(self._z[i], self._c[i], fe, ep.setpoint_n[0], float(self.state[i, S.current_a]), self._obs[i])
         self.episodes[i] = ep
 
     def reset(self, *, seed=None, options: dict | None = None):
@@ -269,12 +266,12 @@ class ContactForceVectorEnv(VectorEnv):
             self._violation[done] = 0.0
             self._terminated[done] = False
             self._truncated[done] = False
-        fc = self.state[:, _I_FC]
+        fc = self.state[:, S.contact_force_n]
         if not np.all(np.isfinite(fc)):
             raise FloatingPointError("the simulation diverged (non-finite contact force)")
         self._prev_done = self._terminated | self._truncated
         every = np.ones(self.num_envs, dtype=np.bool_)
-        info = {"force_true_n": fc.copy(), "_force_true_n": every, "force_est_n": self.state[:, _I_FEST].copy(),
+        info = {"force_true_n": fc.copy(), "_force_true_n": every, "force_est_n": self.state[:, S.force_est_n].copy(),
                 "_force_est_n": every.copy(), "violation": self._violation.copy(), "_violation": every.copy()}
         return (self._obs.copy(), self._reward.copy(), self._terminated.copy(), self._truncated.copy(), info)
 
