@@ -66,7 +66,7 @@ from ebraille_sim.plant.layout import N_INPUT, S, U
 from ebraille_sim.plant.loop import initial_state, pack_params
 from ebraille_sim.physics.noise import seed_from
 from ebraille_sim.estimation.paper_models import paper_model
-from ebraille_sim.physics.params import CircuitParams, DeviceParams, check_finite
+from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, CircuitParams, DeviceParams, check_finite
 
 __all__ = [
     "TABLE3_FREQUENCIES_HZ", "TABLE3_DAMPING_N_S_PER_M", "TABLE3_STIFFNESS_N_PER_M",
@@ -212,7 +212,7 @@ class BenchParams:
     cutoff_hz: float = sourced(40.0, "Hz", "[R] seed paper: content above 40 Hz filtered out", positive=True)
     min_force_n: float = sourced(0.2, "N", "[R] seed paper: tactile forces 0.2-3 N; the preload",
                                positive=True)
-    max_force_n: float = sourced(3.0, "N", "[R] seed paper: tactile forces 0.2-3 N", positive=True)
+    max_force_n: float = sourced(TACTILE_FORCE_MAX_N, "N", "[R] seed paper: tactile forces 0.2-3 N", positive=True)
     ramp_s: float = sourced(1.0, "s", "[E] positioning the effector onto the FSR with the micro-adjuster",
                           positive=True)
     settle_s: float = sourced(10.0, "s", "[E] time at preload before a recording starts", nonneg=True)

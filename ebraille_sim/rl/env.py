@@ -170,6 +170,7 @@ from ebraille_sim.base.validation import check_bool, check_choice, check_number,
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
 from ebraille_sim.plant.layout import S, U
 from ebraille_sim.plant.loop import loop_step
+from ebraille_sim.rl.registration import ENV_ID, register_envs
 from controllers import features
 from controllers.features import (C_CMD_SCALE, C_DT, C_FS, C_INT_GAIN, C_RATE_ALPHA, C_SAFE, C_WARN, C_WU, C_WV,
                                   ERROR_SCALE_N, N_C, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, Z_STEP, _clip,
@@ -193,7 +194,6 @@ __all__ = [
     "validate_options",
 ]
 
-ENV_ID = "EBraille/ContactForce-v0"
 
 OPTION_KEYS = ("device", "passage", "first_character", "wpm", "setpoint_n", "setpoint_steps", "gap_m",
                "drift_amplitude_m", "tremor_amplitude_m", "supply_fraction", "disturbances")
@@ -616,16 +616,3 @@ class ContactForceEnv(gym.Env):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
-
-
-def register_envs() -> None:
-    """Register ``EBraille/ContactForce-v0`` with Gymnasium (once per process, silently).
-
-    No ``max_episode_steps`` is registered: the env truncates itself when the excerpt ends,
-    which bounds an episode by :meth:`EnvConfig.max_episode_steps` at whatever control rate
-    it is made with (a registered step count would cut a 1 kHz episode after 1.4 s).
-    """
-    if ENV_ID in gym.registry:
-        return
-    gym.register(id=ENV_ID, entry_point="ebraille_sim.rl.env:ContactForceEnv",
-                 vector_entry_point="ebraille_sim.rl.vector_env:ContactForceVectorEnv")
