@@ -76,7 +76,7 @@ import numpy as np
 from ebraille_sim.base.fields import sourced
 from ebraille_sim.base.validation import check_keys, check_number, check_pair
 from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2
-from ebraille_sim.scenarios.spec import ScenarioError
+from ebraille_sim.scenarios.spec import ScenarioError, check_section_table
 
 __all__ = ["KINDS", "validate_section", "build_inputs", "parameter_table", "band_limited_noise",
            "minimum_jerk", "strap_transmission", "li_ion_ocv_v", "Tremor", "Pressing", "StrapSlip",
@@ -421,12 +421,7 @@ def validate_section(source: str, value) -> dict:
     Raises :class:`~ebraille_sim.scenarios.spec.ScenarioError` (one line) naming an unknown
     sub-table or key with the allowed ones, or a value out of range with the range.
     """
-    if not isinstance(value, dict):
-        raise ScenarioError(f"{source}: [disturbances] must be a table")
-    try:
-        check_keys("[disturbances]", value, sorted(KINDS))
-    except ValueError as exc:
-        raise ScenarioError(f"{source}: {exc}") from None
+    check_section_table(source, "disturbances", value, sorted(KINDS))
     out = {}
     for name, table in value.items():
         out[name] = _check_kind(source, name, KINDS[name], table)

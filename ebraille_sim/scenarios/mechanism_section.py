@@ -11,9 +11,9 @@ import math
 
 import numpy as np
 
-from ebraille_sim.base.validation import check_keys, check_range
+from ebraille_sim.base.validation import check_range
 from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2
-from ebraille_sim.scenarios.spec import ScenarioError
+from ebraille_sim.scenarios.spec import ScenarioError, check_section_table
 
 _SECTION_KEYS = {
     "press_offset_m": (-15e-3, 15e-3),
@@ -32,12 +32,7 @@ def validate_section(source: str, value) -> dict:
     the finger axis: lateral gravity ``g sin(roll)``), ``pose_steps`` (list of
     ``[time_s, press_offset_m, finger_tilt_deg]``, times increasing) and ``pose_ramp_s``.
     """
-    if not isinstance(value, dict):
-        raise ScenarioError(f"{source}: [mechanism] must be a table")
-    try:
-        check_keys("[mechanism]", value, sorted(_SECTION_KEYS))
-    except ValueError as exc:
-        raise ScenarioError(f"{source}: {exc}") from None
+    check_section_table(source, "mechanism", value, sorted(_SECTION_KEYS))
     out = {}
     for key, v in value.items():
         if key == "pose_steps":

@@ -55,6 +55,20 @@ class ScenarioError(ValueError):
     """
 
 
+def check_section_table(source: str, section: str, value, allowed) -> None:
+    """A delegate section must be a table whose keys are all in ``allowed``.
+
+    Raises :class:`ScenarioError` ``"SOURCE: [section] must be a table"`` or
+    ``"SOURCE: unknown key 'k' in [section]; allowed: ..."``.
+    """
+    if not isinstance(value, dict):
+        raise ScenarioError(f"{source}: [{section}] must be a table")
+    try:
+        check_keys(f"[{section}]", value, allowed)
+    except ValueError as exc:
+        raise ScenarioError(f"{source}: {exc}") from None
+
+
 _SETTING = "scenario setting"
 
 

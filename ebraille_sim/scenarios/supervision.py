@@ -4,23 +4,19 @@ from __future__ import annotations
 import dataclasses
 
 from controllers.supervisor import Supervisor, SupervisorConfig
-from ebraille_sim.base.validation import check_keys
 from ebraille_sim.physics.params import DeviceParams
-from ebraille_sim.scenarios.spec import ScenarioError
+from ebraille_sim.scenarios.spec import ScenarioError, check_section_table
 
 _NAMES = sorted(f.name for f in dataclasses.fields(SupervisorConfig))
 
 
 def validate_section(source: str, value) -> dict:
     """Check a ``[supervisor]`` table; raise ``ScenarioError`` naming a bad key or value."""
-    if not isinstance(value, dict):
-        raise ScenarioError(f"{source}: [supervisor] must be a table")
+    check_section_table(source, "supervisor", value, _NAMES)
     try:
-        check_keys("[supervisor]", value, _NAMES)
         SupervisorConfig(**value)
     except ValueError as exc:
-        msg = str(exc)
-        raise ScenarioError(f"{source}: {msg if msg.startswith('unknown key') else '[supervisor] ' + msg}") from None
+        raise ScenarioError(f"{source}: [supervisor] {exc}") from None
     return dict(value)
 
 
