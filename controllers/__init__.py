@@ -31,12 +31,11 @@ Examples
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Callable
 from typing import Any
 
-from ebraille_sim.base.validation import check_keys
+from ebraille_sim.base.validation import check_keys, read_table
 
 from controllers.base import Controller
 from controllers.pid import DEFAULT_PID, PID, PIDConfig, pid_from_dict
@@ -103,26 +102,7 @@ def available() -> list[str]:
 
 def _load_config_file(path: str) -> dict[str, Any]:
     """Read a ``.toml`` or ``.json`` controller config file."""
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"controller config file not found: {path}")
-    if path.lower().endswith(".toml"):
-        try:
-            import tomllib
-        except ModuleNotFoundError:  # Python < 3.11
-            import tomli as tomllib
-        with open(path, "rb") as fh:
-            try:
-                data = tomllib.load(fh)
-            except tomllib.TOMLDecodeError as exc:
-                raise ValueError(f"invalid TOML in {path}: {exc}") from None
-    else:
-        with open(path, encoding="utf-8") as fh:
-            try:
-                data = json.load(fh)
-            except json.JSONDecodeError as exc:
-                raise ValueError(f"invalid JSON in {path}: {exc}") from None
-    if not isinstance(data, dict):
-        raise ValueError(f"controller config {path} must be a table/object, got {type(data).__name__}")
+    data = read_table(path, "controller config file")
     check_keys(path, data, _FILE_KEYS)
     if "controller" not in data:
         raise ValueError(f"controller config {path} has no 'controller' key")

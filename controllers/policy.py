@@ -33,13 +33,12 @@ Examples
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 
 import numpy as np
 
-from ebraille_sim.base.validation import check_keys, check_number
+from ebraille_sim.base.validation import check_keys, check_number, read_table
 
 from controllers.base import check_dt, check_finite
 from controllers.features import (CURRENT_SCALE_A, N_OBS, N_Z, Z_PREV_ACTION, config_vector, observe, reset_features,
@@ -67,15 +66,7 @@ def _paths(path: str) -> tuple[str, str]:
 
 def read_metadata(json_path: str) -> dict:
     """Read and validate ``policy.json``; one-line errors for anything unexpected."""
-    if not os.path.isfile(json_path):
-        raise FileNotFoundError(f"policy metadata not found: {json_path}")
-    with open(json_path, encoding="utf-8") as fh:
-        try:
-            meta = json.load(fh)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"invalid JSON in {json_path}: {exc}") from None
-    if not isinstance(meta, dict):
-        raise ValueError(f"{json_path} must hold a JSON object")
+    meta = read_table(json_path, "policy metadata")
     check_keys(json_path, meta, _META_KEYS)
     if meta.get("format") != POLICY_FORMAT:
         raise ValueError(f"{json_path}: format must be {POLICY_FORMAT!r}, got {meta.get('format')!r}")

@@ -49,7 +49,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 __all__ = ["admissible", "check_number", "check_finite", "check_positive", "check_bool", "check_choice",
-           "check_pair", "check_keys", "check_range"]
+           "check_pair", "check_keys", "check_range", "read_table"]
 
 
 def _g(x: float) -> str:
@@ -231,3 +231,45 @@ def check_keys(where: str, given: Iterable[str] | Mapping[str, Any], allowed: It
     for key in given:
         if key not in names:
             raise ValueError(f"unknown key {key!r} in {where}; allowed: {', '.join(map(str, allowed))}")
+
+
+def read_table(path: str, what: str) -> dict:
+    """Read a ``.toml`` or ``.json`` file holding one table/object (by the file's suffix).
+
+    Parameters
+    ----------
+    path : str
+        The file.
+    what : str
+        What the file is, for the messages (e.g. ``"controller config"``).
+
+    Raises
+    ------
+    FileNotFoundError
+        ``"WHAT not found: PATH"``.
+    ValueError
+        One line for malformed TOML/JSON or a file that does not hold a table/object.
+    """
+    import json
+    import os
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"{what} not found: {path}")
+    if str(path).lower().endswith(".toml"):
+        try:
+            import tomllib
+        except ModuleNotFoundError:  # Python < 3.11
+            import tomli as tomllib
+        with open(path, "rb") as fh:
+            try:
+                data = tomllib.load(fh)
+            except tomllib.TOMLDecodeError as exc:
+                raise ValueError(f"invalid TOML in {path}: {exc}") from None
+    else:
+        with open(path, encoding="utf-8") as fh:
+            try:
+                data = json.load(fh)
+            except json.JSONDecodeError as exc:
+                raise ValueError(f"invalid JSON in {path}: {exc}") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{what} {path} must hold a table/object, got {type(data).__name__}")
+    return data
