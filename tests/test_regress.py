@@ -8,7 +8,8 @@ import pytest
 from ebraille_sim.tools import regress as R
 from ebraille_sim.cli import main as cli
 from ebraille_sim.scenarios.spec import list_scenarios
-from ebraille_sim.tools.testing import assert_scenario, check_metrics, check_scenario_metrics
+from ebraille_sim.tools.testing import (assert_matches_baseline, assert_scenario, check_metrics,
+                                        check_scenario_metrics)
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 SCEN = ROOT / "scenarios"
@@ -134,3 +135,85 @@ def test_helper_rejects_unknown_checks():
 
 def test_shipped_names_are_listed():
     assert "refresh_120wpm" in list_scenarios() and "tremor_90wpm" in list_scenarios()
+
+
+# ---------------------------------------------------------------- baselines from any working folder
+
+OWN = """name = "own"
+seed = 4
+duration_s = 1.5
+[reading]
+wpm = 90
+start_s = 0.5
+[criteria]
+peak_force_max_n = 3.0
+"""
+
+
+@pytest.fixture
+def elsewhere(tmp_path, monkeypatch):
+    """A working folder with a scenarios/ folder of its own holding one unrelated file."""
+    work = tmp_path / "work"
+    (work / "scenarios").mkdir(parents=True)
+    (work / "scenarios" / "unrelated.toml").write_text('name = "unrelated"\nduration_s = 1.0\n')
+    monkeypatch.chdir(work)
+    return work
+
+
+def test_shipped_baselines_are_found_from_a_folder_with_its_own_scenarios(elsewhere, capsys):
+    files = R.scenario_files(only=["tremor_90wpm", "unrelated"])
+    assert files == [SCEN / "tremor_90wpm.toml", elsewhere / "scenarios" / "unrelated.toml"]
+    assert R.baseline_path(files[0]) == SCEN / "baselines" / "tremor_90wpm.json"
+    before = (SCEN / "baselines" / "tremor_90wpm.json").read_bytes()
+    assert_matches_baseline("tremor_90wpm")
+    assert cli(["regress", "--only", "tremor_90wpm"]) == 0
+    assert "1 of 1 scenario(s) match their baselines" in capsys.readouterr().out
+    assert (SCEN / "baselines" / "tremor_90wpm.json").read_bytes() == before
+    assert not (elsewhere / "scenarios" / "baselines").exists()
+
+
+def test_assert_matches_baseline_still_fails_on_a_moved_shipped_metric(elsewhere, tmp_path):
+    """Checked against a copy of the shipped baseline with one number moved: the helper must fail."""
+    moved = tmp_path / "moved"
+    moved.mkdir()
+    doc = json.loads((SCEN / "baselines" / "contact_onset.json").read_text())
+    doc["metrics"]["onset_overshoot_fraction"] += 0.05
+    (moved / "contact_onset.json").write_text(json.dumps(doc))
+    with pytest.raises(AssertionError, match=r"contact_onset does not match its baseline .*moved/contact_onset\.json"
+                       r"(?s:.*)onset_overshoot_fraction.*moved \(better\)"):
+        assert_matches_baseline("contact_onset", baseline_dir=moved)
+
+
+def test_own_scenario_gets_a_baseline_then_matches(elsewhere, tmp_path, capsys):
+    own = tmp_path / "mine" / "own.toml"
+    own.parent.mkdir()
+    own.write_text(OWN)
+    with pytest.raises(AssertionError, match=r"scenario own has no baseline .*own\.json; create it with "
+                                             r"'ebraille-sim regress --update --only .*own\.toml'"):
+        assert_matches_baseline(own)
+    assert cli(["regress", "--only", str(own)]) == 1
+    assert "no baseline own.json" in capsys.readouterr().out
+    assert cli(["regress", "--update", "--only", str(own)]) == 0
+    capsys.readouterr()
+    base = own.parent / "baselines" / "own.json"
+    doc = json.loads(base.read_text())
+    assert doc["scenario"] == "own" and doc["seed"] == 4 and 0.5 < doc["metrics"]["peak_force_n"] < 1.5
+    assert_matches_baseline(own)
+    assert_matches_baseline(str(own))
+    assert cli(["regress", "--only", str(own), "tremor_90wpm"]) == 0
+    assert "2 of 2 scenario(s) match their baselines" in capsys.readouterr().out
+    doc["metrics"]["force_rmse_n"] *= 2
+    base.write_text(json.dumps(doc))
+    with pytest.raises(AssertionError, match=r"own does not match its baseline(?s:.*)force_rmse_n"):
+        assert_matches_baseline(own)
+
+
+def test_a_missing_scenario_file_is_named_as_a_file(elsewhere, capsys):
+    assert cli(["regress", "--only", "nope/missing.toml"]) == 2
+    err = capsys.readouterr().err
+    assert err == "error: scenario file 'nope/missing.toml' not found\n"
+    assert cli(["regress", "--only", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("error: scenario 'nope' not found (looked in ") and "unrelated, battery_sag" in err
+    with pytest.raises(ValueError, match="^scenario file 'nope/missing.toml' not found$"):
+        assert_matches_baseline("nope/missing.toml")

@@ -419,32 +419,70 @@ def load_scenario(path) -> ScenarioSpec:
     return parse_scenario(data, source=p.name, base_dir=str(p.parent))
 
 
+def library_dir() -> pathlib.Path | None:
+    """The folder of the shipped scenario library, or None when it cannot be found.
+
+    In an installed wheel it is the package data ``ebraille_sim/library`` (built from the
+    project's ``scenarios/`` folder), found with :mod:`importlib.resources`; in a source
+    checkout (also an editable install) it is that top-level ``scenarios/`` folder itself.
+    """
+    import importlib.resources
+    shipped = importlib.resources.files("ebraille_sim") / "library"
+    if isinstance(shipped, pathlib.Path) and shipped.is_dir():
+        return shipped
+    root = pathlib.Path(__file__).resolve().parents[2]
+    try:
+        is_checkout = 'name = "ebraille-sim"' in (root / "pyproject.toml").read_text(encoding="utf-8")
+    except OSError:
+        is_checkout = False
+    if is_checkout and (root / "scenarios").is_dir():
+        return root / "scenarios"
+    return None
+
+
 def scenario_dirs() -> list[pathlib.Path]:
-    """Folders searched for scenario names: ``./scenarios`` and the project's own."""
-    here = pathlib.Path(__file__).resolve().parents[2] / "scenarios"
-    cwd = pathlib.Path.cwd() / "scenarios"
+    """Folders searched for scenario names, first match wins.
+
+    ``./scenarios`` in the working folder (your own scenarios) comes first, then the
+    shipped library (:func:`library_dir`).  A name not found in ``./scenarios`` still
+    resolves to the shipped scenario of that name.
+    """
     out = []
-    for d in (cwd, here):
-        if d.is_dir() and d not in out:
+    for d in (pathlib.Path.cwd() / "scenarios", library_dir()):
+        if d is not None and d.is_dir() and d.resolve() not in [o.resolve() for o in out]:
             out.append(d)
     return out
 
 
 def resolve_scenario_path(path) -> pathlib.Path:
+    """The file of a scenario given as a path or as a bare name.
+
+    The path of an existing file is returned as it is.  A bare name (no folder, no suffix) is looked
+    up as ``NAME.toml`` in :func:`scenario_dirs`, first match wins.
+
+    Raises
+    ------
+    ScenarioError
+        ``"scenario file 'PATH' not found"`` for a path, or ``"scenario 'NAME' not found
+        (looked in DIRS); available: ..."`` for a name.
+    """
     p = pathlib.Path(path)
-    if p.exists():
+    if p.is_file():
         return p
-    if p.suffix == "" and len(p.parts) == 1:
-        for d in scenario_dirs():
-            cand = d / f"{p.name}.toml"
-            if cand.exists():
-                return cand
-    names = ", ".join(list_scenarios()) or "none found"
-    raise ScenarioError(f"scenario file {str(path)!r} not found (shipped scenarios: {names})")
+    if not (p.suffix == "" and len(p.parts) == 1):
+        raise ScenarioError(f"scenario file {str(path)!r} " + ("is not a file" if p.exists() else "not found"))
+    dirs = scenario_dirs()
+    for d in dirs:
+        cand = d / f"{p.name}.toml"
+        if cand.is_file():
+            return cand
+    names = ", ".join(list_scenarios()) or "none"
+    where = ", ".join(str(d) for d in dirs) or "no scenario folder found"
+    raise ScenarioError(f"scenario {str(path)!r} not found (looked in {where}); available: {names}")
 
 
 def list_scenarios() -> list[str]:
-    """Names of the scenario files found in :func:`scenario_dirs`."""
+    """Names of the scenario files found in :func:`scenario_dirs` (yours first, then the library's)."""
     names = []
     for d in scenario_dirs():
         for f in sorted(d.glob("*.toml")):

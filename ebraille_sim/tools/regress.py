@@ -37,6 +37,9 @@ legible_char_fraction_cv    0.02       0         higher   one character in 50
 real_time_factor            excluded                      wall-clock, not a property of the model
 ==========================  =========  ========  =======  ==========================================
 
+For CI, :func:`junit_xml` (one test case per scenario, a failure listing what moved) and
+:func:`json_document` (every row) give the outcome as files.
+
 Examples
 --------
 >>> row = compare_metrics({"force_rmse_n": 0.030}, {"force_rmse_n": 0.020})[0]
@@ -52,7 +55,7 @@ from dataclasses import dataclass
 
 __all__ = ["Tolerance", "TOLERANCES", "DEFAULT_TOLERANCE", "EXCLUDED", "Row", "ScenarioCheck",
            "compare_metrics", "check_criteria", "baseline_path", "read_baseline", "write_baseline",
-           "regress_scenarios", "format_report", "scenario_files"]
+           "regress_scenarios", "format_report", "scenario_files", "FAILING", "json_document", "junit_xml"]
 
 
 @dataclass(frozen=True)
@@ -186,40 +189,74 @@ def write_baseline(path, result) -> None:
 
 
 def scenario_files(scenario_dir=None, only=None) -> list[pathlib.Path]:
-    """The scenario files to check: every ``*.toml`` of ``scenario_dir`` (or only ``only``).
+    """The scenario files to check.
 
-    ``scenario_dir`` defaults to ``./scenarios`` when it exists, else the project's own.
+    Parameters
+    ----------
+    scenario_dir : path, optional
+        Folder of scenario files.  Without it, all scenarios means every ``*.toml`` of
+        ``./scenarios`` when that folder exists, else of the shipped library.
+    only : list of str, optional
+        Scenarios to check instead of all: names or scenario file paths.  A path is taken as
+        it is (its baseline is ``baselines/NAME.json`` beside it).  A name is looked up in
+        ``scenario_dir`` when given, else in ``./scenarios`` and then in the shipped library
+        (see :func:`ebraille_sim.scenarios.spec.scenario_dirs`), so your own folder never
+        hides a shipped scenario it does not contain.
+
+    Raises
+    ------
+    ValueError
+        For an unknown name or a scenario file that does not exist (one line naming it and,
+        for a name, the scenarios available).
+    FileNotFoundError
+        For a scenario folder that does not exist.
     """
-    if scenario_dir is None:
-        from ebraille_sim.scenarios.spec import scenario_dirs
-        dirs = scenario_dirs()
-        if not dirs:
-            raise FileNotFoundError("no scenarios/ folder found")
-        scenario_dir = dirs[0]
-    d = pathlib.Path(scenario_dir)
-    if not d.is_dir():
-        raise FileNotFoundError(f"scenario folder {str(d)!r} not found")
-    files = sorted(d.glob("*.toml"))
-    if only:
-        names = {f.stem: f for f in files}
-        missing = [n for n in only if n not in names]
-        if missing:
-            raise ValueError(f"unknown scenario {missing[0]!r} in {str(d)!r}; available: {', '.join(names) or 'none'}")
-        files = [names[n] for n in only]
+    from ebraille_sim.scenarios.spec import resolve_scenario_path, scenario_dirs
+    d = None
+    if scenario_dir is not None:
+        d = pathlib.Path(scenario_dir)
+        if not d.is_dir():
+            raise FileNotFoundError(f"scenario folder {str(d)!r} not found")
+    if not only:
+        if d is None:
+            dirs = scenario_dirs()
+            if not dirs:
+                raise FileNotFoundError("no scenarios/ folder found in the working folder or the installation")
+            d = dirs[0]
+        return sorted(d.glob("*.toml"))
+    if d is None:
+        return [resolve_scenario_path(entry) for entry in only]
+    files = []
+    for entry in only:
+        p = pathlib.Path(entry)
+        if p.suffix == "" and len(p.parts) == 1:
+            p = d / f"{entry}.toml"
+            if not p.is_file():
+                names = ", ".join(f.stem for f in sorted(d.glob("*.toml"))) or "none"
+                raise ValueError(f"unknown scenario {entry!r} in {str(d)!r}; available: {names}")
+        elif not p.is_file():
+            raise ValueError(f"scenario file {str(entry)!r} not found")
+        files.append(p)
     return files
+
+
+FAILING = ("moved", "removed", "criterion", "missing", "error")
+"""Row statuses that fail a scenario."""
 
 
 @dataclass
 class ScenarioCheck:
-    """Outcome of one scenario: its report rows and the wall time of its run."""
+    """Outcome of one scenario: its report rows, the wall time of its run and its files."""
     name: str
     rows: list
     wall_s: float
     updated: bool = False
+    source: str = ""
+    baseline: str = ""
 
     @property
     def failed(self) -> bool:
-        return any(r.status in ("moved", "removed", "criterion", "missing", "error") for r in self.rows)
+        return any(r.status in FAILING for r in self.rows)
 
 
 def _check_one(path, update: bool, controller, baseline_dir) -> ScenarioCheck:
@@ -230,26 +267,29 @@ def _check_one(path, update: bool, controller, baseline_dir) -> ScenarioCheck:
     t0 = time.perf_counter()
     name = pathlib.Path(path).stem
     bpath = (pathlib.Path(baseline_dir) / f"{name}.json") if baseline_dir else baseline_path(path)
+
+    def done(rows, updated=False):
+        return ScenarioCheck(name, rows, time.perf_counter() - t0, updated, str(path), str(bpath))
+
     try:
         spec = load_scenario(path)
         result = run_scenario(spec, controller=controller)
     except (ValueError, FileNotFoundError, FloatingPointError) as exc:
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        return ScenarioCheck(name, [Row(name, "-", None, None, None, "error", msg)], time.perf_counter() - t0)
+        return done([Row(name, "-", None, None, None, "error", msg)])
     rows = check_criteria(result.metrics, spec.criteria, name)
     if update:
         write_baseline(bpath, result)
-        return ScenarioCheck(name, rows, time.perf_counter() - t0, updated=True)
+        return done(rows, updated=True)
     if not bpath.exists():
         rows.insert(0, Row(name, "-", None, None, None, "missing", f"no baseline {bpath.name}; run with --update"))
-        return ScenarioCheck(name, rows, time.perf_counter() - t0)
+        return done(rows)
     try:
         doc = read_baseline(bpath)
     except (ValueError, FileNotFoundError) as exc:
         rows.insert(0, Row(name, "-", None, None, None, "error", str(exc)))
-        return ScenarioCheck(name, rows, time.perf_counter() - t0)
-    rows = compare_metrics(result.metrics, doc["metrics"], name) + rows
-    return ScenarioCheck(name, rows, time.perf_counter() - t0)
+        return done(rows)
+    return done(compare_metrics(result.metrics, doc["metrics"], name) + rows)
 
 
 def regress_scenarios(scenario_dir=None, only=None, update: bool = False, controller=None, baseline_dir=None,
@@ -261,13 +301,13 @@ def regress_scenarios(scenario_dir=None, only=None, update: bool = False, contro
     scenario_dir : path, optional
         Folder of scenario files (default :func:`scenario_files`' choice).
     only : list of str, optional
-        Scenario names to run (default: all).
+        Scenario names or scenario file paths to run (default: all; see :func:`scenario_files`).
     update : bool
         Rewrite the baselines instead of comparing.
     controller : str, path or Controller, optional
         Replaces every scenario's controller (to check a candidate against the baselines).
     baseline_dir : path, optional
-        Folder of the baseline files (default ``<scenario_dir>/baselines``).
+        Folder of the baseline files (default ``baselines/`` beside each scenario file).
     jobs : int
         Scenarios run in parallel processes (1: in this process).
 
@@ -323,3 +363,72 @@ def format_report(checks: list[ScenarioCheck], verbose: bool = False) -> str:
         out.append(f"{len(checks) - n_fail} of {len(checks)} scenario(s) match their baselines; "
                    f"{n_fail} failed; {wall:.1f} s of runs")
     return "\n".join(out)
+
+
+def _plain(v):
+    """A JSON-safe value: non-finite floats become their text ('nan', 'inf')."""
+    if isinstance(v, float) and not math.isfinite(v):
+        return str(v)
+    return v
+
+
+def json_document(checks: list[ScenarioCheck]) -> dict:
+    """The outcome as a JSON-ready dict: a summary and, per scenario, every report row."""
+    scenarios = []
+    for c in checks:
+        scenarios.append({
+            "name": c.name, "file": c.source, "baseline": c.baseline, "passed": not c.failed,
+            "updated": c.updated, "wall_s": round(c.wall_s, 3),
+            "rows": [{"metric": r.metric, "baseline": _plain(r.baseline), "current": _plain(r.current),
+                      "limit": _plain(r.limit), "status": r.status, "note": r.note} for r in c.rows]})
+    n_fail = sum(c.failed for c in checks)
+    return {"passed": n_fail == 0, "scenarios_checked": len(checks), "scenarios_failed": n_fail,
+            "wall_s": round(sum(c.wall_s for c in checks), 3), "scenarios": scenarios}
+
+
+def _row_line(r: Row) -> str:
+    if r.status in ("missing", "error"):
+        return f"{r.status}: {r.note}"
+    if r.status == "criterion":
+        return f"{r.metric} = {_fmt(r.current)}, expected {r.baseline} ({r.note})"
+    text = f"{r.metric}: baseline {_fmt(r.baseline)}, current {_fmt(r.current)}"
+    if _is_num(r.baseline) and _is_num(r.current):
+        text += f", change {r.current - r.baseline:+.4g}"
+    if r.limit is not None:
+        text += f", allowed {r.limit:.3g}"
+    return text + f" ({r.status}{', ' + r.note if r.note else ''})"
+
+
+def junit_xml(checks: list[ScenarioCheck], suite: str = "ebraille-sim regress") -> str:
+    """The outcome as JUnit XML: one ``testcase`` per scenario.
+
+    A scenario that could not run (or whose baseline is unreadable) gets an ``error``
+    element; one whose metrics moved, were removed, miss a baseline or fail a criterion
+    gets a ``failure`` element whose message names the metrics and whose text has one line
+    per metric (baseline, current, change, allowed).
+    """
+    import xml.etree.ElementTree as ET
+    n_err = sum(any(r.status == "error" for r in c.rows) for c in checks)
+    n_fail = sum(c.failed for c in checks) - n_err
+    root = ET.Element("testsuites")
+    ts = ET.SubElement(root, "testsuite", name=suite, tests=str(len(checks)), failures=str(n_fail),
+                       errors=str(n_err), skipped="0", time=f"{sum(c.wall_s for c in checks):.3f}")
+    for c in checks:
+        tc = ET.SubElement(ts, "testcase", classname="ebraille_sim.regress", name=c.name, time=f"{c.wall_s:.3f}",
+                           file=c.source)
+        bad = [r for r in c.rows if r.status in FAILING]
+        if not bad:
+            continue
+        kind = "error" if any(r.status == "error" for r in bad) else "failure"
+        metrics = [r.metric for r in bad if r.metric != "-"]
+        if metrics:
+            statuses = {r.status for r in bad}
+            verb = ("moved" if statuses <= {"moved", "removed"} else
+                    "failed a criterion" if statuses == {"criterion"} else "moved or failed a criterion")
+            message = f"{len(metrics)} metric(s) {verb}: {', '.join(metrics)}"
+        else:
+            message = bad[0].note
+        el = ET.SubElement(tc, kind, message=message, type=bad[0].status)
+        el.text = "\n".join(_row_line(r) for r in bad)
+    ET.indent(root)
+    return '<?xml version="1.0" encoding="utf-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"

@@ -14,8 +14,9 @@ Checks are keyword arguments ``METRIC__OP=value`` with ``OP`` one of ``ge``, ``g
 ``assert_scenario`` runs the scenario once per ``(name, seed, controller, duration_s)``
 in a test session (results are cached; controllers given as objects are never cached)
 and raises ``AssertionError`` listing every failed check with the measured value.
-``assert_matches_baseline`` checks a scenario against its regression baseline with the
-tolerances of :mod:`ebraille_sim.tools.regress`.
+``assert_matches_baseline`` checks a scenario (a shipped name, or your own file with its
+baseline in ``baselines/`` beside it) against its regression baseline with the tolerances of
+:mod:`ebraille_sim.tools.regress`.
 
 Examples
 --------
@@ -115,9 +116,40 @@ def assert_scenario(name, *, seed=None, controller=None, duration_s=None, **chec
     return metrics
 
 
-def assert_matches_baseline(name, *, controller=None, scenario_dir=None) -> None:
-    """Assert that a shipped scenario still matches its regression baseline."""
+def assert_matches_baseline(name, *, controller=None, scenario_dir=None, baseline_dir=None) -> None:
+    """Assert that a scenario still matches its regression baseline.
+
+    Parameters
+    ----------
+    name : str or path
+        A scenario name or a scenario file path.  A name is looked up in ``scenario_dir``
+        when given, else in ``./scenarios`` and then in the shipped library, whatever the
+        working folder; a shipped scenario is checked against its shipped baseline.  A
+        path's baseline is ``baselines/NAME.json`` beside the file (create it with
+        ``ebraille-sim regress --update --only PATH``).
+    controller : str, path or Controller, optional
+        Replaces the scenario's controller.
+    scenario_dir, baseline_dir : path, optional
+        As in :func:`ebraille_sim.tools.regress.regress_scenarios`.
+
+    Raises
+    ------
+    AssertionError
+        When a metric moved (with the report table), a ``[criteria]`` limit fails, the
+        baseline is missing (with the command that creates it) or the scenario did not run.
+    ValueError, FileNotFoundError
+        For an unknown scenario name or a missing scenario file.
+    """
     from ebraille_sim.tools.regress import format_report, regress_scenarios
-    checks = regress_scenarios(scenario_dir, only=[name], controller=controller)
-    if any(c.failed for c in checks):
-        raise AssertionError(f"scenario {name} moved from its baseline:\n{format_report(checks)}")
+    [check] = regress_scenarios(scenario_dir, only=[str(name)], controller=controller, baseline_dir=baseline_dir)
+    if not check.failed:
+        return
+    statuses = {r.status for r in check.rows}
+    if "missing" in statuses:
+        raise AssertionError(f"scenario {check.name} has no baseline {check.baseline}; create it with "
+                             f"'ebraille-sim regress --update --only {check.source}'")
+    if "error" in statuses:
+        raise AssertionError(f"scenario {check.name} could not be checked:\n{format_report([check])}")
+    what = (f"does not match its baseline {check.baseline}" if statuses & {"moved", "removed"}
+            else "fails its [criteria]")
+    raise AssertionError(f"scenario {check.name} {what}:\n{format_report([check])}")
