@@ -2,7 +2,9 @@
 
 Sub-commands live in :mod:`ebraille_sim.commands`.  Every input problem (missing file,
 malformed TOML, unknown key, bad number) ends with one ``error: ...`` line on stderr and
-exit status 2, never a traceback; nothing is written half-way.
+exit status 2, never a traceback; nothing is written half-way.  Exit status 1 means the
+command ran but its checks failed: ``run`` when a scenario ``[criteria]`` limit fails,
+``regress`` when a scenario moved from its baseline.
 """
 from __future__ import annotations
 
@@ -37,7 +39,7 @@ def build_parser():
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     table = {}
     for mod in _commands():
-        p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP)
+        p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP, epilog=getattr(mod, "EPILOG", None))
         mod.add_arguments(p)
         table[mod.NAME] = mod
     return parser, table

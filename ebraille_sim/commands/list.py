@@ -6,37 +6,69 @@ HELP = "list scenarios, controllers, device presets and estimator models"
 
 
 def add_arguments(p):
-    pass
+    p.add_argument("--json", action="store_true",
+                   help="print everything as one JSON document (scenarios with their file and folder)")
+
+
+def catalogue() -> dict:
+    """Everything ``list`` shows, as a JSON-ready dict.
+
+    ``scenarios`` is a list of ``{"name", "description", "file", "from", "error"}`` in the
+    order names are looked up: ``from`` is ``"library"`` for the shipped library and
+    ``"working folder"`` for your own ``./scenarios``; ``error`` is None for a valid file,
+    else the one-line reason it cannot be loaded.
+    """
+    import controllers
+    from ebraille_sim.estimation.paper_models import KINDS, ORDERS
+    from ebraille_sim.physics import params
+    from ebraille_sim.plant.loop import PLANT_BACKENDS
+    from ebraille_sim.scenarios.spec import library_dir, list_scenarios, load_scenario, resolve_scenario_path
+
+    lib = library_dir()
+    lib = lib.resolve() if lib is not None else None
+    scenarios = []
+    for name in list_scenarios():
+        path = resolve_scenario_path(name)
+        entry = {"name": name, "description": "", "file": str(path),
+                 "from": "library" if path.parent.resolve() == lib else "working folder", "error": None}
+        try:
+            entry["description"] = load_scenario(path).description
+        except ValueError as exc:
+            entry["error"] = str(exc)
+        scenarios.append(entry)
+    return {
+        "scenarios": scenarios,
+        "controllers": list(controllers.available()),
+        "plant_backends": list(PLANT_BACKENDS),
+        "device_presets": {"motor": list(params.MOTORS), "drivetrain": list(params.DRIVETRAINS),
+                           "finger": list(params.FINGERS), "fsr": list(params.FSRS)},
+        "estimator_models": [f"paper:{k}:{o}" for k in KINDS for o in ORDERS],
+    }
 
 
 def main(args) -> int:
-    import controllers
+    import json
 
-    from ebraille_sim.physics import params
-    from ebraille_sim.estimation.paper_models import KINDS, ORDERS
-    from ebraille_sim.scenarios.spec import list_scenarios, load_scenario
-
+    cat = catalogue()
+    if args.json:
+        print(json.dumps(cat, indent=2))
+        return 0
     print("scenarios:")
-    for name in list_scenarios():
-        try:
-            desc = load_scenario(name).description
-        except ValueError as exc:
-            desc = f"(invalid: {exc})"
-        print(f"  {name:<24} {desc}")
+    for s in cat["scenarios"]:
+        desc = f"(invalid: {s['error']})" if s["error"] else s["description"]
+        mark = " [./scenarios]" if s["from"] == "working folder" else ""
+        print(f"  {s['name']:<24} {desc}{mark}")
     print("controllers:")
-    for name in controllers.available():
+    for name in cat["controllers"]:
         print(f"  {name}")
     print("  (or a gains file: .toml/.json with controller = NAME and a [gains] table,")
     print("   or policy:PATH for a policy saved by 'ebraille-sim train', extra: rl)")
     print("plant backends:")
-    from ebraille_sim.plant.loop import PLANT_BACKENDS
-    print("  " + ", ".join(PLANT_BACKENDS))
+    print("  " + ", ".join(cat["plant_backends"]))
     print("device presets:")
-    print("  motor:      " + ", ".join(params.MOTORS))
-    print("  drivetrain: " + ", ".join(params.DRIVETRAINS))
-    print("  finger:     " + ", ".join(params.FINGERS))
-    print("  fsr:        " + ", ".join(params.FSRS))
+    for kind, names in cat["device_presets"].items():
+        print(f"  {kind + ':':<11} " + ", ".join(names))
     print("estimator models:")
-    print("  " + ", ".join(f"paper:{k}:{o}" for k in KINDS for o in ORDERS))
+    print("  " + ", ".join(cat["estimator_models"]))
     print("  (or the path of a model saved as JSON)")
     return 0

@@ -3,32 +3,67 @@ from __future__ import annotations
 
 NAME = "regress"
 HELP = "run every scenario in scenarios/ and compare the metrics with scenarios/baselines/ (exit 1 if any moved)"
+EPILOG = ("exit status: 0 when every scenario matches its baseline and criteria, 1 when any moved, "
+          "failed a criterion or has no baseline, 2 for bad input")
 
 
 def add_arguments(p):
     p.add_argument("--update", action="store_true", help="rewrite the baselines from this run")
-    p.add_argument("--only", nargs="+", metavar="NAME", default=None, help="run only these scenarios")
+    p.add_argument("--only", nargs="+", metavar="NAME", default=None,
+                   help="run only these scenarios: names (./scenarios first, then the shipped library) or "
+                        "scenario file paths (baseline in baselines/ beside the file)")
     p.add_argument("--scenarios", default=None, metavar="DIR",
-                   help="folder of scenario files (default: ./scenarios, else the project's)")
-    p.add_argument("--baselines", default=None, metavar="DIR", help="folder of baselines (default: DIR/baselines)")
+                   help="folder of scenario files (default: ./scenarios, else the shipped library)")
+    p.add_argument("--baselines", default=None, metavar="DIR", help="folder of baselines (default: baselines/ beside each scenario file)")
     p.add_argument("--controller", default=None,
                    help="check this controller (name or gains file) against the baselines instead of each scenario's")
     p.add_argument("-j", "--jobs", type=int, default=1, metavar="N", help="scenarios run in parallel (default 1)")
     p.add_argument("-v", "--verbose", action="store_true", help="list every compared metric, not only what moved")
+    p.add_argument("--junit", default=None, metavar="FILE",
+                   help="also write JUnit XML: one test case per scenario, failures list the moved metrics")
+    p.add_argument("--json", default=None, metavar="FILE", help="also write every compared metric as JSON")
+
+
+def _prepare(option: str, path):
+    """The report file's folder, created now so a bad path fails before the runs."""
+    import pathlib
+    p = pathlib.Path(path)
+    if p.is_dir():
+        raise ValueError(f"{option} {str(p)!r} is a folder; give a file name")
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"{option}: cannot create folder {str(p.parent)!r}: {exc.strerror}") from None
+    return p
+
+
+def _write(p, text: str) -> None:
+    tmp = p.with_name(p.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    tmp.replace(p)
 
 
 def main(args) -> int:
+    import json
     import time
 
-    from ebraille_sim.tools.regress import format_report, regress_scenarios
+    from ebraille_sim.tools.regress import format_report, json_document, junit_xml, regress_scenarios
 
     if args.jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
     if args.update and args.controller:
         raise ValueError("--update writes baselines with each scenario's own controller; drop --controller")
+    junit = _prepare("--junit", args.junit) if args.junit else None
+    json_path = _prepare("--json", args.json) if args.json else None
     t0 = time.perf_counter()
     checks = regress_scenarios(args.scenarios, only=args.only, update=args.update, controller=args.controller,
                                baseline_dir=args.baselines, jobs=args.jobs)
     print(format_report(checks, verbose=args.verbose))
     print(f"wall time {time.perf_counter() - t0:.1f} s")
+    if junit:
+        _write(junit, junit_xml(checks))
+        print(f"wrote {junit}")
+    if json_path:
+        _write(json_path, json.dumps(json_document(checks), indent=2, allow_nan=False) + "\n")
+        print(f"wrote {json_path}")
     return 1 if any(c.failed for c in checks) else 0

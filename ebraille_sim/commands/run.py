@@ -3,6 +3,8 @@ from __future__ import annotations
 
 NAME = "run"
 HELP = "simulate a scenario in closed loop; print the metrics, write metrics.json, trace.csv, force.png"
+EPILOG = ("exit status: 0 when the run meets every [criteria] limit of the scenario, 1 when one fails "
+          "(one 'criterion failed: ...' line per limit on stderr), 2 for bad input")
 
 
 def add_arguments(p):
@@ -20,9 +22,24 @@ def add_arguments(p):
                         "25 frames per simulated second")
 
 
+def failed_criteria(result) -> list[str]:
+    """One line per ``[criteria]`` limit the run fails (empty when all pass)."""
+    from ebraille_sim.scenarios.metrics import CRITERIA, evaluate_criteria
+    lines = []
+    for key, c in evaluate_criteria(result.spec.criteria, result.metrics).items():
+        if not c["passed"]:
+            op = "<=" if CRITERIA[key][1] == "le" else ">="
+            v = c["value"]
+            shown = "None" if v is None else (f"{v:.6g}" if isinstance(v, float) else str(v))
+            lines.append(f"criterion failed: {c['metric']} = {shown}, expected {op} {c['limit']:g} "
+                         f"([criteria] {key})")
+    return lines
+
+
 def main(args) -> int:
     import json
     import pathlib
+    import sys
 
     from ebraille_sim.tools.report import metrics_document, summary_table, write_outputs
     from ebraille_sim.scenarios.runner import run_scenario
@@ -50,4 +67,7 @@ def main(args) -> int:
     else:
         print(summary_table(result))
         print(f"\nwrote {out / 'metrics.json'}, {out / 'trace.csv'}" + ("" if args.no_plot else f", {out / 'force.png'}"))
-    return 0
+    failures = failed_criteria(result)
+    for line in failures:
+        print(line, file=sys.stderr)
+    return 1 if failures else 0
