@@ -5,6 +5,7 @@ them the four robust tunings, two at a time)::
 
     python docs/make_tuning_figures.py            # everything
     python docs/make_tuning_figures.py --reuse    # keep the tunings of results.json, redo the rest (4 min)
+    python docs/make_tuning_figures.py --loops-only   # redo only the loop analyses and Bode/Nyquist figures (10 s)
 
 Writes PNGs and ``results.json`` into ``docs/figures/tuning/``.  Every number quoted in
 docs/tuning.md comes from ``results.json``.
@@ -147,6 +148,13 @@ def loop_figures(results, recommended):
     results["loops"] = {"default_pid": [a.summary() for a in an_d], "scheduled_pid": [a.summary() for a in an_s],
                         "simc": {"gains": {"kp_v_per_n": simc.kp_v_per_n, "ki_v_per_ns": simc.ki_v_per_ns},
                                  "loops": [a.summary() for a in an_simc]}}
+    # the default PID at 1 N: the frequency-response margins against control.stability_margins
+    a1 = analyse_loop(DEFAULT_PID, force_n=1.0)
+    gm, pm, _, _, wgc, _ = control.stability_margins(a1.loop)
+    results["loops"]["default_pid_1n_margins"] = {
+        "loop_margins": a1.summary(),
+        "control_stability_margins": {"version": control.__version__, "gain_margin": float(gm),
+                                      "phase_margin_deg": float(pm), "gain_crossover_hz": float(wgc) / (2 * np.pi)}}
     P = linearize(force_n=1.0)
     results["plant_1n"] = {"dc_gain_n_per_v": float(np.real(control.dcgain(P))),
                            "slowest_pole_abs": float(np.max(np.abs(P.poles()))),
@@ -419,6 +427,12 @@ def fault_figure(results):
 def main():
     reuse = "--reuse" in sys.argv[1:]
     OUT.mkdir(parents=True, exist_ok=True)
+    if "--loops-only" in sys.argv[1:]:
+        results = json.loads((OUT / "results.json").read_text())
+        loop_figures(results, RECOMMENDED)
+        _write(results)
+        print(f"rewrote the loop analyses of {OUT / 'results.json'} and the Bode/Nyquist figures")
+        return
     old = json.loads((OUT / "results.json").read_text()) if reuse else {}
     results = {"population": {"seed": POP_SEED, "n_random": POP_N},
                "heldout_population": {"seed": HELDOUT_SEED, "n_random": HELDOUT_N}}

@@ -3,7 +3,8 @@ r"""Small-signal model of the contact-force loop and its frequency analysis.
 The plant seen by a controller runs from the motor command (V) to the *estimated* force
 (N).  :func:`linearize` returns it as a ``control.StateSpace`` at an operating force in
 contact; :func:`analyse_loop` closes it with a controller and reports gain and phase
-margins, the sensitivity peak ``Ms``, the bandwidth and the closed-loop step.
+margins (:func:`loop_margins`, from the loop's frequency response), the sensitivity peak
+``Ms``, the bandwidth and the closed-loop step.
 
 The model, block by block (symbols at the rack line, ``g = N/r``)
 -----------------------------------------------------------------
@@ -85,6 +86,7 @@ from dataclasses import dataclass
 import control
 import numpy as np
 import scipy.linalg
+import scipy.optimize
 import scipy.signal
 
 from ebraille_sim.physics.drivetrain import mesh_damping_n_s_per_m, mesh_force, reflected, shaft_to_rack_per_m
@@ -95,6 +97,7 @@ __all__ = [
     "OperatingPoint", "LoopAnalysis", "FRICTION_RULES", "CONTINUOUS_STATES",
     "operating_point", "contact_plant_system", "continuous_model", "sensor_models",
     "linearize", "pid_statespace", "lift", "loop_models", "analyse_loop", "sensitivity_peak",
+    "LoopMargins", "loop_margins",
     "simc_pid", "foptd_fit", "plot_bode", "plot_nyquist",
 ]
 
@@ -595,18 +598,40 @@ def _freq_grid(dt: float, n: int = 400) -> np.ndarray:
     return np.logspace(-1.5, math.log10(0.999 * math.pi / dt), n)
 
 
-def _freq_response(sys: control.StateSpace, w: np.ndarray) -> np.ndarray:
-    """Frequency response of a SISO discrete system on ``w`` (rad/s), by a Hessenberg solve."""
-    A, B, C, D = sys.A, sys.B, sys.C, sys.D
-    z = np.exp(1j * w * sys.dt)
+def _response_function(sys: control.StateSpace):
+    """Evaluator ``w -> L(e^{j w dt})`` of a SISO discrete system (Hessenberg form computed once)."""
+    A, B, C, D = (np.atleast_2d(np.asarray(m, float)) for m in (sys.A, sys.B, sys.C, sys.D))
+    d, dt = complex(D[0, 0]), sys.dt
+    if A.size == 0:
+        return lambda w: np.full(np.size(w), d)
     H, Q = scipy.linalg.hessenberg(A, calc_q=True)
     Bq = Q.T @ B
     Cq = C @ Q
-    out = np.empty(len(w), complex)
     I = np.eye(A.shape[0])
-    for k, zk in enumerate(z):
-        out[k] = (Cq @ np.linalg.solve(zk * I - H, Bq))[0, 0] + D[0, 0]
-    return out
+
+    def response(w) -> np.ndarray:
+        z = np.exp(1j * np.atleast_1d(np.asarray(w, float)) * dt)
+        out = np.empty(len(z), complex)
+        for k, zk in enumerate(z):
+            out[k] = (Cq @ np.linalg.solve(zk * I - H, Bq))[0, 0] + d
+        return out
+    return response
+
+
+def _freq_response(sys: control.StateSpace, w: np.ndarray) -> np.ndarray:
+    """Frequency response of a SISO discrete system on ``w`` (rad/s), by a Hessenberg solve."""
+    return _response_function(sys)(w)
+
+
+def _closed_loop_stable(loop: control.StateSpace) -> bool:
+    """Whether ``L/(1 + L)`` (unity negative feedback) has every pole inside the unit circle."""
+    A, B, C, D = (np.atleast_2d(np.asarray(m, float)) for m in (loop.A, loop.B, loop.C, loop.D))
+    if abs(1.0 + D[0, 0]) < 1e-12:
+        return False
+    if A.size == 0:
+        return True
+    acl = A - B @ C / (1.0 + D[0, 0])
+    return bool(np.max(np.abs(np.linalg.eigvals(acl))) < 1.0)
 
 
 def sensitivity_peak(loop: control.StateSpace, w: np.ndarray | None = None) -> float:
@@ -618,14 +643,182 @@ def sensitivity_peak(loop: control.StateSpace, w: np.ndarray | None = None) -> f
     return float(np.max(np.abs(1.0 / (1.0 + _freq_response(loop, w)))))
 
 
+@dataclass(frozen=True)
+class LoopMargins:
+    """Gain and phase margins of a loop transfer ``L`` (unity negative feedback).
+
+    Every crossing of the unit circle (gain crossover) and of the negative real axis (phase
+    crossover) between 0 and the Nyquist frequency is listed; the reported margins are the
+    smallest ones.  The margins describe the distance of the Nyquist curve from -1; they
+    say how far a *stable* closed loop is from instability only when
+    ``closed_loop_stable`` is true.
+    """
+    gain_margin: float
+    """Gain margin (absolute): ``1/|L|`` at the phase crossover whose value is nearest to 1
+    on a log scale (a factor below 1 is a gain-reduction margin); ``inf`` without a phase
+    crossover."""
+    phase_margin_deg: float
+    """``180 deg + arg L``, wrapped to (-180, 180], at the gain crossover where its magnitude
+    is smallest; ``inf`` without a gain crossover."""
+    gain_crossover_rad_s: float
+    """Frequency of the reported phase margin (``nan`` without a gain crossover)."""
+    phase_crossover_rad_s: float
+    """Frequency of the reported gain margin (``nan`` without a phase crossover)."""
+    closed_loop_stable: bool
+    """Every pole of ``L/(1 + L)`` inside the unit circle."""
+    gain_crossovers_rad_s: tuple = ()
+    """All frequencies with ``|L| = 1``, ascending."""
+    phase_margins_deg: tuple = ()
+    """Phase margin at each gain crossover."""
+    phase_crossovers_rad_s: tuple = ()
+    """All frequencies with ``arg L = -180 deg (mod 360)``, ascending."""
+    gain_margins: tuple = ()
+    """Gain margin at each phase crossover."""
+
+
+def _margin_grid(loop: control.StateSpace, response, w: np.ndarray | None, integrating: bool) -> np.ndarray:
+    """Search grid for the crossings: the ``Ms`` grid (or ``w``), the Nyquist frequency, a
+    low-frequency extension below the slowest pole or zero, and dense points around every
+    lightly damped pole or zero (so that a narrow resonance cannot hide a pair of crossings)."""
+    dt = loop.dt
+    w_nyq = math.pi / dt
+    base = _freq_grid(dt) if w is None else np.asarray(w, float)
+    roots = np.concatenate([np.asarray(loop.poles(), complex), np.asarray(loop.zeros(), complex)])
+    roots = roots[np.isfinite(roots) & (np.abs(roots) > 1e-9)]
+    s = np.log(roots) / dt                    # continuous-time equivalents
+    corner = np.abs(s)
+    slow = corner[corner > 1e-8 * w_nyq]
+    lo = max(1e-8 * w_nyq, 0.01 * float(np.min(slow))) if slow.size else 1e-8 * w_nyq
+    lo = min(lo, float(base[0]))
+    parts = [base, [w_nyq], np.logspace(math.log10(lo), math.log10(base[0]), 1 + int(100 * math.log10(base[0] / lo)))]
+    for wd, sigma in zip(np.abs(s.imag), np.abs(s.real)):
+        if lo < wd < w_nyq and sigma < 0.5 * wd:
+            parts.append(wd + sigma * np.linspace(-4.0, 4.0, 33))
+    if not integrating:
+        parts.append([0.0])
+    elif abs(response(lo)[0]) < 1.0:
+        # below lo the integrators dominate: extend down until |L| > 1
+        w_low = lo
+        while abs(response(w_low)[0]) < 1.0 and w_low > 1e-12 * w_nyq:
+            w_low /= 10.0
+        parts.append(np.logspace(math.log10(w_low), math.log10(lo), 1 + 10 * round(math.log10(lo / w_low))))
+    grid = np.unique(np.concatenate([np.asarray(p, float) for p in parts]))
+    return grid[(grid >= 0.0) & (grid <= w_nyq)]
+
+
+def _crossings(fun, grid: np.ndarray, values: np.ndarray) -> list[float]:
+    """Roots of ``fun`` on the grid: exact zeros and every sign change refined by ``brentq``."""
+    out = [float(w) for w, v in zip(grid, values) if v == 0.0]
+    ok = np.isfinite(values)
+    for i in np.nonzero(ok[:-1] & ok[1:] & (values[:-1] * values[1:] < 0.0))[0]:
+        out.append(float(scipy.optimize.brentq(fun, grid[i], grid[i + 1], xtol=1e-13, rtol=4 * np.finfo(float).eps)))
+    return sorted(out)
+
+
+def loop_margins(loop: control.StateSpace, w: np.ndarray | None = None) -> LoopMargins:
+    """Gain and phase margins of a discrete SISO loop transfer from its frequency response.
+
+    ``L(e^{j w dt})`` is evaluated on the ``Ms`` grid of :func:`sensitivity_peak` (or on
+    ``w``, rad/s) extended as described in :func:`_margin_grid`, up to the Nyquist
+    frequency ``pi/dt``.  A gain crossover is a sign change of ``ln|L|``, a phase crossover
+    a sign change of ``Im L/|L| = sin(arg L)`` where ``Re L < 0``; each is refined by
+    ``scipy.optimize.brentq`` on that continuous function of ``w``.  The phase margin at a
+    gain crossover is ``arg(-L)`` in (-180, 180] deg, so no phase unwrapping (and no
+    multiple of 360 deg) enters.  ``L`` is real at 0 and at the Nyquist frequency; there a
+    negative value is a phase crossover, except at a zero of ``L`` on the unit circle.
+
+    Parameters
+    ----------
+    loop : StateSpace
+        Loop transfer (negative feedback), discrete time, one input and one output.
+    w : ndarray, optional
+        Base search grid (rad/s, positive, at most the Nyquist frequency).
+
+    Returns
+    -------
+    LoopMargins
+        The smallest margins, their frequencies, every crossing, and whether the closed
+        loop is stable.
+    """
+    if not isinstance(loop, control.StateSpace):
+        loop = control.ss(loop)
+    if loop.ninputs != 1 or loop.noutputs != 1:
+        raise ValueError(f"loop must have one input and one output, got {loop.ninputs} x {loop.noutputs}")
+    if loop.dt is None or loop.dt is True or not loop.dt > 0:
+        raise ValueError(f"loop must be discrete-time with a numeric sampling period, got dt={loop.dt}")
+    w_nyq = math.pi / loop.dt
+    if w is not None:
+        w = np.asarray(w, float)
+        if w.ndim != 1 or w.size < 2 or not np.all(np.isfinite(w)) or np.any(w <= 0) or np.any(w > w_nyq * (1 + 1e-12)):
+            raise ValueError(f"w must be a 1-D grid of at least two frequencies in (0, {w_nyq:g}] rad/s")
+        w = np.sort(w)
+    response = _response_function(loop)
+    # a pole this close to z = 1 acts as an integrator on the whole grid (and makes L(1) meaningless)
+    poles = np.asarray(loop.poles(), complex)
+    integrating = bool(np.any(np.abs(np.log(poles[np.abs(poles) > 1e-9])) < 1e-8 * math.pi))
+    grid = _margin_grid(loop, response, w, integrating)
+    ell = response(grid)
+    real_end = (grid == 0.0) | (grid == w_nyq)
+    ell[real_end] = ell[real_end].real          # L is real at z = 1 and z = -1
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_mag = np.log(np.abs(ell))
+        sin_arg = ell.imag / np.abs(ell)
+
+    def f_mag(x):
+        return float(np.log(abs(response(x)[0])))
+
+    def f_arg(x):
+        v = response(x)[0]
+        return 0.0 if x in (0.0, w_nyq) else float(v.imag / abs(v))
+
+    wgc = _crossings(f_mag, grid, log_mag)
+    pms = [math.degrees(np.angle(-response(x)[0])) for x in wgc]
+    wpc, gms = [], []
+    for x in _crossings(f_arg, grid, sin_arg):
+        v = response(x)[0]
+        if x in (0.0, w_nyq):
+            v = complex(v.real, 0.0)
+            # a zero of L at z = +-1 is the curve passing through the origin, not a crossing
+            k = int(np.searchsorted(grid, x))
+            neighbour = ell[k + 1] if x == 0.0 else ell[k - 1]
+            if abs(v) <= 1e-6 * abs(neighbour):
+                continue
+        # a sign change of sin(arg L) across a zero of L on the unit circle is a jump, not a root
+        if v.real < 0.0 and abs(v.imag) <= 1e-3 * abs(v):
+            wpc.append(x)
+            gms.append(1.0 / abs(v))
+    if pms:
+        i = int(np.argmin(np.abs(pms)))
+        pm, w_pm = pms[i], wgc[i]
+    else:
+        pm, w_pm = math.inf, math.nan
+    if gms:
+        j = int(np.argmin(np.abs(np.log(gms))))
+        gm, w_gm = gms[j], wpc[j]
+    else:
+        gm, w_gm = math.inf, math.nan
+    return LoopMargins(gain_margin=gm, phase_margin_deg=pm, gain_crossover_rad_s=w_pm, phase_crossover_rad_s=w_gm,
+                       closed_loop_stable=_closed_loop_stable(loop), gain_crossovers_rad_s=tuple(wgc),
+                       phase_margins_deg=tuple(pms), phase_crossovers_rad_s=tuple(wpc), gain_margins=tuple(gms))
+
+
 @dataclass
 class LoopAnalysis:
-    """Frequency and step analysis of one loop at one operating force."""
+    """Frequency and step analysis of one loop at one operating force.
+
+    The margins are those of :func:`loop_margins`; on an unstable closed loop they are
+    ``nan`` here (the crossings themselves stay in ``margins``).
+    """
     force_n: float
     gain_margin: float
-    """Gain margin (absolute, ``inf`` if the phase never crosses -180 deg)."""
+    """Gain margin (absolute, ``inf`` if the phase never crosses -180 deg, ``nan`` if the
+    closed loop is unstable)."""
     phase_margin_deg: float
+    """Phase margin (``inf`` if ``|L|`` never crosses 1, ``nan`` if the closed loop is unstable)."""
     gain_crossover_hz: float
+    """Frequency of the phase margin (``nan`` if none or unstable)."""
+    phase_crossover_hz: float
+    """Frequency of the gain margin (``nan`` if none or unstable)."""
     ms: float
     """Sensitivity peak max |S|."""
     bandwidth_hz: float
@@ -636,27 +829,41 @@ class LoopAnalysis:
     loop: control.StateSpace
     closed: control.StateSpace
     op: OperatingPoint
+    margins: LoopMargins
+    """Every crossing of ``L`` (:func:`loop_margins`), stable or not."""
 
     def summary(self) -> dict:
         keys = ("RiseTime", "SettlingTime", "Overshoot", "Peak")
         return {"force_n": self.force_n, "gain_margin": self.gain_margin, "phase_margin_deg": self.phase_margin_deg,
-                "gain_crossover_hz": self.gain_crossover_hz, "ms": self.ms, "bandwidth_hz": self.bandwidth_hz,
+                "gain_crossover_hz": self.gain_crossover_hz, "phase_crossover_hz": self.phase_crossover_hz,
+                "ms": self.ms, "bandwidth_hz": self.bandwidth_hz,
                 "stable": self.stable, **{f"step_{k}": float(self.step.get(k, math.nan)) for k in keys}}
+
+    def margin_label(self) -> str:
+        """``PM .. deg at .. Hz, GM ..`` for a stable loop, ``closed loop unstable`` otherwise."""
+        if not self.stable:
+            return "closed loop unstable"
+        pm = "PM none" if math.isinf(self.phase_margin_deg) else \
+            f"PM {self.phase_margin_deg:.1f} deg at {self.gain_crossover_hz:.2f} Hz"
+        gm = "GM inf" if math.isinf(self.gain_margin) else f"GM {self.gain_margin:.2f}"
+        return f"{pm}, {gm}"
 
 
 def analyse_loop(controller, device: DeviceParams = DeviceParams(), force_n: float = 1.0, *,
                  friction: str = "press", step_time_s: float = 3.0) -> LoopAnalysis:
     """Margins, Ms, bandwidth and closed-loop step of ``controller`` at ``force_n``.
 
-    ``controller`` as in :func:`loop_models`.  Margins come from
-    ``control.stability_margins``; the step from ``control.step_info`` on a
-    ``step_time_s`` response.
+    ``controller`` as in :func:`loop_models`.  Margins from :func:`loop_margins` (the
+    loop's frequency response, crossings refined by a root finder); the step from
+    ``control.step_info`` on a ``step_time_s`` response.
     """
     op = operating_point(device, force_n, friction=friction)
     loop, closed = loop_models(device, force_n, controller, op=op)
-    stable = bool(np.max(np.abs(np.linalg.eigvals(closed.A))) < 1.0)
-    gm, pm, _, _, wgc, _ = control.stability_margins(loop)
-    gm, pm, wgc = float(gm), float(pm), float(wgc)
+    margins = loop_margins(loop)
+    stable = margins.closed_loop_stable
+    hz = 1.0 / (2 * math.pi)
+    gm, pm, wgc, wpc = ((margins.gain_margin, margins.phase_margin_deg, margins.gain_crossover_rad_s * hz,
+                         margins.phase_crossover_rad_s * hz) if stable else (math.nan,) * 4)
     ms = sensitivity_peak(loop)
     w = _freq_grid(loop.dt, 800)
     t_mag = np.abs(_freq_response(closed, w))
@@ -669,9 +876,9 @@ def analyse_loop(controller, device: DeviceParams = DeviceParams(), force_n: flo
         info = control.step_info(resp.outputs, T=resp.time, yfinal=t0)
     else:
         info = {}
-    return LoopAnalysis(force_n=float(force_n), gain_margin=gm, phase_margin_deg=pm,
-                        gain_crossover_hz=wgc / (2 * math.pi) if math.isfinite(wgc) else math.nan,
-                        ms=ms, bandwidth_hz=bw, step=dict(info), stable=stable, loop=loop, closed=closed, op=op)
+    return LoopAnalysis(force_n=float(force_n), gain_margin=gm, phase_margin_deg=pm, gain_crossover_hz=wgc,
+                        phase_crossover_hz=wpc, ms=ms, bandwidth_hz=bw, step=dict(info), stable=stable, loop=loop,
+                        closed=closed, op=op, margins=margins)
 
 
 def foptd_fit(plant: control.StateSpace, t_end_s: float = 6.0) -> tuple[float, float, float]:
@@ -709,7 +916,12 @@ def simc_pid(device: DeviceParams = DeviceParams(), force_n: float = 1.0, tau_c_
 
 
 def plot_bode(analyses, path, title: str = "") -> None:
-    """Bode plot of the loop transfer of several :class:`LoopAnalysis` (one line each)."""
+    """Bode plot of the loop transfer of several :class:`LoopAnalysis` (one line each).
+
+    The legend gives the margins of :func:`loop_margins` (or says that the closed loop is
+    unstable); a circle marks the gain crossover of the phase margin, a square the phase
+    crossover of the gain margin.
+    """
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -718,9 +930,18 @@ def plot_bode(analyses, path, title: str = "") -> None:
         w = _freq_grid(an.loop.dt, 600)
         l = _freq_response(an.loop, w)
         f = w / (2 * math.pi)
-        lab = f"{an.force_n:g} N (PM {an.phase_margin_deg:.0f} deg, Ms {an.ms:.2f})"
-        a1.semilogx(f, 20 * np.log10(np.abs(l)), label=lab)
-        a2.semilogx(f, np.degrees(np.unwrap(np.angle(l))))
+        ms = f"Ms {an.ms:.2f}" if math.isfinite(an.ms) else "Ms inf"
+        lab = f"{an.force_n:g} N ({an.margin_label()}, {ms})"
+        phase = np.degrees(np.unwrap(np.angle(l)))
+        phase -= 360.0 * math.floor((phase[0] + 180.0) / 360.0)   # start within [-180, 180)
+        line, = a1.semilogx(f, 20 * np.log10(np.abs(l)), label=lab)
+        a2.semilogx(f, phase, color=line.get_color())
+        if an.stable and math.isfinite(an.gain_crossover_hz):
+            a1.plot(an.gain_crossover_hz, 0.0, "o", color=line.get_color(), ms=4)
+        if an.stable and math.isfinite(an.phase_crossover_hz):
+            p_gm = np.interp(an.phase_crossover_hz, f, phase)
+            a2.plot(an.phase_crossover_hz, -180.0 + 360.0 * round((p_gm + 180.0) / 360.0), "s",
+                    color=line.get_color(), ms=4)
     a1.axhline(0, color="0.5", lw=0.8)
     a2.axhline(-180, color="0.5", lw=0.8)
     a1.set_ylabel("|L| (dB)")

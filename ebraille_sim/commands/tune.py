@@ -9,7 +9,8 @@ Writes into ``--out`` (default ``runs/tune-SCENARIO``):
   the reference the tuned gains are compared with;
 * ``report.md`` and ``report.json``: gains, Ms at every linearisation point, median,
   CVaR25 and worst-case metrics per scenario of the tuned controller, the hand-tuned
-  default PID, the SIMC rule and the family at the default gains, per device;
+  default PID, the SIMC rule and the family at the default gains, per device; the phase
+  and gain margins and Ms of the tuned loop on the nominal reader at each setpoint;
 * ``bode.png``, ``nyquist.png`` (tuned loop on the nominal reader at each setpoint) and
   ``population.png`` (worst-case in-band fraction per scenario for each controller).
 """
@@ -100,6 +101,16 @@ def _fmt_ms(x: float) -> str:
     return "unstable" if (x is None or x < 0 or not math.isfinite(x)) else f"{x:.2f}"
 
 
+def _loop_cells(a: dict) -> list[str]:
+    """Closed-loop state, phase margin, gain margin and Ms of one ``LoopAnalysis.summary()``."""
+    if not a["stable"]:
+        return ["unstable", "-", "-", "unstable"]
+    pm = "none" if math.isinf(a["phase_margin_deg"]) else \
+        f"{a['phase_margin_deg']:.1f} deg at {a['gain_crossover_hz']:.2f} Hz"
+    gm = "inf" if math.isinf(a["gain_margin"]) else f"{a['gain_margin']:.2f} at {a['phase_crossover_hz']:.2f} Hz"
+    return ["stable", pm, gm, _fmt_ms(a["ms"])]
+
+
 _NAMES = {"tuned": "tuned", "hand": "family at default gains", "default": "default PID", "simc": "SIMC"}
 
 
@@ -145,6 +156,14 @@ def _markdown(spec, rep: dict, n_dev: int) -> str:
                 f"({rep['hand']['cost']:.3f} against {rep['tuned']['cost']:.3f}) but does not meet the Ms bound "
                 f"(max Ms {_fmt_ms(rep['hand']['ms_max'])}); it is written as gains_hand.toml.  docs/tuning.md "
                 "discusses which one to ship.", ""]
+    if rep.get("nominal_loop"):
+        out += ["## Tuned loop on the nominal reader (sliding model)", "",
+                "Margins from the loop's frequency response (`ebraille_sim.analysis.tuning.loop_margins`); "
+                "none are given for an unstable closed loop.", "",
+                "| setpoint | closed loop | phase margin | gain margin | Ms |", "|---|---|---|---|---|"]
+        for a in rep["nominal_loop"]:
+            out.append(f"| {a['force_n']:g} N | " + " | ".join(_loop_cells(a)) + " |")
+        out.append("")
     out += ["## Per device (in-band fraction)", ""]
     for s in rep["scenarios"]:
         out += [f"**{s}**", "", "| device | " + " | ".join(_NAMES[k] for k in keys) + " |",

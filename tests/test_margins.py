@@ -1,0 +1,222 @@
+"""Gain and phase margins from the loop's frequency response (ebraille_sim.analysis.tuning.loop_margins).
+
+Each margin is checked against a computation that does not use ``loop_margins``: closed
+forms of discrete loops whose frequency response is known exactly, python-control's
+``stability_margins`` on continuous loops (reliable for low-order continuous systems),
+and, for the project's sampled-data force loop, a brute-force search on 200 000
+log-spaced frequencies with a direct (batched) solve of ``(zI - A) x = B`` and no
+refinement, plus the closed-loop poles of the loop scaled by the gain margin.
+"""
+import math
+
+import control
+import numpy as np
+import pytest
+
+from controllers.pid import DEFAULT_PID
+from ebraille_sim.analysis.tuning import analyse_loop, loop_margins, loop_models
+from ebraille_sim.physics.params import DeviceParams
+
+
+def _delay(d: int, dt: float) -> control.TransferFunction:
+    """``z^-d``."""
+    return control.tf([1.0], [1.0] + [0.0] * d, dt=dt)
+
+
+def _dense_response(loop: control.StateSpace, w: np.ndarray) -> np.ndarray:
+    """``C (zI - A)^-1 B + D`` by batched direct solves (no Hessenberg form)."""
+    A, B, C, D = (np.asarray(m, float) for m in (loop.A, loop.B, loop.C, loop.D))
+    out = np.empty(len(w), complex)
+    eye = np.eye(A.shape[0])
+    for k in range(0, len(w), 4000):
+        z = np.exp(1j * w[k:k + 4000] * loop.dt)
+        x = np.linalg.solve(z[:, None, None] * eye - A, np.broadcast_to(B.astype(complex), (len(z),) + B.shape))
+        out[k:k + 4000] = (C @ x)[:, 0, 0] + D[0, 0]
+    return out
+
+
+def _brute_force(loop: control.StateSpace, n: int = 200_000, w_min: float = 1e-3):
+    """Margins on a dense log grid up to the Nyquist frequency: nearest grid point, no refinement."""
+    w = np.logspace(math.log10(w_min), math.log10(math.pi / loop.dt), n)
+    ell = _dense_response(loop, w)
+    mag = np.abs(ell)
+    gain = []
+    for i in np.nonzero(np.diff(np.sign(mag - 1.0)) != 0)[0]:
+        k = i if abs(mag[i] - 1.0) < abs(mag[i + 1] - 1.0) else i + 1
+        gain.append((w[k], math.degrees(math.atan2(-ell[k].imag, -ell[k].real))))
+    phase = []
+    for i in np.nonzero(np.diff(np.sign(ell.imag)) != 0)[0]:
+        k = i if abs(ell[i].imag) < abs(ell[i + 1].imag) else i + 1
+        if ell[k].real < 0.0:
+            phase.append((w[k], 1.0 / mag[k]))
+    return gain, phase
+
+
+# ---------------------------------------------------------------- closed forms
+
+def test_integrator_with_delay_matches_the_closed_form():
+    # L = k T/(z - 1) z^-d: |L| = k T/(2 sin(wT/2)), arg L = -90 deg - w (d T + T/2)
+    k, dt, d = 20.0, 1e-3, 20
+    loop = control.ss(control.tf([k * dt], [1.0, -1.0], dt=dt) * _delay(d, dt))
+    m = loop_margins(loop)
+    lag_s = d * dt + dt / 2
+    wc = 2.0 / dt * math.asin(k * dt / 2.0)
+    assert m.gain_crossovers_rad_s == pytest.approx((wc,), rel=1e-10)
+    assert m.phase_margin_deg == pytest.approx(90.0 - math.degrees(wc * lag_s), abs=1e-8)
+    # continuous k e^{-s Td}/s: PM = 90 deg - k Td; the hold adds half a sample of lag
+    assert abs(m.phase_margin_deg - (90.0 - math.degrees(k * d * dt))) <= math.degrees(k * dt / 2) + 1e-3
+    # every phase crossover, w_n = (2n + 1/2) pi / lag, up to the Nyquist frequency pi/T (the last one)
+    w180 = [(2 * n + 0.5) * math.pi / lag_s for n in range(50)
+            if (2 * n + 0.5) * math.pi / lag_s <= math.pi / dt * (1 + 1e-12)]
+    assert len(w180) == 11 and w180[-1] == pytest.approx(math.pi / dt)
+    assert m.phase_crossovers_rad_s == pytest.approx(tuple(w180), rel=1e-10)
+    gms = [2.0 * math.sin(x * dt / 2) / (k * dt) for x in w180]
+    assert m.gain_margins == pytest.approx(tuple(gms), rel=1e-9)
+    assert m.gain_margin == pytest.approx(gms[0], rel=1e-10) and m.phase_crossover_rad_s == pytest.approx(w180[0])
+    assert m.closed_loop_stable
+
+
+def test_integrator_with_two_sample_mean_has_no_crossing_at_its_nyquist_zero():
+    # L = k T (1 + z^-1)/2 /(z - 1): arg L = -90 deg - wT, |L| = k T cot(wT/2)/2, L(-1) = 0
+    k, dt = 30.0, 0.01
+    loop = control.ss(control.tf([k * dt / 2, k * dt / 2], [1.0, -1.0, 0.0], dt=dt))
+    m = loop_margins(loop)
+    theta_c = 2.0 * math.atan(k * dt / 2.0)
+    assert m.gain_crossover_rad_s == pytest.approx(theta_c / dt, rel=1e-10)
+    assert m.phase_margin_deg == pytest.approx(90.0 - math.degrees(theta_c), abs=1e-8)
+    assert m.phase_crossovers_rad_s == pytest.approx((math.pi / (2 * dt),), rel=1e-10)
+    assert m.gain_margin == pytest.approx(2.0 / (k * dt), rel=1e-9)
+
+
+def test_first_order_plus_delay_with_p_control():
+    # continuous K e^{-theta s}/(tau s + 1) with gain kp, ZOH-sampled: L = c z^-d/(z - a)
+    K, tau, theta, kp, dt = 2.0, 0.5, 0.1, 3.0, 1e-3
+    d = round(theta / dt)
+    a = math.exp(-dt / tau)
+    c = kp * K * (1.0 - a)
+    loop = control.ss(kp * control.sample_system(control.tf([K], [tau, 1.0]), dt, "zoh") * _delay(d, dt))
+    m = loop_margins(loop)
+    # |e^{jwT} - a| = c gives cos(wT) in closed form
+    wc = math.acos((1.0 + a * a - c * c) / (2.0 * a)) / dt
+    pm = 180.0 - math.degrees(np.angle(np.exp(1j * wc * dt) - a) + wc * d * dt)
+    assert m.gain_crossover_rad_s == pytest.approx(wc, rel=1e-10)
+    assert m.phase_margin_deg == pytest.approx(pm, abs=1e-8)
+
+    # phase crossover: arg(e^{jwT} - a) + w d T = pi, solved on the scalar formula
+    import scipy.optimize
+    w180 = scipy.optimize.brentq(lambda x: np.angle(np.exp(1j * x * dt) - a) + x * d * dt - math.pi, 1.0, 100.0,
+                                 xtol=1e-14)
+    assert m.phase_crossover_rad_s == pytest.approx(w180, rel=1e-10)
+    assert m.gain_margin == pytest.approx(abs(np.exp(1j * w180 * dt) - a) / c, rel=1e-9)
+    # the continuous loop with half a sample more delay
+    wc_ct = math.sqrt((kp * K) ** 2 - 1.0) / tau
+    pm_ct = 180.0 - math.degrees(math.atan(wc_ct * tau) + wc_ct * (theta + dt / 2))
+    assert m.phase_margin_deg == pytest.approx(pm_ct, abs=0.02)
+    assert m.gain_crossover_rad_s == pytest.approx(wc_ct, rel=1e-4)
+
+
+def test_first_order_loop_crosses_the_negative_axis_at_nyquist():
+    # ZOH-sampled first order: L(-1) = -g (1 - a)/(1 + a) is real and negative
+    a, g, dt = 0.8, 0.5, 0.01
+    loop = control.ss(control.tf([g * (1 - a)], [1.0, -a], dt=dt))
+    m = loop_margins(loop)
+    assert m.gain_crossovers_rad_s == () and m.phase_margin_deg == math.inf and math.isnan(m.gain_crossover_rad_s)
+    assert m.phase_crossover_rad_s == pytest.approx(math.pi / dt)
+    assert m.gain_margin == pytest.approx((1 + a) / (g * (1 - a)), rel=1e-12)
+    # the closed loop of gm L has its pole at z = -1
+    acl = loop.A - m.gain_margin * loop.B @ loop.C
+    assert np.linalg.eigvals(acl) == pytest.approx([-1.0], abs=1e-9)
+
+
+def test_no_crossing_gives_infinite_margins():
+    a, g, dt = 0.8, 0.5, 0.01
+    loop = control.ss(control.tf([g * (1 - a), 0.0], [1.0, -a], dt=dt))   # g (1 - a) z/(z - a), |L| <= g
+    m = loop_margins(loop)
+    assert m.gain_margin == math.inf and m.phase_margin_deg == math.inf
+    assert m.gain_crossovers_rad_s == () and m.phase_crossovers_rad_s == ()
+    assert m.closed_loop_stable
+
+
+@pytest.mark.parametrize("num, den", [
+    ([10.0], np.polymul(np.polymul([1.0, 1.0], [0.5, 1.0]), [0.1, 1.0])),
+    ([2.0], np.polymul(np.polymul([1.0, 0.0], [1.0, 1.0]), [0.2, 1.0])),
+    ([4.0, 4.0], np.polymul(np.polymul([1.0, 0.0], [1.0, 0.0]), [0.1, 1.0])),
+])
+def test_finely_sampled_third_order_loop_matches_the_continuous_margins(num, den):
+    ct = control.tf(num, den)
+    gm, pm, _, wpc, wgc, _ = control.stability_margins(ct)
+    dt = 1e-4
+    # sampled from a state-space realisation (a companion form of the sampled transfer function
+    # has a condition number near 1e12 at this step)
+    m = loop_margins(control.sample_system(control.ss(ct), dt, "zoh"))
+    # the hold lags by w T/2: below 0.02 deg at these crossovers
+    assert m.phase_margin_deg == pytest.approx(pm, abs=0.02)
+    assert m.gain_crossover_rad_s == pytest.approx(wgc, rel=1e-3)
+    if math.isfinite(gm):
+        assert m.gain_margin == pytest.approx(gm, rel=1e-3)
+        assert m.phase_crossover_rad_s == pytest.approx(wpc, rel=1e-3)
+    else:
+        assert m.gain_margin == math.inf or m.gain_margin > 1e3
+
+
+# ---------------------------------------------------------------- the force loop
+
+@pytest.fixture(scope="module")
+def default_loops():
+    return {f: loop_models(DeviceParams(), f, DEFAULT_PID)[0] for f in (0.6, 1.0)}
+
+
+@pytest.mark.parametrize("force", [0.6, 1.0])
+def test_default_pid_margins_match_a_dense_brute_force_search(default_loops, force):
+    loop = default_loops[force]
+    m = loop_margins(loop)
+    gain, phase = _brute_force(loop)
+    assert len(gain) == len(m.gain_crossovers_rad_s) == 1
+    assert m.gain_crossover_rad_s == pytest.approx(gain[0][0], rel=1e-3)
+    assert m.phase_margin_deg == pytest.approx(gain[0][1], abs=0.1)
+    assert len(phase) == len(m.phase_crossovers_rad_s) == 2
+    for (w_bf, gm_bf), w, gm in zip(phase, m.phase_crossovers_rad_s, m.gain_margins):
+        assert w == pytest.approx(w_bf, rel=1e-3)
+        assert gm == pytest.approx(gm_bf, rel=1e-3)
+    assert m.gain_margin == min(m.gain_margins)
+    # the loop scaled by its gain margin has a closed-loop pole pair on the unit circle at w_pc
+    poles = np.linalg.eigvals(loop.A - m.gain_margin * loop.B @ loop.C)
+    edge = poles[np.argmax(np.abs(poles))]
+    assert abs(edge) == pytest.approx(1.0, abs=1e-9)
+    assert abs(np.angle(edge)) / loop.dt == pytest.approx(m.phase_crossover_rad_s, rel=1e-7)
+    assert m.closed_loop_stable
+
+
+def test_default_pid_margins_at_1n_and_0_6n():
+    a1 = analyse_loop(DEFAULT_PID, force_n=1.0)
+    assert a1.stable and a1.phase_margin_deg == pytest.approx(21.65, abs=0.05)
+    assert a1.gain_crossover_hz == pytest.approx(6.464, abs=0.005)
+    assert a1.gain_margin == pytest.approx(1.2859, rel=1e-3)
+    a06 = analyse_loop(DEFAULT_PID, force_n=0.6)
+    assert a06.stable and a06.gain_margin == pytest.approx(2.2874, rel=1e-3)
+    assert a06.phase_margin_deg == pytest.approx(58.32, abs=0.05)
+    assert a06.margin_label() == "PM 58.3 deg at 3.47 Hz, GM 2.29"
+    # a higher pulp stiffness raises the loop gain: the margins shrink with force
+    assert a1.gain_margin < a06.gain_margin and a1.phase_margin_deg < a06.phase_margin_deg
+
+
+def test_margins_of_an_unstable_loop_are_not_reported():
+    a = analyse_loop(DEFAULT_PID, force_n=2.0)
+    assert not a.stable and not a.margins.closed_loop_stable
+    assert math.isnan(a.gain_margin) and math.isnan(a.phase_margin_deg) and math.isnan(a.gain_crossover_hz)
+    s = a.summary()
+    assert math.isnan(s["gain_margin"]) and math.isnan(s["phase_margin_deg"]) and s["stable"] is False
+    assert a.margin_label() == "closed loop unstable"
+    # the crossings are still there: the curve passes -1 on the wrong side (GM < 1)
+    assert a.margins.gain_margin < 1.0 and a.margins.phase_margin_deg < 0.0
+
+
+def test_bad_loops_are_refused():
+    with pytest.raises(ValueError, match="discrete-time"):
+        loop_margins(control.ss(control.tf([1.0], [1.0, 1.0])))
+    two = control.ss(np.eye(2) * 0.5, np.eye(2), np.eye(2), np.zeros((2, 2)), dt=0.01)
+    with pytest.raises(ValueError, match="one input and one output"):
+        loop_margins(two)
+    one = control.ss(control.tf([0.1], [1.0, -0.9], dt=0.01))
+    with pytest.raises(ValueError, match="w must be"):
+        loop_margins(one, w=np.array([1.0, 400.0]))
