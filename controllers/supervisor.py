@@ -75,9 +75,16 @@ from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, DeviceParams
 
 from controllers.base import check_dt
 
-__all__ = ["SupervisorConfig", "Supervisor", "RATED_CURRENT_A", "RATED_TO_STALL", "rated_current_a"]
+__all__ = ["SupervisorConfig", "Supervisor", "RATED_CURRENT_A", "RATED_TO_STALL", "rated_current_a",
+           "FORCE_CAP_LIMIT_N"]
 
 _NOMINAL = DeviceParams()
+
+FORCE_CAP_LIMIT_N = TACTILE_FORCE_MAX_N + 1.0
+"""Largest admissible ``force_cap_n``, N: the 3 N top of the tactile range ([R] seed paper)
+plus 1 N of margin [E] for a cap set above the reading force.  The cap exists to keep the
+board from pressing the finger harder than reading needs; one far above the tactile range
+would not protect it."""
 
 RATED_CURRENT_A: dict[str, float] = {"faulhaber_0816_006sr": 0.19}
 """Continuous (rated) motor current by motor preset, A ([R] Faulhaber 0816 006 SR datasheet).
@@ -141,6 +148,10 @@ class SupervisorConfig:
                 check_bool(f.name, self.enabled)
                 continue
             object.__setattr__(self, f.name, check_number(f.name, getattr(self, f.name), lo=0.0, lo_open=True))
+        if self.force_cap_n > FORCE_CAP_LIMIT_N:
+            raise ValueError(f"force_cap_n = {self.force_cap_n:g} N is above the {FORCE_CAP_LIMIT_N:g} N safe limit "
+                             f"(the {TACTILE_FORCE_MAX_N:g} N top of the tactile range, [R] seed paper, plus "
+                             f"1 N margin): a cap above it would let the board press harder than reading needs")
         if self.cap_margin_n >= self.force_cap_n:
             raise ValueError(f"cap_margin_n ({self.cap_margin_n:g}) must be below force_cap_n "
                              f"({self.force_cap_n:g})")

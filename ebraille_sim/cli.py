@@ -4,7 +4,8 @@ Sub-commands live in :mod:`ebraille_sim.commands`.  Every input problem (missing
 malformed TOML, unknown key, bad number) ends with one ``error: ...`` line on stderr and
 exit status 2, never a traceback; nothing is written half-way.  Exit status 1 means the
 command ran but its checks failed: ``run`` when a scenario ``[criteria]`` limit fails,
-``regress`` when a scenario moved from its baseline.
+``regress`` when a scenario moved from its baseline.  A warning (e.g. a setpoint below the
+tactile range) is one ``warning: ...`` line on stderr.
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import argparse
 import importlib
 import pkgutil
 import sys
+import warnings
 
 from ebraille_sim import __version__
 
@@ -55,8 +57,14 @@ def main(argv=None) -> int:
     if not args.command:
         parser.print_help()
         return 2
+    def one_line(message, category, filename, lineno, file=None, line=None):
+        text = str(message).strip().splitlines()
+        print(f"warning: {text[0] if text else category.__name__}", file=sys.stderr)
+
     try:
-        return int(table[args.command].main(args) or 0)
+        with warnings.catch_warnings():
+            warnings.showwarning = one_line
+            return int(table[args.command].main(args) or 0)
     except (UserError, ValueError, FileNotFoundError, KeyError, FloatingPointError) as exc:
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         if isinstance(exc, KeyError):

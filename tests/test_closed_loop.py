@@ -102,11 +102,84 @@ def _write(tmp_path, text, name="s.toml"):
     ('name = "x"\nbogus = 1\n', "unknown key 'bogus' in the top level"),
     ('[reading]\nwpm = 90\n', "missing required key 'name'"),
     ('name = "x"\n[reading\nwpm = 90\n', "malformed TOML"),
+    ('name = "x"\n[rates]\ncontrol_hz = 1\n', "control_hz = 1 is below the 100 Hz rate of the force estimate"),
+    ('name = "x"\n[rates]\ncontrol_hz = 50\nsensor_hz = 1000\n', "154|below the 100 Hz rate"),
+    ('name = "x"\n[rates]\nsensor_hz = 1050\nphysics_hz = 10500\ncontrol_hz = 1050\n',
+     "sensor_rate_hz \\(1050\\) must be a whole multiple of the estimator model's rate \\(100 Hz\\)"),
+    ('name = "x"\n[rates]\nsensor_hz = 100\n[estimator]\nantialias_cutoff_hz = 60\n',
+     "antialias_cutoff_hz 60 must lie in \\(0, 50\\) Hz, below the Nyquist frequency"),
+    ('name = "x"\n[rates]\nphysics_hz = 1000\n', "physics_rate_hz 1000 is too low"),
+    ('name = "x"\n[device.drivetrain_overrides]\ngear_efficiency = 5\n', "gear_efficiency = 5 must be in \\(0, 1\\]"),
+    ('name = "x"\n[device.circuit_overrides]\nadc_bits = 10.5\n', "adc_bits must be a whole number"),
+    ('name = "x"\nseed = ' + "[" * 2000 + "]" * 2000 + "\n", "nested too deeply"),
 ])
 def test_scenario_validation_errors_name_the_problem(tmp_path, text, match):
     with pytest.raises(ScenarioError, match=match) as info:
         load_scenario(_write(tmp_path, text))
     assert "\n" not in str(info.value)
+
+
+def test_invalid_utf8_is_named_with_its_offset(tmp_path):
+    p = tmp_path / "s.toml"
+    p.write_bytes(b'name = "x"\n# caf\xe9\n')
+    with pytest.raises(ScenarioError, match=r"s.toml: not valid UTF-8 \(byte 0xe9 at offset 16\); TOML files must be UTF-8"):
+        load_scenario(p)
+
+
+def test_cr_only_line_ends_read_as_line_breaks(tmp_path):
+    text = (ROOT / "scenarios" / "setpoint_steps.toml").read_bytes()
+    p = tmp_path / "setpoint_steps.toml"
+    p.write_bytes(text.replace(b"\n", b"\r"))
+    assert b"\n" not in p.read_bytes()
+    a, b = load_scenario(p), load_scenario(ROOT / "scenarios" / "setpoint_steps.toml")
+    assert a.setpoint == b.setpoint and a.reading == b.reading and a.duration_s == b.duration_s == 14.0
+
+
+def test_setpoint_below_the_tactile_range_warns_not_fails():
+    from ebraille_sim.scenarios.spec import ScenarioWarning
+    with pytest.warns(ScenarioWarning, match=r"x: \[setpoint\] force_n = 0.1 N, steps at 2 s = 0.15 N are below "
+                                             r"the 0.2 N lower end of the tactile range"):
+        spec = parse_scenario({"name": "x", "setpoint": {"force_n": 0.1, "steps": [[2.0, 0.15], [3.0, 1.0]]}},
+                              source="x")
+    assert spec.setpoint.force_n == 0.1
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        parse_scenario({"name": "x", "setpoint": {"force_n": 0.2}}, source="x")       # the range's own end
+
+
+@pytest.mark.parametrize("doc,match", [
+    # 3600 s at 1 MHz: 3.6e9 control periods x 256 B = 921.6 GB
+    ({"duration_s": 3600, "rates": {"control_hz": 1e6, "sensor_hz": 1e6, "physics_hz": 1e6}},
+     r"duration_s = 3600 s; at control_hz = 1e\+06 that is 3.6e\+09 control periods x 256 B .* = 921.6 GB, "
+     r"above the 2 GB bound"),
+    # 0.001 wpm: 12000 s per cell, the default passage's cells end after ~6e6 s
+    ({"reading": {"wpm": 0.001}}, r"the reading of \d+ cells at 0.001 wpm ends at .* GB, above the 2 GB bound"),
+])
+def test_runs_beyond_the_memory_bound_are_refused_before_allocating(doc, match):
+    from ebraille_sim.scenarios.inputs import build_run_inputs
+    spec = parse_scenario({"name": "x", **doc}, source="x")
+    with pytest.raises(ScenarioError, match=match):
+        build_run_inputs(spec)
+
+
+def test_memory_bound_admits_an_hour_at_one_kilohertz():
+    from ebraille_sim.scenarios.inputs import BYTES_PER_CONTROL_SAMPLE, MAX_CONTROL_SAMPLES, check_run_size
+    spec = parse_scenario({"name": "x", "duration_s": 3600}, source="x")
+    assert check_run_size(spec, 3600.0) == 3_600_000
+    assert MAX_CONTROL_SAMPLES * BYTES_PER_CONTROL_SAMPLE <= 2e9 < (MAX_CONTROL_SAMPLES + 1) * BYTES_PER_CONTROL_SAMPLE
+
+
+def test_cli_prints_a_warning_as_one_line(tmp_path):
+    src = _write(tmp_path, 'name = "low"\nduration_s = 0.3\n[setpoint]\nforce_n = 0.1\n')
+    out = tmp_path / "o"
+    proc = subprocess.run([sys.executable, "-m", "ebraille_sim", "run", str(src), "--out", str(out), "--no-plot"],
+                          capture_output=True, text=True, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stderr.splitlines() == [
+        "warning: s.toml: [setpoint] force_n = 0.1 N is below the 0.2 N lower end of the tactile range "
+        "([R] seed paper: tactile forces 0.2-3 N): the reader may not feel the display"]
+    assert (out / "metrics.json").exists()
 
 
 def test_missing_scenario_file_is_named(tmp_path):

@@ -33,6 +33,8 @@ def profiles(section, t=T, seed=0, device=NOMINAL):
     ({"battery": {"soc_start": "full"}}, "soc_start must be a number"),
     ({"orientation": {"at_s": 5.0, "return_at_s": 5.2}}, "return_at_s = 5.2 must be at least"),
     ({"fsr_temperature": {"skin_c": math.inf}}, "skin_c must be finite"),
+    ({"tremor": {"band_hz": [10.0, 10.000001]}}, "band_hz = [10, 10.000001] is 1e-06 Hz wide, narrower than 0.01 Hz"),
+    ({"pressing": {"band_hz": [0.5, 0.505]}}, "needs a record of 4/width = 800 s"),
 ])
 def test_bad_sections_give_one_line_errors(section, fragment):
     with pytest.raises(ScenarioError) as exc:
@@ -77,6 +79,16 @@ def test_pressing_is_slow():
     _, x = profiles({"pressing": {}})["finger_pos_m"]
     assert np.std(x) == pytest.approx(0.1e-3, rel=0.05)
     assert _band_power_fraction(x, 0.1, 1.0) > 0.999
+
+
+def test_noise_record_beyond_the_memory_bound_is_refused_before_allocating():
+    t = np.arange(10) * 1e-6                         # a 1 MHz control rate
+    with pytest.raises(ValueError, match=r"band \[0.1, 1\] Hz needs a record of 40 s .* = 4e\+07 samples at 1e\+06 Hz"):
+        D.band_limited_noise(t, 0.1, 1.0, 1e-4, np.random.default_rng(0))
+    with pytest.raises(ValueError, match="is empty"):
+        D.band_limited_noise(np.arange(10) * 1e-3, 5.0, 5.0, 1e-4, np.random.default_rng(0))
+    # the bound sits above every shipped band at the 1 kHz control rate: 4/0.1 Hz = 40 s = 4e4 samples
+    assert D.MAX_NOISE_RECORD_SAMPLES > 4.0 / D.MIN_BAND_WIDTH_HZ / 1e-3
 
 
 def test_noise_record_shorter_than_the_band_period_keeps_its_rms_on_average():

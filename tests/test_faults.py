@@ -124,6 +124,8 @@ def test_build_inputs_windows_and_withdraw_profile():
     ([{"kind": "fsr_value", "start_s": 1.0}], "needs value_v"),
     ([{"kind": "finger_withdrawn", "start_s": 1.0, "duration_s": 0.05}], "twice move_s"),
     ([{"kind": "fsr_open", "start_s": math.nan}], "finite number"),
+    ([{"kind": ["fsr_open"], "start_s": 1.0}], r"kind = \['fsr_open'\] is not one of"),
+    ([{"kind": {"a": 1}, "start_s": 1.0}], r"kind = \{'a': 1\} is not one of"),
 ])
 def test_validate_section_errors(value, msg):
     with pytest.raises(ScenarioError, match=msg):

@@ -163,3 +163,29 @@ def test_run_scenario_rejects_an_unknown_key_in_a_controller_file(tmp_path):
 def test_env_reset_options_reject_an_unknown_key():
     env = pytest.importorskip("ebraille_sim.rl.env")
     _rejects(lambda: env.validate_options({KEY: 1.0}, 3.0))
+
+
+# --- physical bounds of the parameter dataclasses ----------------------------------------
+
+@pytest.mark.parametrize("cls, changes, fragment", [
+    (params.DriveTrainParams, {"gear_efficiency": 60}, "gear_efficiency = 60 must be in (0, 1]: it is a fraction"),
+    (params.DriveTrainParams, {"gear_efficiency": 1.0001}, "gear_efficiency = 1.0001 must be in (0, 1]"),
+    (params.DriveTrainParams, {"travel_min_m": 6e-3, "travel_max_m": 0.0}, "travel_max_m (0 m) must be above"),
+    (params.DriveTrainParams, {"travel_min_m": 3e-3, "travel_max_m": 3e-3}, "needs a travel range"),
+    (params.CircuitParams, {"adc_bits": 2000}, "adc_bits must be an int in [1, 24], got 2000"),
+    (params.CircuitParams, {"adc_bits": 10.5}, "adc_bits must be a whole number, got 10.5"),
+    (params.CircuitParams, {"adc_bits": 0.5}, "adc_bits must be a whole number, got 0.5"),
+    (params.CircuitParams, {"adc_bits": 0}, "adc_bits must be > 0, got 0"),
+    (params.FSRParams, {"hysteresis_fraction": 1.0}, "hysteresis_fraction = 1 must be below 1"),
+])
+def test_parameter_dataclasses_reject_unphysical_values(cls, changes, fragment):
+    with pytest.raises(ValueError) as info:
+        cls(**changes)
+    msg = str(info.value)
+    assert fragment in msg and "\n" not in msg, msg
+
+
+def test_adc_bits_given_as_a_whole_float_is_stored_as_an_int():
+    c = params.CircuitParams(adc_bits=12.0)
+    assert c.adc_bits == 12 and isinstance(c.adc_bits, int) and c.adc_max_code == 4095.0
+    assert params.DriveTrainParams(gear_efficiency=1.0).gear_loss_coefficient == 0.0

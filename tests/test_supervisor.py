@@ -148,6 +148,8 @@ def test_disabled_supervisor_passes_through():
     ({"retract_v": float("nan")}, "retract_v must be finite, got nan"),
     ({"cap_margin_n": 5.0}, "cap_margin_n"),
     ({"enabled": 1}, "enabled must be true or false"),
+    ({"force_cap_n": 100.0, "out_of_range_n": 200.0}, "force_cap_n = 100 N is above the 4 N safe limit"),
+    ({"force_cap_n": 4.01, "out_of_range_n": 5.0}, "above the 4 N safe limit"),
 ])
 def test_validate_section_errors(section, msg):
     with pytest.raises(ScenarioError, match=msg):
@@ -176,3 +178,10 @@ def test_motor_limits_follow_the_device():
     sup = wrap_controller({"force_cap_n": 2.0, "cap_margin_n": 0.2}, Const(1.0), 1e-3, device=maxon)
     assert sup.config.motor_resistance_ohm == 8.9 and sup.config.force_cap_n == 2.0
     assert SupervisorConfig.for_device(maxon, motor_resistance_ohm=9.5).motor_resistance_ohm == 9.5
+
+
+def test_force_cap_limit_is_the_tactile_maximum_plus_one_newton():
+    from controllers.supervisor import FORCE_CAP_LIMIT_N
+    from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
+    assert FORCE_CAP_LIMIT_N == TACTILE_FORCE_MAX_N + 1.0 == 4.0
+    assert SupervisorConfig(force_cap_n=4.0, out_of_range_n=5.0).force_cap_n == 4.0

@@ -39,6 +39,9 @@ def test_check_number_accepts_and_normalises(value, kwargs, expected):
     (None, {"lo": 0, "hi": 1}, "wpm must be a number in [0, 1], got None"),
     (1.5, {"lo": 1, "integer": True}, "wpm must be a whole number, got 1.5; admissible: an int >= 1"),
     (0, {"lo": 1, "hi": 10, "integer": True}, "wpm must be an int in [1, 10], got 0"),
+    (10 ** 400, {"lo": 0, "hi": 1000}, f"wpm must be finite, got {10 ** 400}; admissible: a finite number in [0, 1000]"),
+    (-10 ** 400, {}, f"wpm must be finite, got {-10 ** 400}; admissible: a finite number"),
+    (10 ** 400, {"lo": 1, "hi": 24, "integer": True}, f"wpm must be an int in [1, 24], got {10 ** 400}"),
 ])
 def test_check_number_messages(value, kwargs, message):
     with pytest.raises(ValueError) as info:

@@ -115,8 +115,16 @@ def check_number(name: str, value: Any, lo: float | None = None, hi: float | Non
     want = f"{noun} {adm}".rstrip()
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{name} must be {want}, got {value!r}")
-    v = int(value) if isinstance(value, numbers.Integral) else float(value)
-    if isinstance(v, float) and math.isnan(v) or (finite or integer) and not math.isfinite(v):
+    if isinstance(value, numbers.Integral):
+        v = int(value)
+        if not integer:
+            try:
+                v = float(v)
+            except OverflowError:                          # an int beyond the float range
+                v = math.inf if v > 0 else -math.inf
+    else:
+        v = float(value)
+    if isinstance(v, float) and (math.isnan(v) or (finite or integer) and not math.isfinite(v)):
         raise ValueError(f"{name} must be finite, got {value!r}; admissible: "
                          f"{'an int' if integer else 'a finite number'} {adm}".rstrip())
     if integer and isinstance(v, float) and v != int(v):

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ebraille_sim.base.fields import sourced
-from ebraille_sim.base.validation import check_keys
+from ebraille_sim.base.validation import check_keys, check_number
 from ebraille_sim.physics import fingertip as _fingertip
 from ebraille_sim.physics import fsr as _fsr
 
@@ -52,6 +52,11 @@ tactile forces 0.2-3 N).  Setpoints are bounded by it."""
 STANDARD_GRAVITY_M_PER_S2 = 9.81
 """Gravity at the reader, m/s^2 ([R] standard gravity 9.80665 (CGPM 1901) to three figures;
 local gravity on Earth spans 9.78-9.83)."""
+
+
+ADC_BITS_MAX = 24
+"""Finest resolution of an analogue-to-digital converter, bits ([R] 24-bit sigma-delta
+converters are the finest sold, e.g. TI ADS1256, Analog Devices AD7190)."""
 
 
 def _p(default: Any, unit: str, source: str):
@@ -76,7 +81,7 @@ def check_finite(obj) -> None:
         v = getattr(obj, f.name)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             continue
-        if not math.isfinite(v):
+        if isinstance(v, float) and not math.isfinite(v):
             raise ValueError(f"{type(obj).__name__}.{f.name} must be finite, got {v}")
         if f.metadata.get("positive") and not v > 0:
             raise ValueError(f"{type(obj).__name__}.{f.name} must be > 0, got {v}")
@@ -233,6 +238,16 @@ class DriveTrainParams(_Checked):
     travel_min_m: float = _p(0.0, "m", "[E] board fully retracted")
     travel_max_m: float = _p(6e-3, "m", "[E] rack travel of a finger-worn frame")
 
+    def __post_init__(self):
+        super().__post_init__()
+        if not self.gear_efficiency <= 1.0:
+            raise ValueError(f"DriveTrainParams.gear_efficiency = {self.gear_efficiency:g} must be in (0, 1]: "
+                             f"it is a fraction (60 % is 0.6), and above 1 the gearhead would deliver more "
+                             f"power than the motor puts in")
+        if not self.travel_max_m > self.travel_min_m:
+            raise ValueError(f"DriveTrainParams.travel_max_m ({self.travel_max_m:g} m) must be above "
+                             f"travel_min_m ({self.travel_min_m:g} m): the board needs a travel range to move in")
+
     @property
     def transmission_m_per_rad(self) -> float:
         """Rack travel per motor-shaft radian, r/N (m/rad)."""
@@ -337,6 +352,13 @@ class FSRParams(_Checked):
     temperature_coeff_per_k: float = _p(
         -0.15 / 60.0, "1/K", "[R] datasheet: -15 % resistance at +85 C after 1 h, taken linear from 25 C")
 
+    def __post_init__(self):
+        super().__post_init__()
+        if not self.hysteresis_fraction < 1.0:
+            raise ValueError(f"FSRParams.hysteresis_fraction = {self.hysteresis_fraction:g} must be below 1: "
+                             f"it is the relative resistance difference between loading and unloading "
+                             f"(0.10 for +10 %), and 1 would mean a zero resistance on one branch")
+
     @property
     def creep_per_decade(self) -> float:
         """Creep slope per decade of load time so that 30 min gives creep_fraction_30min."""
@@ -372,6 +394,15 @@ class CircuitParams(_Checked):
                          "nominal FSR (docs/model.md, 'Calibration'); paper: adjustable 1-20 kOhm")
     adc_bits: int = _pos(10, "bit", "[R] ATmega328 10-bit ADC")
     adc_ref_v: float = _pos(5.0, "V", "[R] ATmega328 AVcc reference")
+
+    def __post_init__(self):
+        super().__post_init__()
+        try:
+            bits = check_number("CircuitParams.adc_bits", self.adc_bits, lo=1, hi=ADC_BITS_MAX, integer=True)
+        except ValueError as exc:
+            raise ValueError(f"{exc} (an ADC converts to a whole number of bits; converters are made "
+                             f"with 1 to {ADC_BITS_MAX} bits)") from None
+        object.__setattr__(self, "adc_bits", bits)
 
     def divider_v(self, resistance_ohm: float) -> float:
         """Paper eq. 1: V_o = V_in R2/(R2 + R_FSR), through :func:`ebraille_sim.physics.fsr.divider_voltage`."""

@@ -39,7 +39,7 @@ from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import (MAX_BREAKPOINTS, MAX_TF_LEN, N_INPUT, N_PARAM, N_PLAYS, N_STATE, P, S, U)
 
 __all__ = ["Plant", "loop_step", "make_plant", "PLANT_BACKENDS", "pack_params", "pack_devices", "initial_state",
-           "check_step", "load_estimator"]
+           "check_step", "check_sensor_rates", "load_estimator"]
 
 
 def check_step(device: DeviceParams, max_force_n: float = 10.0) -> float:
@@ -61,6 +61,33 @@ def check_step(device: DeviceParams, max_force_n: float = 10.0) -> float:
     return wh
 
 
+def check_sensor_rates(device: DeviceParams, model) -> int:
+    """Sensor samples per force estimate; raise if the sensor rate does not suit the estimator.
+
+    The estimator runs at its model's own rate ``1/model.dt_s`` (the rate it was identified
+    at) and decimates the anti-aliased sensor samples by a whole factor, so the sensor rate
+    must be a whole multiple of it; the anti-alias cutoff must lie below the sensor's
+    Nyquist frequency.
+
+    Raises
+    ------
+    ValueError
+        One line naming the rates and the reason.
+    """
+    r, e = device.rates, device.estimator
+    est_rate = 1.0 / model.dt_s
+    ratio = r.sensor_rate_hz / est_rate
+    if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
+        raise ValueError(f"sensor_rate_hz ({r.sensor_rate_hz:g}) must be a whole multiple of the "
+                         f"estimator model's rate ({est_rate:g} Hz): the estimator takes every "
+                         f"n-th sensor sample, n a whole number (sensor/estimator = {ratio:.6g})")
+    nyq = 0.5 * r.sensor_rate_hz
+    if not 0 < e.antialias_cutoff_hz < nyq:
+        raise ValueError(f"antialias_cutoff_hz {e.antialias_cutoff_hz:g} must lie in (0, {nyq:g}) Hz, "
+                         f"below the Nyquist frequency of the {r.sensor_rate_hz:g} Hz sensor rate")
+    return int(round(ratio))
+
+
 def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     """Flat parameter vector ``(N_PARAM,)`` of one device for the kernel.
 
@@ -74,17 +101,13 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     check_step(device)
     if model is None:
         model = load_estimator(e.model)
-    est_rate = 1.0 / model.dt_s
-    ratio = r.sensor_rate_hz / est_rate
-    if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
-        raise ValueError(f"sensor_rate_hz ({r.sensor_rate_hz:g}) must be a whole multiple of the "
-                         f"estimator model's rate ({est_rate:g} Hz)")
+    ratio = check_sensor_rates(device, model)
     p = np.zeros(N_PARAM)
     h = 1.0 / r.physics_rate_hz
     g = shaft_to_rack_per_m(d.gear_ratio, d.pinion_radius_m)
     p[P["h_s"]] = h
     p[P["substeps_per_sensor"]] = r.substeps_per_sensor
-    p[P["sensors_per_estimate"]] = round(ratio)
+    p[P["sensors_per_estimate"]] = ratio
     p[P["motor_r_ohm"]] = m.resistance_ohm
     p[P["motor_current_decay"]] = current_decay(h, m.resistance_ohm, m.inductance_h)
     p[P["motor_kt"]] = m.torque_constant_nm_per_a
@@ -136,9 +159,6 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     for j in range(N_PLAYS):
         p[P[f"play_w{j}"]] = widths[j]
         p[P[f"play_weight{j}"]] = weights[j]
-    nyq = 0.5 * r.sensor_rate_hz
-    if not 0 < e.antialias_cutoff_hz < nyq:
-        raise ValueError(f"antialias_cutoff_hz {e.antialias_cutoff_hz:g} must lie in (0, {nyq:g}) Hz")
     bb, aa = scipy.signal.butter(2, e.antialias_cutoff_hz, fs=r.sensor_rate_hz)
     p[P["aa_b0"]], p[P["aa_b1"]], p[P["aa_b2"]] = bb
     p[P["aa_a1"]], p[P["aa_a2"]] = aa[1], aa[2]

@@ -84,6 +84,16 @@ __all__ = ["KINDS", "validate_section", "build_inputs", "parameter_table", "band
 
 G_M_PER_S2 = STANDARD_GRAVITY_M_PER_S2
 
+MAX_NOISE_RECORD_SAMPLES = 2 ** 25
+"""Longest record :func:`band_limited_noise` synthesises, samples: about 40 bytes per
+sample (the record, its spectrum, frequencies and draws), 1.3 GB at this bound."""
+
+MIN_BAND_WIDTH_HZ = 0.01
+"""Narrowest ``band_hz`` of a noise disturbance, Hz.  A band narrower than this is a single
+sinusoid over any session (its components drift apart by less than one cycle in 100 s),
+not the random process the model describes; the synthesis would also need a record of
+4 / width s (400 s at this bound)."""
+
 
 # --------------------------------------------------------------------------------------
 # signal helpers
@@ -117,6 +127,14 @@ def band_limited_noise(t_s: np.ndarray, f_lo_hz: float, f_hi_hz: float, rms: flo
     dt = float(t_s[1] - t_s[0]) if n > 1 else 1e-3
     if not f_hi_hz < 0.5 / dt:
         raise ValueError(f"band edge {f_hi_hz:g} Hz is above the Nyquist frequency {0.5 / dt:g} Hz")
+    if not f_hi_hz > f_lo_hz:
+        raise ValueError(f"band [{f_lo_hz:g}, {f_hi_hz:g}] Hz is empty; it needs f_lo < f_hi")
+    rec_s = max(4.0 / max(f_lo_hz, 1e-3), 4.0 / (f_hi_hz - f_lo_hz))
+    if rec_s / dt > MAX_NOISE_RECORD_SAMPLES:
+        raise ValueError(f"band [{f_lo_hz:g}, {f_hi_hz:g}] Hz needs a record of {rec_s:.4g} s (four periods of "
+                         f"the lower edge and of the band width) = {rec_s / dt:.4g} samples at {1 / dt:g} Hz, "
+                         f"above the bound of {MAX_NOISE_RECORD_SAMPLES:.4g} samples "
+                         f"(~{MAX_NOISE_RECORD_SAMPLES * 40 / 1e9:.2g} GB); widen the band or lower the control rate")
     n_rec = max(n, int(math.ceil(4.0 / (max(f_lo_hz, 1e-3) * dt))), int(math.ceil(4.0 / ((f_hi_hz - f_lo_hz) * dt))))
     freqs = np.fft.rfftfreq(n_rec, dt)
     band = (freqs >= f_lo_hz) & (freqs <= f_hi_hz) & (freqs > 0)
@@ -400,6 +418,12 @@ def _check_kind(src, name, cls, table):
             kind = meta["kind"]
             if kind == "band":
                 out[key] = check_pair(where, value, meta["lo"], meta["hi"], strict=True)
+                width = out[key][1] - out[key][0]
+                if width < MIN_BAND_WIDTH_HZ:
+                    raise ValueError(f"{where} = [{out[key][0]:.10g}, {out[key][1]:.10g}] is {width:.3g} Hz wide, "
+                                     f"narrower than {MIN_BAND_WIDTH_HZ:g} Hz: that is a single sinusoid over a "
+                                     f"session, not a random band, and its synthesis needs a record of "
+                                     f"4/width = {4 / width:.3g} s")
             elif kind == "times":
                 if isinstance(value, (str, bytes)) or not isinstance(value, (list, tuple)):
                     raise ValueError(f"{where} must be a list of times in s, got {value!r}")

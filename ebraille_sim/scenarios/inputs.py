@@ -39,8 +39,27 @@ from ebraille_sim.physics.noise import seed_from
 from ebraille_sim.plant.layout import N_INPUT, U
 from ebraille_sim.scenarios.spec import DELEGATES, ScenarioError, ScenarioSpec
 
-__all__ = ["RunInputs", "SCHEDULE_CELL_MARGIN", "base_input_row", "build_run_inputs", "build_schedule_for",
+__all__ = ["RunInputs", "SCHEDULE_CELL_MARGIN", "MAX_RUN_BYTES", "BYTES_PER_CONTROL_SAMPLE", "MAX_CONTROL_SAMPLES",
+           "MAX_SCHEDULE_CELLS", "base_input_row", "build_run_inputs", "build_schedule_for", "check_run_size",
            "input_profiles", "reading_text", "refresh_phases", "run_length", "setpoint_profile"]
+
+MAX_RUN_BYTES = 2e9
+"""Memory bound of one run's per-sample arrays, bytes (2 GB: a tenth of a 16-32 GB
+workstation, so parallel sweeps fit)."""
+
+BYTES_PER_CONTROL_SAMPLE = 8 * (14 + N_INPUT + 7)
+"""Memory per control period of a run, bytes: float64 arrays of one value per period --
+the runner's 10 trace columns, time, setpoint, cell index and character (14), one array
+per plant input while the input profiles are built (``N_INPUT``) and about 7 temporaries of
+the setpoint profile and the metrics.  Physics steps are not stored."""
+
+MAX_CONTROL_SAMPLES = int(MAX_RUN_BYTES // BYTES_PER_CONTROL_SAMPLE)
+"""Most control periods of one run (about 7.8 million: 3600 s at 2 kHz)."""
+
+MAX_SCHEDULE_CELLS = 2_000_000
+"""Most cells of a reading schedule (about 40 bytes each: start, dwell, flags and the
+reference, 80 MB).  The scenario bounds (``duration_s <= 3600``, ``wpm <= 1000``) give at
+most 480,000 cells; a long text read without ``duration_s`` can give more."""
 
 SCHEDULE_CELL_MARGIN = 1.6
 """Cells transcribed per nominal dwell of a scenario with ``duration_s``, as a multiple.
@@ -149,12 +168,27 @@ def build_schedule_for(spec: ScenarioSpec, rng: np.random.Generator):
         raise ScenarioError(f"{spec.source}: {exc}") from None
     if not cells:
         raise ScenarioError(f"{spec.source}: the reading text is empty")
+    mean = mean_dwell_s(r.wpm)
     if spec.duration_s is not None:
-        need = int(math.ceil((spec.duration_s - r.start_s) / mean_dwell_s(r.wpm) * SCHEDULE_CELL_MARGIN)) + 1
+        check_run_size(spec, spec.duration_s)
+        need = int(math.ceil((spec.duration_s - r.start_s) / mean * SCHEDULE_CELL_MARGIN)) + 1
+        if min(need, r.max_characters or need) > MAX_SCHEDULE_CELLS:
+            raise ScenarioError(f"{spec.source}: the reading schedule would hold {need} cells "
+                                f"({spec.duration_s:g} s at {r.wpm:g} wpm, {SCHEDULE_CELL_MARGIN:g} x the "
+                                f"nominal count), above the bound of {MAX_SCHEDULE_CELLS} cells")
         reps = max(1, int(math.ceil(need / len(cells))))
         cells = (cells * reps)[:max(need, 1)]
     if r.max_characters is not None:
         cells = cells[:r.max_characters]
+    if len(cells) > MAX_SCHEDULE_CELLS:
+        raise ScenarioError(f"{spec.source}: the reading text gives {len(cells)} cells, above the bound of "
+                            f"{MAX_SCHEDULE_CELLS} cells of one schedule; set [reading] max_characters")
+    if spec.duration_s is None:
+        # the nominal end of the reading (jitter averages out): the exact end is checked by run_length
+        pauses = sum(r.line_pause_s if c.line_end else (r.word_pause_s if c.kind == "space" else 0.0)
+                     for c in cells) if (r.word_pause_s or r.line_pause_s) else 0.0
+        t_end = r.start_s + len(cells) * mean + pauses
+        check_run_size(spec, t_end, f"the reading of {len(cells)} cells at {r.wpm:g} wpm ends at {t_end:.4g} s")
     return build_schedule(cells, r.wpm, start_s=r.start_s, jitter_fraction=r.jitter_fraction,
                           word_pause_s=r.word_pause_s, line_pause_s=r.line_pause_s,
                           rng=rng if r.jitter_fraction > 0 else None)
@@ -258,7 +292,14 @@ def input_profiles(spec: ScenarioSpec, t_s: np.ndarray, rng: np.random.Generator
         build = getattr(mod, "build_inputs", None)
         if build is None:
             continue
-        for name, (mode, arr) in build(section, t_s, rng, spec.device).items():
+        try:
+            built = build(section, t_s, rng, spec.device)
+        except ScenarioError as exc:
+            msg = str(exc)
+            raise ScenarioError(msg if msg.startswith(f"{spec.source}:") else f"{spec.source}: {msg}") from None
+        except ValueError as exc:
+            raise ScenarioError(f"{spec.source}: [{key}] {exc}") from None
+        for name, (mode, arr) in built.items():
             if name not in base:
                 raise ScenarioError(f"{spec.source}: [{key}] drives unknown input {name!r}")
             base[name] = base[name] + arr if mode == "add" else np.broadcast_to(arr, t_s.shape).astype(float)
@@ -266,10 +307,44 @@ def input_profiles(spec: ScenarioSpec, t_s: np.ndarray, rng: np.random.Generator
     return {name: base[name] for name in sorted(touched)}
 
 
+def check_run_size(spec: ScenarioSpec, t_end_s: float, why: str | None = None) -> int:
+    """Number of control periods of a run ending at ``t_end_s``; raise if its arrays exceed the memory bound.
+
+    Parameters
+    ----------
+    spec : ScenarioSpec
+    t_end_s : float
+        End of the run, s.
+    why : str, optional
+        Where ``t_end_s`` comes from, for the message (default: ``duration_s``).
+
+    Raises
+    ------
+    ScenarioError
+        One line with the duration, the control rate, the sample count and the bytes
+        against :data:`MAX_RUN_BYTES`.
+    """
+    hz = spec.device.rates.control_rate_hz
+    n = t_end_s * hz
+    if not n <= MAX_CONTROL_SAMPLES:
+        why = why or f"duration_s = {t_end_s:g} s"
+        raise ScenarioError(f"{spec.source}: {why}; at control_hz = {hz:g} that is {n:.4g} control periods x "
+                            f"{BYTES_PER_CONTROL_SAMPLE} B of trace and input arrays = {n * BYTES_PER_CONTROL_SAMPLE / 1e9:.4g} GB, "
+                            f"above the {MAX_RUN_BYTES / 1e9:g} GB bound of one run (at most {MAX_CONTROL_SAMPLES} "
+                            f"periods, {MAX_CONTROL_SAMPLES / hz:.4g} s at this rate); shorten the run or lower control_hz")
+    return int(n)
+
+
 def run_length(spec: ScenarioSpec, schedule) -> tuple[float, int]:
-    """Control period and number of periods of a run: ``duration_s`` or the schedule's end."""
+    """Control period and number of periods of a run: ``duration_s`` or the schedule's end.
+
+    Raises :class:`ScenarioError` for a run shorter than one period or one whose arrays
+    exceed :data:`MAX_RUN_BYTES` (:func:`check_run_size`).
+    """
     dt = 1.0 / spec.device.rates.control_rate_hz
     t_end = spec.duration_s if spec.duration_s is not None else schedule.t_end_s
+    check_run_size(spec, t_end, None if spec.duration_s is not None else
+                   f"the reading schedule of {len(schedule)} cells at {spec.reading.wpm:g} wpm ends at {t_end:.4g} s")
     n = int(round(t_end / dt))
     if n < 1:
         raise ScenarioError(f"{spec.source}: duration {t_end:g} s is shorter than one control period")

@@ -34,6 +34,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import pathlib
+import warnings
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -52,6 +53,13 @@ class ScenarioError(ValueError):
 
     A ``ValueError`` subclass, so the checks of :mod:`ebraille_sim.base.validation` are
     re-raised as a ``ScenarioError`` with the file name in front.
+    """
+
+
+class ScenarioWarning(UserWarning):
+    """A scenario that runs but is physically doubtful (e.g. a setpoint the finger cannot feel).
+
+    Issued with :func:`warnings.warn`; the command line prints it as one ``warning: ...`` line.
     """
 
 
@@ -368,14 +376,61 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
             e = _params.replace_checked(e, model=str(mp))
         angle = math.radians(dev.get("hand_orientation_deg", d0.hand_orientation_deg))
         g = _params.STANDARD_GRAVITY_M_PER_S2 * math.cos(angle)
-        return _params.DeviceParams(motor=motor, drivetrain=drivetrain, finger=finger, fsr=fsr,
-                                    circuit=circuit, estimator=e, rates=r,
-                                    driver_supply_v=dev.get("driver_supply_v", motor.nominal_voltage_v),
-                                    gravity_m_per_s2=g)
+        device = _params.DeviceParams(motor=motor, drivetrain=drivetrain, finger=finger, fsr=fsr,
+                                      circuit=circuit, estimator=e, rates=r,
+                                      driver_supply_v=dev.get("driver_supply_v", motor.nominal_voltage_v),
+                                      gravity_m_per_s2=g)
+        _check_rates(device)
+        return device
     except ScenarioError:
         raise
-    except (ValueError, TypeError) as exc:
-        raise ScenarioError(f"{src}: {exc}") from None
+    except (ValueError, TypeError, KeyError, OSError) as exc:
+        msg = str(exc).strip("'\"") if isinstance(exc, KeyError) else str(exc)
+        raise ScenarioError(f"{src}: {msg}") from None
+
+
+def _check_rates(device: _params.DeviceParams) -> None:
+    """The rates of a scenario device against its estimator and its mechanics (``ValueError``).
+
+    * the sensor rate is a whole multiple of the estimator model's rate and the anti-alias
+      cutoff lies below the sensor's Nyquist frequency
+      (:func:`ebraille_sim.plant.loop.check_sensor_rates`);
+    * the control rate is at least the estimator's rate: the controller acts on force
+      estimates, and a loop slower than them discards estimates while the drive moves
+      within a few mechanical time constants of the motor (6.5 ms for the Faulhaber 0816);
+    * the physics rate resolves the stiff mesh/pulp contact
+      (:func:`ebraille_sim.plant.loop.check_step`).
+
+    The plant repeats the first and last check when it is built; here they reject a file
+    before anything runs.
+    """
+    from ebraille_sim.estimation.models import load_estimator
+    from ebraille_sim.plant.loop import check_sensor_rates, check_step
+    model = load_estimator(device.estimator.model)
+    check_sensor_rates(device, model)
+    est_hz = 1.0 / model.dt_s
+    r = device.rates
+    if r.control_rate_hz < est_hz * (1 - 1e-9):
+        tau_ms = 1e3 * device.motor.mechanical_time_constant_s
+        raise ValueError(f"[rates] control_hz = {r.control_rate_hz:g} is below the {est_hz:g} Hz rate of the "
+                         f"force estimate it acts on: a force loop must update at least once per estimate "
+                         f"(one period of {1e3 / r.control_rate_hz:g} ms is "
+                         f"{1.0 / r.control_rate_hz / device.motor.mechanical_time_constant_s:.3g} mechanical "
+                         f"time constants of the motor, {tau_ms:.3g} ms, during which the drive runs unchecked)")
+    check_step(device)
+
+
+def _warn_setpoints(source: str, sp: SetpointSpec) -> None:
+    """Warn (:class:`ScenarioWarning`) about force setpoints below the tactile range."""
+    lo = _params.TACTILE_FORCE_MIN_N
+    low = [("force_n", sp.force_n)] if sp.force_n < lo else []
+    low += [(f"steps at {t_s:g} s", f_n) for t_s, f_n in sp.steps if f_n < lo]
+    if low:
+        what = ", ".join(f"{k} = {v:g} N" for k, v in low)
+        warnings.warn(f"{source}: [setpoint] {what} {'is' if len(low) == 1 else 'are'} below the {lo:g} N "
+                      f"lower end of the tactile range "
+                      f"([R] seed paper: tactile forces 0.2-3 N): the reader may not feel the display",
+                      ScenarioWarning, stacklevel=3)
 
 
 def parse_scenario(data: dict, source: str = "<scenario>", base_dir: str = ".") -> ScenarioSpec:
@@ -392,6 +447,7 @@ def parse_scenario(data: dict, source: str = "<scenario>", base_dir: str = ".") 
         raise ScenarioError(f"{source}: {exc}") from None
     sp = SetpointSpec(**top.get("setpoint", {}))
     dev = _build_device(source, top.get("device", {}), top.get("rates", {}), top.get("estimator", {}), base_dir)
+    _warn_setpoints(source, sp)
     ctl = top.get("controller", {})
     return ScenarioSpec(
         name=top["name"], description=top.get("description", ""), seed=top.get("seed", 0),
@@ -409,14 +465,34 @@ def load_scenario(path) -> ScenarioSpec:
     """
     p = resolve_scenario_path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        raw = p.read_bytes()
     except OSError as exc:
         raise ScenarioError(f"cannot read scenario file {str(p)!r}: {exc.strerror}") from None
+    return parse_scenario(parse_toml(raw, p.name), source=p.name, base_dir=str(p.parent))
+
+
+def parse_toml(raw: bytes, name: str) -> dict:
+    """Decode and parse the bytes of a scenario file; raise :class:`ScenarioError` (one line).
+
+    The file must be UTF-8.  Line ends may be LF, CRLF or a lone CR: TOML itself allows only
+    LF and CRLF, but a lone CR (old Mac line ends) cannot be part of any valid TOML value, so
+    it is read as a line break (as Python's text mode does) instead of failing with a
+    misleading position.  Tables or arrays nested beyond the parser's recursion limit (about
+    a thousand levels; the schema nests three) are rejected with one line.
+    """
     try:
-        data = tomllib.loads(text)
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"{name}: not valid UTF-8 (byte 0x{raw[exc.start]:02x} at offset {exc.start}); "
+                            f"TOML files must be UTF-8 encoded") from None
+    text = text.replace("\r\n", "\n").replace("\r", "\n")
+    try:
+        return tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{p.name}: malformed TOML: {exc}") from None
-    return parse_scenario(data, source=p.name, base_dir=str(p.parent))
+        raise ScenarioError(f"{name}: malformed TOML: {exc}") from None
+    except RecursionError:
+        raise ScenarioError(f"{name}: tables or arrays nested too deeply to parse (a scenario nests "
+                            f"at most 3 levels)") from None
 
 
 def library_dir() -> pathlib.Path | None:
