@@ -220,3 +220,18 @@ def test_bad_loops_are_refused():
     one = control.ss(control.tf([0.1], [1.0, -0.9], dt=0.01))
     with pytest.raises(ValueError, match="w must be"):
         loop_margins(one, w=np.array([1.0, 400.0]))
+
+
+def test_analyse_loop_takes_controller_objects_as_well_as_configs():
+    import controllers
+    from ebraille_sim.analysis.tuning import analyse_loop
+    pid = controllers.make("pid")
+    by_object = analyse_loop(pid, force_n=1.0)
+    by_config = analyse_loop(pid.config, force_n=1.0)
+    assert by_object.phase_margin_deg == by_config.phase_margin_deg
+    assert 21.0 < by_object.phase_margin_deg < 22.5
+    sched = controllers.make("pid_scheduled")
+    assert analyse_loop(sched, force_n=1.0).phase_margin_deg == \
+        analyse_loop(sched.pid_config_at(1.0), force_n=1.0).phase_margin_deg
+    with pytest.raises(TypeError, match="cannot analyse a controller of type str"):
+        analyse_loop("pid", force_n=1.0)

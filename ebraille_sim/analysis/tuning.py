@@ -544,9 +544,11 @@ def loop_models(device: DeviceParams, force_n: float, controller, *, friction: s
     """Exact sampled-data loop at the estimator rate.
 
     ``controller`` is a two-input (setpoint, estimate) ``StateSpace`` at the control rate
-    (e.g. :func:`pid_statespace`), a :class:`~controllers.pid.PIDConfig`, or a
-    two-input ``StateSpace`` already at the estimator rate (a sampled-data design such as
-    :mod:`controllers.lqg`).
+    (e.g. :func:`pid_statespace`), a :class:`~controllers.pid.PIDConfig`, a controller
+    object: a :class:`~controllers.pid.PID` (its config is used), a scheduled PID (its
+    fixed equivalent at ``force_n``, ``pid_config_at``) or one with a ``statespace()``
+    method (:mod:`controllers.lqg`), or a two-input ``StateSpace`` already at the
+    estimator rate.  Anything else is a one-line ``TypeError``.
 
     Returns
     -------
@@ -564,6 +566,15 @@ def loop_models(device: DeviceParams, force_n: float, controller, *, friction: s
     fr, est = front
     n = _ratio(device, est.dt)
     h = fr.dt
+    if isinstance(getattr(controller, "config", None), PIDConfig):
+        controller = controller.config
+    elif hasattr(controller, "pid_config_at"):
+        controller = controller.pid_config_at(force_n)
+    elif hasattr(controller, "statespace") and callable(controller.statespace):
+        controller = controller.statespace()
+    if not isinstance(controller, PIDConfig) and not all(hasattr(controller, m) for m in "ABCD"):
+        raise TypeError(f"cannot analyse a controller of type {type(controller).__name__}: give a PIDConfig, "
+                        "a PID, a scheduled PID, an object with statespace() or a two-input StateSpace")
     if isinstance(controller, PIDConfig):
         controller = pid_statespace(controller, h)
     Ac, Bc, Cc, Dc = (np.atleast_2d(np.asarray(m, float)) for m in
