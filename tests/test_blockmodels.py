@@ -406,3 +406,40 @@ def test_fitness_errors():
         fitness([1.0, 2.0], [1.0])
     with pytest.raises(ValueError, match="constant"):
         fitness([1.0, 1.0], [1.0, 2.0])
+
+
+# ---------------------------------------------------------------------------
+# BlockModel.to_control
+# ---------------------------------------------------------------------------
+@pytest.mark.parametrize("linear", [
+    LinearBF(b=(-0.529, 0.471, -0.16, 0.179), f=(0.736, -0.822, -0.646, -0.065), nk=1),  # paper Wiener 5
+    LinearBF(b=(0.2, 0.1, -0.05), f=(), nk=2),                                             # FIR, longer numerator
+    LinearBF(b=(1.0,), f=(-1.6, 0.8), nk=0),                                               # resonant, no delay
+])
+def test_to_control_is_the_linear_block_of_the_model(linear):
+    control = pytest.importorskip("control")
+    model = BlockModel(linear, PiecewiseLinear((0.0, 1.0), (0.0, 2.0)), None, dt_s=0.01)
+    tf = model.to_control()
+    assert isinstance(tf, control.TransferFunction) and tf.dt == 0.01
+    u = np.random.default_rng(7).standard_normal(400)
+    x, _ = linear.simulate(u)                              # the model's own lfilter of the linear block
+    y = control.forced_response(tf, U=u).outputs
+    assert np.max(np.abs(y - x)) <= 1e-12 * max(1.0, np.max(np.abs(x)))
+    assert control.dcgain(tf) == pytest.approx(linear.dc_gain(), rel=1e-12)
+    # poles of the transfer function: those of F plus the ones at the origin from the padding
+    p = np.sort_complex(tf.poles())
+    expected = np.concatenate([linear.poles(), np.zeros(linear.order - len(linear.f))])
+    np.testing.assert_allclose(p, np.sort_complex(expected), atol=1e-9)
+
+
+def test_to_control_of_the_paper_model():
+    control = pytest.importorskip("control")
+    from ebraille_sim.estimation.models import load_estimator
+    m = load_estimator("paper:wiener:5")
+    tf = m.to_control()
+    u = np.random.default_rng(3).uniform(0.0, 1.2, 1000)          # detrended divider volts
+    x, _ = m.linear.simulate(u)
+    y = control.forced_response(tf, U=u).outputs
+    assert tf.dt == m.dt_s == 0.01
+    assert np.max(np.abs(y - x)) <= 1e-12 * np.max(np.abs(x))
+    assert np.allclose(m.output_nl(y), m.simulate(u)[0], rtol=0, atol=1e-12)

@@ -763,6 +763,36 @@ class BlockModel:
         terms = num[1:] * w - den[1:] * x
         return np.cumsum(terms[::-1])[::-1].copy()
 
+    def to_control(self):
+        """The linear block ``z^-nk B(z^-1) / F(z^-1)`` as a python-control transfer function.
+
+        The coefficients in powers of ``z^-1`` (:meth:`LinearBF.numerator`,
+        :meth:`LinearBF.denominator`) are padded with zeros to a common length ``L`` and
+        read in descending powers of ``z`` (multiplying both by ``z^(L-1)``), so the
+        transfer function is exactly the filter that :meth:`simulate` applies between
+        the input and output maps (the maps themselves are left out).  The sample time is
+        :attr:`dt_s`.  python-control is imported here, so the estimation layer does not
+        need it to load.
+
+        Returns
+        -------
+        control.TransferFunction
+            Discrete-time SISO transfer function with ``dt = dt_s``.
+
+        Examples
+        --------
+        >>> m = BlockModel(LinearBF((0.5,), (-0.5,), nk=1), None, None, dt_s=0.01)
+        >>> tf = m.to_control()
+        >>> tf.dt, tf.num[0][0].tolist(), tf.den[0][0].tolist()
+        (0.01, [0.5], [1.0, -0.5])
+        """
+        import control
+        num, den = self.linear.numerator(), self.linear.denominator()
+        n = max(num.size, den.size)
+        num = np.concatenate([num, np.zeros(n - num.size)])
+        den = np.concatenate([den, np.zeros(n - den.size)])
+        return control.TransferFunction(num, den, self.dt_s)
+
     # -- serialisation -----------------------------------------------------
     def to_dict(self) -> dict[str, Any]:
         """JSON-safe description.
