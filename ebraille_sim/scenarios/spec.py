@@ -7,7 +7,8 @@ the field declarations of the table dataclasses (:class:`ScenarioFile`, :class:`
 :class:`SetpointSpec`, :class:`DeviceSpec`, :class:`RatesSpec`, :class:`EstimatorSpec`,
 :class:`FingerSpec`, :class:`ControllerSpec`, :class:`CriteriaSpec`): each key is declared
 once, with its default, unit, kind and range.  An unknown key is an error that names it and
-lists the allowed ones, a value out of range names the value and the range.  See ``docs/scenarios.md`` for the full reference.
+lists the allowed ones, a value out of range names the value and the range.  The full
+reference, generated from the schema, is ``docs/scenario-reference.md``.
 
 Example (``scenarios/steady_90wpm.toml``)::
 
