@@ -6,11 +6,18 @@ exit status 2, never a traceback; nothing is written half-way.  Exit status 1 me
 command ran but its checks failed: ``run`` when a scenario ``[criteria]`` limit fails,
 ``regress`` when a scenario moved from its baseline.  A warning (e.g. a setpoint below the
 tactile range) is one ``warning: ...`` line on stderr.
+
+Every sub-command takes ``--json`` (print only the command's result as one JSON document
+on stdout; ``regress --json FILE`` writes it to FILE instead) and ``-q/--quiet`` (print
+nothing but errors and warnings, no progress); the exit status does not change.  Under
+``--json`` an input error prints no document, only its ``error:`` line.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
+import io
 import pkgutil
 import sys
 import warnings
@@ -34,6 +41,22 @@ def _commands():
     return sorted(mods, key=lambda m: (order.get(m.NAME, 9), m.NAME))
 
 
+def add_output_options(p, json_file: bool = False) -> None:
+    """``--json`` and ``-q/--quiet``, the same on every sub-command.
+
+    With ``json_file`` ``--json`` also takes an optional FILE to write the document to.
+    """
+    if json_file:
+        p.add_argument("--json", nargs="?", const=True, default=False, metavar="FILE",
+                       help="print the result as one JSON document on stdout and nothing else; "
+                            "with FILE write it there and print the usual report")
+    else:
+        p.add_argument("--json", action="store_true",
+                       help="print the result as one JSON document on stdout and nothing else")
+    p.add_argument("-q", "--quiet", action="store_true",
+                   help="print nothing but errors and warnings (no progress; --json still prints its document)")
+
+
 def build_parser():
     parser = _Parser(prog="ebraille-sim",
                      description="Closed-loop contact-force simulator for a finger-wearable E-Braille reader.")
@@ -43,12 +66,13 @@ def build_parser():
     for mod in _commands():
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP, epilog=getattr(mod, "EPILOG", None))
         mod.add_arguments(p)
+        add_output_options(p, json_file=getattr(mod, "JSON_FILE", False))
         table[mod.NAME] = mod
     return parser, table
 
 
 def main(argv=None) -> int:
-    from ebraille_sim.commands import UserError
+    from ebraille_sim.commands import Console, UserError
     parser, table = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -61,10 +85,18 @@ def main(argv=None) -> int:
         text = str(message).strip().splitlines()
         print(f"warning: {text[0] if text else category.__name__}", file=sys.stderr)
 
+    con = args.console = Console(json=args.json is True, quiet=args.quiet)
+    stdout = sys.stdout
+    # under --json stray prints of library code go to stderr, under --quiet nowhere
+    divert = (contextlib.redirect_stdout(sys.stderr) if con.json else
+              contextlib.redirect_stdout(io.StringIO()) if con.quiet else contextlib.nullcontext())
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), divert:
             warnings.showwarning = one_line
-            return int(table[args.command].main(args) or 0)
+            code = int(table[args.command].main(args) or 0)
+        if con.json and con.document is not None:
+            print(con.json_text(), file=stdout)
+        return code
     except (UserError, ValueError, FileNotFoundError, KeyError, FloatingPointError) as exc:
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         if isinstance(exc, KeyError):

@@ -1,4 +1,5 @@
 """Exit codes and machine-readable outputs for CI: run's criteria, regress --junit/--json, list --json."""
+import importlib.util
 import json
 import pathlib
 import xml.etree.ElementTree as ET
@@ -152,3 +153,244 @@ def test_list_json_names_where_each_scenario_comes_from(tmp_path, monkeypatch, c
     assert cli(["list"]) == 0
     text = capsys.readouterr().out
     assert "mine" in text and "[./scenarios]" in text and "tremor_90wpm" in text
+
+
+# ---------------------------------------------------------------- --json and --quiet on every command
+
+def _csv_record(folder: pathlib.Path) -> pathlib.Path:
+    from ebraille_sim.identification import bench
+    rec = bench.run_profiles([bench.PAPER_PROFILES["square_0.2hz"]], seed=2)["square_0.2hz"]
+    path = folder / "square.csv"
+    rec.to_csv(path)
+    return path
+
+
+def _argv(command: str, tmp_path: pathlib.Path, tag: str) -> list:
+    """A fast invocation of ``command`` writing under ``tmp_path/tag``."""
+    out = str(tmp_path / tag)
+    if command == "list":
+        return ["list"]
+    if command == "run":
+        return ["run", str(_scenario(tmp_path / "scen", "plain")), "--no-plot", "--out", out]
+    if command == "regress":
+        d = tmp_path / "suite"
+        if not (d / "baselines" / "alpha.json").exists():
+            _scenario(d, "alpha", "peak_force_max_n = 3.0")
+            assert cli(["regress", "--scenarios", str(d), "--update", "--quiet"]) == 0
+        return ["regress", "--scenarios", str(d)]
+    if command == "sweep":
+        return ["sweep", "contact_onset", "--rates", "90", "--readers", "2", "--duration", "0.6", "-j", "1",
+                "--no-figures", "--out", out]
+    if command == "identify":
+        csv_path = tmp_path / "square.csv"
+        if not csv_path.exists():
+            _csv_record(tmp_path)
+        return ["identify", "--csv", str(csv_path), "--kinds", "linear", "--orders", "2", "--quick", "--no-plots",
+                "--out", out]
+    raise AssertionError(command)
+
+
+def _check_document(command: str, doc: dict) -> None:
+    if command == "list":
+        assert "pid" in doc["controllers"] and "pymunk" in doc["plant_backends"]
+    elif command == "run":
+        assert doc["scenario"] == "plain" and doc["seed"] == 2
+        assert 0.5 < doc["metrics"]["peak_force_n"] < 1.5
+        assert [pathlib.Path(f).name for f in doc["files"]] == ["metrics.json", "trace.csv"]
+        assert all(pathlib.Path(f).is_file() for f in doc["files"])
+    elif command == "regress":
+        assert doc["passed"] is True and doc["scenarios_checked"] == 1
+        assert {r["status"] for r in doc["scenarios"][0]["rows"]} == {"ok"}
+    elif command == "sweep":
+        assert doc["episodes"] == 2 and doc["failed"] == 0 and doc["executor"] == "serial"
+        assert doc["summary"][0]["scenario"] == "contact_onset" and doc["summary"][0]["episodes"] == 2
+    elif command == "identify":
+        assert doc["best"]["kind"] == "linear" and doc["best"]["order"] == 2
+        assert doc["best"]["mean_fitness"] > 90.0 and doc["fitness"]["linear"]["2"]["square"] > 90.0
+
+
+@pytest.mark.parametrize("command", ["list", "run", "regress", "sweep", "identify"])
+def test_json_prints_one_document_and_quiet_prints_nothing(command, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert cli(_argv(command, tmp_path, "a") + ["--json"]) == 0
+    cap = capsys.readouterr()
+    _check_document(command, json.loads(cap.out))          # the whole of stdout is one document
+    assert cli(_argv(command, tmp_path, "b") + ["--quiet"]) == 0
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err == ""                   # no report, no progress
+
+
+def test_json_and_quiet_on_tune(tmp_path, capsys):
+    out = tmp_path / "t"
+    assert cli(["tune", "steady_90wpm", "--population", "0", "--evaluations", "4", "--scenarios", "single",
+                "--duration", "1.5", "--out", str(out), "--json", "--quiet"]) == 0
+    cap = capsys.readouterr()
+    assert cap.err == ""                                      # no progress bar under --quiet
+    doc = json.loads(cap.out)
+    assert doc["scenario"] == "steady_90wpm" and doc["population"] == 5 and doc["ms_max"] <= doc["ms_bound"] == 1.6
+    assert doc["gains"]["kp_v_per_n"] > 0 and set(doc["costs"]) == {"tuned", "hand", "default", "simc"}
+    assert 0.0 <= doc["scenarios"]["steady_90wpm"]["tuned"]["worst"] <= 1.0
+    assert [pathlib.Path(f).name for f in doc["files"]][:2] == ["gains.toml", "gains_hand.toml"]
+    assert all(pathlib.Path(f).is_file() for f in doc["files"])
+
+
+def test_json_keeps_failed_criteria_and_warnings_on_stderr(tmp_path, capsys):
+    path = _scenario(tmp_path, "low", "peak_force_max_n = 0.0")
+    path.write_text(path.read_text() + "[setpoint]\nforce_n = 0.15\n")
+    assert cli(["run", str(path), "--no-plot", "--out", str(tmp_path / "o"), "--json"]) == 1
+    cap = capsys.readouterr()
+    doc = json.loads(cap.out)
+    assert doc["criteria"]["peak_force_max_n"]["passed"] is False
+    err = cap.err.splitlines()
+    assert len(err) == 2 and err[0].startswith("warning: low.toml: [setpoint] force_n = 0.15 N is below")
+    assert err[1].startswith("criterion failed: peak_force_n")
+
+
+def test_regress_json_file_still_writes_the_file(tmp_path, capsys):
+    d = tmp_path / "suite"
+    _scenario(d, "alpha")
+    assert cli(["regress", "--scenarios", str(d), "--update", "-q"]) == 0
+    js = tmp_path / "r.json"
+    assert cli(["regress", "--scenarios", str(d), "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    assert "1 of 1 scenario(s) match" in out and f"wrote {js}" in out   # the report; the document in the file
+    assert json.loads(js.read_text())["scenarios_checked"] == 1
+
+
+def test_json_prints_no_document_on_bad_input(tmp_path, capsys):
+    assert cli(["run", "no_such_scenario", "--json", "--out", str(tmp_path / "o")]) == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err.startswith("error: ") and cap.err.count("\n") == 1
+
+
+# ---------------------------------------------------------------- run folders: --force, stale outputs, --trace
+
+def test_run_refuses_an_existing_run_folder_before_simulating(tmp_path, capsys, monkeypatch):
+    path = _scenario(tmp_path, "plain")
+    out = tmp_path / "o"
+    assert cli(["run", str(path), "--no-plot", "--out", str(out), "-q"]) == 0
+    before = (out / "metrics.json").read_text()
+
+    def no_simulation(*a, **k):
+        raise AssertionError("simulated although the folder is refused")
+    monkeypatch.setattr("ebraille_sim.scenarios.runner.run_scenario", no_simulation)
+    assert cli(["run", str(path), "--no-plot", "--out", str(out), "--seed", "5"]) == 2
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err.count("\n") == 1
+    assert cap.err.startswith(f"error: run folder {str(out)!r} already holds a run (metrics.json, trace.csv)")
+    assert "--force" in cap.err and (out / "metrics.json").read_text() == before
+
+
+def test_force_overwrites_and_clears_stale_outputs(tmp_path, capsys):
+    path = _scenario(tmp_path, "plain")
+    out = tmp_path / "o"
+    assert cli(["run", str(path), "--out", str(out), "-q"]) == 0
+    assert (out / "force.png").stat().st_size > 10_000 and (out / "trace.csv").is_file()
+    (out / "notes.txt").write_text("mine")                   # not a run output: kept
+    (out / "animation.gif").write_bytes(b"GIF89a")           # a run output this run does not write: removed
+    assert cli(["run", str(path), "--out", str(out), "--force", "--no-plot", "--trace", "none", "--seed", "5",
+                "-q"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["metrics.json", "notes.txt"]
+    assert json.loads((out / "metrics.json").read_text())["seed"] == 5
+    assert not list(tmp_path.glob(".ebraille-*"))            # no temporary folder left
+
+
+@pytest.mark.skipif(importlib.util.find_spec("pyarrow") is not None, reason="pyarrow is installed")
+def test_trace_parquet_without_pyarrow_is_one_line(tmp_path, capsys):
+    out = tmp_path / "o"
+    assert cli(["run", str(_scenario(tmp_path, "plain")), "--trace", "parquet", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err == "error: --trace parquet needs pyarrow, which is not installed; use --trace csv or none\n"
+    assert not out.exists()
+
+
+@pytest.mark.skipif(importlib.util.find_spec("pyarrow") is None, reason="needs pyarrow")
+def test_trace_parquet_has_the_csv_columns(tmp_path):
+    import pyarrow.parquet as pq
+
+    from ebraille_sim.scenarios.runner import TRACE_COLUMNS
+    out = tmp_path / "o"
+    assert cli(["run", str(_scenario(tmp_path, "plain")), "--trace", "parquet", "--no-plot", "--out", str(out),
+                "-q"]) == 0
+    table = pq.read_table(out / "trace.parquet")
+    assert table.column_names == list(TRACE_COLUMNS) and table.num_rows > 1000
+    assert not (out / "trace.csv").exists()
+
+
+# ---------------------------------------------------------------- --out problems, before any work
+
+def _out_argv(command: str, out: str) -> list:
+    return {"run": ["run", "steady_90wpm", "--duration", "1"],
+            "sweep": ["sweep", "contact_onset", "--readers", "1", "-j", "1"],
+            "tune": ["tune", "steady_90wpm", "--population", "0", "--evaluations", "4"],
+            "identify": ["identify", "--quick"],
+            "train": ["train", "--steps", "10"]}[command] + ["--out", out]
+
+
+@pytest.mark.parametrize("command", ["run", "sweep", "tune", "identify", "train"])
+def test_out_problems_are_one_line_before_any_work(command, tmp_path, capsys, monkeypatch):
+    import os
+    a_file = tmp_path / "a_file"
+    a_file.write_text("x")
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw: False if pathlib.Path(p) == locked
+                        else real_access(p, mode, **kw))
+    cases = [(str(a_file), f"error: --out {str(a_file)!r} is a file, not a folder"),
+             (str(a_file / "sub"), f"error: --out {str(a_file / 'sub')!r}: {str(a_file)!r} is a file, not a folder"),
+             (str(locked / "new"), f"error: --out {str(locked / 'new')!r}: folder {str(locked)!r} is not writable")]
+    for out, message in cases:
+        assert cli(_out_argv(command, out) + ["--json"]) == 2
+        cap = capsys.readouterr()
+        assert cap.out == "" and cap.err == message + "\n"
+    assert list(locked.iterdir()) == []
+
+
+# ---------------------------------------------------------------- --backend, --animate
+
+def test_backend_help_lists_the_plant_backends(capsys):
+    from ebraille_sim.plant.loop import PLANT_BACKENDS
+    assert cli(["run", "--help"]) == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--backend {" + ",".join(PLANT_BACKENDS) + "}" in text
+    assert "plant model: " + ", ".join(PLANT_BACKENDS) + " (default: lumped)" in text
+    assert cli(["run", "steady_90wpm", "--backend", "nope"]) == 2
+    assert "invalid choice: 'nope'" in capsys.readouterr().err
+
+
+def test_animate_writes_into_the_run_folder_with_progress(tmp_path, capsys, monkeypatch):
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    out = tmp_path / "anim"
+    argv = ["run", "contact_onset", "--backend", "pymunk", "--duration", "0.3", "--no-plot", "--trace", "none",
+            "--out", str(out), "--animate"]
+    assert cli(argv) == 0
+    cap = capsys.readouterr()
+    assert (out / "animation.gif").stat().st_size > 1000 and list(work.iterdir()) == []
+    frames = 1 + int(0.3 * 25)                               # 25 frames per simulated second, both ends
+    assert cap.err.splitlines() == [f"drawing frames {frames}/{frames}"]
+    assert f"{out / 'animation.gif'} ({frames} frames)" in cap.out
+    assert cli(argv + ["--force", "--quiet"]) == 0
+    cap = capsys.readouterr()
+    assert cap.out == "" and cap.err == "" and (out / "animation.gif").is_file()
+
+
+def test_frame_progress_counts_in_place_on_a_terminal_and_in_lines_elsewhere():
+    import io
+
+    from ebraille_sim.commands import FrameProgress
+
+    class Tty(io.StringIO):
+        def isatty(self):
+            return True
+    tty, log = Tty(), io.StringIO()
+    bars = [FrameProgress("frames", stream=tty), FrameProgress("frames", stream=log, every=25),
+            FrameProgress("frames", enabled=False, stream=log)]
+    for bar in bars:
+        for k in range(1, 61):
+            bar(k, 60)
+        bar.close()
+    assert tty.getvalue() == "".join(f"\rframes {k}/60" for k in range(1, 61)) + "\n"
+    assert log.getvalue() == "frames 25/60\nframes 50/60\nframes 60/60\n"

@@ -229,10 +229,12 @@ def _write_json(path, doc) -> None:
 def main(args) -> int:
     import numpy as np
 
+    from ebraille_sim.commands import check_out_dir, console
     from ebraille_sim.identification import bench as B
     from ebraille_sim.identification import dma as D
     from ebraille_sim.identification.sysid import PAPER_FITNESS, shift_operating_point
 
+    con = console(args)
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
     if args.starts is not None and args.starts < 1:
@@ -248,7 +250,8 @@ def main(args) -> int:
     fit_options = {"seed": args.seed, "n_starts": args.starts or (1 if args.quick else 4),
                    "n_delay_candidates": 1 if args.quick else 2, "max_nfev": 100 if args.quick else 200}
 
-    log = print
+    out = check_out_dir(args.out)
+    log = con.say
     labels = dict(B.PROFILE_LABELS)
     extra = {}
     if args.csv:
@@ -306,7 +309,6 @@ def main(args) -> int:
     models, table, info = identify_all(records, estimation, kinds, orders, fit_options, log)
     total = time.perf_counter() - t0
 
-    out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = pathlib.Path(tempfile.mkdtemp(prefix=".ebraille-identify-", dir=out.parent))
     try:
@@ -352,9 +354,11 @@ def main(args) -> int:
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
 
-    print()
-    print((out / "fitness.md").read_text(encoding="utf-8").split("# The paper's")[0].rstrip())
-    print(f"\nidentification took {total:.1f} s; wrote {out}/fitness.json, fitness.md, summary.json, "
+    con.result({**summary, "fitness": {k: {str(o): v for o, v in by.items()} for k, by in table.items()},
+                "out": str(out)})
+    con.say()
+    con.say((out / "fitness.md").read_text(encoding="utf-8").split("# The paper's")[0].rstrip())
+    con.say(f"\nidentification took {total:.1f} s; wrote {out}/fitness.json, fitness.md, summary.json, "
           f"models/*.json" + ("" if args.no_plots else ", plots/*.png")
           + ("" if args.csv else ", dma.md, dma.json, creep.json, data/*.csv"))
     return 0

@@ -6,8 +6,7 @@ HELP = "list scenarios, controllers, device presets and estimator models"
 
 
 def add_arguments(p):
-    p.add_argument("--json", action="store_true",
-                   help="print everything as one JSON document (scenarios with their file and folder)")
+    """No options of its own: ``--json`` prints :func:`catalogue` (scenarios with their file and folder)."""
 
 
 def catalogue() -> dict:
@@ -47,11 +46,12 @@ def catalogue() -> dict:
 
 
 def main(args) -> int:
-    import json
+    from ebraille_sim.commands import console
 
+    con = console(args)
     cat = catalogue()
-    if args.json:
-        print(json.dumps(cat, indent=2))
+    con.result(cat)
+    if con.json or con.quiet:
         return 0
     print("scenarios:")
     for s in cat["scenarios"]:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 NAME = "regress"
+JSON_FILE = True
 HELP = "run every scenario in scenarios/ and compare the metrics with scenarios/baselines/ (exit 1 if any moved)"
 EPILOG = ("exit status: 0 when every scenario matches its baseline and criteria, 1 when any moved, "
           "failed a criterion or has no baseline, 2 for bad input")
@@ -21,7 +22,6 @@ def add_arguments(p):
     p.add_argument("-v", "--verbose", action="store_true", help="list every compared metric, not only what moved")
     p.add_argument("--junit", default=None, metavar="FILE",
                    help="also write JUnit XML: one test case per scenario, failures list the moved metrics")
-    p.add_argument("--json", default=None, metavar="FILE", help="also write every compared metric as JSON")
 
 
 def _prepare(option: str, path):
@@ -47,23 +47,28 @@ def main(args) -> int:
     import json
     import time
 
+    from ebraille_sim.commands import console
     from ebraille_sim.tools.regress import format_report, json_document, junit_xml, regress_scenarios
+
+    con = console(args)
 
     if args.jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
     if args.update and args.controller:
         raise ValueError("--update writes baselines with each scenario's own controller; drop --controller")
     junit = _prepare("--junit", args.junit) if args.junit else None
-    json_path = _prepare("--json", args.json) if args.json else None
+    json_path = _prepare("--json", args.json) if isinstance(args.json, str) else None
     t0 = time.perf_counter()
     checks = regress_scenarios(args.scenarios, only=args.only, update=args.update, controller=args.controller,
                                baseline_dir=args.baselines, jobs=args.jobs)
-    print(format_report(checks, verbose=args.verbose))
-    print(f"wall time {time.perf_counter() - t0:.1f} s")
+    doc = json_document(checks)
+    con.result(doc)
+    con.say(format_report(checks, verbose=args.verbose))
+    con.say(f"wall time {time.perf_counter() - t0:.1f} s")
     if junit:
         _write(junit, junit_xml(checks))
-        print(f"wrote {junit}")
+        con.say(f"wrote {junit}")
     if json_path:
-        _write(json_path, json.dumps(json_document(checks), indent=2, allow_nan=False) + "\n")
-        print(f"wrote {json_path}")
+        _write(json_path, json.dumps(doc, indent=2, allow_nan=False) + "\n")
+        con.say(f"wrote {json_path}")
     return 1 if any(c.failed for c in checks) else 0

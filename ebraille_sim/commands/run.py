@@ -4,7 +4,28 @@ from __future__ import annotations
 NAME = "run"
 HELP = "simulate a scenario in closed loop; print the metrics, write metrics.json, trace.csv, force.png"
 EPILOG = ("exit status: 0 when the run meets every [criteria] limit of the scenario, 1 when one fails "
-          "(one 'criterion failed: ...' line per limit on stderr), 2 for bad input")
+          "(one 'criterion failed: ...' line per limit on stderr), 2 for bad input (also an --out folder "
+          "that already holds a run, without --force)")
+
+ANIMATION_NAME = "animation.gif"
+"""File name of ``--animate`` without a path, inside the run folder."""
+
+
+class _Backends:
+    """The names of :data:`ebraille_sim.plant.loop.PLANT_BACKENDS`, read when argparse asks."""
+
+    def _names(self) -> list:
+        from ebraille_sim.plant.loop import PLANT_BACKENDS
+        return list(PLANT_BACKENDS)
+
+    def __iter__(self):
+        return iter(self._names())
+
+    def __contains__(self, name) -> bool:
+        return name in self._names()
+
+    def __len__(self) -> int:
+        return len(self._names())
 
 
 def add_arguments(p):
@@ -14,12 +35,16 @@ def add_arguments(p):
     p.add_argument("--seed", type=int, default=None, help="master seed (default: the scenario's)")
     p.add_argument("--duration", type=float, default=None, metavar="S", help="override the duration, s")
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default: runs/SCENARIO)")
-    p.add_argument("--backend", default="lumped", help="plant model (default: lumped)")
+    p.add_argument("--force", action="store_true",
+                   help="overwrite the outputs of an earlier run in --out (refused otherwise)")
+    p.add_argument("--backend", default="lumped", choices=_Backends(),
+                   help="plant model: %(choices)s (default: %(default)s)")
+    p.add_argument("--trace", default="csv", choices=("csv", "parquet", "none"),
+                   help="trace file: trace.csv (default), trace.parquet (needs pyarrow) or none")
     p.add_argument("--no-plot", action="store_true", help="skip force.png")
-    p.add_argument("--json", action="store_true", help="print the metrics as JSON instead of a table")
-    p.add_argument("--animate", default=None, metavar="PATH",
-                   help="with --backend pymunk: write the mechanism as a GIF (PNG frames without Pillow), "
-                        "25 frames per simulated second")
+    p.add_argument("--animate", nargs="?", const="", default=None, metavar="PATH",
+                   help=f"with --backend pymunk: draw the mechanism as a GIF (PNG frames without Pillow), "
+                        f"25 frames per simulated second; default PATH: {ANIMATION_NAME} in the run folder")
 
 
 def failed_criteria(result) -> list[str]:
@@ -36,37 +61,76 @@ def failed_criteria(result) -> list[str]:
     return lines
 
 
-def main(args) -> int:
-    import json
+def _targets(args, spec):
+    """The run folder and the animation path, checked before any simulation."""
     import pathlib
+
+    from ebraille_sim.commands import UserError, check_out_dir
+    from ebraille_sim.tools.report import existing_outputs
+
+    out = check_out_dir(args.out if args.out is not None else pathlib.Path("runs") / spec.name)
+    anim = None
+    if args.animate is not None:
+        anim = pathlib.Path(args.animate) if args.animate else out / ANIMATION_NAME
+        if args.animate:
+            if anim.is_dir():
+                raise UserError(f"--animate {str(anim)!r} is a folder; give a file name such as press.gif")
+            check_out_dir(anim.parent, "--animate")
+    if not args.force:
+        old = [p.name for p in existing_outputs(out)]
+        if old:
+            raise UserError(f"run folder {str(out)!r} already holds a run ({', '.join(old)}); "
+                            "pass --force to overwrite it or choose another --out")
+        if anim is not None and anim.exists():
+            raise UserError(f"--animate {str(anim)!r} exists; pass --force to overwrite it")
+    return out, anim
+
+
+def main(args) -> int:
     import sys
 
-    from ebraille_sim.tools.report import metrics_document, summary_table, write_outputs
+    from ebraille_sim.commands import FrameProgress, UserError, console
     from ebraille_sim.scenarios.runner import run_scenario
     from ebraille_sim.scenarios.spec import load_scenario
+    from ebraille_sim.tools.report import have_parquet, metrics_document, summary_table, write_outputs
 
-    spec = load_scenario(args.scenario)
+    con = console(args)
     if args.seed is not None and args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
     if args.animate is not None and args.backend != "pymunk":
         raise ValueError(f"--animate draws the pymunk mechanism; use it with --backend pymunk, not {args.backend!r}")
-    if args.animate is not None:
-        from ebraille_sim.plant.mechanism import recording, write_animation
+    if args.trace == "parquet" and not have_parquet():
+        raise UserError("--trace parquet needs pyarrow, which is not installed; use --trace csv or none")
+    spec = load_scenario(args.scenario)
+    out, anim = _targets(args, spec)
+
+    def simulate():
+        return run_scenario(spec, controller=args.controller, seed=args.seed, duration_s=args.duration,
+                            backend=args.backend)
+
+    frames = None
+    if anim is not None:
+        from ebraille_sim.plant.mechanism import recording
         with recording(every_s=1.0 / 25.0) as rec:
-            result = run_scenario(spec, controller=args.controller, seed=args.seed, duration_s=args.duration,
-                                  backend=args.backend)
-        anim = write_animation(rec.frames, args.animate, fps=25.0)
-        print(f"wrote {anim} ({len(rec.frames)} frames)")
+            result = simulate()
+        frames = rec.frames
     else:
-        result = run_scenario(spec, controller=args.controller, seed=args.seed, duration_s=args.duration,
-                              backend=args.backend)
-    out = pathlib.Path(args.out) if args.out else pathlib.Path("runs") / spec.name
-    write_outputs(result, out, plot=not args.no_plot)
-    if args.json:
-        print(json.dumps(metrics_document(result), indent=2))
-    else:
-        print(summary_table(result))
-        print(f"\nwrote {out / 'metrics.json'}, {out / 'trace.csv'}" + ("" if args.no_plot else f", {out / 'force.png'}"))
+        result = simulate()
+    written = write_outputs(result, out, plot=not args.no_plot, trace=args.trace)
+    if frames is not None:
+        from ebraille_sim.plant.mechanism import write_animation
+        bar = FrameProgress("drawing frames", enabled=con.progress)
+        try:
+            written.append(write_animation(frames, anim, fps=25.0, progress=bar))
+        finally:
+            bar.close()
+    doc = metrics_document(result)
+    doc["out"] = str(out)
+    doc["files"] = [str(p) for p in written]
+    con.result(doc)
+    con.say(summary_table(result))
+    con.say("\nwrote " + ", ".join(str(p) for p in written)
+            + (f" ({len(frames)} frames)" if frames is not None else ""))
     failures = failed_criteria(result)
     for line in failures:
         print(line, file=sys.stderr)

@@ -28,8 +28,10 @@ def add_arguments(p):
 
 
 def main(args) -> int:
+    from ebraille_sim.commands import check_out_dir, console
     from ebraille_sim.tools.sweep import format_summary, plan_sweep, run_sweep, summarise, write_results
 
+    con = console(args)
     if args.jobs is not None and args.jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
     if not 0 < args.alpha <= 1:
@@ -39,12 +41,18 @@ def main(args) -> int:
     known = set(_metric_names())
     if args.loss not in known:
         raise ValueError(f"unknown --loss metric {args.loss!r}; metrics: {', '.join(sorted(known))}")
-    result = run_sweep(plan, jobs=args.jobs, scheduler=args.scheduler, progress=not args.no_progress)
-    paths = write_results(result, args.out, loss=args.loss, alpha=args.alpha, figures=not args.no_figures)
-    print(format_summary(summarise(result, args.loss, args.alpha)))
+    out = check_out_dir(args.out)
+    result = run_sweep(plan, jobs=args.jobs, scheduler=args.scheduler,
+                       progress=con.progress and not args.no_progress)
+    paths = write_results(result, out, loss=args.loss, alpha=args.alpha, figures=not args.no_figures)
+    summary = summarise(result, args.loss, args.alpha)
     failed = sum(1 for r in result.rows if r.get("error"))
-    print(f"\n{len(result.rows)} episodes ({failed} failed) on {result.executor} in {result.wall_s:.1f} s")
-    print("wrote " + ", ".join(str(p) for p in paths))
+    con.result({"episodes": len(result.rows), "failed": failed, "executor": result.executor,
+                "wall_s": round(result.wall_s, 3), "loss": args.loss, "alpha": args.alpha, "summary": summary,
+                "out": str(out), "files": [str(p) for p in paths]})
+    con.say(format_summary(summary))
+    con.say(f"\n{len(result.rows)} episodes ({failed} failed) on {result.executor} in {result.wall_s:.1f} s")
+    con.say("wrote " + ", ".join(str(p) for p in paths))
     return 0
 
 

@@ -110,12 +110,17 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
 
 def main(args) -> int:
     import pathlib
+
+    from ebraille_sim.commands import check_out_dir, console
+    con = console(args)
     _check(args)
-    out = pathlib.Path(args.out) if args.out else pathlib.Path("runs") / f"train-{args.algo}"
+    out = check_out_dir(args.out if args.out else pathlib.Path("runs") / f"train-{args.algo}")
     rec = train(args.algo, args.steps, out, seed=args.seed, n_envs=args.envs, control_rate_hz=args.control_rate,
                 threads=args.threads)
     ret = rec["mean_episode_return_last_100"]
-    print(f"trained {args.algo.upper()} for {rec['steps']} steps in {rec['wall_time_s']:.1f} s "
+    con.result({"algo": args.algo, **rec, "out": str(out),
+                "files": [str(out / "policy.zip"), str(out / "policy.json")]})
+    con.say(f"trained {args.algo.upper()} for {rec['steps']} steps in {rec['wall_time_s']:.1f} s "
           f"({rec['steps_per_s']:.0f} steps/s)" + ("" if ret is None else f"; mean episode return {ret:.1f}"))
-    print(f"wrote {out / 'policy.zip'}, {out / 'policy.json'}  (use --controller policy:{out})")
+    con.say(f"wrote {out / 'policy.zip'}, {out / 'policy.json'}  (use --controller policy:{out})")
     return 0

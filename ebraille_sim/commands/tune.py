@@ -50,10 +50,13 @@ def add_arguments(p):
 
 
 class _Bar:
-    """tqdm when installed, else a one-line bar on stderr."""
+    """tqdm when installed, else a one-line bar on stderr; nothing when not ``enabled``."""
 
-    def __init__(self, total: int, desc: str):
-        self.total, self.n, self.desc = total, 0, desc
+    def __init__(self, total: int, desc: str, enabled: bool = True):
+        self.total, self.n, self.desc, self.enabled = total, 0, desc, enabled
+        self._tq = None
+        if not enabled:
+            return
         try:
             from tqdm import tqdm
             self._tq = tqdm(total=total, desc=desc, unit="run", file=sys.stderr)
@@ -62,6 +65,8 @@ class _Bar:
 
     def __call__(self, k: int) -> None:
         self.n += k
+        if not self.enabled:
+            return
         if self._tq is not None:
             self._tq.update(k)
             return
@@ -74,7 +79,7 @@ class _Bar:
     def close(self) -> None:
         if self._tq is not None:
             self._tq.close()
-        else:
+        elif self.enabled:
             sys.stderr.write("\n")
 
 
@@ -232,8 +237,10 @@ def main(args) -> int:
     from ebraille_sim.analysis.robust import family_ms_controller, robust_tune, tuning_population
     from ebraille_sim.analysis.tuning import analyse_loop, plot_bode, plot_nyquist
 
+    from ebraille_sim.commands import check_out_dir, console
     from ebraille_sim.scenarios.spec import load_scenario
 
+    con = console(args)
     if args.population < 0:
         raise ValueError(f"--population must be >= 0, got {args.population}")
     if args.seed < 0:
@@ -248,11 +255,11 @@ def main(args) -> int:
         raise ValueError(f"--ms-gain must be finite and > 0, got {args.ms_gain}")
     spec = load_scenario(args.scenario)
     scenarios = _scenarios(args.scenarios, spec, args.duration)
-    out = pathlib.Path(args.out) if args.out else pathlib.Path("runs") / f"tune-{spec.name}"
+    out = check_out_dir(args.out if args.out else pathlib.Path("runs") / f"tune-{spec.name}")
     pop = tuning_population(args.population, seed=args.seed, base=spec.device)
     n_ref = 3 if args.family != "pid" else 2
     total = len(pop) * len(scenarios) * (max(args.evaluations, 9) + n_ref)   # at most; rejected candidates are not run
-    bar = _Bar(total, f"tune {spec.name}")
+    bar = _Bar(total, f"tune {spec.name}", enabled=con.progress)
     try:
         res = robust_tune(spec, pop, family=args.family, ms_max=args.ms_max, ms_gain=args.ms_gain,
                           max_evaluations=args.evaluations, progress=bar, scenarios=scenarios)
@@ -287,15 +294,25 @@ def main(args) -> int:
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     g = res.gains_file()["gains"]
-    print(f"tuned {args.family}: kp {g['kp_v_per_n']:.4g}, ki {g['ki_v_per_ns']:.4g}, kd {g['kd_vs_per_n']:.4g}; "
+    files = ["gains.toml"] + (["gains_hand.toml"] if "hand" in res.references else []) + \
+        ["report.md", "report.json", "bode.png", "nyquist.png", "population.png"]
+    con.result({
+        "scenario": spec.name, "family": args.family, "gains": g, "ms_max": res.ms_max, "ms_bound": args.ms_max,
+        "ms_gain": args.ms_gain, "cost": res.cost, "population": len(pop), "population_seed": args.seed,
+        "scenarios": {s: {k: {q: rep[k]["scenarios"][s]["metrics"]["in_band_fraction"][q] for q in ("worst", "median")}
+                          for k in ("tuned", "hand", "default", "simc") if k in rep}
+                      for s in rep["scenarios"]},
+        "costs": {k: rep[k]["cost"] for k in ("tuned", "hand", "default", "simc") if k in rep},
+        "out": str(out), "files": [str(out / f) for f in files]})
+    con.say(f"tuned {args.family}: kp {g['kp_v_per_n']:.4g}, ki {g['ki_v_per_ns']:.4g}, kd {g['kd_vs_per_n']:.4g}; "
           f"max Ms {res.ms_max:.3f} (bound {args.ms_max:g}, loop factor {args.ms_gain:g}); cost {res.cost:.3f}")
     for s in rep["scenarios"]:
         t = rep["tuned"]["scenarios"][s]["metrics"]["in_band_fraction"]
         d = rep["default"]["scenarios"][s]["metrics"]["in_band_fraction"]
-        print(f"  {s}: in-band worst {t['worst']:.3f} (default PID {d['worst']:.3f}), "
+        con.say(f"  {s}: in-band worst {t['worst']:.3f} (default PID {d['worst']:.3f}), "
               f"median {t['median']:.3f} (default {d['median']:.3f})")
     if "hand" in rep and rep["hand"]["cost"] < rep["tuned"]["cost"]:
-        print(f"note: the family at the default gains has a lower cost ({rep['hand']['cost']:.3f}) but max Ms "
+        con.say(f"note: the family at the default gains has a lower cost ({rep['hand']['cost']:.3f}) but max Ms "
               f"{_fmt_ms(rep['hand']['ms_max'])}: written as gains_hand.toml (see report.md)")
-    print(f"wrote {out / 'gains.toml'}, report.md, report.json, bode.png, nyquist.png, population.png")
+    con.say(f"wrote {out / 'gains.toml'}, report.md, report.json, bode.png, nyquist.png, population.png")
     return 0

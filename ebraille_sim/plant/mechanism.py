@@ -872,10 +872,27 @@ def draw_mechanism(plant: PymunkPlant, k: int = 0, size_px=(480, 360)) -> np.nda
     return plant.render(k, size_px)
 
 
-def write_animation(frames: list, path, fps: float = 25.0, size_px=(480, 360)):
+def write_animation(frames: list, path, fps: float = 25.0, size_px=(480, 360), progress=None):
     """Write recorded snapshots as a GIF (Pillow) or, without Pillow, as numbered PNG frames.
 
-    Returns the path written (the GIF, or the folder of PNG frames).
+    Parameters
+    ----------
+    frames : list of dict
+        Snapshots from :func:`recording`.
+    path : path
+        The GIF; without Pillow, the folder ``path`` without its suffix receives
+        ``frame_00000.png`` ... (earlier ``frame_*.png`` there are removed first).
+    fps : float
+        Frames per second of the GIF.
+    size_px : (int, int)
+        Width and height of a frame, px.
+    progress : callable, optional
+        Called as ``progress(done, total)`` after each frame is drawn.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written (the GIF, or the folder of PNG frames).
     """
     import pathlib
     path = pathlib.Path(path)
@@ -886,7 +903,11 @@ def write_animation(frames: list, path, fps: float = 25.0, size_px=(480, 360)):
         have_pillow = True
     except ModuleNotFoundError:
         have_pillow = False
-    images = [draw_snapshot(f, size_px=size_px) for f in frames]
+    images = []
+    for f in frames:
+        images.append(draw_snapshot(f, size_px=size_px))
+        if progress is not None:
+            progress(len(images), len(frames))
     path.parent.mkdir(parents=True, exist_ok=True)
     if have_pillow:
         import matplotlib
@@ -909,6 +930,8 @@ def write_animation(frames: list, path, fps: float = 25.0, size_px=(480, 360)):
     import matplotlib.image as mpimg
     folder = path.with_suffix("")
     folder.mkdir(parents=True, exist_ok=True)
+    for old in folder.glob("frame_*.png"):
+        old.unlink()
     for i, img in enumerate(images):
         mpimg.imsave(folder / f"frame_{i:05d}.png", img)
     return folder

@@ -1,10 +1,13 @@
-"""Run outputs: summary table, metrics.json, trace.csv and force.png.
+"""Run outputs: summary table, metrics.json, the trace (trace.csv or trace.parquet) and force.png.
 
 Files are written into a temporary folder beside the target and moved into place only
 when all of them are complete, so an interrupted or failed run leaves nothing half-way.
+A run folder holds one run: outputs of an earlier run that this one does not write
+(a force.png under ``--no-plot``, a trace of another format, an animation) are removed.
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import os
@@ -103,19 +106,94 @@ def plot_force(result: RunResult, path) -> None:
     plt.close(fig)
 
 
-def write_outputs(result: RunResult, out_dir, plot: bool = True) -> pathlib.Path:
-    """Write metrics.json, trace.csv and force.png into ``out_dir`` (created if needed)."""
+RUN_OUTPUTS = ("metrics.json", "trace.csv", "trace.parquet", "force.png", "animation.gif", "animation")
+"""The names a run writes into its folder (``animation`` is the PNG-frame folder drawn without Pillow)."""
+
+TRACE_FORMATS = ("csv", "parquet", "none")
+
+
+def existing_outputs(out_dir) -> list[pathlib.Path]:
+    """The run outputs (:data:`RUN_OUTPUTS`) already present in ``out_dir``."""
+    out = pathlib.Path(out_dir)
+    if not out.is_dir():
+        return []
+    return [out / n for n in RUN_OUTPUTS if (out / n).exists()]
+
+
+def remove_output(path) -> None:
+    """Remove one run output: a file, or the frame folder's ``frame_*.png`` (and the folder once empty)."""
+    p = pathlib.Path(path)
+    if p.is_dir() and not p.is_symlink():
+        for f in p.glob("frame_*.png"):
+            f.unlink()
+        with contextlib.suppress(OSError):
+            p.rmdir()
+    elif p.exists() or p.is_symlink():
+        p.unlink()
+
+
+def have_parquet() -> bool:
+    """Whether pyarrow is installed (``trace.parquet`` needs it)."""
+    import importlib.util
+    return importlib.util.find_spec("pyarrow") is not None
+
+
+def write_trace_parquet(path, trace: dict) -> None:
+    """The trace as a Parquet table (needs pyarrow), same columns as trace.csv."""
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise ValueError("trace format 'parquet' needs pyarrow, which is not installed; use 'csv'") from None
+    cols = {}
+    for c in TRACE_COLUMNS:
+        v = np.asarray(trace[c])
+        cols[c] = (v.astype(np.int64) if c == "char_index" else
+                   [str(x) for x in v] if c == "character" else v.astype(np.float64))
+    pq.write_table(pa.table(cols), path)
+
+
+def write_outputs(result: RunResult, out_dir, plot: bool = True, trace: str = "csv",
+                  clear_stale: bool = True) -> list[pathlib.Path]:
+    """Write metrics.json, the trace and force.png into ``out_dir`` (created if needed).
+
+    Parameters
+    ----------
+    result : RunResult
+    out_dir : path
+    plot : bool
+        Draw force.png.
+    trace : {"csv", "parquet", "none"}
+        trace.csv, trace.parquet (pyarrow) or no trace.
+    clear_stale : bool
+        Remove the outputs of :data:`RUN_OUTPUTS` this run does not write.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The files written.
+    """
+    if trace not in TRACE_FORMATS:
+        raise ValueError(f"trace format must be one of {', '.join(TRACE_FORMATS)}, got {trace!r}")
     out = pathlib.Path(out_dir)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = pathlib.Path(tempfile.mkdtemp(prefix=".ebraille-", dir=out.parent))
     try:
         (tmp / "metrics.json").write_text(json.dumps(metrics_document(result), indent=2) + "\n")
-        write_trace_csv(tmp / "trace.csv", result.trace)
+        if trace == "csv":
+            write_trace_csv(tmp / "trace.csv", result.trace)
+        elif trace == "parquet":
+            write_trace_parquet(tmp / "trace.parquet", result.trace)
         if plot:
             plot_force(result, tmp / "force.png")
         out.mkdir(parents=True, exist_ok=True)
-        for f in tmp.iterdir():
-            os.replace(f, out / f.name)
+        names = [n for n in RUN_OUTPUTS if (tmp / n).exists()]
+        if clear_stale:
+            for old in existing_outputs(out):
+                if old.name not in names:
+                    remove_output(old)
+        for name in names:
+            os.replace(tmp / name, out / name)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
-    return out
+    return [out / n for n in names]
