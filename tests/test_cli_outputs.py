@@ -394,3 +394,14 @@ def test_frame_progress_counts_in_place_on_a_terminal_and_in_lines_elsewhere():
         bar.close()
     assert tty.getvalue() == "".join(f"\rframes {k}/60" for k in range(1, 61)) + "\n"
     assert log.getvalue() == "frames 25/60\nframes 50/60\nframes 60/60\n"
+
+
+def test_tune_refuses_a_duration_that_ends_before_reading(tmp_path):
+    import subprocess
+    import sys
+    r = subprocess.run([sys.executable, "-m", "ebraille_sim", "tune", "contact_onset", "--duration", "0.5",
+                        "--out", str(tmp_path / "t")], capture_output=True, text=True)
+    assert r.returncode == 2
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and "before its reading starts" in lines[0]
+    assert not (tmp_path / "t").exists()

@@ -255,6 +255,12 @@ def main(args) -> int:
         raise ValueError(f"--ms-gain must be finite and > 0, got {args.ms_gain}")
     spec = load_scenario(args.scenario)
     scenarios = _scenarios(args.scenarios, spec, args.duration)
+    for sc in scenarios:
+        end = sc.duration_s if sc.duration_s is not None else sc.spec.duration_s
+        if end is not None and end <= sc.spec.reading.start_s:
+            raise ValueError(f"scenario {sc.name!r} ends at {end:g} s, before its reading starts at "
+                             f"{sc.spec.reading.start_s:g} s; the tuning cost is measured while reading "
+                             f"(give a longer --duration)")
     out = check_out_dir(args.out if args.out else pathlib.Path("runs") / f"tune-{spec.name}")
     pop = tuning_population(args.population, seed=args.seed, base=spec.device)
     n_ref = 3 if args.family != "pid" else 2
