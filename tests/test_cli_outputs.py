@@ -223,7 +223,7 @@ def test_json_prints_one_document_and_quiet_prints_nothing(command, tmp_path, ca
 def test_json_and_quiet_on_tune(tmp_path, capsys):
     out = tmp_path / "t"
     assert cli(["tune", "steady_90wpm", "--population", "0", "--evaluations", "4", "--scenarios", "single",
-                "--duration", "1.5", "--out", str(out), "--json", "--quiet"]) == 0
+                "--duration", "2.0", "--out", str(out), "--json", "--quiet"]) == 0
     cap = capsys.readouterr()
     assert cap.err == ""                                      # no progress bar under --quiet
     doc = json.loads(cap.out)
