@@ -96,7 +96,7 @@ class ScheduleConfig:
     friction-band describing-function factor 0.5; reproduced by
     ``docs/make_tuning_figures.py``), rounded, with the static reference map on.  On the
     sliding linearisation their Ms is at most 2.45 over the tuning population (2.0 or less
-    at 63 of its 66 points); the design that meets the issue's Ms <= 1.6 there is
+    at 63 of its 66 points); the design that meets the robustness target Ms <= 1.6 there is
     :data:`MS_1_6`.
 
     Raises
@@ -155,7 +155,7 @@ RECOMMENDED = ScheduleConfig()
 
 MS_1_6 = ScheduleConfig(kp_v_per_n=0.537, ki_v_per_ns=1.148, kd_vs_per_n=0.0002)
 """What ``ebraille-sim tune setpoint_steps --population 6 --evaluations 36`` finds under the
-issue's bound, Ms <= 1.6 on the sliding linearisation at every device and setpoint (max 1.59;
+robustness target Ms <= 1.6 on the sliding linearisation at every device and setpoint (max 1.59;
 reference map on).  Kept to three digits: its worst case on ``setpoint_steps`` is fragile
 (docs/tuning.md, section 3)."""
 

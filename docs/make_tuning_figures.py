@@ -46,7 +46,7 @@ HELDOUT_SEED, HELDOUT_N = 1, 8
 FORCES = [0.6, 0.8, 1.0, 1.2, 1.5, 2.0]
 """Every setpoint of the tuning scenarios (setpoint steps, steady reading, contact onset)."""
 TUNINGS = {
-    "ms1.6": {"ms_max": 1.6, "ms_gain": 1.0, "label": "Ms <= 1.6, sliding model (the issue's bound)"},
+    "ms1.6": {"ms_max": 1.6, "ms_gain": 1.0, "label": "Ms <= 1.6, sliding model (the robustness target)"},
     "ms2.0": {"ms_max": 2.0, "ms_gain": 1.0, "label": "Ms <= 2.0, sliding model"},
     "friction": {"ms_max": 1.6, "ms_gain": 0.5, "label": "Ms <= 1.6 on the loop x 0.5 (friction-band DF)"},
     "free": {"ms_max": float("inf"), "ms_gain": 1.0, "label": "no Ms bound (simulation only)"},
