@@ -227,10 +227,11 @@ def test_json_and_quiet_on_tune(tmp_path, capsys):
     cap = capsys.readouterr()
     assert cap.err == ""                                      # no progress bar under --quiet
     doc = json.loads(cap.out)
-    assert doc["scenario"] == "steady_90wpm" and doc["population"] == 5 and doc["ms_max"] <= doc["ms_bound"] == 1.6
+    assert doc["scenario"] == "steady_90wpm" and doc["population"] == 5 and doc["ms_max_tuned"] <= doc["ms_bound"] == 1.6
     assert doc["gains"]["kp_v_per_n"] > 0 and set(doc["costs"]) == {"tuned", "hand", "default", "simc"}
     assert 0.0 <= doc["scenarios"]["steady_90wpm"]["tuned"]["worst"] <= 1.0
-    assert [pathlib.Path(f).name for f in doc["files"]][:2] == ["gains.toml", "gains_hand.toml"]
+    names = [pathlib.Path(f).name for f in doc["files"]]
+    assert names[0] == "gains.toml" and "gains_hand.toml" in names
     assert all(pathlib.Path(f).is_file() for f in doc["files"])
 
 

@@ -52,8 +52,15 @@ gains (kp 2, ki 8, kd 0) as they are when they meet the bound, otherwise scaled 
 together until they do; the SIMC rule, scaled the same way; the default kp with ki/kp = 1,
 2 and 16 1/s (other integral times), scaled the same way; the best start is refined.  A
 candidate that violates the bound is charged ``10 + 10 (Ms_max - ms_max)`` without being
-simulated.  The hand-tuned default PID, the SIMC PID and the family at the default gains
-(``"hand"``) are evaluated on the same runs for the report.
+simulated.  The hand-tuned default PID, the SIMC PID, the family at the default gains
+(``"hand"``) and the shipped controller of the family (``"shipped"``,
+:func:`shipped_config`; for ``"pid"`` it is the default PID) are evaluated on the same
+runs for the report.
+
+Selection: the result is the search optimum unless the shipped controller of the family
+has a lower cost on the named (first) scenario; then the shipped controller is kept
+(:attr:`TuneResult.selected`, with the reason in :attr:`TuneResult.selection_reason`),
+even where it exceeds the Ms bound, which the reason states.
 
 Examples
 --------
@@ -78,7 +85,7 @@ __all__ = ["FAMILIES", "TuneScenario", "tuning_population", "standard_scenarios"
            "linearisation_points", "population_ms", "evaluate", "evaluate_scenarios", "tracking_cost",
            "scenario_cost", "multi_cost", "summarise", "cvar", "robust_tune", "TuneResult", "scenario_setpoints",
            "family_config", "family_controller", "family_ms_controller", "gains_document", "friction_band_v",
-           "KD_OFFSET"]
+           "shipped_config", "KD_OFFSET"]
 
 KD_OFFSET = 1e-3
 """kd enters the search as ``ln(kd + KD_OFFSET)``, so that kd = 0 is a finite point."""
@@ -309,6 +316,14 @@ def family_controller(cfg, family: str | None = None):
     return ScheduledPID(cfg, name=family or ("pid_feedforward" if cfg.feedforward else "pid_scheduled"))
 
 
+def shipped_config(family: str):
+    """The configuration ``controllers.make(family)`` builds: the shipped controller of ``family``."""
+    import controllers
+    if family not in FAMILIES:
+        raise ValueError(f"family must be one of {', '.join(FAMILIES)}, got {family!r}")
+    return controllers.make(family).config
+
+
 def family_ms_controller(cfg):
     """What :func:`population_ms` needs: the fixed config, or the schedule ``force -> PIDConfig``."""
     if isinstance(cfg, PIDConfig):
@@ -420,23 +435,33 @@ class TuneResult:
     family: str = "pid"
     start_scale: float = 1.0
     """Factor the default gains were scaled by to meet the bound (1: they meet it)."""
+    selected: str = "tuned"
+    """The controller returned: ``"tuned"`` (the search optimum) or the key in
+    :attr:`references` of the shipped controller that beat it on the named scenario."""
+    selection_reason: str = ""
+    """Why the shipped controller was kept instead of the optimum (empty when it was not)."""
 
-    # single-scenario era attribute names
+    @property
+    def chosen(self) -> Candidate:
+        """The candidate returned (:attr:`selected`)."""
+        return self.tuned if self.selected == "tuned" else self.references[self.selected]
+
+    # single-scenario era attribute names, of the controller returned
     @property
     def config(self):
-        return self.tuned.config
+        return self.chosen.config
 
     @property
     def cost(self) -> float:
-        return self.tuned.cost
+        return self.chosen.cost
 
     @property
     def ms_max(self) -> float:
-        return self.tuned.ms_max
+        return self.chosen.ms_max
 
     @property
     def rows(self) -> list:
-        return self.tuned.rows[self.scenarios[0].name]
+        return self.chosen.rows[self.scenarios[0].name]
 
     @property
     def baseline_config(self):
@@ -446,9 +471,16 @@ class TuneResult:
     def baseline_rows(self) -> list:
         return self.references["default"].rows[self.scenarios[0].name]
 
+    def named_cost(self, key: str = "tuned") -> float:
+        """:func:`scenario_cost` of a controller (``"tuned"`` or a reference key) on the named scenario."""
+        sc = self.scenarios[0]
+        c = self.tuned if key == "tuned" else self.references[key]
+        sps = scenario_setpoints(sc.spec)
+        return scenario_cost(c.rows[sc.name], float(np.mean(sps)), float(np.max(sps)))
+
     def gains_file(self) -> dict:
-        """The tuned controller as a gains document for ``controllers.make`` / ``run --controller``."""
-        return gains_document(self.tuned.config, self.family)
+        """The controller returned as a gains document for ``controllers.make`` / ``run --controller``."""
+        return gains_document(self.chosen.config, self.chosen.family)
 
     def report(self) -> dict:
         args = (self.scenarios, self.labels, self.forces_n)
@@ -458,7 +490,9 @@ class TuneResult:
         rep.update(family=self.family, evaluations=self.evaluations, ms_bound=self.ms_bound, ms_gain=self.ms_gain,
                    start_scale=self.start_scale, scenarios=[sc.name for sc in self.scenarios],
                    scenario_durations_s=[sc.duration_s for sc in self.scenarios], labels=self.labels,
-                   forces_n=self.forces_n, history=self.history)
+                   forces_n=self.forces_n, history=self.history, selected=self.selected,
+                   selection_reason=self.selection_reason,
+                   named_costs={k: self.named_cost(k) for k in ["tuned", *self.references]})
         return rep
 
 
@@ -481,7 +515,9 @@ def robust_tune(spec, population, *, family: str = "pid", ms_max: float = 1.6, s
     max_evaluations : int
         Budget of Nelder-Mead cost evaluations (simulated or rejected).
     progress : callable, optional
-        Called with the number of finished simulation runs.
+        Called as ``progress(done, total)`` after every simulation run: ``done`` runs so far
+        of at most ``total``.  ``total`` shrinks as candidates are rejected by the Ms bound
+        or found in the cache; the last call has ``done == total``.
     base : PIDConfig
         The hand-tuned baseline; also supplies the limits and the derivative filter.
     scenarios : list of TuneScenario, optional
@@ -507,6 +543,23 @@ def robust_tune(spec, population, *, family: str = "pid", ms_max: float = 1.6, s
     points = linearisation_points(population, forces)
     labels = [lab for lab, _ in population]
     history = []
+    per_candidate = len(population) * len(scenarios)
+    shipped = shipped_config(family)
+    shipped_is_default = family == "pid" and shipped == base
+    n_refs = 3 + (family != "pid") - shipped_is_default
+    n_seeds = 2 + len(START_KI_OVER_KP)
+    maxfev = max(4, max_evaluations - n_seeds)
+    # candidates that may be simulated: references, starts, and Nelder-Mead, which may
+    # overrun maxfev by one iteration (at most 2 + n evaluations past the check, n = 3)
+    runs = {"done": 0, "total": per_candidate * (n_refs + n_seeds + maxfev + 4)}
+
+    def tick(k):
+        runs["done"] += k
+        if progress is not None:
+            progress(runs["done"], max(runs["total"], runs["done"]))
+
+    def skipped():
+        runs["total"] -= per_candidate
 
     def config_of(kp, ki, kd):
         return family_config(family, kp, ki, kd, base)
@@ -516,7 +569,7 @@ def robust_tune(spec, population, *, family: str = "pid", ms_max: float = 1.6, s
 
     def run(cfg, fam):
         return evaluate_scenarios(lambda: family_controller(cfg, fam), population, scenarios, seed=seed,
-                                  progress=progress)
+                                  progress=tick)
 
     def candidate(cfg, fam):
         rows = run(cfg, fam)
@@ -527,6 +580,7 @@ def robust_tune(spec, population, *, family: str = "pid", ms_max: float = 1.6, s
     def cost(x):
         key = tuple(np.round(x, 6))
         if key in cache:
+            skipped()
             return cache[key].cost if cache[key] is not None else cache[key + ("c",)]
         kp, ki = np.exp(x[:2])
         kd = float(np.exp(x[2])) - KD_OFFSET
@@ -537,6 +591,7 @@ def robust_tune(spec, population, *, family: str = "pid", ms_max: float = 1.6, s
         if m > ms_max:
             c = 10.0 + 10.0 * min(m - ms_max, 100.0)
             cache[key], cache[key + ("c",)] = None, c
+            skipped()
         else:
             rows = run(cfg, family)
             cand = Candidate(cfg, family, multi_cost(rows, scenarios), ms, rows)
@@ -554,6 +609,9 @@ def robust_tune(spec, population, *, family: str = "pid", ms_max: float = 1.6, s
     hand = config_of(*_gains(base))
     if family != "pid":
         refs["hand"] = candidate(hand, family)
+    shipped_key = "default" if shipped_is_default else "shipped"
+    if not shipped_is_default:
+        refs["shipped"] = candidate(shipped, family)
 
     # starts: the default gains and SIMC, and the default kp with other integral times
     # (ki/kp = 1, 2 and 16 1/s against the default's 4), each scaled down to the bound
@@ -567,7 +625,7 @@ def robust_tune(spec, population, *, family: str = "pid", ms_max: float = 1.6, s
         if j == 0:
             start_scale = a
         kp, ki, kd = _gains(c)
-        if kp <= 0 or ki <= 0:
+        if kp <= 0 or ki <= 0:             # its slot goes to Nelder-Mead (maxfev counts the starts)
             continue
         starts.append(np.log([kp, ki, kd + KD_OFFSET]))
     start_costs = [cost(x) for x in starts]
@@ -576,10 +634,22 @@ def robust_tune(spec, population, *, family: str = "pid", ms_max: float = 1.6, s
     scipy.optimize.minimize(cost, x0, method="Nelder-Mead",
                             options={"maxfev": max(4, max_evaluations - len(starts)), "initial_simplex": simplex,
                                      "xatol": 0.02, "fatol": 1e-3})
+    runs["total"] = runs["done"]
+    tick(0)
     found = [c for k, c in cache.items() if len(k) == 3 and c is not None]
     if not found:
         raise RuntimeError(f"no gains met Ms <= {ms_max:g} at every linearisation point")
     best = min(found, key=lambda c: c.cost)
-    return TuneResult(tuned=best, references=refs, scenarios=scenarios, labels=labels, forces_n=forces,
-                      ms_bound=float(ms_max), ms_gain=float(ms_gain), evaluations=len(history), history=history,
-                      family=family, start_scale=start_scale)
+    res = TuneResult(tuned=best, references=refs, scenarios=scenarios, labels=labels, forces_n=forces,
+                     ms_bound=float(ms_max), ms_gain=float(ms_gain), evaluations=len(history), history=history,
+                     family=family, start_scale=start_scale)
+    c_opt, c_ship = res.named_cost("tuned"), res.named_cost(shipped_key)
+    if c_ship < c_opt:
+        ship = refs[shipped_key]
+        bound = f"Ms <= {ms_max:g}" if math.isfinite(ms_max) else "no Ms bound"
+        ms_note = (f"its max Ms {ship.ms_max:.2f} exceeds the bound {ms_max:g}" if ship.ms_max > ms_max
+                   else f"its max Ms {ship.ms_max:.2f} meets the bound")
+        res.selected = shipped_key
+        res.selection_reason = (f"on {scenarios[0].name} its cost is {c_ship:.3f} against {c_opt:.3f} for the "
+                                f"{bound} optimum; {ms_note}")
+    return res

@@ -90,7 +90,7 @@ def main(args) -> int:
     import sys
 
     from ebraille_sim.commands import FrameProgress, UserError, console
-    from ebraille_sim.scenarios.runner import run_scenario
+    from ebraille_sim.scenarios.runner import make_controller, run_scenario
     from ebraille_sim.scenarios.spec import load_scenario
     from ebraille_sim.tools.report import have_parquet, metrics_document, summary_table, write_outputs
 
@@ -103,9 +103,12 @@ def main(args) -> int:
         raise UserError("--trace parquet needs pyarrow, which is not installed; use --trace csv or none")
     spec = load_scenario(args.scenario)
     out, anim = _targets(args, spec)
+    ctrl = make_controller(spec, args.controller)
+    gains_file = args.controller if (args.controller is not None
+                                     and str(args.controller).lower().endswith((".toml", ".json"))) else None
 
     def simulate():
-        return run_scenario(spec, controller=args.controller, seed=args.seed, duration_s=args.duration,
+        return run_scenario(spec, controller=ctrl, seed=args.seed, duration_s=args.duration,
                             backend=args.backend)
 
     frames = None
@@ -116,7 +119,8 @@ def main(args) -> int:
         frames = rec.frames
     else:
         result = simulate()
-    written = write_outputs(result, out, plot=not args.no_plot, trace=args.trace)
+    written = write_outputs(result, out, plot=not args.no_plot, trace=args.trace, controller=ctrl,
+                            controller_file=gains_file)
     if frames is not None:
         from ebraille_sim.plant.mechanism import write_animation
         bar = FrameProgress("drawing frames", enabled=con.progress)
@@ -124,11 +128,11 @@ def main(args) -> int:
             written.append(write_animation(frames, anim, fps=25.0, progress=bar))
         finally:
             bar.close()
-    doc = metrics_document(result)
+    doc = metrics_document(result, ctrl, gains_file)
     doc["out"] = str(out)
     doc["files"] = [str(p) for p in written]
     con.result(doc)
-    con.say(summary_table(result))
+    con.say(summary_table(result, gains_file))
     con.say("\nwrote " + ", ".join(str(p) for p in written)
             + (f" ({len(frames)} frames)" if frames is not None else ""))
     failures = failed_criteria(result)

@@ -4,7 +4,9 @@ Writes into ``--out`` (default ``runs/tune-SCENARIO``):
 
 * ``gains.toml``: the tuned controller, accepted by ``ebraille-sim run --controller``
   (for a scheduled family ``controller = "pid_scheduled"`` or ``"pid_feedforward"`` with
-  every :class:`~controllers.schedule.ScheduleConfig` field);
+  every :class:`~controllers.schedule.ScheduleConfig` field); when the shipped controller
+  of the family beats the Ms-bounded optimum on SCENARIO, the shipped controller, with the
+  reason in a comment line, and the optimum in ``gains_tuned.toml``;
 * ``gains_hand.toml`` (scheduled families): the family at the hand-tuned default gains,
   the reference the tuned gains are compared with;
 * ``report.md`` and ``report.json``: gains, Ms at every linearisation point, median,
@@ -17,11 +19,10 @@ Writes into ``--out`` (default ``runs/tune-SCENARIO``):
 from __future__ import annotations
 
 import math
-import sys
 
 NAME = "tune"
 HELP = ("tune PID gains over a population of readers and FSR units and several scenarios "
-        "(Ms <= 1.6); write gains, report, figures")
+        "(Ms <= 1.6 by default); keep the shipped controller if it does better; write gains, report, figures")
 
 
 def add_arguments(p):
@@ -49,40 +50,6 @@ def add_arguments(p):
                         "sliding linearisation; e.g. 0.5 for the friction-band relaxation of docs/tuning.md)")
 
 
-class _Bar:
-    """tqdm when installed, else a one-line bar on stderr; nothing when not ``enabled``."""
-
-    def __init__(self, total: int, desc: str, enabled: bool = True):
-        self.total, self.n, self.desc, self.enabled = total, 0, desc, enabled
-        self._tq = None
-        if not enabled:
-            return
-        try:
-            from tqdm import tqdm
-            self._tq = tqdm(total=total, desc=desc, unit="run", file=sys.stderr)
-        except ImportError:
-            self._tq = None
-
-    def __call__(self, k: int) -> None:
-        self.n += k
-        if not self.enabled:
-            return
-        if self._tq is not None:
-            self._tq.update(k)
-            return
-        frac = min(self.n / max(self.total, 1), 1.0)
-        width = 30
-        fill = int(frac * width)
-        sys.stderr.write(f"\r{self.desc} [{'#' * fill}{'.' * (width - fill)}] {self.n}/{self.total} runs")
-        sys.stderr.flush()
-
-    def close(self) -> None:
-        if self._tq is not None:
-            self._tq.close()
-        elif self.enabled:
-            sys.stderr.write("\n")
-
-
 def _toml_value(v) -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
@@ -96,8 +63,9 @@ def _toml_value(v) -> str:
     return repr(v)
 
 
-def _toml(doc: dict) -> str:
-    lines = [f'controller = "{doc["controller"]}"', "", "[gains]"]
+def _toml(doc: dict, comment: str = "") -> str:
+    lines = [f"# {line}" for line in comment.splitlines()]
+    lines += [f'controller = "{doc["controller"]}"', "", "[gains]"]
     lines += [f"{k} = {_toml_value(v)}" for k, v in doc["gains"].items()]
     return "\n".join(lines) + "\n"
 
@@ -116,11 +84,13 @@ def _loop_cells(a: dict) -> list[str]:
     return ["stable", pm, gm, _fmt_ms(a["ms"])]
 
 
-_NAMES = {"tuned": "tuned", "hand": "family at default gains", "default": "default PID", "simc": "SIMC"}
+_NAMES = {"tuned": "tuned", "shipped": "shipped", "hand": "family at default gains", "default": "default PID",
+          "simc": "SIMC"}
+_KEYS = ("tuned", "shipped", "hand", "default", "simc")
 
 
 def _markdown(spec, rep: dict, n_dev: int) -> str:
-    keys = [k for k in ("tuned", "hand", "default", "simc") if k in rep]
+    keys = [k for k in _KEYS if k in rep]
     bound = rep["ms_bound"]
     rule = (f"Ms <= {bound:g}" if math.isfinite(bound) else "no Ms bound") + \
         (" on the sliding linearisation" if rep["ms_gain"] == 1.0 else
@@ -161,8 +131,15 @@ def _markdown(spec, rep: dict, n_dev: int) -> str:
                 f"({rep['hand']['cost']:.3f} against {rep['tuned']['cost']:.3f}) but does not meet the Ms bound "
                 f"(max Ms {_fmt_ms(rep['hand']['ms_max'])}); it is written as gains_hand.toml.  docs/tuning.md "
                 "discusses which one to ship.", ""]
+    sel = rep.get("selected", "tuned")
+    out += ["## Selection", "",
+            (f"gains.toml holds the shipped controller `{rep[sel]['controller']}`, better than the optimum: "
+             f"{rep['selection_reason']}.  The optimum under the bound is in gains_tuned.toml." if sel != "tuned" else
+             "gains.toml holds the tuned optimum (cost on the named scenario "
+             f"{rep['named_costs']['tuned']:.3f}; " + ", ".join(
+                 f"{_NAMES[k]} {rep['named_costs'][k]:.3f}" for k in keys if k != "tuned") + ")."), ""]
     if rep.get("nominal_loop"):
-        out += ["## Tuned loop on the nominal reader (sliding model)", "",
+        out += ["## Loop of gains.toml on the nominal reader (sliding model)", "",
                 "Margins from the loop's frequency response (`ebraille_sim.analysis.tuning.loop_margins`); "
                 "none are given for an unstable closed loop.", "",
                 "| setpoint | closed loop | phase margin | gain margin | Ms |", "|---|---|---|---|---|"]
@@ -177,7 +154,7 @@ def _markdown(spec, rep: dict, n_dev: int) -> str:
             out.append(f"| {lab} | " + " | ".join(
                 f"{rep[k]['scenarios'][s]['per_device'][j]['in_band_fraction']:.3f}" for k in keys) + " |")
         out.append("")
-    out += ["Figures: bode.png, nyquist.png (tuned loop, nominal reader), population.png."]
+    out += ["Figures: bode.png, nyquist.png (loop of gains.toml, nominal reader), population.png."]
     return "\n".join(out) + "\n"
 
 
@@ -186,7 +163,7 @@ def _plot_population(rep: dict, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     import numpy as np
-    keys = [k for k in ("tuned", "hand", "default", "simc") if k in rep]
+    keys = [k for k in _KEYS if k in rep]
     scen = rep["scenarios"]
     x = np.arange(len(scen))
     wdt = 0.8 / len(keys)
@@ -234,10 +211,10 @@ def main(args) -> int:
     import shutil
     import tempfile
 
-    from ebraille_sim.analysis.robust import family_ms_controller, robust_tune, tuning_population
+    from ebraille_sim.analysis.robust import family_ms_controller, gains_document, robust_tune, tuning_population
     from ebraille_sim.analysis.tuning import analyse_loop, plot_bode, plot_nyquist
 
-    from ebraille_sim.commands import check_out_dir, console
+    from ebraille_sim.commands import FrameProgress, check_out_dir, console
     from ebraille_sim.scenarios.spec import load_scenario
 
     con = console(args)
@@ -263,9 +240,7 @@ def main(args) -> int:
                              f"(give a longer --duration)")
     out = check_out_dir(args.out if args.out else pathlib.Path("runs") / f"tune-{spec.name}")
     pop = tuning_population(args.population, seed=args.seed, base=spec.device)
-    n_ref = 3 if args.family != "pid" else 2
-    total = len(pop) * len(scenarios) * (max(args.evaluations, 9) + n_ref)   # at most; rejected candidates are not run
-    bar = _Bar(total, f"tune {spec.name}", enabled=con.progress)
+    bar = FrameProgress(f"tune {spec.name}: runs", enabled=con.progress)
     try:
         res = robust_tune(spec, pop, family=args.family, ms_max=args.ms_max, ms_gain=args.ms_gain,
                           max_evaluations=args.evaluations, progress=bar, scenarios=scenarios)
@@ -284,14 +259,17 @@ def main(args) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = pathlib.Path(tempfile.mkdtemp(prefix=".ebraille-tune-", dir=out.parent))
     try:
-        (tmp / "gains.toml").write_text(_toml(res.gains_file()))
+        reason = (f"kept the shipped {res.chosen.family}: {res.selection_reason}\n"
+                  "the optimum under the bound is in gains_tuned.toml") if res.selected != "tuned" else ""
+        (tmp / "gains.toml").write_text(_toml(res.gains_file(), reason))
+        if res.selected != "tuned":
+            (tmp / "gains_tuned.toml").write_text(_toml(gains_document(res.tuned.config, args.family)))
         if "hand" in res.references:
-            from ebraille_sim.analysis.robust import gains_document
             (tmp / "gains_hand.toml").write_text(_toml(gains_document(res.references["hand"].config, args.family)))
         (tmp / "report.json").write_text(json.dumps(rep, indent=2, default=float) + "\n")
         (tmp / "report.md").write_text(_markdown(spec, rep, len(pop)))
-        plot_bode(analyses, tmp / "bode.png", title=f"tuned loop, nominal reader ({spec.name})")
-        plot_nyquist(analyses, tmp / "nyquist.png", title=f"tuned loop, nominal reader ({spec.name})",
+        plot_bode(analyses, tmp / "bode.png", title=f"gains.toml loop, nominal reader ({spec.name})")
+        plot_nyquist(analyses, tmp / "nyquist.png", title=f"gains.toml loop, nominal reader ({spec.name})",
                      ms_limit=args.ms_max if math.isfinite(args.ms_max) else 2.0)
         _plot_population(rep, tmp / "population.png")
         out.mkdir(parents=True, exist_ok=True)
@@ -300,25 +278,39 @@ def main(args) -> int:
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     g = res.gains_file()["gains"]
-    files = ["gains.toml"] + (["gains_hand.toml"] if "hand" in res.references else []) + \
+    ship_key = "shipped" if "shipped" in rep else "default"
+    files = ["gains.toml"] + (["gains_tuned.toml"] if res.selected != "tuned" else []) + \
+        (["gains_hand.toml"] if "hand" in res.references else []) + \
         ["report.md", "report.json", "bode.png", "nyquist.png", "population.png"]
     con.result({
         "scenario": spec.name, "family": args.family, "gains": g, "ms_max": res.ms_max, "ms_bound": args.ms_max,
-        "ms_gain": args.ms_gain, "cost": res.cost, "population": len(pop), "population_seed": args.seed,
+        "ms_gain": args.ms_gain, "ms_max_tuned": res.tuned.ms_max, "cost": res.cost,
+        "selected": res.selected, "selection_reason": res.selection_reason,
+        "named_costs": rep["named_costs"],
+        "shipped": {"key": ship_key, "controller": rep[ship_key]["controller"], "gains": rep[ship_key]["gains"],
+                    "ms_max": rep[ship_key]["ms_max"]},
+        "population": len(pop), "population_seed": args.seed,
         "scenarios": {s: {k: {q: rep[k]["scenarios"][s]["metrics"]["in_band_fraction"][q] for q in ("worst", "median")}
-                          for k in ("tuned", "hand", "default", "simc") if k in rep}
+                          for k in _KEYS if k in rep}
                       for s in rep["scenarios"]},
         "costs": {k: rep[k]["cost"] for k in ("tuned", "hand", "default", "simc") if k in rep},
         "out": str(out), "files": [str(out / f) for f in files]})
-    con.say(f"tuned {args.family}: kp {g['kp_v_per_n']:.4g}, ki {g['ki_v_per_ns']:.4g}, kd {g['kd_vs_per_n']:.4g}; "
-          f"max Ms {res.ms_max:.3f} (bound {args.ms_max:g}, loop factor {args.ms_gain:g}); cost {res.cost:.3f}")
+    bound = f"Ms <= {args.ms_max:g}" if math.isfinite(args.ms_max) else "no Ms bound"
+    ms_rule = bound + (" (default; --ms-max changes it)" if args.ms_max == 1.6 else "") + \
+        (f", loop factor {args.ms_gain:g}" if args.ms_gain != 1.0 else "")
+    t = rep["tuned"]["gains"]
+    con.say(f"tuned {args.family} under {ms_rule}: kp {t['kp_v_per_n']:.4g}, ki {t['ki_v_per_ns']:.4g}, "
+            f"kd {t['kd_vs_per_n']:.4g}; achieved max Ms {_fmt_ms(res.tuned.ms_max)}; cost {res.tuned.cost:.3f}")
+    if res.selected != "tuned":
+        con.say(f"kept the shipped {res.chosen.family} in gains.toml, better than the optimum: "
+                f"{res.selection_reason}; the optimum is in gains_tuned.toml")
     for s in rep["scenarios"]:
         t = rep["tuned"]["scenarios"][s]["metrics"]["in_band_fraction"]
-        d = rep["default"]["scenarios"][s]["metrics"]["in_band_fraction"]
-        con.say(f"  {s}: in-band worst {t['worst']:.3f} (default PID {d['worst']:.3f}), "
-              f"median {t['median']:.3f} (default {d['median']:.3f})")
+        d = rep[ship_key]["scenarios"][s]["metrics"]["in_band_fraction"]
+        con.say(f"  {s}: in-band worst {t['worst']:.3f} (shipped {rep[ship_key]['controller']} {d['worst']:.3f}), "
+                f"median {t['median']:.3f} (shipped {d['median']:.3f})")
     if "hand" in rep and rep["hand"]["cost"] < rep["tuned"]["cost"]:
         con.say(f"note: the family at the default gains has a lower cost ({rep['hand']['cost']:.3f}) but max Ms "
               f"{_fmt_ms(rep['hand']['ms_max'])}: written as gains_hand.toml (see report.md)")
-    con.say(f"wrote {out / 'gains.toml'}, report.md, report.json, bode.png, nyquist.png, population.png")
+    con.say(f"wrote {out / 'gains.toml'}, " + ", ".join(files[1:]))
     return 0

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import dataclasses
 import json
 import os
 import pathlib
@@ -27,10 +28,24 @@ _FMT = {"force_rmse_n": "{:.4f}", "force_mae_n": "{:.4f}", "in_band_fraction": "
         "legible_char_fraction": "{:.3f}", "legible_char_fraction_cv": "{:.3f}"}
 
 
-def summary_table(result: RunResult) -> str:
-    """A plain-text table of the run's metrics."""
+def controller_label(result: RunResult, controller_file=None) -> str:
+    """The run's controller name, with the gains file it came from when there is one."""
+    return result.controller_name + (f" (gains {controller_file})" if controller_file else "")
+
+
+def controller_gains(controller) -> dict | None:
+    """A controller's configuration dataclass as a dict (``None`` when it has none)."""
+    cfg = getattr(controller, "config", None)
+    if not dataclasses.is_dataclass(cfg) or isinstance(cfg, type):
+        return None
+    return dataclasses.asdict(cfg)
+
+
+def summary_table(result: RunResult, controller_file=None) -> str:
+    """A plain-text table of the run's metrics (``controller_file``: the gains file, if any)."""
     m = result.metrics
-    lines = [f"scenario {result.spec.name}  controller {result.controller_name}  seed {result.seed}",
+    lines = [f"scenario {result.spec.name}  controller {controller_label(result, controller_file)}  "
+             f"seed {result.seed}",
              f"{'metric':<26} value"]
     lines.append("-" * 40)
     for k, v in m.items():
@@ -47,11 +62,20 @@ def summary_table(result: RunResult) -> str:
     return "\n".join(lines)
 
 
-def metrics_document(result: RunResult) -> dict:
-    """The JSON document written as metrics.json."""
-    return {"scenario": result.spec.name, "controller": result.controller_name, "seed": result.seed,
-            "band_fraction": result.spec.setpoint.band_fraction, "reading_start_s": result.spec.reading.start_s,
-            "metrics": result.metrics, "criteria": evaluate_criteria(result.spec.criteria, result.metrics)}
+def metrics_document(result: RunResult, controller=None, controller_file=None) -> dict:
+    """The JSON document written as metrics.json.
+
+    With ``controller`` (the controller object run) it records ``controller_gains``, its
+    configuration dataclass as a dict; with ``controller_file`` the gains file it came from.
+    """
+    doc = {"scenario": result.spec.name, "controller": result.controller_name, "seed": result.seed,
+           "band_fraction": result.spec.setpoint.band_fraction, "reading_start_s": result.spec.reading.start_s,
+           "metrics": result.metrics, "criteria": evaluate_criteria(result.spec.criteria, result.metrics)}
+    if controller_file is not None:
+        doc["controller_file"] = str(controller_file)
+    if controller is not None:
+        doc["controller_gains"] = controller_gains(controller)
+    return doc
 
 
 def write_trace_csv(path, trace: dict) -> None:
@@ -74,7 +98,7 @@ def write_trace_csv(path, trace: dict) -> None:
             w.writerow(row)
 
 
-def plot_force(result: RunResult, path) -> None:
+def plot_force(result: RunResult, path, controller_file=None) -> None:
     """True and estimated force against the setpoint, character boundaries marked."""
     import matplotlib
     matplotlib.use("Agg")
@@ -95,7 +119,7 @@ def plot_force(result: RunResult, path) -> None:
             ax.axvline(s, color="0.75", lw=0.4, zorder=0)
     ax.axvline(result.spec.reading.start_s, color="tab:green", lw=1, label="reading starts")
     ax.set_ylabel("contact force (N)")
-    ax.set_title(f"{result.spec.name}: {result.controller_name}, seed {result.seed}")
+    ax.set_title(f"{result.spec.name}: {controller_label(result, controller_file)}, seed {result.seed}")
     ax.legend(loc="upper right", fontsize=8, ncol=3)
     ax.set_ylim(0, max(1.5 * float(np.max(sp)), float(np.max(tr["force_true_n"])) * 1.05))
     ax2.plot(t, tr["command_v"], color="tab:red", lw=0.8)
@@ -154,7 +178,7 @@ def write_trace_parquet(path, trace: dict) -> None:
 
 
 def write_outputs(result: RunResult, out_dir, plot: bool = True, trace: str = "csv",
-                  clear_stale: bool = True) -> list[pathlib.Path]:
+                  clear_stale: bool = True, controller=None, controller_file=None) -> list[pathlib.Path]:
     """Write metrics.json, the trace and force.png into ``out_dir`` (created if needed).
 
     Parameters
@@ -167,6 +191,8 @@ def write_outputs(result: RunResult, out_dir, plot: bool = True, trace: str = "c
         trace.csv, trace.parquet (pyarrow) or no trace.
     clear_stale : bool
         Remove the outputs of :data:`RUN_OUTPUTS` this run does not write.
+    controller, controller_file : optional
+        The controller object run and the gains file it came from (:func:`metrics_document`).
 
     Returns
     -------
@@ -179,13 +205,14 @@ def write_outputs(result: RunResult, out_dir, plot: bool = True, trace: str = "c
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = pathlib.Path(tempfile.mkdtemp(prefix=".ebraille-", dir=out.parent))
     try:
-        (tmp / "metrics.json").write_text(json.dumps(metrics_document(result), indent=2) + "\n")
+        (tmp / "metrics.json").write_text(json.dumps(
+            metrics_document(result, controller, controller_file), indent=2) + "\n")
         if trace == "csv":
             write_trace_csv(tmp / "trace.csv", result.trace)
         elif trace == "parquet":
             write_trace_parquet(tmp / "trace.parquet", result.trace)
         if plot:
-            plot_force(result, tmp / "force.png")
+            plot_force(result, tmp / "force.png", controller_file)
         out.mkdir(parents=True, exist_ok=True)
         names = [n for n in RUN_OUTPUTS if (tmp / n).exists()]
         if clear_stale:
