@@ -36,7 +36,7 @@ its friction band, which behaves like a play operator of about 0.7 V (nominal de
 1 N, :func:`friction_band_v`) at the command; its describing function has a gain
 ``|N(A)| < 1`` that falls to zero as the oscillation amplitude ``A`` approaches the play's
 half-width (and a phase lag of up to 90 deg).  ``ms_gain`` multiplies the loop by a real
-factor ``kappa``: 1 (default) is the sliding model the issue asks for; ``kappa < 1`` is the
+factor ``kappa``: 1 (default) is the sliding model (the loop linearised with the friction sliding); ``kappa < 1`` is the
 describing-function relaxation (``kappa = 0.5``: oscillations of about twice the band;
 see docs/tuning.md for the measured describing function and for why the phase lag the
 argument leaves out makes this relaxation optimistic).
