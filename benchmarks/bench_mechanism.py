@@ -4,7 +4,7 @@ Both backends run the same scenario (default: ``steady_90wpm`` for 20 s of simul
 reading) in the same process, one after the other and repeated; the best of the repeats
 is kept for each (the least disturbed by other load on the machine).  The real-time
 factor is simulated time over the wall-clock time of the closed loop, as measured by
-the runner (``metrics["real_time_factor"]``).  The issue's requirement is a pymunk
+the runner (``metrics["real_time_factor"]``).  The target is a pymunk
 real-time factor of at least 20.
 
 Run::

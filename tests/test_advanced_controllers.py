@@ -146,7 +146,7 @@ def test_ms_of_the_shipped_schedules_on_presets():
     pts = linearisation_points(pop, [0.6, 1.0, 2.0])
     ms16 = population_ms(ScheduledPID(MS_1_6).pid_config_at, pts)
     rec = population_ms(ScheduledPID(RECOMMENDED).pid_config_at, pts)
-    assert np.max(ms16) <= 1.6                                     # the bound, sliding model
+    assert np.max(ms16) <= 1.6                                     # the robustness target, sliding model
     assert np.max(rec) <= 2.0 and np.max(population_ms(ScheduledPID(RECOMMENDED).pid_config_at, pts, 0.5)) <= 1.6
     assert np.max(population_ms(ScheduledPID(HAND).pid_config_at, pts)) > 2.0
     assert np.max(population_ms(DEFAULT_PID, pts)) == math.inf     # the default PID: unstable at 2 N
