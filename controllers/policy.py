@@ -1,9 +1,16 @@
 """A trained reinforcement-learning policy used as a contact-force controller.
 
 ``controllers.make("policy:PATH")`` (and ``ebraille-sim run SCENARIO --controller
-policy:PATH``) loads a policy saved by ``ebraille-sim train``: ``PATH`` is the output
-folder or its ``policy.zip``; ``policy.json`` beside it records the algorithm and the
-environment settings the observation depends on.
+policy:PATH``) loads a saved Stable-Baselines3 policy with the JSON metadata beside it
+(format ``ebraille-sim-policy/1``: the algorithm and the environment settings the
+observation depends on):
+
+* ``PATH`` is a folder written by ``ebraille-sim train``: ``PATH/policy.zip`` and
+  ``PATH/policy.json``;
+* ``PATH`` is a model saved with SB3's ``model.save`` (``PATH.zip``, or ``PATH`` as given
+  to ``model.save``): the metadata is ``PATH.json``, written after training with
+  :func:`ebraille_sim.rl.sb3.write_policy_metadata` from the env the model was trained on.
+  Without it the load is a one-line error naming the missing file.
 
 The controller sees only what the microcontroller sees (estimated force, setpoint, time
 step, motor current) and builds the policy's observation with the same compiled function
@@ -61,7 +68,10 @@ def _paths(path: str) -> tuple[str, str]:
         return os.path.join(path, "policy.zip"), os.path.join(path, "policy.json")
     if path.endswith(".zip"):
         return path, path[:-4] + ".json"
-    raise ValueError(f"policy path {path!r} must be a folder written by 'ebraille-sim train' or its .zip file")
+    if os.path.isfile(path + ".zip"):
+        return path + ".zip", path + ".json"
+    raise ValueError(f"policy path {path!r} must be a folder written by 'ebraille-sim train' or a .zip file "
+                     "saved by Stable-Baselines3")
 
 
 def read_metadata(json_path: str) -> dict:
@@ -178,11 +188,13 @@ class PolicyController:
 
 
 def load_policy(path, **overrides) -> PolicyController:
-    """Load a policy saved by ``ebraille-sim train`` (folder or ``policy.zip``).
+    """Load a saved policy and its metadata (see the module docstring for the paths).
 
     Parameters
     ----------
     path : str or path-like
+        A folder written by ``ebraille-sim train``, or a model saved with ``model.save``
+        (``PATH.zip`` or ``PATH``) with ``PATH.json`` beside it.
     **overrides
         ``deterministic`` (bool) only; anything else is an error.
     """
@@ -197,6 +209,10 @@ def load_policy(path, **overrides) -> PolicyController:
     zip_path, json_path = _paths(path)
     if not os.path.exists(zip_path):
         raise FileNotFoundError(f"policy file not found: {zip_path}")
+    if not os.path.isfile(json_path):
+        raise ValueError(f"policy {zip_path} has no metadata {json_path} (algorithm and env settings it was "
+                         f"trained with); write it with ebraille_sim.rl.sb3.write_policy_metadata("
+                         f"{zip_path!r}, model, env)")
     meta = read_metadata(json_path)
     model = _load_sb3(meta["algo"], zip_path)
     return PolicyController(model, meta["env"], deterministic=det)

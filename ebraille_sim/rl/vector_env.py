@@ -249,6 +249,34 @@ class ContactForceVectorEnv(VectorEnv):
         self._ready = True
         return self._obs.copy(), {}
 
+    def reset_rows(self, indices) -> np.ndarray:
+        """Start the next episode of the given sub-envs now, without waiting for the next step.
+
+        Each sub-env draws its next episode as an autoreset would (the same draws), and
+        its pending autoreset is cleared, so the next :meth:`step` steps the new episode
+        with the given action.  This is the same-step autoreset of Stable-Baselines3
+        (:mod:`ebraille_sim.rl.sb3`).
+
+        Parameters
+        ----------
+        indices : sequence of int
+            Sub-envs to reset.
+
+        Returns
+        -------
+        numpy.ndarray
+            Their first observations, shape ``(len(indices), 7)``.
+        """
+        if not self._ready:
+            raise RuntimeError("call reset() before reset_rows()")
+        rows = [int(i) for i in indices]
+        for i in rows:
+            if not 0 <= i < self.num_envs:
+                raise ValueError(f"sub-env index {i} is out of range for {self.num_envs} envs")
+            self._load_row(i, {})
+            self._prev_done[i] = False
+        return self._obs[rows].copy()
+
     def step(self, actions):
         """Step every sub-env; sub-envs that ended on the previous step are reset instead."""
         if not self._ready:
