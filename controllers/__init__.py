@@ -120,7 +120,8 @@ def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
     name_or_path : str or path-like
         A name from :func:`available`, a path to a ``.toml`` / ``.json``
         file holding ``{"controller": name, "gains": {...}}``, or
-        ``"policy:PATH"`` for a policy saved by ``ebraille-sim train``
+        ``"policy:PATH"`` for a policy saved by ``ebraille-sim train`` or by
+        Stable-Baselines3's ``model.save`` with its metadata beside it
         (:mod:`controllers.policy`; needs the ``rl`` extra).
     **overrides
         Keyword arguments passed to the factory; they take precedence over
