@@ -406,3 +406,15 @@ def test_tune_refuses_a_duration_that_ends_before_reading(tmp_path):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and "before its reading starts" in lines[0]
     assert not (tmp_path / "t").exists()
+
+
+def test_a_reader_that_stops_early_gets_no_traceback():
+    """``ebraille-sim list --json | head -c 0``: the closed pipe ends the command quietly."""
+    import subprocess
+    import sys
+    p = subprocess.Popen([sys.executable, "-m", "ebraille_sim", "list", "--json"], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE)
+    p.stdout.close()                                  # the reader is gone before anything is written
+    err = p.stderr.read().decode()
+    p.wait(timeout=60)
+    assert "Traceback" not in err and p.returncode == 0, err
