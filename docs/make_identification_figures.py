@@ -151,6 +151,18 @@ def fig_static_maps(models, bench, offsets):
     plt.close(fig)
 
 
+def pole_axes(ax, ylabel: bool = True) -> None:
+    """Draw the unit circle and label the axes of a pole plot in the z-plane."""
+    th = np.linspace(0, 2 * np.pi, 200)
+    ax.plot(np.cos(th), np.sin(th), color="0.7", lw=0.8, label="unit circle")
+    ax.axhline(0.0, color="0.85", lw=0.5, zorder=0)
+    ax.axvline(0.0, color="0.85", lw=0.5, zorder=0)
+    ax.set_xlabel("Re z")
+    if ylabel:
+        ax.set_ylabel("Im z")
+    ax.set_aspect("equal")
+
+
 def recovery_example():
     poles = np.array([0.92, 0.7 + 0.5j, 0.7 - 0.5j, -0.5 + 0.3j, -0.5 - 0.3j])
     lin = LinearBF((1.0, -0.6, 0.4, -0.2, 0.3), tuple(np.real(np.poly(poles))[1:]), nk=1)
@@ -166,12 +178,10 @@ def recovery_example():
     val = sysid.fitness(sysid.simulate(truth, uv), sysid.simulate(rep.model, uv))
     dist = sysid.match_poles(rep.model.linear.poles(), poles)
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    th = np.linspace(0, 2 * np.pi, 200)
-    axes[0].plot(np.cos(th), np.sin(th), color="0.7", lw=0.8)
+    pole_axes(axes[0])
     axes[0].plot(poles.real, poles.imag, "o", mfc="none", ms=10, color="k", label="true poles")
     p = rep.model.linear.poles()
     axes[0].plot(p.real, p.imag, "x", color="tab:red", ms=8, label="identified")
-    axes[0].set_aspect("equal")
     axes[0].legend(fontsize=8)
     axes[0].set_title(f"poles: largest distance {dist:.4f}", fontsize=10)
     ux = np.linspace(0.0, 1.2, 100)
@@ -190,15 +200,13 @@ def recovery_example():
 def fig_paper_poles():
     rows = paper_model_table()
     fig, axes = plt.subplots(1, 4, figsize=(14, 3.8), sharey=True)
-    th = np.linspace(0, 2 * np.pi, 200)
     for ax, kind in zip(axes, sysid.KINDS):
-        ax.plot(np.cos(th), np.sin(th), color="0.7", lw=0.8)
+        pole_axes(ax, ylabel=ax is axes[0])
         for r in rows:
             if r["kind"] != kind:
                 continue
             p = np.array(r["poles"])
             ax.plot(p.real, p.imag, "x", ms=7, label=f"order {r['order']}" + ("" if r["usable"] else " (unusable)"))
-        ax.set_aspect("equal")
         ax.set_title(f"paper, {KIND_TITLE[kind]}", fontsize=10)
         ax.legend(fontsize=7, loc="lower left")
     fig.tight_layout()

@@ -418,3 +418,35 @@ def test_a_reader_that_stops_early_gets_no_traceback():
     err = p.stderr.read().decode()
     p.wait(timeout=60)
     assert "Traceback" not in err and p.returncode == 0, err
+
+
+# ---------------------------------------------------------------- run: force.png names what it shows
+
+def test_force_figure_names_controller_backend_and_its_vertical_lines(tmp_path, capsys, monkeypatch):
+    from ebraille_sim.tools import report
+
+    seen = {}
+    draw = report.force_figure
+
+    def recording(result, controller_file=None, backend=None):
+        fig = draw(result, controller_file, backend)
+        ax = fig.axes[0]
+        seen["title"] = ax.get_title()
+        seen["legend"] = [t.get_text() for t in ax.get_legend().get_texts()]
+        seen["vlines"] = sorted(float(ln.get_xdata()[0]) for ln in ax.get_lines()
+                                if len(ln.get_xdata()) == 2 and ln.get_xdata()[0] == ln.get_xdata()[1])
+        seen["starts"] = result.schedule.boundaries_s()
+        seen["t_end"] = float(result.trace["t_s"][-1])
+        return fig
+
+    monkeypatch.setattr(report, "force_figure", recording)
+    path = _scenario(tmp_path, "short")
+    out = tmp_path / "out"
+    assert cli(["run", str(path), "--out", str(out), "--backend", "lumped", "--controller", "pid"]) == 0
+    assert (out / "force.png").stat().st_size > 5000
+    assert "controller pid" in seen["title"] and "lumped backend" in seen["title"] and "seed 2" in seen["title"]
+    # every vertical line is explained: one legend entry for the character starts, one for reading
+    assert seen["legend"].count("character starts") == 1 and seen["legend"].count("reading starts") == 1
+    starts = [float(s) for s in seen["starts"] if s <= seen["t_end"]]
+    assert len(starts) >= 2
+    assert seen["vlines"] == sorted(starts + [0.5])

@@ -133,3 +133,43 @@ def test_thousand_episodes_on_dask_and_locally_are_identical(tmp_path):
     assert S.identical_results(local, remote)
     assert sum(1 for r in local.rows if r["error"]) == 0
     print(f"\n1008 episodes: local x2 {t_local:.1f} s, dask LocalCluster(2) {t_dask:.1f} s")
+
+
+def test_episode_scatter_has_one_marker_and_legend_entry_per_controller():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [{"controller": c, "finger_b_n_per_m": b, "fsr_k_ohm": k}
+            for c, b, k in (("pid", 300.0, 4e3), ("lqg", 500.0, 6e3), ("pid", 800.0, 5e3),
+                            ("scheduled", 400.0, 7e3), ("lqg", 900.0, 8e3), ("scheduled", 600.0, 5e3),
+                            ("failed", 700.0, 6e3))]
+    L = np.array([0.1, 0.2, 0.3, np.inf, 0.5, 0.6, np.inf])
+    fig, ax = plt.subplots()
+    try:
+        S._episode_scatter(fig, ax, rows, L)
+        texts = [t.get_text() for t in ax.get_legend().get_texts()]
+        # an infinite loss is left out, and a controller with only infinite losses with it
+        assert texts == ["pid (2)", "lqg (2)", "scheduled (1)"]
+        cols = ax.collections
+        assert [len(c.get_offsets()) for c in cols] == [2, 2, 1]
+        assert len({tuple(map(tuple, c.get_paths()[0].vertices.round(6))) for c in cols}) == 3
+        np.testing.assert_allclose(cols[1].get_offsets(), [[500.0, 0.2], [900.0, 0.5]])
+        assert ax.get_xlabel() == "pulp stiffness b (N/m)" and len(fig.axes) == 2  # with the colour bar
+    finally:
+        plt.close(fig)
+
+
+def test_episode_scatter_without_a_finite_loss_draws_an_empty_panel():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = [{"controller": "pid", "finger_b_n_per_m": 300.0, "fsr_k_ohm": 4e3}]
+    fig, ax = plt.subplots()
+    try:
+        S._episode_scatter(fig, ax, rows, np.array([np.inf]))
+        fig.canvas.draw()
+        assert len(ax.collections) == 0 and ax.get_legend() is None and len(fig.axes) == 1
+    finally:
+        plt.close(fig)

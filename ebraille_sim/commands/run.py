@@ -120,7 +120,7 @@ def main(args) -> int:
     else:
         result = simulate()
     written = write_outputs(result, out, plot=not args.no_plot, trace=args.trace, controller=ctrl,
-                            controller_file=gains_file)
+                            controller_file=gains_file, backend=args.backend)
     if frames is not None:
         from ebraille_sim.plant.mechanism import write_animation
         bar = FrameProgress("drawing frames", enabled=con.progress)

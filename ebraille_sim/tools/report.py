@@ -98,8 +98,23 @@ def write_trace_csv(path, trace: dict) -> None:
             w.writerow(row)
 
 
-def plot_force(result: RunResult, path, controller_file=None) -> None:
-    """True and estimated force against the setpoint, character boundaries marked."""
+def force_figure(result: RunResult, controller_file=None, backend: str | None = None):
+    """The figure of force.png: true and estimated force against the setpoint, and the command.
+
+    Parameters
+    ----------
+    result : RunResult
+    controller_file : path, optional
+        The gains file the controller came from, named in the title.
+    backend : str, optional
+        The plant backend the run used (``"lumped"``, ``"pymunk"``), named in the title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Thin grey vertical lines mark the start of each braille character (up to 400 of
+        them; none when there are more), the green line the start of reading.
+    """
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -115,17 +130,27 @@ def plot_force(result: RunResult, path, controller_file=None) -> None:
     starts = result.schedule.boundaries_s()
     starts = starts[starts <= t[-1]]
     if len(starts) <= 400:
-        for s in starts:
-            ax.axvline(s, color="0.75", lw=0.4, zorder=0)
+        for i, s in enumerate(starts):
+            ax.axvline(s, color="0.75", lw=0.4, zorder=0, label="character starts" if i == 0 else None)
     ax.axvline(result.spec.reading.start_s, color="tab:green", lw=1, label="reading starts")
     ax.set_ylabel("contact force (N)")
-    ax.set_title(f"{result.spec.name}: {controller_label(result, controller_file)}, seed {result.seed}")
+    title = f"{result.spec.name}: controller {controller_label(result, controller_file)}"
+    if backend is not None:
+        title += f", {backend} backend"
+    ax.set_title(f"{title}, seed {result.seed}")
     ax.legend(loc="upper right", fontsize=8, ncol=3)
     ax.set_ylim(0, max(1.5 * float(np.max(sp)), float(np.max(tr["force_true_n"])) * 1.05))
     ax2.plot(t, tr["command_v"], color="tab:red", lw=0.8)
     ax2.set_ylabel("command (V)")
     ax2.set_xlabel("time (s)")
     fig.tight_layout()
+    return fig
+
+
+def plot_force(result: RunResult, path, controller_file=None, backend: str | None = None) -> None:
+    """Write :func:`force_figure` to ``path``."""
+    import matplotlib.pyplot as plt
+    fig = force_figure(result, controller_file, backend)
     fig.savefig(path, dpi=110)
     plt.close(fig)
 
@@ -178,7 +203,8 @@ def write_trace_parquet(path, trace: dict) -> None:
 
 
 def write_outputs(result: RunResult, out_dir, plot: bool = True, trace: str = "csv",
-                  clear_stale: bool = True, controller=None, controller_file=None) -> list[pathlib.Path]:
+                  clear_stale: bool = True, controller=None, controller_file=None,
+                  backend: str | None = None) -> list[pathlib.Path]:
     """Write metrics.json, the trace and force.png into ``out_dir`` (created if needed).
 
     Parameters
@@ -193,6 +219,8 @@ def write_outputs(result: RunResult, out_dir, plot: bool = True, trace: str = "c
         Remove the outputs of :data:`RUN_OUTPUTS` this run does not write.
     controller, controller_file : optional
         The controller object run and the gains file it came from (:func:`metrics_document`).
+    backend : str, optional
+        The plant backend the run used, named in force.png's title.
 
     Returns
     -------
@@ -212,7 +240,7 @@ def write_outputs(result: RunResult, out_dir, plot: bool = True, trace: str = "c
         elif trace == "parquet":
             write_trace_parquet(tmp / "trace.parquet", result.trace)
         if plot:
-            plot_force(result, tmp / "force.png", controller_file)
+            plot_force(result, tmp / "force.png", controller_file, backend)
         out.mkdir(parents=True, exist_ok=True)
         names = [n for n in RUN_OUTPUTS if (tmp / n).exists()]
         if clear_stale:

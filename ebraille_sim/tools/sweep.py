@@ -482,6 +482,44 @@ def write_results(result: SweepResult, out_dir, loss: str = "force_rmse_n", alph
     return written
 
 
+_CONTROLLER_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "<", ">", "*")
+
+
+def _episode_scatter(fig, ax, rows: list, L: np.ndarray) -> None:
+    """Loss of every episode against the reader's pulp stiffness, one marker per controller.
+
+    The colour is the FSR unit's ``k`` (colour bar); the marker shape names the controller
+    (legend, one entry per controller in order of first appearance). Episodes with a
+    non-finite loss are left out, and so is a controller with none left.
+    """
+    fin = np.isfinite(L)
+    b = np.array([r["finger_b_n_per_m"] for r in rows], dtype=float)
+    k_kohm = np.array([r["fsr_k_ohm"] for r in rows], dtype=float) / 1e3
+    ctrl = np.array([r["controller"] for r in rows], dtype=object)
+    names = list(dict.fromkeys(ctrl.tolist()))
+    norm = None
+    if fin.any():
+        import matplotlib.colors
+        norm = matplotlib.colors.Normalize(float(np.min(k_kohm[fin])), float(np.max(k_kohm[fin])))
+    sc = None
+    for i, name in enumerate(names):
+        sel = fin & (ctrl == name)
+        if not sel.any():
+            continue
+        sc = ax.scatter(b[sel], L[sel], c=k_kohm[sel], s=14, cmap="viridis", norm=norm,
+                        marker=_CONTROLLER_MARKERS[i % len(_CONTROLLER_MARKERS)], edgecolors="k",
+                        linewidths=0.3, label=f"{name} ({int(np.count_nonzero(sel))})")
+    ax.set_xscale("log")
+    ax.set_xlabel("pulp stiffness b (N/m)")
+    ax.set_ylabel("loss")
+    ax.set_title("every episode against the reader's pulp and FSR unit")
+    if sc is not None:
+        leg = ax.legend(title="controller (episodes)", fontsize=7, title_fontsize=7)
+        for h in leg.legend_handles:
+            h.set_facecolor("0.6")
+        fig.colorbar(sc, ax=ax, label="FSR k = R at 1 N (kOhm)")
+
+
 def plot_results(result: SweepResult, fig_dir, loss: str = "force_rmse_n", alpha: float = 0.1) -> list:
     """Figures: metric distributions, the worst episodes, and CVaR against alpha."""
     import matplotlib
@@ -519,15 +557,7 @@ def plot_results(result: SweepResult, fig_dir, loss: str = "force_rmse_n", alpha
     ax1.set_yticks(range(len(order))[::-1], ylab, fontsize=7)
     ax1.set_xlabel(f"loss ({'1 - ' if _better(loss) == 'higher' else ''}{loss})")
     ax1.set_title("worst episodes")
-    fin = np.isfinite(L)
-    b = np.array([r["finger_b_n_per_m"] for r in result.rows])
-    k = np.array([r["fsr_k_ohm"] for r in result.rows])
-    sc = ax2.scatter(b[fin], L[fin], c=k[fin] / 1e3, s=8, cmap="viridis")
-    ax2.set_xscale("log")
-    ax2.set_xlabel("pulp stiffness b (N/m)")
-    ax2.set_ylabel("loss")
-    ax2.set_title("every episode against the reader's pulp and FSR unit")
-    fig.colorbar(sc, ax=ax2, label="FSR k = R at 1 N (kOhm)")
+    _episode_scatter(fig, ax2, result.rows, L)
     fig.tight_layout()
     paths.append(d / "worst_cases.png")
     fig.savefig(paths[-1], dpi=110)
