@@ -179,3 +179,14 @@ def test_ppo_learns_on_the_adapter_and_runs_as_a_scenario_controller(tmp_path):
     assert res.controller_name == "policy" and np.all(np.isfinite(res.trace["command_v"]))
     assert np.all(np.abs(res.trace["command_v"]) <= 6.0)
     envs.close()
+
+
+def test_train_reports_progress_to_the_steps_actually_taken(tmp_path):
+    pytest.importorskip("stable_baselines3")
+    from ebraille_sim.commands.train import train
+    calls = []
+    rec = train("ppo", 512, tmp_path / "p", n_envs=1, progress=lambda done, total: calls.append((done, total)))
+    dones = [d for d, _ in calls]
+    assert dones == sorted(dones) and len(calls) >= 10
+    assert calls[-1] == (rec["steps"], rec["steps"]) == (1024, 1024)      # one whole PPO rollout of 1024
+    assert all(total == 1024 for _, total in calls)

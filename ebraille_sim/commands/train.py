@@ -41,8 +41,36 @@ def _check(args):
         raise ValueError(f"--threads must be in [1, 64], got {args.threads}")
 
 
+def _progress_callback(report, total: int, reports: int = 50):
+    """A Stable-Baselines3 callback calling ``report(done, total)`` about ``reports`` times.
+
+    An algorithm may run past ``total`` to finish its last rollout; the total shown then
+    grows to the steps actually taken, and the last report is ``(taken, taken)``.
+    """
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class _Progress(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.step_size = max(1, int(total) // reports)
+            self.next_report = self.step_size
+
+        def _on_step(self) -> bool:
+            if self.num_timesteps >= self.next_report:
+                report(self.num_timesteps, max(int(total), self.num_timesteps))
+                while self.next_report <= self.num_timesteps:
+                    self.next_report += self.step_size
+            return True
+
+        def _on_training_end(self) -> None:
+            if self.num_timesteps != max(int(total), self.num_timesteps) or self.num_timesteps < self.next_report:
+                report(self.num_timesteps, self.num_timesteps)
+
+    return _Progress()
+
+
 def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_rate_hz: float = 200.0,
-          threads: int = 1, verbose: int = 0) -> dict:
+          threads: int = 1, verbose: int = 0, progress=None) -> dict:
     """Train and save a policy; returns the ``training`` record written to ``policy.json``.
 
     Parameters
@@ -59,6 +87,8 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
         Env step rate; must divide the 10 kHz physics rate.
     threads : int
         PyTorch intra-op threads.
+    progress : callable, optional
+        Called as ``progress(done_steps, total_steps)`` about 50 times during training.
     """
     import json
     import pathlib
@@ -86,7 +116,10 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
     else:
         model = sb3.SAC("MlpPolicy", venv, seed=seed, device="cpu", verbose=verbose, **_SAC)
     t0 = time.perf_counter()
-    model.learn(total_timesteps=int(steps))
+    # PPO collects whole rollouts of n_steps per env, so it takes steps up to the next rollout
+    rollout = _PPO["n_steps"] * n_envs if algo == "ppo" else 1
+    planned = -(-int(steps) // rollout) * rollout
+    model.learn(total_timesteps=int(steps), callback=None if progress is None else _progress_callback(progress, planned))
     wall = time.perf_counter() - t0
     returns = [ep["r"] for ep in model.ep_info_buffer] if model.ep_info_buffer else []
     out = pathlib.Path(out)
@@ -111,12 +144,14 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
 def main(args) -> int:
     import pathlib
 
-    from ebraille_sim.commands import check_out_dir, console
+    from ebraille_sim.commands import FrameProgress, check_out_dir, console
     con = console(args)
     _check(args)
     out = check_out_dir(args.out if args.out else pathlib.Path("runs") / f"train-{args.algo}")
+    bar = FrameProgress(f"train {args.algo}", enabled=con.progress, every=1)
     rec = train(args.algo, args.steps, out, seed=args.seed, n_envs=args.envs, control_rate_hz=args.control_rate,
-                threads=args.threads)
+                threads=args.threads, progress=bar)
+    bar.close()
     ret = rec["mean_episode_return_last_100"]
     con.result({"algo": args.algo, **rec, "out": str(out),
                 "files": [str(out / "policy.zip"), str(out / "policy.json")]})
