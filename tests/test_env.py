@@ -244,3 +244,25 @@ def test_render_draws_device_force_and_cell():
     quiet.reset(seed=0)
     with pytest.warns(UserWarning, match="render_mode"):
         assert quiet.render() is None
+
+
+@pytest.mark.parametrize("action", ["0.5", b"1", np.array([1 + 0j]), np.array(["0.5"]), {"a": 1}, [None], True,
+                                    np.array([0.5], dtype=object)])
+def test_only_real_numbers_are_actions(action):
+    """Strings, bytes, booleans, complex numbers and objects are one-line ValueErrors, never stepped."""
+    env = gym.make(ENV_ID).unwrapped
+    env.reset(seed=1)
+    with pytest.raises(ValueError, match="action must be a real number or an array of real numbers") as err:
+        env.step(action)
+    assert "\n" not in str(err.value)
+    assert env._k == 0
+
+
+def test_vector_env_rejects_non_real_actions():
+    envs = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point")
+    envs.reset(seed=1)
+    with pytest.raises(ValueError, match="real number"):
+        envs.step(np.array([["0.5"], ["1"]]))
+    with pytest.raises(ValueError, match="real number"):
+        envs.step(np.array([[1 + 1j], [0.0]]))
+    envs.close()

@@ -469,13 +469,23 @@ def draw_episode(ss: np.random.SeedSequence, cfg: EnvConfig, options: dict | Non
 
 
 def check_action(action, n: int | None = None):
-    """A float (``n`` None, shape (1,) action) or an (n, 1) float64 array; non-finite or misshapen
-    input raises ``ValueError``."""
-    if n is None and type(action) is np.ndarray and action.shape == (1,):
+    """A float (``n`` None, shape (1,) action) or an (n, 1) float64 array.
+
+    Only real numbers are actions: strings, bytes, booleans, complex numbers, dicts and
+    other objects, non-finite values and misshapen input raise a one-line ``ValueError``.
+    """
+    if n is None and type(action) is np.ndarray and action.shape == (1,) and action.dtype.kind == "f":
         x = float(action[0])
         if math.isfinite(x):
             return x
-    a = np.asarray(action, dtype=np.float64)
+    try:
+        raw = np.asarray(action)
+    except (TypeError, ValueError):
+        raw = np.asarray(None, dtype=object)
+    if raw.dtype.kind not in "fiu":
+        what = type(action).__name__ if raw.dtype.kind == "O" else f"{type(action).__name__} of {raw.dtype}"
+        raise ValueError(f"action must be a real number or an array of real numbers, got {what}")
+    a = raw.astype(np.float64, copy=False)
     want = (1,) if n is None else (n, 1)
     if a.shape != want:
         if n is None and a.size == 1:
