@@ -241,3 +241,11 @@ def test_cli_list_names_scenarios_and_controllers(capsys):
     assert cli_main(["list"]) == 0
     out = capsys.readouterr().out
     assert "steady_90wpm" in out and "pid" in out and "paper:wiener:5" in out
+
+
+@pytest.mark.parametrize("name", ["../../x", "/etc/evil", "a/b", "..", "", ".hidden", "x" * 101, "a b"])
+def test_a_scenario_name_cannot_leave_the_run_folder(name):
+    from ebraille_sim.scenarios.spec import ScenarioError, parse_scenario
+    with pytest.raises(ScenarioError, match="must be 1-100 letters, digits") as err:
+        parse_scenario({"name": name, "reading": {"wpm": 90}}, source="inline")
+    assert "\n" not in str(err.value)

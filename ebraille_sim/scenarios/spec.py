@@ -35,6 +35,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import pathlib
+import re
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
@@ -434,11 +435,25 @@ def _warn_setpoints(source: str, sp: SetpointSpec) -> None:
                       ScenarioWarning, stacklevel=3)
 
 
+_NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}")
+
+
+def check_scenario_name(source: str, name) -> str:
+    """A scenario name is also the default output folder (``runs/NAME``): letters, digits,
+    ``_``, ``-`` and ``.``, starting with a letter or digit, at most 100 characters, and no
+    ``..``; so a name can never point outside the run folder."""
+    if not isinstance(name, str) or not _NAME_RE.fullmatch(name) or ".." in name:
+        raise ScenarioError(f"{source}: name {name!r} must be 1-100 letters, digits, '_', '-' or '.', start with "
+                            f"a letter or digit and contain no '..' (it names the output folder runs/NAME)")
+    return name
+
+
 def parse_scenario(data: dict, source: str = "<scenario>", base_dir: str = ".") -> ScenarioSpec:
     """Validate a scenario given as a dict (the parsed TOML)."""
     top = _check_table(source, "", data)
     if "name" not in top:
         raise ScenarioError(f"{source}: missing required key 'name'")
+    check_scenario_name(source, top["name"])
     rd = top.get("reading", {})
     if sum(k in rd for k in ("passage", "text", "file")) > 1:
         raise ScenarioError(f"{source}: [reading] takes only one of passage, text, file")
