@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
-from ebraille_sim.base.validation import check_keys, check_number
+from ebraille_sim.base.validation import check_number, replace_checked
 
 from controllers.base import check_reset_args, check_update_args
 
@@ -79,8 +79,7 @@ class LQGConfig:
         ValueError
             On an unknown key (named, with the allowed ones) or an invalid value.
         """
-        check_keys("LQGConfig", d, [f.name for f in dataclasses.fields(cls)])
-        return dataclasses.replace(cls() if base is None else base, **d)
+        return replace_checked(cls() if base is None else base, **d)
 
 
 def design(config: LQGConfig, plant: control.StateSpace, command_v: float, estimate_n: float) -> dict:

@@ -64,7 +64,7 @@ from typing import Any
 
 import numpy as np
 
-from ebraille_sim.base.validation import check_bool, check_choice, check_keys, check_number
+from ebraille_sim.base.validation import check_bool, check_choice, check_keys, check_number, replace_checked
 from ebraille_sim.physics.drivetrain import shaft_to_rack_per_m
 from ebraille_sim.physics.fingertip import tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N, DeviceParams
@@ -144,8 +144,7 @@ class ScheduleConfig:
         ValueError
             On an unknown key (named, with the allowed ones) or an invalid value.
         """
-        check_keys("ScheduleConfig", d, _FIELD_NAMES)
-        return dataclasses.replace(RECOMMENDED if base is None else base, **d)
+        return replace_checked(RECOMMENDED if base is None else base, **d)
 
 
 _FIELD_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(ScheduleConfig))

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from ebraille_sim.scenarios.metrics import CHAR_IN_BAND_REQUIRED, compute_metrics, in_band
-from ebraille_sim.scenarios.runner import build_schedule_for, refresh_phases, run_scenario, setpoint_profile
+from ebraille_sim.scenarios.inputs import build_schedule_for, refresh_phases, setpoint_profile
+from ebraille_sim.scenarios.runner import run_scenario
 from ebraille_sim.scenarios.spec import ScenarioError, parse_scenario
 
 

@@ -49,7 +49,7 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 __all__ = ["admissible", "check_number", "check_finite", "check_positive", "check_bool", "check_choice",
-           "check_pair", "check_keys", "check_range", "read_table"]
+           "check_pair", "check_keys", "check_range", "read_table", "replace_checked"]
 
 
 def _g(x: float) -> str:
@@ -281,3 +281,16 @@ def read_table(path: str, what: str) -> dict:
     if not isinstance(data, dict):
         raise ValueError(f"{what} {path} must hold a table/object, got {type(data).__name__}")
     return data
+
+
+def replace_checked(obj, **changes):
+    """``dataclasses.replace`` that rejects unknown field names with a one-line error.
+
+    Raises
+    ------
+    ValueError
+        ``unknown key 'k' in TYPE; allowed: ...`` (fields sorted by name).
+    """
+    import dataclasses
+    check_keys(type(obj).__name__, changes, sorted(f.name for f in dataclasses.fields(obj)))
+    return dataclasses.replace(obj, **changes)

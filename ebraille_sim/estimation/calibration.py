@@ -26,11 +26,15 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ebraille_sim.estimation.models import cached_model
 from ebraille_sim.physics.fsr import adc_code, adc_voltage, divider_voltage, play_widths, static_conductance
+
+if TYPE_CHECKING:
+    from ebraille_sim.physics.params import DeviceParams
 
 DEFAULT_FORCES_N = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0)
 DEFAULT_HOLDS_S = (5.0, 20.0, 60.0)

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ebraille_sim.base.fields import sourced
-from ebraille_sim.base.validation import check_keys, check_number
+from ebraille_sim.base.validation import check_number, replace_checked
 from ebraille_sim.physics import fingertip as _fingertip
 from ebraille_sim.physics import fsr as _fsr
 
@@ -511,9 +511,3 @@ def describe(obj) -> list[tuple[str, Any, str, str]]:
     """Rows (name, value, unit, source) of a parameter dataclass, for reports and docs."""
     return [(f.name, getattr(obj, f.name), f.metadata.get("unit", ""), source_of(obj, f.name))
             for f in dataclasses.fields(obj) if f.name != "sources"]
-
-
-def replace_checked(obj, **changes):
-    """``dataclasses.replace`` that rejects unknown field names with a one-line error."""
-    check_keys(type(obj).__name__, changes, sorted(f.name for f in dataclasses.fields(obj)))
-    return dataclasses.replace(obj, **changes)

@@ -32,8 +32,7 @@ from ebraille_sim.physics import fingertip as _fingertip
 from ebraille_sim.physics import fsr as _fsr
 from ebraille_sim.physics import motor as _motor
 from ebraille_sim.physics import noise as _noise
-from ebraille_sim.physics.fsr import (FAULT_NONE, FAULT_OPEN, FAULT_SHORT, FAULT_STUCK,  # noqa: F401
-                                      FAULT_VALUE, N_PLAYS)
+from ebraille_sim.physics.fsr import N_PLAYS
 
 
 class _Slots(tuple):

@@ -105,67 +105,67 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     p = np.zeros(N_PARAM)
     h = 1.0 / r.physics_rate_hz
     g = shaft_to_rack_per_m(d.gear_ratio, d.pinion_radius_m)
-    p[P["h_s"]] = h
-    p[P["substeps_per_sensor"]] = r.substeps_per_sensor
-    p[P["sensors_per_estimate"]] = ratio
-    p[P["motor_r_ohm"]] = m.resistance_ohm
-    p[P["motor_current_decay"]] = current_decay(h, m.resistance_ohm, m.inductance_h)
-    p[P["motor_kt"]] = m.torque_constant_nm_per_a
-    p[P["motor_ke"]] = m.back_emf_v_s_per_rad
-    p[P["n_over_r_per_m"]] = g
-    p[P["pinion_mass_kg"]] = reflected_inertia_kg(m.rotor_inertia_kg_m2, g)
-    p[P["pinion_coulomb_n"]] = reflected_force_n(m.friction_torque_nm, g)
-    p[P["pinion_static_n"]] = reflected_force_n(m.friction_torque_nm, g) * m.breakaway_ratio
-    p[P["pinion_viscous_n_s_per_m"]] = reflected_inertia_kg(m.viscous_friction_nm_s_per_rad, g)
-    p[P["gear_mu"]] = d.gear_loss_coefficient
-    p[P["half_backlash_m"]] = 0.5 * d.backlash_m
-    p[P["mesh_k_n_per_m"]] = d.mesh_stiffness_n_per_m
-    p[P["mesh_c_n_s_per_m"]] = mesh_damping_n_s_per_m(d.mesh_damping_ratio, d.mesh_stiffness_n_per_m,
+    p[P.h_s] = h
+    p[P.substeps_per_sensor] = r.substeps_per_sensor
+    p[P.sensors_per_estimate] = ratio
+    p[P.motor_r_ohm] = m.resistance_ohm
+    p[P.motor_current_decay] = current_decay(h, m.resistance_ohm, m.inductance_h)
+    p[P.motor_kt] = m.torque_constant_nm_per_a
+    p[P.motor_ke] = m.back_emf_v_s_per_rad
+    p[P.n_over_r_per_m] = g
+    p[P.pinion_mass_kg] = reflected_inertia_kg(m.rotor_inertia_kg_m2, g)
+    p[P.pinion_coulomb_n] = reflected_force_n(m.friction_torque_nm, g)
+    p[P.pinion_static_n] = reflected_force_n(m.friction_torque_nm, g) * m.breakaway_ratio
+    p[P.pinion_viscous_n_s_per_m] = reflected_inertia_kg(m.viscous_friction_nm_s_per_rad, g)
+    p[P.gear_mu] = d.gear_loss_coefficient
+    p[P.half_backlash_m] = 0.5 * d.backlash_m
+    p[P.mesh_k_n_per_m] = d.mesh_stiffness_n_per_m
+    p[P.mesh_c_n_s_per_m] = mesh_damping_n_s_per_m(d.mesh_damping_ratio, d.mesh_stiffness_n_per_m,
                                                        d.moving_mass_kg)
-    p[P["board_mass_kg"]] = d.moving_mass_kg
-    p[P["guide_coulomb_n"]] = d.guide_coulomb_n
-    p[P["guide_static_n"]] = d.guide_coulomb_n * d.guide_breakaway_ratio
-    p[P["guide_viscous_n_s_per_m"]] = d.guide_viscous_n_s_per_m
-    p[P["stribeck_v_m_per_s"]] = d.stribeck_velocity_m_per_s
-    p[P["travel_min_m"]] = d.travel_min_m
-    p[P["travel_max_m"]] = d.travel_max_m
-    p[P["finger_b_n_per_m"]] = f.stiffness_b_n_per_m
-    p[P["finger_m_per_m"]] = f.exponent_m_per_m
-    p[P["relax_c0"]] = f.relax_weight_inf
-    p[P["relax_c1"]] = f.relax_weight_1
-    p[P["relax_c2"]] = f.relax_weight_2
-    p[P["relax_c3"]] = f.relax_weight_3
+    p[P.board_mass_kg] = d.moving_mass_kg
+    p[P.guide_coulomb_n] = d.guide_coulomb_n
+    p[P.guide_static_n] = d.guide_coulomb_n * d.guide_breakaway_ratio
+    p[P.guide_viscous_n_s_per_m] = d.guide_viscous_n_s_per_m
+    p[P.stribeck_v_m_per_s] = d.stribeck_velocity_m_per_s
+    p[P.travel_min_m] = d.travel_min_m
+    p[P.travel_max_m] = d.travel_max_m
+    p[P.finger_b_n_per_m] = f.stiffness_b_n_per_m
+    p[P.finger_m_per_m] = f.exponent_m_per_m
+    p[P.relax_c0] = f.relax_weight_inf
+    p[P.relax_c1] = f.relax_weight_1
+    p[P.relax_c2] = f.relax_weight_2
+    p[P.relax_c3] = f.relax_weight_3
     a, beta = prony_coefficients(h, (f.relax_tau_1_s, f.relax_tau_2_s, f.relax_tau_3_s))
     for j in range(3):
         p[P[f"relax_a{j + 1}"]] = a[j]
         p[P[f"relax_beta{j + 1}"]] = beta[j]
-    p[P["fsr_lag_alpha"]] = lag_alpha(h, s.mechanical_lag_s)
-    p[P["fsr_k_ohm"]] = s.resistance_at_1n_ohm
-    p[P["fsr_n"]] = s.exponent
-    p[P["fsr_g_standoff_s"]] = 1.0 / s.standoff_resistance_ohm
-    p[P["fsr_creep_per_decade"]] = s.creep_per_decade
-    p[P["fsr_creep_t0_s"]] = s.creep_t0_s
+    p[P.fsr_lag_alpha] = lag_alpha(h, s.mechanical_lag_s)
+    p[P.fsr_k_ohm] = s.resistance_at_1n_ohm
+    p[P.fsr_n] = s.exponent
+    p[P.fsr_g_standoff_s] = 1.0 / s.standoff_resistance_ohm
+    p[P.fsr_creep_per_decade] = s.creep_per_decade
+    p[P.fsr_creep_t0_s] = s.creep_t0_s
     dt_sensor = 1.0 / r.sensor_rate_hz
-    p[P["fsr_recovery_decay"]] = recovery_decay(dt_sensor, s.creep_recovery_s)
-    p[P["fsr_load_threshold_n"]] = s.load_threshold_n
-    p[P["fsr_tempco_per_k"]] = s.temperature_coeff_per_k
-    p[P["fsr_noise_v"]] = s.noise_v_rms
-    p[P["fsr_dt_s"]] = dt_sensor
-    p[P["r2_ohm"]] = c.r2_ohm
-    p[P["divider_supply_v"]] = c.supply_v
-    p[P["adc_lsb_v"]] = c.adc_lsb_v
-    p[P["adc_max_code"]] = c.adc_max_code
+    p[P.fsr_recovery_decay] = recovery_decay(dt_sensor, s.creep_recovery_s)
+    p[P.fsr_load_threshold_n] = s.load_threshold_n
+    p[P.fsr_tempco_per_k] = s.temperature_coeff_per_k
+    p[P.fsr_noise_v] = s.noise_v_rms
+    p[P.fsr_dt_s] = dt_sensor
+    p[P.r2_ohm] = c.r2_ohm
+    p[P.divider_supply_v] = c.supply_v
+    p[P.adc_lsb_v] = c.adc_lsb_v
+    p[P.adc_max_code] = c.adc_max_code
     widths, weights = play_widths(s)
     for j in range(N_PLAYS):
         p[P[f"play_w{j}"]] = widths[j]
         p[P[f"play_weight{j}"]] = weights[j]
     bb, aa = scipy.signal.butter(2, e.antialias_cutoff_hz, fs=r.sensor_rate_hz)
-    p[P["aa_b0"]], p[P["aa_b1"]], p[P["aa_b2"]] = bb
-    p[P["aa_a1"]], p[P["aa_a2"]] = aa[1], aa[2]
+    p[P.aa_b0], p[P.aa_b1], p[P.aa_b2] = bb
+    p[P.aa_a1], p[P.aa_a2] = aa[1], aa[2]
     _pack_model(p, model)
-    p[P["est_clamp"]] = 1.0 if e.clamp_nonnegative else 0.0
-    p[P["est_nyquist_average"]] = 1.0 if e.nyquist_average else 0.0
-    p[P["seed"]] = float(seed)
+    p[P.est_clamp] = 1.0 if e.clamp_nonnegative else 0.0
+    p[P.est_nyquist_average] = 1.0 if e.nyquist_average else 0.0
+    p[P.seed] = float(seed)
     return p
 
 
@@ -179,9 +179,9 @@ def _pack_model(p: np.ndarray, model) -> None:
     den = np.pad(den, (0, n - len(den)))
     if den[0] != 1.0:
         num, den = num / den[0], den / den[0]
-    p[P["est_len"]] = n
-    p[P["est_num0"]:P["est_num0"] + n] = num
-    p[P["est_den0"]:P["est_den0"] + n] = den
+    p[P.est_len] = n
+    p[P.est_num0:P.est_num0 + n] = num
+    p[P.est_den0:P.est_den0 + n] = den
     for side in ("in", "out"):
         xs, ys = np.asarray(arr[f"{side}_x"], float), np.asarray(arr[f"{side}_y"], float)
         if len(xs) > MAX_BREAKPOINTS or len(xs) < 2:
@@ -197,8 +197,8 @@ def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None
     tared no-load voltage."""
     s = np.zeros(N_STATE)
     xb = device.drivetrain.travel_min_m if board_pos_m is None else float(board_pos_m)
-    s[S["board_pos_m"]] = xb
-    s[S["pinion_pos_m"]] = xb
+    s[S.board_pos_m] = xb
+    s[S.pinion_pos_m] = xb
     lf = log_force(0.0)
     for j in range(N_PLAYS):
         s[S[f"play_{j}"]] = lf
@@ -206,31 +206,31 @@ def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None
     lsb = device.circuit.adc_lsb_v
     code0 = adc_code(v0, lsb, float(device.circuit.adc_max_code))
     v_read = adc_voltage(code0, lsb)
-    s[S["fsr_code"]] = code0
-    s[S["fsr_voltage_v"]] = v_read
-    s[S["tare_v"]] = v_read if device.estimator.tare_at_start else 0.0
-    _estimator_steady_state(s, p, v_read - s[S["tare_v"]])
+    s[S.fsr_code] = code0
+    s[S.fsr_voltage_v] = v_read
+    s[S.tare_v] = v_read if device.estimator.tare_at_start else 0.0
+    _estimator_steady_state(s, p, v_read - s[S.tare_v])
     return s
 
 
 def _estimator_steady_state(s: np.ndarray, p: np.ndarray, u0: float) -> None:
     """Fill the anti-alias and estimator states for a constant input ``u0``."""
     import scipy.signal
-    bb = np.array([p[P["aa_b0"]], p[P["aa_b1"]], p[P["aa_b2"]]])
-    aa = np.array([1.0, p[P["aa_a1"]], p[P["aa_a2"]]])
+    bb = np.array([p[P.aa_b0], p[P.aa_b1], p[P.aa_b2]])
+    aa = np.array([1.0, p[P.aa_a1], p[P.aa_a2]])
     zi = scipy.signal.lfilter_zi(bb, aa) * u0
-    s[S["aa_z1"]], s[S["aa_z2"]] = zi
-    n = int(p[P["est_len"]])
-    num = p[P["est_num0"]:P["est_num0"] + n]
-    den = p[P["est_den0"]:P["est_den0"] + n]
-    x0 = pwl_eval(u0, p, P["est_in_x0"], P["est_in_y0"], int(p[P["est_n_in"]]))
+    s[S.aa_z1], s[S.aa_z2] = zi
+    n = int(p[P.est_len])
+    num = p[P.est_num0:P.est_num0 + n]
+    den = p[P.est_den0:P.est_den0 + n]
+    x0 = pwl_eval(u0, p, P.est_in_x0, P.est_in_y0, int(p[P.est_n_in]))
     if n >= 2:
         zi = scipy.signal.lfilter_zi(num, den) * x0
-        s[S["est_z0"]:S["est_z0"] + n - 1] = zi
+        s[S.est_z0:S.est_z0 + n - 1] = zi
     y0 = num.sum() / den.sum() * x0 if abs(den.sum()) > 1e-12 else 0.0
-    f0 = pwl_eval(y0, p, P["est_out_x0"], P["est_out_y0"], int(p[P["est_n_out"]]))
-    s[S["est_raw_prev_n"]] = f0
-    s[S["force_est_n"]] = max(f0, 0.0) if p[P["est_clamp"]] > 0 else f0
+    f0 = pwl_eval(y0, p, P.est_out_x0, P.est_out_y0, int(p[P.est_n_out]))
+    s[S.est_raw_prev_n] = f0
+    s[S.force_est_n] = max(f0, 0.0) if p[P.est_clamp] > 0 else f0
 
 
 def pack_devices(devices, seeds, board_pos_m=None, models=None):
@@ -267,8 +267,8 @@ def pack_devices(devices, seeds, board_pos_m=None, models=None):
         params.append(p)
         states.append(initial_state(dvc, p, board_pos_m))
     inputs = np.zeros((len(devices), N_INPUT))
-    inputs[:, U["gravity_along_m_per_s2"]] = [-d.gravity_m_per_s2 for d in devices]
-    inputs[:, U["driver_supply_v"]] = [d.driver_supply_v for d in devices]
+    inputs[:, U.gravity_along_m_per_s2] = [-d.gravity_m_per_s2 for d in devices]
+    inputs[:, U.driver_supply_v] = [d.driver_supply_v for d in devices]
     return devices, params, states, inputs
 
 
@@ -322,7 +322,7 @@ class Plant:
             cmd = np.broadcast_to(np.asarray(command_v, dtype=float), (self.n,))
             if not np.all(np.isfinite(cmd)):
                 raise ValueError("command_v must be finite for every device")
-            inp[:, U["command_v"]] = cmd
+            inp[:, U.command_v] = cmd
             kernel.advance_batch(self.state, self.params, inp, self.substeps)
 
     def set_input(self, name: str, value) -> None:
@@ -333,7 +333,7 @@ class Plant:
 
     def set_finger(self, finger_pos_m) -> None:
         """Pulp surface position(s) relative to the device frame, m (board travel axis)."""
-        self.inputs[:, U["finger_pos_m"]] = finger_pos_m
+        self.inputs[:, U.finger_pos_m] = finger_pos_m
 
     def _col(self, name):
         return self.state[:, S[name]]

@@ -172,8 +172,7 @@ from ebraille_sim.plant.layout import S, U
 from ebraille_sim.plant.loop import loop_step
 from ebraille_sim.rl.registration import ENV_ID, register_envs
 from controllers import features
-from controllers.features import (C_CMD_SCALE, C_DT, C_FS, C_INT_GAIN, C_RATE_ALPHA, C_SAFE, C_WARN, C_WU, C_WV,
-                                  ERROR_SCALE_N, N_C, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, Z_STEP, _clip,
+from controllers.features import (C_CMD_SCALE, C_DT, C_SAFE, C_WARN, C_WU, C_WV, ERROR_SCALE_N, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, Z_STEP, _clip,
                                   observe, reset_features, write_observation)
 
 __all__ = [

@@ -2,7 +2,7 @@
 
 A scenario lists the disturbances it wants as sub-tables; each becomes a per-control-period
 profile of one plant input (:data:`ebraille_sim.plant.layout.INPUT_NAMES`), built before the
-loop runs by :func:`build_inputs` (called by :func:`ebraille_sim.scenarios.runner.input_profiles`)::
+loop runs by :func:`build_inputs` (called by :func:`ebraille_sim.scenarios.inputs.input_profiles`)::
 
     [disturbances.tremor]
     rms_m = 15e-6

@@ -39,7 +39,7 @@ import math
 import numpy as np
 
 from ebraille_sim.base.validation import check_choice, check_keys, check_number
-from ebraille_sim.plant.layout import FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE
+from ebraille_sim.physics.fsr import FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE
 
 __all__ = ["KINDS", "validate_section", "build_inputs", "wrap_controller", "FaultyController"]
 

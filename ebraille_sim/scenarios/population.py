@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ebraille_sim.base.validation import check_bool, check_keys, check_number, check_pair
+from ebraille_sim.base.validation import check_bool, check_number, check_pair
 from ebraille_sim.estimation.calibration import calibrate_device
 from ebraille_sim.physics.params import FINGERS, DeviceParams, replace_checked
 
@@ -82,9 +82,8 @@ class PopulationSpec:
         ValueError
             On an unknown key (named, with the allowed ones) or an invalid value.
         """
-        check_keys("PopulationSpec", d, [f.name for f in dataclasses.fields(cls)])
         d = {k: tuple(v) if isinstance(v, list) else v for k, v in d.items()}
-        return dataclasses.replace(cls() if base is None else base, **d)
+        return replace_checked(cls() if base is None else base, **d)
 
 
 def _log_uniform(rng, lo, hi):

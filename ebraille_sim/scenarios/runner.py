@@ -17,8 +17,7 @@ import numpy as np
 
 from ebraille_sim.plant.layout import S, U
 from ebraille_sim.plant.loop import make_plant
-from ebraille_sim.scenarios.inputs import (build_run_inputs, build_schedule_for, input_profiles,  # noqa: F401
-                                           reading_text, refresh_phases, setpoint_profile)
+from ebraille_sim.scenarios.inputs import build_run_inputs, refresh_phases
 from ebraille_sim.scenarios.metrics import compute_metrics
 from ebraille_sim.scenarios.spec import ScenarioError, ScenarioSpec, load_scenario
 
@@ -126,8 +125,9 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     ctrl = wrap_controller(spec, ctrl, dt)
     tr = {c: np.zeros(n) for c in TRACE_COLUMNS if c != "character"}
     st = plant.state[0]
-    i_fc, i_fe, i_v, i_i, i_x, i_e = (S["contact_force_n"], S["force_est_n"], S["fsr_voltage_v"],
-                                      S["current_a"], S["board_pos_m"], S["energy_j"])
+    # slot indices and trace columns bound to locals: the loop below runs once per control period
+    i_fc, i_fe, i_v, i_i, i_x, i_e = (S.contact_force_n, S.force_est_n, S.fsr_voltage_v,
+                                      S.current_a, S.board_pos_m, S.energy_j)
     ctrl.reset(force_est_n=float(st[i_fe]), setpoint_n=float(sp[0]), command_v=0.0)
     f_true, f_est, v_fsr, cmd_v, cur, xb, en = (tr["force_true_n"], tr["force_est_n"], tr["fsr_voltage_v"],
                                                 tr["command_v"], tr["motor_current_a"], tr["board_pos_m"],

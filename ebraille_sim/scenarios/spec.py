@@ -130,7 +130,7 @@ class ReadingSpec:
     # per-character refresh: each dwell is lift | press | hold | release, as fractions of
     # the dwell; the setpoint is refresh_lift_force_n while lifted or released and the
     # force setpoint from the press on; only the hold part counts as the character's window
-    # (see ebraille_sim.scenarios.runner.refresh_phases)
+    # (see ebraille_sim.scenarios.inputs.refresh_phases)
     mode: str = _key("continuous", "-", "choice", choices=("continuous", "refresh"))
     refresh_lift_fraction: float = _key(0.10, "-", "float", lo=0, hi=1)
     refresh_press_fraction: float = _key(0.30, "-", "float", lo=0, hi=1)
