@@ -73,9 +73,10 @@ def test_every_module_has_a_layer():
         assert layer_of(module_name(p)) is not None, p
 
 
-def test_no_module_imports_a_layer_above_its_own():
+def violations(g: dict[str, set[str]]) -> list[str]:
+    """Edges of the import graph ``g`` that break the layer rule."""
     bad = []
-    for mod, deps in graph().items():
+    for mod, deps in g.items():
         lm = layer_of(mod)
         for d in deps:
             ld = layer_of(d)
@@ -83,7 +84,12 @@ def test_no_module_imports_a_layer_above_its_own():
                 bad.append(f"{mod} -> {d}")
             elif RANK[ld] > RANK[lm] or (lm in PEERS and ld in PEERS and ld != lm):
                 bad.append(f"{mod} ({lm}) -> {d} ({ld})")
-    assert not bad, "layer rule broken:\n" + "\n".join(sorted(bad))
+    return sorted(bad)
+
+
+def test_no_module_imports_a_layer_above_its_own():
+    bad = violations(graph())
+    assert not bad, "layer rule broken:\n" + "\n".join(bad)
 
 
 def test_controllers_see_only_physics_and_estimation():
@@ -116,10 +122,17 @@ def test_no_import_cycles():
             visit(m)
 
 
-@pytest.mark.parametrize("bad, good", [("ebraille_sim.physics.motor", "ebraille_sim.plant.kernel")])
-def test_the_checker_sees_an_upward_import(tmp_path, bad, good):
-    """The rule itself can fail: an upward edge is reported."""
-    assert RANK[layer_of(good)] > RANK[layer_of(bad)]
+@pytest.mark.parametrize("importer, imported", [
+    ("ebraille_sim.physics.motor", "ebraille_sim.plant.kernel"),          # upward
+    ("controllers.pid", "ebraille_sim.scenarios.runner"),                 # controllers above estimation
+    ("ebraille_sim.rl.env", "ebraille_sim.analysis.tuning"),              # between peers
+    ("ebraille_sim.plant.loop", "ebraille_sim"),                          # the package front door
+])
+def test_the_checker_reports_a_forbidden_import(importer, imported):
+    """The rule itself can fail: a real import graph with one forbidden edge added is reported."""
+    g = {m: set(d) for m, d in graph().items()}
+    g[importer].add(imported)
+    assert violations(g) == [e for e in violations(g) if importer in e] and len(violations(g)) == 1
 
 
 def test_shipped_scenarios_are_found_from_any_working_directory(tmp_path, monkeypatch):
