@@ -56,6 +56,13 @@ integrator then holds the constant bias set by ``reset``. An explicit
 ``tracking_time_s = math.inf`` disables back-calculation (plain clamping),
 which is useful as a reference.
 
+Gain scaling above a force: with ``schedule_above_n = F_s`` the three gains are multiplied
+by ``K(F_s) / K(r)`` at setpoints ``r > F_s``, ``K`` the relaxed tangent stiffness of the
+pulp (:func:`pulp_stiffness_n_per_m`).  The loop gain from command to force is
+proportional to ``K``, which grows about threefold from 1 to 3 N; the scaling keeps it
+at its ``F_s`` value.  The derived tracking time depends only on gain ratios and is
+unchanged.  The default controller scales above 1 N (:data:`DEFAULT_PID`).
+
 Examples
 --------
 >>> from controllers.pid import PID, PIDConfig
@@ -75,6 +82,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from ebraille_sim.base.validation import check_finite, check_keys, check_number
+from ebraille_sim.physics.fingertip import tangent_stiffness_n_per_m
+from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N, DeviceParams
 
 from controllers.base import check_update_args
 
@@ -118,6 +127,24 @@ def tracking_time_s(kp: float, ki: float, kd: float, explicit: float | None = No
 def tracking_gain_per_s(tt_s: float) -> float:
     """``1/Tt`` as used by :meth:`PIDCore.step`: 0 for ``Tt = inf``, inf for ``Tt = 0``."""
     return 0.0 if tt_s == _INF else (_INF if tt_s == 0.0 else 1.0 / tt_s)
+
+
+def pulp_stiffness_n_per_m(force_n: float, device: DeviceParams = DeviceParams()) -> float:
+    """Relaxed tangent stiffness of the pulp at contact force ``force_n``, N/m.
+
+    ``K(F) = b + m F / c0``: the tangent stiffness of the elastic law
+    (:func:`ebraille_sim.physics.fingertip.tangent_stiffness_n_per_m`) at the elastic force
+    ``F / c0`` on which a relaxed contact force ``F`` sits.
+    """
+    f = device.finger
+    return tangent_stiffness_n_per_m(force_n / f.relax_weight_inf, f.stiffness_b_n_per_m, f.exponent_m_per_m)
+
+
+def stiffness_ratio(force_n: float, reference_force_n: float, device: DeviceParams = DeviceParams()) -> float:
+    """``K(F_ref) / K(F)`` with ``K`` from :func:`pulp_stiffness_n_per_m`, ``F`` clipped to the
+    tactile range [``TACTILE_FORCE_MIN_N``, ``TACTILE_FORCE_MAX_N``]."""
+    return (pulp_stiffness_n_per_m(reference_force_n, device)
+            / pulp_stiffness_n_per_m(min(max(force_n, TACTILE_FORCE_MIN_N), TACTILE_FORCE_MAX_N), device))
 
 
 class PIDCore:
@@ -245,6 +272,12 @@ class PIDConfig:
         ``kp/ki`` (= ``Ti``); unused when ``ki = 0``.
     feedforward_v : float, optional
         Constant command added before saturation, V. Finite. Default 0.
+    schedule_above_n : float or None, optional
+        Force ``F_s`` above which the gains are scaled down with the pulp's stiffness:
+        at a setpoint ``r > F_s`` every gain is multiplied by ``K(F_s) / K(r)``
+        (:func:`stiffness_ratio`, nominal finger), so the loop gain, which grows with
+        ``K``, stays at its value at ``F_s``.  Within the tactile range
+        [0.2, 3] N; None (default) keeps the gains fixed at every force.
 
     Raises
     ------
@@ -272,6 +305,7 @@ class PIDConfig:
     u_max_v: float = 6.0
     tracking_time_s: float | None = None
     feedforward_v: float = 0.0
+    schedule_above_n: float | None = None
 
     def __post_init__(self) -> None:
         nonneg = (
@@ -292,6 +326,29 @@ class PIDConfig:
         if self.tracking_time_s is not None:
             tt = check_number("tracking_time_s", self.tracking_time_s, lo=0.0, finite=False)
             object.__setattr__(self, "tracking_time_s", tt)
+        if self.schedule_above_n is not None:
+            object.__setattr__(self, "schedule_above_n", check_number(
+                "schedule_above_n", self.schedule_above_n, TACTILE_FORCE_MIN_N, TACTILE_FORCE_MAX_N))
+
+    def gain_scale(self, setpoint_n: float) -> float:
+        """Factor on ``kp, ki, kd`` at ``setpoint_n``: ``K(F_s) / K(r)`` above ``schedule_above_n``, else 1.
+
+        Examples
+        --------
+        >>> cfg = PIDConfig(kp_v_per_n=2.0, schedule_above_n=1.0)
+        >>> cfg.gain_scale(0.5), round(cfg.gain_scale(3.0), 3)
+        (1.0, 0.352)
+        """
+        f_s = self.schedule_above_n
+        if f_s is None or not setpoint_n > f_s:
+            return 1.0
+        return stiffness_ratio(setpoint_n, f_s)
+
+    def at(self, force_n: float) -> PIDConfig:
+        """The fixed-gain config this one runs with at the setpoint ``force_n`` (for analysis)."""
+        a = self.gain_scale(force_n)
+        return dataclasses.replace(self, kp_v_per_n=self.kp_v_per_n * a, ki_v_per_ns=self.ki_v_per_ns * a,
+                                   kd_vs_per_n=self.kd_vs_per_n * a, schedule_above_n=None)
 
     @property
     def effective_tracking_time_s(self) -> float:
@@ -367,8 +424,12 @@ DEFAULT_PID = PIDConfig(
     setpoint_weight_d=0.0,
     u_min_v=-6.0,
     u_max_v=6.0,
+    schedule_above_n=1.0,
 )
-"""Provisional default gains used by ``controllers.make("pid")``."""
+"""Default gains of ``controllers.make("pid")``: a hand design at 1 N, scaled down with the
+pulp's stiffness above 1 N (``schedule_above_n``).  With fixed gains this loop oscillates
+at 2 N and a step of the setpoint from 1 to 3 N overshoots to about 9.7 N; scaled, the
+same step peaks at about 3.04 N."""
 
 _STATE_KEYS: tuple[str, ...] = (
     "integrator_v",
@@ -427,6 +488,8 @@ class PID:
         "_ff",
         "_inv_tt",
         "_core",
+        "_r_sched",
+        "_scale",
     )
 
     def __init__(self, config: PIDConfig) -> None:
@@ -444,6 +507,8 @@ class PID:
         self._ff = config.feedforward_v
         self._inv_tt = tracking_gain_per_s(config.effective_tracking_time_s)
         self._core = PIDCore()
+        self._r_sched = math.nan
+        self._scale = 1.0
 
     @property
     def config(self) -> PIDConfig:
@@ -488,7 +553,7 @@ class PID:
         y = check_finite("force_est_n", force_est_n)
         r = check_finite("setpoint_n", setpoint_n)
         u0 = min(max(check_finite("command_v", command_v), self._umin), self._umax)
-        self._core.reset(y, r, u0, self._kp, self._b, self._c, self._ff)
+        self._core.reset(y, r, u0, self._kp * self._gain_scale(r), self._b, self._c, self._ff)
 
     def update(
         self,
@@ -521,8 +586,19 @@ class PID:
             If ``dt_s`` is not finite and > 0, or a force is not finite.
         """
         y, r, h = check_update_args(force_est_n, setpoint_n, dt_s)
-        return self._core.step(y, r, h, self._kp, self._ki, self._kd, self._tf, self._b, self._c,
+        if self._cfg.schedule_above_n is None:
+            return self._core.step(y, r, h, self._kp, self._ki, self._kd, self._tf, self._b, self._c,
+                                   self._inv_tt, self._ff, self._umin, self._umax)
+        a = self._gain_scale(r)      # the derived tracking time depends on gain ratios only
+        return self._core.step(y, r, h, self._kp * a, self._ki * a, self._kd * a, self._tf, self._b, self._c,
                                self._inv_tt, self._ff, self._umin, self._umax)
+
+    def _gain_scale(self, r: float) -> float:
+        """:meth:`PIDConfig.gain_scale` at ``r``, cached for a repeated setpoint."""
+        if r != self._r_sched:
+            self._r_sched = r
+            self._scale = self._cfg.gain_scale(r)
+        return self._scale
 
     def state(self) -> dict[str, float | None]:
         """Return the internal state as a small dict of floats.

@@ -66,14 +66,13 @@ import numpy as np
 
 from ebraille_sim.base.validation import check_bool, check_choice, check_keys, check_number, replace_checked
 from ebraille_sim.physics.drivetrain import shaft_to_rack_per_m
-from ebraille_sim.physics.fingertip import tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N, DeviceParams
 
 from controllers.base import check_reset_args, check_update_args
-from controllers.pid import PIDConfig, PIDCore, tracking_gain_per_s, tracking_time_s
+from controllers.pid import (PIDConfig, PIDCore, pulp_stiffness_n_per_m, stiffness_ratio, tracking_gain_per_s,
+                             tracking_time_s)
 
-__all__ = ["ScheduleConfig", "ScheduledPID", "make_scheduled", "make_feedforward", "stiffness_ratio",
-           "pulp_stiffness_n_per_m", "RECOMMENDED", "MS_1_6", "HAND"]
+__all__ = ["ScheduleConfig", "ScheduledPID", "make_scheduled", "make_feedforward", "RECOMMENDED", "MS_1_6", "HAND"]
 
 F_MIN_N, F_MAX_N = TACTILE_FORCE_MIN_N, TACTILE_FORCE_MAX_N
 
@@ -160,23 +159,6 @@ reference map on).  Kept to three digits: its worst case on ``setpoint_steps`` i
 
 HAND = ScheduleConfig(kp_v_per_n=2.0, ki_v_per_ns=8.0, kd_vs_per_n=0.0)
 """The default PID's gains at 1 N, scheduled, with the reference map (a hand design)."""
-
-
-def pulp_stiffness_n_per_m(force_n: float, device: DeviceParams = DeviceParams()) -> float:
-    """Relaxed tangent stiffness of the pulp at contact force ``force_n``, N/m.
-
-    ``K(F) = b + m F / c0``: the tangent stiffness of the elastic law
-    (:func:`ebraille_sim.physics.fingertip.tangent_stiffness_n_per_m`) at the elastic force
-    ``F / c0`` on which a relaxed contact force ``F`` sits.
-    """
-    f = device.finger
-    return tangent_stiffness_n_per_m(force_n / f.relax_weight_inf, f.stiffness_b_n_per_m, f.exponent_m_per_m)
-
-
-def stiffness_ratio(force_n: float, reference_force_n: float, device: DeviceParams = DeviceParams()) -> float:
-    """``K(F_ref) / K(F)`` with ``K`` from :func:`pulp_stiffness_n_per_m`, ``F`` clipped to the tactile range."""
-    return (pulp_stiffness_n_per_m(reference_force_n, device)
-            / pulp_stiffness_n_per_m(min(max(force_n, F_MIN_N), F_MAX_N), device))
 
 
 class ScheduledPID:

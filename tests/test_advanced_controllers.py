@@ -12,7 +12,8 @@ import controllers
 from ebraille_sim.analysis.tuning import make_lqg
 from controllers.pid import DEFAULT_PID, PID, PIDConfig
 from ebraille_sim.analysis.robust import evaluate, linearisation_points, population_ms, summarise, tuning_population
-from controllers.schedule import ScheduleConfig, ScheduledPID, stiffness_ratio
+from controllers.pid import stiffness_ratio
+from controllers.schedule import ScheduleConfig, ScheduledPID
 from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.scenarios.spec import load_scenario
 
@@ -112,7 +113,8 @@ def test_scheduled_pid_with_everything_off_is_the_plain_pid_bit_for_bit(extra):
 def test_schedule_and_supervisor_limits_come_from_the_laws():
     from ebraille_sim.physics.fingertip import tangent_stiffness_n_per_m
     from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N
-    from controllers.schedule import F_MAX_N, F_MIN_N, pulp_stiffness_n_per_m
+    from controllers.pid import pulp_stiffness_n_per_m
+    from controllers.schedule import F_MAX_N, F_MIN_N
     f = DeviceParams().finger
     assert (F_MIN_N, F_MAX_N) == (TACTILE_FORCE_MIN_N, TACTILE_FORCE_MAX_N)
     assert pulp_stiffness_n_per_m(1.5) == tangent_stiffness_n_per_m(1.5 / f.relax_weight_inf,
@@ -149,7 +151,9 @@ def test_ms_of_the_shipped_schedules_on_presets():
     assert np.max(ms16) <= 1.6                                     # the robustness target, sliding model
     assert np.max(rec) <= 2.0 and np.max(population_ms(ScheduledPID(RECOMMENDED).pid_config_at, pts, 0.5)) <= 1.6
     assert np.max(population_ms(ScheduledPID(HAND).pid_config_at, pts)) > 2.0
-    assert np.max(population_ms(DEFAULT_PID, pts)) == math.inf     # the default PID: unstable at 2 N
+    fixed = dataclasses.replace(DEFAULT_PID, schedule_above_n=None)
+    assert np.max(population_ms(fixed, pts)) == math.inf           # the default gains, fixed: unstable at 2 N
+    assert 2.0 < np.max(population_ms(DEFAULT_PID, pts)) < math.inf  # scaled above 1 N: stable, not robust
 
 
 def test_pid_scheduled_defaults_are_the_recommended_design():

@@ -395,9 +395,30 @@ def test_protocol_and_defaults():
     assert pid.config == DEFAULT_PID
     assert DEFAULT_PID == PIDConfig(
         kp_v_per_n=2.0, ki_v_per_ns=8.0, kd_vs_per_n=0.0, derivative_filter_s=0.005,
-        setpoint_weight_p=1.0, setpoint_weight_d=0.0, u_min_v=-6.0, u_max_v=6.0,
+        setpoint_weight_p=1.0, setpoint_weight_d=0.0, u_min_v=-6.0, u_max_v=6.0, schedule_above_n=1.0,
     )
     assert "pid" in available()
+
+
+def test_gain_scaling_above_force():
+    from controllers.pid import pulp_stiffness_n_per_m
+    cfg = PIDConfig(kp_v_per_n=2.0, ki_v_per_ns=8.0, kd_vs_per_n=0.01, schedule_above_n=1.0)
+    assert cfg.gain_scale(1.0) == 1.0 and cfg.gain_scale(0.3) == 1.0
+    k1, k3 = pulp_stiffness_n_per_m(1.0), pulp_stiffness_n_per_m(3.0)
+    assert cfg.gain_scale(3.0) == pytest.approx(k1 / k3, rel=1e-12)
+    assert 0.3 < cfg.gain_scale(3.0) < 0.4            # the pulp is ~3x stiffer at 3 N
+    at3 = cfg.at(3.0)
+    assert at3.schedule_above_n is None and at3.kp_v_per_n == pytest.approx(2.0 * k1 / k3)
+    assert at3.ki_v_per_ns / at3.kp_v_per_n == pytest.approx(4.0)
+    # the controller runs the config's gains at its setpoint: same commands as the fixed equivalent
+    a, b = PID(cfg), PID(at3)
+    for c in (a, b):
+        c.reset(force_est_n=2.5, setpoint_n=3.0, command_v=1.0)
+    ua = [a.update(2.5 + 0.01 * k, 3.0, 1e-3) for k in range(20)]
+    ub = [b.update(2.5 + 0.01 * k, 3.0, 1e-3) for k in range(20)]
+    assert ua == ub
+    with pytest.raises(ValueError, match="schedule_above_n"):
+        PIDConfig(kp_v_per_n=1.0, schedule_above_n=5.0)
 
 
 def test_make_with_overrides_and_unknown_override():

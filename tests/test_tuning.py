@@ -166,11 +166,19 @@ def test_pid_statespace_reproduces_pid_recursions():
     assert np.allclose(u_pid, u_ss, atol=1e-12)
 
 
-def test_default_pid_loses_stability_at_2n_in_the_sliding_model():
-    a06 = analyse_loop(DEFAULT_PID, force_n=0.6)
-    a2 = analyse_loop(DEFAULT_PID, force_n=2.0)
+def test_default_gains_fixed_lose_stability_at_2n_and_scaling_keeps_the_loop():
+    fixed = dataclasses.replace(DEFAULT_PID, schedule_above_n=None)
+    a06 = analyse_loop(fixed, force_n=0.6)
+    a2 = analyse_loop(fixed, force_n=2.0)
     assert a06.stable and 1.0 < a06.ms < 3.0
     assert not a2.stable and a2.ms == math.inf
+    # the default scales its gains above 1 N with the pulp's stiffness: the loop at 2 and 3 N
+    # has about the margins of the loop at 1 N
+    a1 = analyse_loop(DEFAULT_PID, force_n=1.0)
+    assert analyse_loop(DEFAULT_PID, force_n=0.6).ms == a06.ms
+    for f in (2.0, 3.0):
+        a = analyse_loop(DEFAULT_PID, force_n=f)
+        assert a.stable and a.ms < 1.5 * a1.ms
 
 
 def test_simc_gains_are_robust_on_the_nominal_plant():

@@ -545,7 +545,7 @@ def loop_models(device: DeviceParams, force_n: float, controller, *, friction: s
 
     ``controller`` is a two-input (setpoint, estimate) ``StateSpace`` at the control rate
     (e.g. :func:`pid_statespace`), a :class:`~controllers.pid.PIDConfig`, a controller
-    object: a :class:`~controllers.pid.PID` (its config is used), a scheduled PID (its
+    object: a :class:`~controllers.pid.PID` (its config at ``force_n``, :meth:`~controllers.pid.PIDConfig.at`), a scheduled PID (its
     fixed equivalent at ``force_n``, ``pid_config_at``) or one with a ``statespace()``
     method (:mod:`controllers.lqg`), or a two-input ``StateSpace`` already at the
     estimator rate.  Anything else is a one-line ``TypeError``.
@@ -572,6 +572,8 @@ def loop_models(device: DeviceParams, force_n: float, controller, *, friction: s
         controller = controller.pid_config_at(force_n)
     elif hasattr(controller, "statespace") and callable(controller.statespace):
         controller = controller.statespace()
+    if isinstance(controller, PIDConfig):
+        controller = controller.at(force_n)
     if not isinstance(controller, PIDConfig) and not all(hasattr(controller, m) for m in "ABCD"):
         raise TypeError(f"cannot analyse a controller of type {type(controller).__name__}: give a PIDConfig, "
                         "a PID, a scheduled PID, an object with statespace() or a two-input StateSpace")
