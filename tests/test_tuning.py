@@ -318,7 +318,8 @@ def test_tune_command_writes_a_gains_file_that_run_accepts(tmp_path):
 def test_tune_report_gives_margins_only_for_a_stable_loop(tmp_path):
     from ebraille_sim.analysis.tuning import plot_bode
     from ebraille_sim.commands.tune import _loop_cells
-    a1, a2 = analyse_loop(DEFAULT_PID, force_n=1.0), analyse_loop(DEFAULT_PID, force_n=2.0)
+    fixed = dataclasses.replace(DEFAULT_PID, schedule_above_n=None)
+    a1, a2 = analyse_loop(DEFAULT_PID, force_n=1.0), analyse_loop(fixed, force_n=2.0)
     assert _loop_cells(a1.summary()) == ["stable", "21.7 deg at 6.46 Hz", "1.29 at 8.09 Hz", "5.15"]
     assert _loop_cells(a2.summary()) == ["unstable", "-", "-", "unstable"]
     assert a1.margin_label() == "PM 21.7 deg at 6.46 Hz, GM 1.29"
