@@ -40,6 +40,10 @@ class RunResult:
     schedule : ReadingSchedule
     controller_name : str
     seed : int
+    supervisor : dict
+        The safety supervisor of the run (:func:`supervisor_choice`): ``enabled``, ``source``
+        (why it is on or off) and, when it ran, its latched ``fault`` (None) and its
+        ``events`` (time s, description).
     """
     spec: ScenarioSpec
     metrics: dict
@@ -47,6 +51,7 @@ class RunResult:
     schedule: object
     controller_name: str
     seed: int
+    supervisor: dict = None
 
 
 def make_controller(spec: ScenarioSpec, controller=None):
@@ -62,21 +67,49 @@ def make_controller(spec: ScenarioSpec, controller=None):
     return controller
 
 
-def wrap_controller(spec: ScenarioSpec, ctrl, dt_s: float):
-    """Apply the scenario's controller wrappers (e.g. a safety supervisor)."""
+def supervisor_choice(spec: ScenarioSpec, supervised: bool = True) -> tuple[bool, str]:
+    """Whether a run of ``spec`` is supervised, and why.
+
+    The safety supervisor (:mod:`controllers.supervisor`) is on unless switched off
+    explicitly: by ``supervised=False`` (the command line's ``--no-supervisor``) or by the
+    scenario's ``[supervisor] enabled = false``.  A scenario without a ``[supervisor]``
+    section runs with the default supervisor for its device.
+    """
+    if not isinstance(supervised, bool):
+        raise TypeError(f"supervised must be True or False, got {supervised!r}")
+    section = spec.sections.get("supervisor")
+    if not supervised:
+        return False, "off: switched off for this run (supervised=False, --no-supervisor)"
+    if section is None:
+        return True, "on: default limits for the device"
+    if section.get("enabled", True) is False:
+        return False, f"off: {spec.source} sets [supervisor] enabled = false"
+    return True, f"on: limits of {spec.source} [supervisor]" if section else "on: default limits for the device"
+
+
+def wrap_controller(spec: ScenarioSpec, ctrl, dt_s: float, supervised: bool = True):
+    """Apply the scenario's controller wrappers: injected controller faults, then the safety
+    supervisor (on unless switched off, :func:`supervisor_choice`)."""
     import importlib
 
     from ebraille_sim.scenarios.spec import DELEGATES
-    for key, section in spec.sections.items():
-        mod = importlib.import_module(DELEGATES[key])
-        wrap = getattr(mod, "wrap_controller", None)
+    on, _ = supervisor_choice(spec, supervised)
+    for key in DELEGATES:
+        section = spec.sections.get(key)
+        if key == "supervisor":
+            if not on:
+                continue
+            section = {} if section is None else section
+        elif section is None:
+            continue
+        wrap = getattr(importlib.import_module(DELEGATES[key]), "wrap_controller", None)
         if wrap is not None:
             ctrl = wrap(section, ctrl, dt_s, device=spec.device)
     return ctrl
 
 
 def run_scenario(scenario, controller=None, seed: int | None = None, duration_s: float | None = None,
-                 backend: str = "lumped", device=None) -> RunResult:
+                 backend: str = "lumped", device=None, supervised: bool = True) -> RunResult:
     """Simulate a scenario in closed loop.
 
     Parameters
@@ -95,6 +128,10 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     device : DeviceParams, optional
         Replaces the scenario's device (e.g. a reader drawn by
         :func:`ebraille_sim.scenarios.population.sample_devices`).
+    supervised : bool
+        False switches the safety supervisor off for this run (recorded in
+        ``RunResult.supervisor``); True (default) leaves the scenario's choice, which is on
+        unless the file sets ``[supervisor] enabled = false``.
 
     Returns
     -------
@@ -110,6 +147,7 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
         import dataclasses
         spec = dataclasses.replace(spec, duration_s=float(duration_s))
     seed = spec.seed if seed is None else int(seed)
+    sup_on, sup_source = supervisor_choice(spec, supervised)
     run = build_run_inputs(spec, seed)
     schedule = run.schedule
     ctrl = make_controller(spec, controller)
@@ -122,7 +160,7 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
         raise ScenarioError(f"{spec.source}: {exc}") from None
     plant.set_finger(spec.finger.gap_m)
     profiles = run.profiles
-    ctrl = wrap_controller(spec, ctrl, dt)
+    ctrl = wrap_controller(spec, ctrl, dt, supervised)
     tr = {c: np.zeros(n) for c in TRACE_COLUMNS if c != "character"}
     st = plant.state[0]
     # slot indices and trace columns bound to locals: the loop below runs once per control period
@@ -171,4 +209,16 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     # electrotactile legibility beside the force metrics (stimulation during the same windows)
     from ebraille_sim.scenarios.legibility import legibility_metrics
     metrics.update(legibility_metrics(f_true, sp, window["char_index"], cells))
-    return RunResult(spec, metrics, tr, schedule, getattr(ctrl, "name", type(ctrl).__name__), seed)
+    supervisor = {"enabled": sup_on, "source": sup_source}
+    if sup_on:
+        sup = _find_supervisor(ctrl)
+        supervisor.update(fault=sup.fault, events=[[t_ev, text] for t_ev, text in sup.events])
+    return RunResult(spec, metrics, tr, schedule, getattr(ctrl, "name", type(ctrl).__name__), seed, supervisor)
+
+
+def _find_supervisor(ctrl):
+    """The :class:`controllers.supervisor.Supervisor` in a chain of wrappers (outermost first)."""
+    from controllers.supervisor import Supervisor
+    while not isinstance(ctrl, Supervisor):
+        ctrl = ctrl.inner
+    return ctrl
