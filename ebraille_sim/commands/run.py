@@ -42,6 +42,9 @@ def add_arguments(p):
     p.add_argument("--trace", default="csv", choices=("csv", "parquet", "none"),
                    help="trace file: trace.csv (default), trace.parquet (needs pyarrow) or none")
     p.add_argument("--no-plot", action="store_true", help="skip force.png")
+    p.add_argument("--no-supervisor", action="store_true",
+                   help="run without the safety supervisor (on by default; the choice is printed and "
+                        "recorded in metrics.json)")
     p.add_argument("--animate", nargs="?", const="", default=None, metavar="PATH",
                    help=f"with --backend pymunk: draw the mechanism as a GIF (PNG frames without Pillow), "
                         f"25 frames per simulated second; default PATH: {ANIMATION_NAME} in the run folder")
@@ -103,13 +106,17 @@ def main(args) -> int:
         raise UserError("--trace parquet needs pyarrow, which is not installed; use --trace csv or none")
     spec = load_scenario(args.scenario)
     out, anim = _targets(args, spec)
+    from ebraille_sim.scenarios.runner import supervisor_choice
+    sup_on, sup_source = supervisor_choice(spec, not args.no_supervisor)
+    if not sup_on:
+        print(f"warning: safety supervisor {sup_source}", file=sys.stderr)
     ctrl = make_controller(spec, args.controller)
     gains_file = args.controller if (args.controller is not None
                                      and str(args.controller).lower().endswith((".toml", ".json"))) else None
 
     def simulate():
         return run_scenario(spec, controller=ctrl, seed=args.seed, duration_s=args.duration,
-                            backend=args.backend)
+                            backend=args.backend, supervised=not args.no_supervisor)
 
     frames = None
     if anim is not None:

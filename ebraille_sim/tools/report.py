@@ -59,7 +59,21 @@ def summary_table(result: RunResult, controller_file=None) -> str:
     for key, c in evaluate_criteria(result.spec.criteria, m).items():
         op = "<=" if key.endswith("max") or key.endswith("max_n") else ">="
         lines.append(f"criterion {c['metric']} {op} {c['limit']:g}: {'pass' if c['passed'] else 'FAIL'}")
+    lines.extend(supervisor_lines(result))
     return "\n".join(lines)
+
+
+def supervisor_lines(result: RunResult) -> list[str]:
+    """The safety supervisor's state for the summary: on/off and why, its fault and events."""
+    sup = result.supervisor or {}
+    if not sup:
+        return []
+    lines = [f"supervisor {sup['source']}"]
+    if sup.get("fault"):
+        lines.append(f"supervisor fault {sup['fault']}")
+    for t, text in sup.get("events", ()):
+        lines.append(f"supervisor event at {t:.3f} s: {text}")
+    return lines
 
 
 def metrics_document(result: RunResult, controller=None, controller_file=None) -> dict:
@@ -70,7 +84,8 @@ def metrics_document(result: RunResult, controller=None, controller_file=None) -
     """
     doc = {"scenario": result.spec.name, "controller": result.controller_name, "seed": result.seed,
            "band_fraction": result.spec.setpoint.band_fraction, "reading_start_s": result.spec.reading.start_s,
-           "metrics": result.metrics, "criteria": evaluate_criteria(result.spec.criteria, result.metrics)}
+           "metrics": result.metrics, "criteria": evaluate_criteria(result.spec.criteria, result.metrics),
+           "supervisor": result.supervisor}
     if controller_file is not None:
         doc["controller_file"] = str(controller_file)
     if controller is not None:
