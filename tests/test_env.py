@@ -12,6 +12,7 @@ import pytest
 import ebraille_sim
 from ebraille_sim.rl.env import ENV_ID, MAX_EPISODE_STEPS, OPTION_KEYS, ContactForceEnv, EnvConfig, register_envs
 from ebraille_sim.physics.params import FINGERS, DeviceParams
+from ebraille_sim.plant.layout import S
 
 
 def _rollout(env, seed, actions, options=None):
@@ -195,7 +196,7 @@ def test_truncation_at_the_end_of_the_passage():
 
 
 def test_reward_formula_and_termination_past_the_safe_force():
-    env = ContactForceEnv(randomize_device=False)
+    env = ContactForceEnv(randomize_device=False, safety=False)
     _, info = env.reset(seed=1, options={"disturbances": False, "gap_m": 0.5e-3, "setpoint_n": 1.0,
                                            "device": DeviceParams(finger=FINGERS["stiff"])})
     seen_violation = False
@@ -266,3 +267,21 @@ def test_vector_env_rejects_non_real_actions():
     with pytest.raises(ValueError, match="real number"):
         envs.step(np.array([[1 + 1j], [0.0]]))
     envs.close()
+
+
+def test_safety_layer_latches_a_fault_and_ignores_the_agent_then():
+    env = ContactForceEnv(randomize_device=False)
+    _, info = env.reset(seed=2, options={"disturbances": False, "gap_m": 1e-3, "setpoint_n": 1.0})
+    for _ in range(600):                                     # reach contact
+        *_, info = env.step(np.array([0.2], np.float32))
+    env._st[S.force_est_n] = float("nan")                    # a broken estimate
+    *_, info = env.step(np.array([1.0], np.float32))
+    assert info["supervisor_fault"] == "fsr_out_of_range" and info["command_v"] <= 0.0
+    for _ in range(20):
+        *_, info = env.step(np.array([1.0], np.float32))
+        assert info["command_v"] <= 0.0
+
+
+def test_safety_flag_is_validated():
+    with pytest.raises(ValueError, match="safety"):
+        ContactForceEnv(safety="yes")

@@ -34,7 +34,7 @@ def test_importing_controllers_does_not_import_torch_or_sb3():
 
 def test_policy_in_a_1khz_loop_matches_the_200hz_env_exactly():
     """The controller rebuilds the env's observation: same actions, same forces (to 1e-9)."""
-    env = ContactForceEnv(randomize_device=False)
+    env = ContactForceEnv(randomize_device=False, safety=False)
     obs, info = env.reset(seed=5, options={"disturbances": False, "gap_m": 1e-3,
                                            "setpoint_steps": [(1.5, 1.2)], "setpoint_n": 0.7})
     ep = env.episode

@@ -123,6 +123,21 @@ tremor RMS is the amplitude over sqrt 2, as for a sine), ``supply_fraction`` [0.
 (driver supply as a fraction of the device's, no battery), ``disturbances`` (False: no
 drift, tremor, sag or battery).
 
+## Safety layer
+
+With ``safety=True`` (the default; ``safety=False`` is the explicit opt-out) every
+command passes through the safety supervisor the scenario runner uses
+(:class:`controllers.supervisor.Supervisor`, limits :meth:`SupervisorConfig.for_device
+<controllers.supervisor.SupervisorConfig.for_device>` of the episode's device).  The agent's
+command ``a * driver_supply_v`` is the supervisor's inner controller: it sees the force
+estimate, the setpoint shown with the action, the control period and the motor current,
+and in normal running only limits the command's slew and the force near its cap; after a
+detected fault it retracts and holds whatever the agent asks.  The applied command, as a
+fraction of the supply, is what the reward's effort term and the next observation's
+previous action use (``info["command_v"]`` in volts; ``info["action_v"]`` is the agent's
+own; ``info["supervisor_mode"]`` and ``info["supervisor_fault"]`` its state).  A policy
+trained with the layer on is therefore evaluated with it on, as in a scenario run.
+
 ## Arguments
 
 | Parameter              | Type  | Default   | Description                                            |
@@ -141,6 +156,7 @@ drift, tremor, sag or battery).
 | `violation_weight`     | float | 1.0       | ``w_v``                                                |
 | `backend`              | str   | "lumped"  | plant model for :func:`ebraille_sim.plant.loop.make_plant`   |
 | `base_device`          | DeviceParams | nominal | centre of the population                        |
+| `safety`               | bool  | True      | safety layer: the supervisor shapes every command      |
 
 Examples
 --------
@@ -176,6 +192,7 @@ from controllers.features import (C_CMD_SCALE, C_DT, C_SAFE, C_WARN, C_WU, C_WV,
                                   observe, reset_features, write_observation)
 
 __all__ = [
+    "ActionCommand",
     "ENV_ID",
     "MAX_EPISODE_STEPS",
     "N_OBS",
@@ -186,10 +203,12 @@ __all__ = [
     "EnvConfig",
     "Episode",
     "draw_episode",
+    "make_supervisor",
     "observe",
     "post_step",
     "register_envs",
     "reward_of",
+    "supervised_action",
     "validate_options",
 ]
 
@@ -221,6 +240,35 @@ def post_step(z, c, force_est_n, force_true_n, current_a, setpoint_shown_n, setp
     return r, v, force_true_n > c[C_SAFE]
 
 
+class ActionCommand:
+    """The agent as the supervisor's inner controller: returns the command it was handed."""
+
+    name = "agent"
+
+    def __init__(self):
+        self.command_v = 0.0
+
+    def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
+        pass
+
+    def update(self, force_est_n, setpoint_n, dt_s, motor_current_a=None) -> float:
+        return self.command_v
+
+
+def make_supervisor(device):
+    """The safety layer of one env: a supervisor for ``device`` around an :class:`ActionCommand`."""
+    from controllers.supervisor import Supervisor, SupervisorConfig
+    return Supervisor(ActionCommand(), SupervisorConfig.for_device(device))
+
+
+def supervised_action(sup, action: float, cmd_scale_v: float, force_est_n: float, setpoint_n: float,
+                      dt_s: float, current_a: float) -> float:
+    """The applied command of the safety layer as a fraction of ``cmd_scale_v`` (in [-1, 1])."""
+    sup.inner.command_v = action * cmd_scale_v
+    u = sup.update(force_est_n, setpoint_n, dt_s, current_a) / cmd_scale_v
+    return -1.0 if u < -1.0 else (1.0 if u > 1.0 else u)
+
+
 # ---------------------------------------------------------------------------------------------
 # configuration and episodes
 # ---------------------------------------------------------------------------------------------
@@ -244,6 +292,7 @@ class EnvConfig:
     integral_time_s: float = 0.1
     backend: str = "lumped"
     base_device: object = None
+    safety: bool = True
 
     def __post_init__(self):
         from ebraille_sim.physics.params import DeviceParams, RateParams
@@ -258,6 +307,7 @@ class EnvConfig:
                            check_pair("setpoint_range_n", self.setpoint_range_n, 0.01, self.warn_force_n))
         check_bool("randomize_device", self.randomize_device)
         check_bool("disturbances", self.disturbances)
+        check_bool("safety", self.safety)
         check_range("effort_weight", self.effort_weight, 0.0, 100.0)
         check_range("violation_weight", self.violation_weight, 0.0, 100.0)
         check_range("rate_filter_s", self.rate_filter_s, 0.0, 10.0)
@@ -512,7 +562,7 @@ class ContactForceEnv(gym.Env):
                  safe_force_n: float = TACTILE_FORCE_MAX_N, warn_force_n: float = 2.0, episode_characters: int = 30,
                  reading_start_s: float = 1.0, wpm_range=(60.0, 120.0), setpoint_range_n=(0.3, 1.5),
                  randomize_device: bool = True, disturbances: bool = True, effort_weight: float = 0.1,
-                 violation_weight: float = 1.0, backend: str = "lumped", base_device=None):
+                 violation_weight: float = 1.0, backend: str = "lumped", base_device=None, safety: bool = True):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode {render_mode!r} is not supported; allowed: None, "
                              f"{', '.join(self.metadata['render_modes'])}")
@@ -522,7 +572,8 @@ class ContactForceEnv(gym.Env):
                                 reading_start_s=reading_start_s, wpm_range=wpm_range,
                                 setpoint_range_n=setpoint_range_n, randomize_device=randomize_device,
                                 disturbances=disturbances, effort_weight=effort_weight,
-                                violation_weight=violation_weight, backend=backend, base_device=base_device)
+                                violation_weight=violation_weight, backend=backend, base_device=base_device,
+                                safety=safety)
         from ebraille_sim.plant.loop import PLANT_BACKENDS
         if backend not in PLANT_BACKENDS:
             raise ValueError(f"unknown backend {backend!r}; available: {', '.join(sorted(PLANT_BACKENDS))}")
@@ -538,6 +589,7 @@ class ContactForceEnv(gym.Env):
         self._varying = []
         self._renderer = None
         self._history = None
+        self._sup = None
 
     # -- episode ---------------------------------------------------------------------------
     def next_episode_seed(self, seed=None) -> np.random.SeedSequence:
@@ -563,6 +615,10 @@ class ContactForceEnv(gym.Env):
         self.episode = ep
         self._k = 0
         fe = float(self._st[S.force_est_n])
+        self._sup = None
+        if self.config.safety:
+            self._sup = make_supervisor(dev)
+            self._sup.reset(force_est_n=fe, setpoint_n=float(ep.setpoint_n[0]), command_v=0.0)
         reset_features(self._z, fe)
         write_observation(self._z, self._c, fe, ep.setpoint_n[0], float(self._st[S.current_a]), self._obs)
         if self.render_mode is not None:
@@ -574,9 +630,13 @@ class ContactForceEnv(gym.Env):
         st = self._st
         k = self._k
         ep = self.episode
-        return {"force_true_n": float(st[S.contact_force_n]), "force_est_n": float(st[S.force_est_n]),
+        info = {"force_true_n": float(st[S.contact_force_n]), "force_est_n": float(st[S.force_est_n]),
                 "setpoint_n": float(ep.setpoint_n[k]), "command_v": float(self._inp[U.command_v]),
                 "violation": violation, "time_s": k * self.config.dt_s, "char_index": int(ep.char_index[k])}
+        if self._sup is not None:
+            info.update(action_v=self._sup.inner.command_v, supervisor_mode=self._sup.mode,
+                        supervisor_fault=self._sup.fault)
+        return info
 
     def step(self, action):
         if self.episode is None:
@@ -591,6 +651,9 @@ class ContactForceEnv(gym.Env):
         inp = self._inp
         for j, arr in self._varying:
             inp[j] = arr[k]
+        if self._sup is not None:
+            a = supervised_action(self._sup, a, self._c[C_CMD_SCALE], float(st[S.force_est_n]),
+                                  float(ep.setpoint_n[k]), self.config.dt_s, float(st[S.current_a]))
         loop_step(self.plant, a * self._c[C_CMD_SCALE])
         self._k = k + 1
         ft = float(st[S.contact_force_n])

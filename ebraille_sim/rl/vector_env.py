@@ -58,8 +58,10 @@ from ebraille_sim.rl.env import (
     check_action,
     draw_episode,
     estimator_model,
+    make_supervisor,
     post_step,
     reset_features,
+    supervised_action,
     validate_options,
     write_observation,
 )
@@ -184,6 +186,7 @@ class ContactForceVectorEnv(VectorEnv):
         self._masters: list = [None] * n
         self._rngs: list = [None] * n
         self.episodes: list = [None] * n
+        self._sups: list = [None] * n
         self._renderer = None
         self._ready = False
 
@@ -214,6 +217,9 @@ class ContactForceVectorEnv(VectorEnv):
         reset_features(self._z[i], fe)
         write_observation(self._z[i], self._c[i], fe, ep.setpoint_n[0], float(self.state[i, S.current_a]), self._obs[i])
         self.episodes[i] = ep
+        if self.config.safety:
+            self._sups[i] = make_supervisor(dev)
+            self._sups[i].reset(force_est_n=fe, setpoint_n=float(ep.setpoint_n[0]), command_v=0.0)
 
     def reset(self, *, seed=None, options: dict | None = None):
         """Reset every sub-env.
@@ -284,6 +290,8 @@ class ContactForceVectorEnv(VectorEnv):
         a = check_action(actions, self.num_envs)[:, 0]
         done = self._prev_done
         np.logical_not(done, out=self._active)
+        if self.config.safety:
+            a = self._supervised(a)
         self._step_fn(self.state, self.params, self.inputs, self._z, self._c, self._seq, self._setpoint,
                       self._n_steps, a, self._active, self.config.substeps, self._obs, self._reward,
                       self._violation, self._terminated, self._truncated)
@@ -302,6 +310,17 @@ class ContactForceVectorEnv(VectorEnv):
         info = {"force_true_n": fc.copy(), "_force_true_n": every, "force_est_n": self.state[:, S.force_est_n].copy(),
                 "_force_est_n": every.copy(), "violation": self._violation.copy(), "_violation": every.copy()}
         return (self._obs.copy(), self._reward.copy(), self._terminated.copy(), self._truncated.copy(), info)
+
+    def _supervised(self, a: np.ndarray) -> np.ndarray:
+        """The safety layer's applied commands (fractions of the supply) of the active rows."""
+        out = np.clip(a, -1.0, 1.0)
+        st, dt = self.state, self.config.dt_s
+        for i in np.nonzero(self._active)[0]:
+            k = int(self._z[i, Z_STEP])
+            out[i] = supervised_action(self._sups[i], float(out[i]), self._c[i, C_CMD_SCALE],
+                                       float(st[i, S.force_est_n]), float(self._setpoint[i, k]), dt,
+                                       float(st[i, S.current_a]))
+        return out
 
     def render(self):
         """One RGB frame per sub-env (tuple of arrays), or None without a render mode."""
