@@ -110,6 +110,21 @@ def test_strap_slips_are_minimum_jerk_steps():
     assert np.all(np.diff(x) >= 0)
 
 
+def test_strap_seats_after_its_maximum_offset():
+    from ebraille_sim.scenarios.disturbances import StrapSlip
+    t = np.arange(0.0, 3600.0, 0.01)
+    x = StrapSlip(rate_per_min=2.0, displacement_m=0.1e-3).inputs(t, np.random.default_rng(1), None)["finger_pos_m"][1]
+    assert x.max() == pytest.approx(1e-3) and x[-1] == pytest.approx(1e-3)   # 120 slips would add 12 mm
+    assert np.all(np.diff(x) >= 0)
+    k = int(np.argmax(x >= 1e-3 - 1e-12))
+    assert 0.0 < t[k] < 1200.0 and np.all(x[k:] == x[-1])                   # seated: no further slips
+    back = StrapSlip(at_s=(1.0, 2.0, 3.0), displacement_m=-0.5e-3, max_offset_m=1.2e-3).inputs(
+        t[:500], np.random.default_rng(0), None)["finger_pos_m"][1]
+    assert back[-1] == pytest.approx(-1.2e-3)                                 # both directions
+    with pytest.raises(ValueError, match="max_offset_m"):
+        profiles({"strap_slip": {"rate_per_min": 2.0, "max_offset_m": -1e-3}})
+
+
 def test_poisson_slips_follow_the_rate_and_the_seed():
     counts = []
     for seed in range(30):
@@ -194,7 +209,7 @@ def _spec(dist, duration=12.0, seed=5):
 
 
 def test_a_slip_away_from_the_board_drops_the_force_then_the_loop_recovers():
-    res = run_scenario(_spec({"strap_slip": {"at_s": [6.0], "displacement_m": 0.3e-3}}))
+    res = run_scenario(_spec({"strap_slip": {"at_s": [6.0], "displacement_m": 0.3e-3}}), supervised=False)
     t, f, fe = res.trace["t_s"], res.trace["force_true_n"], res.trace["force_est_n"]
     before = f[(t > 5.0) & (t < 6.0)].mean()
     assert before == pytest.approx(1.0, abs=0.05)

@@ -240,13 +240,18 @@ class Pressing:
 class StrapSlip:
     """The strap slips: the pulp moves relative to the frame by a step, ramped over the slip.
 
-    ``x(t) = sum_i d * s((t - t_i) / T)`` with ``s`` the minimum-jerk ramp, ``d`` =
-    ``displacement_m`` (positive: the pulp moves away from the board) and ``T`` =
-    ``duration_s``.  Slip times ``t_i`` are ``at_s``, or a Poisson process of
-    ``rate_per_min`` when ``at_s`` is empty.  The strap sits on the dorsal skin over the
-    distal phalanx, which is a few millimetres of soft tissue [M]; a resettling by a
-    fraction of it gives 0.1-0.5 mm [E] (0.2 mm default).  A strap slips as the skin
-    under it shears, taking tens of milliseconds (30 ms [E]).
+    ``x(t) = sum_i D_i s((t - t_i) / T)`` with ``s`` the minimum-jerk ramp and ``T`` =
+    ``duration_s``; each slip moves the pulp by ``d`` = ``displacement_m`` (positive: away
+    from the board) until the strap seats: the accumulated offset ``X_i = clip(X_{i-1} + d,
+    -X_max, X_max)`` and ``D_i = X_i - X_{i-1}``, with ``X_max`` = ``max_offset_m``.  Slip
+    times ``t_i`` are ``at_s``, or a Poisson process of ``rate_per_min`` when ``at_s`` is
+    empty.  The strap sits on the dorsal skin over the distal phalanx, which is a few
+    millimetres of soft tissue [M]; a resettling by a fraction of it gives 0.1-0.5 mm [E]
+    (0.2 mm default).  A strap slips as the skin under it shears, taking tens of
+    milliseconds (30 ms [E]).  It cannot slide without end: the finger tapers toward its
+    tip and the skin under the strap stretches, so the strap seats after about 1 mm [E]
+    (``max_offset_m``), well inside the 6 mm rack travel; an hour of slips at 2 per minute
+    therefore moves the pulp 1 mm, not 12.
     """
     at_s: tuple = sourced((), "s", "[E] scenario-chosen slip times", lo=0.0, hi=3600.0, kind="times")
     rate_per_min: float = sourced(0.0, "1/min", "[E] Poisson slip rate when at_s is empty",
@@ -255,6 +260,8 @@ class StrapSlip:
                                     lo=-2e-3, hi=2e-3, kind="float")
     duration_s: float = sourced(0.03, "s", "[E] skin shear under the strap, tens of ms",
                                 lo=1e-3, hi=5.0, kind="float")
+    max_offset_m: float = sourced(1e-3, "m", "[E] the strap seats after ~1 mm of slips (tapering finger, "
+                                  "stretched skin)", lo=0.0, hi=3e-3, kind="float")
 
     def inputs(self, t_s, rng, device):
         times = list(self.at_s)
@@ -265,8 +272,13 @@ class StrapSlip:
                 times.append(t)
                 t += float(rng.exponential(60.0 / self.rate_per_min))
         x = np.zeros(len(t_s))
-        for ti in times:
-            x += self.displacement_m * minimum_jerk((t_s - ti) / self.duration_s)
+        offset = 0.0
+        d, x_max = self.displacement_m, self.max_offset_m
+        for ti in sorted(times):
+            step = d if abs(offset + d) <= x_max else min(max(offset + d, -x_max), x_max) - offset
+            if step != 0.0:
+                x += step * minimum_jerk((t_s - ti) / self.duration_s)
+            offset += step
         return {"finger_pos_m": ("add", x)}
 
 
