@@ -41,8 +41,7 @@ def test_fsr_open_retracts():
 
 def test_fsr_open_without_supervisor_presses_too_hard():
     spec = load_scenario("fault_fsr_open")
-    spec = dataclasses.replace(spec, sections={k: v for k, v in spec.sections.items() if k != "supervisor"})
-    tr = run_scenario(spec).trace
+    tr = run_scenario(spec, supervised=False).trace
     assert tr["force_true_n"].max() > MAX_SAFE_N
 
 
@@ -80,9 +79,8 @@ def test_controller_nan_is_caught_and_reading_recovers():
 
 def test_controller_nan_without_supervisor_is_an_error():
     spec = load_scenario("fault_controller_nan")
-    spec = dataclasses.replace(spec, sections={k: v for k, v in spec.sections.items() if k != "supervisor"})
     with pytest.raises(ValueError, match="command_v must be finite"):
-        run_scenario(spec)
+        run_scenario(spec, supervised=False)
 
 
 def test_finger_withdrawn_and_put_back_recovers():

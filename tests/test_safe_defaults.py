@@ -28,7 +28,7 @@ def test_opt_out_is_explicit_and_recorded():
     assert "supervisor" not in spec.sections
     r = run_scenario(spec, duration_s=1.0)
     assert r.supervisor["enabled"] and r.supervisor["source"].startswith("on: default")
-    assert r.supervisor["fault"] is None and r.controller_name == "supervised(pid)"
+    assert r.supervisor["fault"] is None and r.controller_name == "pid"
     off = dataclasses.replace(spec, sections={**spec.sections, "supervisor": {"enabled": False}})
     r_off = run_scenario(off, duration_s=1.0)
     assert not r_off.supervisor["enabled"] and "enabled = false" in r_off.supervisor["source"]

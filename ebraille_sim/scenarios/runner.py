@@ -39,6 +39,8 @@ class RunResult:
         :data:`TRACE_COLUMNS`); sample ``k`` is the state at the end of control period ``k``.
     schedule : ReadingSchedule
     controller_name : str
+        The name of the controller chosen for the run (the scenario's or the override),
+        without the wrappers (injected faults, supervisor) the scenario adds around it.
     seed : int
     supervisor : dict
         The safety supervisor of the run (:func:`supervisor_choice`): ``enabled``, ``source``
@@ -160,6 +162,7 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
         raise ScenarioError(f"{spec.source}: {exc}") from None
     plant.set_finger(spec.finger.gap_m)
     profiles = run.profiles
+    chosen = ctrl
     ctrl = wrap_controller(spec, ctrl, dt, supervised)
     tr = {c: np.zeros(n) for c in TRACE_COLUMNS if c != "character"}
     st = plant.state[0]
@@ -213,7 +216,7 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     if sup_on:
         sup = _find_supervisor(ctrl)
         supervisor.update(fault=sup.fault, events=[[t_ev, text] for t_ev, text in sup.events])
-    return RunResult(spec, metrics, tr, schedule, getattr(ctrl, "name", type(ctrl).__name__), seed, supervisor)
+    return RunResult(spec, metrics, tr, schedule, getattr(chosen, "name", type(chosen).__name__), seed, supervisor)
 
 
 def _find_supervisor(ctrl):
