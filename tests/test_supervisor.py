@@ -102,7 +102,8 @@ def test_stuck_reading_with_jammed_motor_is_left_to_i2t():
     sup.reset(force_est_n=1.0, setpoint_n=1.0)
     run(sup, 1.0, n=200, cur=0.0, jitter=0.0)
     sup.inner.u = 1.0
-    run(sup, 1.0, n=50, cur=1.0 / 21.2, jitter=0.0)              # stalled: no back-EMF
+    for _ in range(50):                                          # stalled: i = u/R, no back-EMF
+        sup.update(1.0, 1.0, 1e-3, sup.u_prev / 21.2)
     assert sup.fault is None
 
 
