@@ -115,6 +115,17 @@ def _design_reader(device: DeviceParams):
     return max(f.stiffness_b_n_per_m, s.stiffness_b_n_per_m), max(f.exponent_m_per_m, s.exponent_m_per_m)
 
 
+ESTIMATOR_PERIOD_S = 0.01
+"""Period of the force estimate, s: the paper's models run at 100 Hz ([R] seed paper); the
+estimate holds its value in between."""
+
+
+def _speed_limit(b: dict, rb: float, rm: float) -> float:
+    """Speed at which the impact alone brings the design reader to the safe force (no tremor allowance), m/s."""
+    e = limits.absorbed_energy_j(0.0, SAFE_FORCE_N, rb, rm)
+    return limits.speed_for_energy_m_per_s(e, b["pinion_mass_kg"], b["board_mass_kg"], b["gear_efficiency"])
+
+
 def device_limits(device: DeviceParams) -> dict:
     """The drive and reader constants of ``device`` that :class:`SupervisorConfig` carries (see docs/safety.md)."""
     b = limits.drive_bounds(device)
@@ -136,10 +147,12 @@ def device_limits(device: DeviceParams) -> dict:
         "gear_efficiency": b["gear_efficiency"],
         "friction_breakaway_ratio": device.motor.breakaway_ratio,
         "guide_static_n": dt.guide_coulomb_n * dt.guide_breakaway_ratio,
+        "soft_b_n_per_m": soft.stiffness_b_n_per_m,
+        "soft_m_per_m": soft.exponent_m_per_m,
         "reader_b_n_per_m": rb,
         "reader_m_per_m": rm,
         "speed_hold_s": 0.5 * math.pi * math.sqrt(b["impact_mass_kg"] / k_contact),
-        "stuck_travel_m": 2.0 * dt.backlash_m,
+        "stuck_travel_m": 2.0 * dt.backlash_m + ESTIMATOR_PERIOD_S * _speed_limit(b, rb, rm),
         "first_contact_travel_m": DESIGN_GAP_M + compression_at_force_m(
             SAFE_FORCE_N, soft.stiffness_b_n_per_m, soft.exponent_m_per_m),
     }
@@ -206,10 +219,14 @@ class SupervisorConfig:
     """How long the highest recent speed sets the current limit: a quarter period of the impact
     mass on the design reader's stiffness at the contact threshold [D]."""
     stuck_travel_m: float = None  # type: ignore[assignment]
-    """Travel with an unchanged estimate that makes it stuck: twice the backlash [D]."""
+    """Travel with an unchanged estimate that makes it stuck: twice the backlash plus the travel
+    at the impact speed limit within one estimator period [D]."""
     first_contact_travel_m: float = None  # type: ignore[assignment]
     """Travel from the start within which the first contact must show: the design gap plus the
     soft reader's compression at the safe force [D]."""
+    soft_b_n_per_m: float = None  # type: ignore[assignment]
+    """Pulp b of the softest reader preset: the most travel a force change can take."""
+    soft_m_per_m: float = None  # type: ignore[assignment]
     retract_v: float = 2.0
     retract_s: float = 0.6
     retract_moving_s: float = 0.05
@@ -308,13 +325,20 @@ class SupervisorConfig:
         """eta M_p + m_b, kg: the mass whose kinetic energy reaches the finger (physics.limits eq. 2)."""
         return self.gear_efficiency * self.pinion_mass_kg + self.board_mass_kg
 
-    def push_force_n(self, current_a: float) -> float:
-        """Largest steady force the drive pushes with at ``current_a`` (physics.limits eq. 1), N."""
-        return self.push_force_per_a_n * (current_a - self.friction_current_a) + self.weight_n
+    def push_force_n(self, current_a: float, friction_scale: float = 1.0, weight_n: float | None = None) -> float:
+        """Steady force the drive pushes with at ``current_a`` (physics.limits eq. 1), N.
+
+        The constants are already at the rack line and through the gearhead, so the law is
+        called with ``kM = eta kM N/r``, ``N/r = eta = 1`` and ``T_f = friction_scale I_f eta kM N/r``.
+        """
+        return limits.push_force_bound_n(current_a, self.push_force_per_a_n, 1.0, 1.0,
+                                         friction_scale * self.friction_current_a * self.push_force_per_a_n,
+                                         self.weight_n if weight_n is None else weight_n)
 
     def current_for_force_a(self, force_n: float) -> float:
         """Current at which :meth:`push_force_n` equals ``force_n``, A."""
-        return (force_n - self.weight_n) / self.push_force_per_a_n + self.friction_current_a
+        return limits.current_for_push_force_a(force_n, self.push_force_per_a_n, 1.0, 1.0,
+                                               self.friction_current_a * self.push_force_per_a_n, self.weight_n)
 
     @property
     def envelope_force_n(self) -> float:
@@ -421,6 +445,7 @@ class Supervisor:
         self.travel_m = 0.0
         self.stuck_ref_n = math.nan
         self.stuck_travel_m = 0.0
+        self.contact_travel_m = None
         self.stall_s = 0.0
         self.implausible_s = 0.0
         self.current_limit_a = c.current_limit_a
@@ -458,7 +483,8 @@ class Supervisor:
         v = limits.rack_speed_from_emf_m_per_s(u, cur, c.motor_resistance_ohm, c.back_emf_v_s_per_m, 1.0)
         self.accel = (v - self.speed) / dt_s
         self.speed = v
-        self.travel_m = max(0.0, self.travel_m + v * dt_s)
+        if abs(cur) > 0.5 * c.friction_current_a:     # an unpowered motor (a cut supply) reads its command as speed
+            self.travel_m = max(0.0, self.travel_m + v * dt_s)
         self.speed_win.push(self.t, v)
 
     def _envelope_cap(self, u: float, cur: float) -> float:
@@ -480,12 +506,21 @@ class Supervisor:
             if not abs(f - self.stuck_ref_n) <= c.stuck_tolerance_n:
                 self.stuck_ref_n = f
                 self.stuck_travel_m = 0.0
-            elif abs(cur) > c.friction_current_a:      # a driven motor (an unpowered one reads no EMF)
+            elif abs(cur) > 0.5 * c.friction_current_a:     # a driven motor: an unpowered one (a cut supply)
+                # draws no current and its command reads as speed
                 self.stuck_travel_m += abs(v) * dt_s
                 if self.stuck_travel_m > c.stuck_travel_m:
                     return "fsr_stuck"
         else:
             self.stuck_ref_n = math.nan
+        # travel since the first contact against the compression the estimate allows on the soft reader
+        if self.in_contact:
+            if self.contact_travel_m is None:
+                self.contact_travel_m = self.travel_m
+            allowed = (compression_at_force_m(self.est_win.hi[0][1] + c.implausible_n, c.soft_b_n_per_m,
+                                              c.soft_m_per_m) + c.stuck_travel_m)
+            if self.travel_m - self.contact_travel_m > allowed:
+                return "fsr_implausible"
         # no contact within the travel the gap allows
         if not self.in_contact and self.travel_m > c.first_contact_travel_m:
             return "fsr_no_contact"
@@ -500,10 +535,10 @@ class Supervisor:
         # the force the current implies while the board moves forward, against the estimate
         if v > c.moving_speed_m_per_s:
             a = max(self.accel, 0.0)
-            f_lo = (c.gear_efficiency * (c.push_force_per_a_n / c.gear_efficiency
-                                         * (cur - c.friction_breakaway_ratio * c.friction_current_a)
-                                         - c.pinion_mass_kg * a)
-                    - c.guide_static_n - c.weight_n - c.board_mass_kg * a)
+            # lower edge of the friction band: break-away friction, guide friction, weight against
+            # the push, and the force that accelerates the rotor and the board
+            f_lo = (c.push_force_n(cur, c.friction_breakaway_ratio, -c.weight_n) - c.guide_static_n
+                    - c.impact_mass_kg * a)
             if f_lo - self.est_win.hi[0][1] > c.implausible_n:
                 self.implausible_s += dt_s
                 if self.implausible_s > c.implausible_s:
@@ -566,6 +601,7 @@ class Supervisor:
             if self.in_contact and lost:
                 self.mode = "freeze"
                 self.freeze_t0 = t
+                self.contact_travel_m = None          # the compression check starts again at the next contact
                 self._event("contact lost: freeze")
         if self.mode == "freeze":
             if f > c.contact_on_n and f >= f_then and t - self.freeze_t0 > c.backoff_s:
@@ -642,7 +678,7 @@ def _envelope(c: SupervisorConfig) -> tuple[list[float], list[float]]:
     v_max = c.speed_limit_m_per_s
     speeds = [v_max * k / 32 for k in range(33)]
     currents = [c.current_for_force_a(max(c.drive_force_limit_n(v), 0.0)) for v in speeds]
-    speeds.append(2.0 * v_max)
+    speeds.append(1.05 * v_max)
     currents.append(-c.friction_current_a)
     return speeds, currents
 

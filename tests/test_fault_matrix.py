@@ -112,7 +112,7 @@ def test_the_sensor_lies_that_went_unseen_are_bounded(case, phase):
 def test_a_sensor_reading_a_fixed_plausible_value_is_detected():
     r = run_cell(("fsr_at_0.45V",), "steady")
     d = detection(r["trace"], r["t0_s"])
-    assert d is not None and d < 1.5
+    assert d is not None and d < 1.8
 
 
 def test_without_the_supervisor_the_same_lie_presses_too_hard():
