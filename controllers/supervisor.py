@@ -15,6 +15,13 @@ Shaping (every period, in this order)
    command is scaled by ``1 - v`` with ``v`` the degree of violation in [0, 1]; at or
    above the cap the command is ``-retract_v`` until the estimate is back below it.
 3. **Rate limit.**  The command moves at most ``slew_v_per_s`` per second.
+4. **Current and speed envelope** (with a current measurement).  The command is capped at
+   the voltage that brings the motor current to a limit that depends on the rack speed read
+   from the back-EMF (highest of the last ``speed_hold_s``): at rest the current whose
+   steady push (:mod:`ebraille_sim.physics.limits` eq. 1) is ``safe_force_n`` less the
+   pulp's own motion; moving, the current whose push plus the impact of the moving drive
+   stays there; above the speed limit a braking current.  This bounds the true force
+   whatever the sensor reads (derivation and numbers: docs/safety.md).
 
 Faults (latched: safe retract, then hold)
 -----------------------------------------
@@ -38,7 +45,20 @@ contact_lost       after contact (estimate > ``contact_on_n``), a loss of contac
                    controller from 0 V; no contact within ``contact_loss_timeout_s`` is
                    latched (an open FSR reads 0 V, i.e. no force, for good)
 controller_nonfinite non-finite commands for longer than ``watchdog_timeout_s``
+fsr_stuck          (travel) in contact, the estimate stays within ``stuck_tolerance_n`` while
+                   the driven motor travels ``stuck_travel_m``
+fsr_implausible    moving forward, the force the current implies (lower edge of the friction
+                   band) exceeds the recent estimate by ``implausible_n`` for
+                   ``implausible_s``; or the travel since contact exceeds the soft reader's
+                   compression for the estimate
+fsr_no_contact     no contact within ``first_contact_travel_m`` of travel from the start
+motor_stalled      pushing without moving for ``stall_time_s``, with no contact shown or at
+                   ``stall_fraction`` of the current limit
 ================== =====================================================================
+
+A fall of the setpoint within ``release_window_s`` (refresh release, a step down) widens the
+drop that counts as a loss of contact by that fall, and an estimate below ``contact_lost_n``
+is a loss only while the setpoint asks for contact.
 
 *Safe retract*: ``-retract_v`` until the board has moved back for at least
 ``retract_moving_s`` (motion is read from the current: a moving motor draws much less than
