@@ -15,6 +15,13 @@ Shaping (every period, in this order)
    command is scaled by ``1 - v`` with ``v`` the degree of violation in [0, 1]; at or
    above the cap the command is ``-retract_v`` until the estimate is back below it.
 3. **Rate limit.**  The command moves at most ``slew_v_per_s`` per second.
+4. **Current and speed envelope** (with a current measurement).  The command is capped at
+   the voltage that brings the motor current to a limit that depends on the rack speed read
+   from the back-EMF (highest of the last ``speed_hold_s``): at rest the current whose
+   steady push (:mod:`ebraille_sim.physics.limits` eq. 1) is ``safe_force_n`` less the
+   pulp's own motion; moving, the current whose push plus the impact of the moving drive
+   stays there; above the speed limit a braking current.  This bounds the true force
+   whatever the sensor reads (derivation and numbers: docs/safety.md).
 
 Faults (latched: safe retract, then hold)
 -----------------------------------------
@@ -38,7 +45,20 @@ contact_lost       after contact (estimate > ``contact_on_n``), a loss of contac
                    controller from 0 V; no contact within ``contact_loss_timeout_s`` is
                    latched (an open FSR reads 0 V, i.e. no force, for good)
 controller_nonfinite non-finite commands for longer than ``watchdog_timeout_s``
+fsr_stuck          (travel) in contact, the estimate stays within ``stuck_tolerance_n`` while
+                   the driven motor travels ``stuck_travel_m``
+fsr_implausible    moving forward, the force the current implies (lower edge of the friction
+                   band) exceeds the recent estimate by ``implausible_n`` for
+                   ``implausible_s``; or the travel since contact exceeds the soft reader's
+                   compression for the estimate
+fsr_no_contact     no contact within ``first_contact_travel_m`` of travel from the start
+motor_stalled      pushing without moving for ``stall_time_s``, with no contact shown or at
+                   ``stall_fraction`` of the current limit
 ================== =====================================================================
+
+A fall of the setpoint within ``release_window_s`` (refresh release, a step down) widens the
+drop that counts as a loss of contact by that fall, and an estimate below ``contact_lost_n``
+is a loss only while the setpoint asks for contact.
 
 *Safe retract*: ``-retract_v`` until the board has moved back for at least
 ``retract_moving_s`` (motion is read from the current: a moving motor draws much less than
@@ -63,6 +83,7 @@ Examples
 """
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import math
 from collections import deque
@@ -71,12 +92,14 @@ from dataclasses import dataclass
 from typing import Any
 
 from ebraille_sim.base.validation import check_bool, check_keys, check_number
-from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, DeviceParams
+from ebraille_sim.physics import limits
+from ebraille_sim.physics.fingertip import compression_at_force_m, tangent_stiffness_n_per_m
+from ebraille_sim.physics.params import FINGERS, TACTILE_FORCE_MAX_N, DeviceParams
 
 from controllers.base import check_dt
 
 __all__ = ["SupervisorConfig", "Supervisor", "RATED_CURRENT_A", "RATED_TO_STALL", "rated_current_a",
-           "FORCE_CAP_LIMIT_N"]
+           "FORCE_CAP_LIMIT_N", "SAFE_FORCE_N", "device_limits"]
 
 _NOMINAL = DeviceParams()
 
@@ -94,6 +117,67 @@ RATED_TO_STALL = 0.19 / (6.0 / 21.2)
 """Rated over stall current at the nominal supply, [E] the Faulhaber 0816's ratio (0.67)."""
 
 
+SAFE_FORCE_N = 3.5
+"""Default bound on the true finger force, N: half a newton above the 3 N top of the tactile
+range ([R] seed paper) [E], below :data:`FORCE_CAP_LIMIT_N`."""
+
+CONTACT_ON_N = 0.2
+"""Estimate above which the board is taken to touch the finger, N: the 0.2 N bottom of the
+tactile range ([R] seed paper)."""
+
+DESIGN_GAP_M = 2e-3
+"""Largest board-to-pulp gap at the start of a session, m [E] (the shipped scenarios use 1-2 mm)."""
+
+
+def _design_reader(device: DeviceParams):
+    """Pulp constants the impact bound assumes: the stiffer of the device's reader and the stiff preset [E]."""
+    f, s = device.finger, FINGERS["stiff"]
+    return max(f.stiffness_b_n_per_m, s.stiffness_b_n_per_m), max(f.exponent_m_per_m, s.exponent_m_per_m)
+
+
+ESTIMATOR_PERIOD_S = 0.01
+"""Period of the force estimate, s: the paper's models run at 100 Hz ([R] seed paper); the
+estimate holds its value in between."""
+
+
+def _speed_limit(b: dict, rb: float, rm: float) -> float:
+    """Speed at which the impact alone brings the design reader to the safe force (no tremor allowance), m/s."""
+    e = limits.absorbed_energy_j(0.0, SAFE_FORCE_N, rb, rm)
+    return limits.speed_for_energy_m_per_s(e, b["pinion_mass_kg"], b["board_mass_kg"], b["gear_efficiency"])
+
+
+def device_limits(device: DeviceParams) -> dict:
+    """The drive and reader constants of ``device`` that :class:`SupervisorConfig` carries (see docs/safety.md)."""
+    b = limits.drive_bounds(device)
+    rb, rm = _design_reader(device)
+    soft = FINGERS["soft"]
+    k_contact = tangent_stiffness_n_per_m(CONTACT_ON_N, rb, rm)
+    dt = device.drivetrain
+    return {
+        "motor_resistance_ohm": device.motor.resistance_ohm,
+        "stall_current_a": device.driver_supply_v / device.motor.resistance_ohm,
+        "rated_current_a": rated_current_a(device),
+        "driver_supply_v": device.driver_supply_v,
+        "push_force_per_a_n": b["push_force_per_a_n"],
+        "friction_current_a": b["friction_current_a"],
+        "weight_n": b["weight_n"],
+        "back_emf_v_s_per_m": b["back_emf_v_s_per_m"],
+        "pinion_mass_kg": b["pinion_mass_kg"],
+        "board_mass_kg": b["board_mass_kg"],
+        "gear_efficiency": b["gear_efficiency"],
+        "friction_breakaway_ratio": device.motor.breakaway_ratio,
+        "guide_static_n": dt.guide_coulomb_n * dt.guide_breakaway_ratio,
+        "soft_b_n_per_m": soft.stiffness_b_n_per_m,
+        "soft_m_per_m": soft.exponent_m_per_m,
+        "reader_b_n_per_m": rb,
+        "reader_m_per_m": rm,
+        "speed_hold_s": 0.5 * math.pi * math.sqrt(b["impact_mass_kg"] / k_contact),
+        "stuck_travel_m": 2.0 * dt.backlash_m + ESTIMATOR_PERIOD_S * _speed_limit(b, rb, rm),
+        "first_contact_travel_m": DESIGN_GAP_M + compression_at_force_m(
+            SAFE_FORCE_N, soft.stiffness_b_n_per_m, soft.exponent_m_per_m),
+    }
+
+
 def rated_current_a(device: DeviceParams) -> float:
     """Continuous current of ``device``'s motor, A (:data:`RATED_CURRENT_A`, else the ratio)."""
     m = device.motor
@@ -102,27 +186,67 @@ def rated_current_a(device: DeviceParams) -> float:
     return RATED_TO_STALL * device.driver_supply_v / m.resistance_ohm
 
 
+_NOMINAL_LIMITS: dict = {}
+
+
 @dataclass(frozen=True)
 class SupervisorConfig:
     """Limits and detector settings of :class:`Supervisor` (SI units in the names).
 
-    The motor limits default to the nominal device's (:class:`DeviceParams`);
-    :meth:`for_device` derives them from another device.  Every numeric field must be a
-    positive finite number.
+    The motor, drive and reader constants default to the nominal device's
+    (:class:`DeviceParams`, :func:`device_limits`); :meth:`for_device` derives them from
+    another device.  Every numeric field must be a positive finite number.
     """
     force_cap_n: float = TACTILE_FORCE_MAX_N
     """Cap on the estimated force (upper end of the tactile range, [R] seed paper)."""
     cap_margin_n: float = 0.3
+    safe_force_n: float = SAFE_FORCE_N
+    """Bound on the true force that the current and speed envelope keeps whatever the sensor reads."""
+    finger_motion_m: float = 45e-6
+    """Motion of the pulp toward a held board that the drive cannot prevent, m: three times the
+    15 um RMS of physiological tremor [E] (the tremor scenarios' amplitude)."""
     slew_v_per_s: float = 600.0
     """Full scale (6 V) in 10 ms, one estimator period."""
-    rated_current_a: float = rated_current_a(_NOMINAL)
+    rated_current_a: float = None  # type: ignore[assignment]
     """Continuous motor current (:func:`rated_current_a`)."""
-    stall_current_a: float = _NOMINAL.driver_supply_v / _NOMINAL.motor.resistance_ohm
+    stall_current_a: float = None  # type: ignore[assignment]
     """Stall current at the driver supply, [D] U / R."""
     overload_time_s: float = 0.5
     """Time allowed at the stall current before the I^2 t trip [E]."""
-    motor_resistance_ohm: float = _NOMINAL.motor.resistance_ohm
+    motor_resistance_ohm: float = None  # type: ignore[assignment]
     """Armature resistance R of the device's motor (back-EMF ``u - R i`` and motion detection)."""
+    driver_supply_v: float = None  # type: ignore[assignment]
+    """H-bridge supply: the terminal voltage is the command clipped to it."""
+    push_force_per_a_n: float = None  # type: ignore[assignment]
+    """eta kM N/r, N/A: rack force per ampere through the gearhead in the pushing direction [D]."""
+    friction_current_a: float = None  # type: ignore[assignment]
+    """T_f / kM, A: current that the motor's own friction torque takes [D]."""
+    weight_n: float = None  # type: ignore[assignment]
+    """m_b g, N: weight of the board, counted as pushing (hand upside down) [D]."""
+    back_emf_v_s_per_m: float = None  # type: ignore[assignment]
+    """kE N/r, V s/m: back-EMF per rack speed [D]."""
+    pinion_mass_kg: float = None  # type: ignore[assignment]
+    """J (N/r)^2, kg: rotor inertia at the rack line [D]."""
+    board_mass_kg: float = None  # type: ignore[assignment]
+    gear_efficiency: float = None  # type: ignore[assignment]
+    friction_breakaway_ratio: float = None  # type: ignore[assignment]
+    guide_static_n: float = None  # type: ignore[assignment]
+    """Break-away friction of the guide rods, N (the plausibility band's lower edge)."""
+    reader_b_n_per_m: float = None  # type: ignore[assignment]
+    """Pulp b of the reader the impact bound assumes (the stiffer of the device's and the stiff preset)."""
+    reader_m_per_m: float = None  # type: ignore[assignment]
+    speed_hold_s: float = None  # type: ignore[assignment]
+    """How long the highest recent speed sets the current limit: a quarter period of the impact
+    mass on the design reader's stiffness at the contact threshold [D]."""
+    stuck_travel_m: float = None  # type: ignore[assignment]
+    """Travel with an unchanged estimate that makes it stuck: twice the backlash plus the travel
+    at the impact speed limit within one estimator period [D]."""
+    first_contact_travel_m: float = None  # type: ignore[assignment]
+    """Travel from the start within which the first contact must show: the design gap plus the
+    soft reader's compression at the safe force [D]."""
+    soft_b_n_per_m: float = None  # type: ignore[assignment]
+    """Pulp b of the softest reader preset: the most travel a force change can take."""
+    soft_m_per_m: float = None  # type: ignore[assignment]
     retract_v: float = 2.0
     retract_s: float = 0.6
     retract_moving_s: float = 0.05
@@ -132,14 +256,27 @@ class SupervisorConfig:
     stuck_tolerance_n: float = 2e-3
     stuck_command_v: float = 0.25
     stuck_emf_v: float = 0.05
-    contact_on_n: float = 0.2
+    contact_on_n: float = CONTACT_ON_N
     contact_lost_n: float = 0.1
     """Above the 0.063 N that the paper's estimator reads with no load (and with an open FSR)."""
     drop_n: float = 0.3
     drop_window_s: float = 0.03
+    release_window_s: float = 0.15
+    """A fall of the setpoint within this time is an intended release, not a loss of contact [E]
+    (estimator delay plus the controller's settling)."""
     backoff_s: float = 0.05
     contact_loss_timeout_s: float = 0.6
     watchdog_timeout_s: float = 0.5
+    moving_speed_m_per_s: float = 0.5e-3
+    """Rack speed above which the motor is taken to move (back-EMF 0.05 V for the nominal drive) [E]."""
+    stall_time_s: float = 0.5
+    """A motor pushing with current but not moving while no contact shows is stopped after this [E]."""
+    stall_fraction: float = 0.95
+    """Fraction of the current limit at rest above which a motor that does not move is stalled [E]
+    (holding the 2.7 N top setpoint takes about 85 % of it)."""
+    implausible_n: float = 0.5
+    """Margin by which the force the current implies may exceed the estimate [E]."""
+    implausible_s: float = 0.2
     enabled: bool = True
 
     def __post_init__(self):
@@ -147,11 +284,20 @@ class SupervisorConfig:
             if f.name == "enabled":
                 check_bool(f.name, self.enabled)
                 continue
-            object.__setattr__(self, f.name, check_number(f.name, getattr(self, f.name), lo=0.0, lo_open=True))
+            v = getattr(self, f.name)
+            if v is None:
+                v = _NOMINAL_LIMITS[f.name]
+            object.__setattr__(self, f.name, check_number(f.name, v, lo=0.0, lo_open=True))
         if self.force_cap_n > FORCE_CAP_LIMIT_N:
             raise ValueError(f"force_cap_n = {self.force_cap_n:g} N is above the {FORCE_CAP_LIMIT_N:g} N safe limit "
                              f"(the {TACTILE_FORCE_MAX_N:g} N top of the tactile range, [R] seed paper, plus "
                              f"1 N margin): a cap above it would let the board press harder than reading needs")
+        if self.safe_force_n > FORCE_CAP_LIMIT_N:
+            raise ValueError(f"safe_force_n = {self.safe_force_n:g} N is above the {FORCE_CAP_LIMIT_N:g} N safe "
+                             f"limit: the bound on the true force may not exceed the largest admissible cap")
+        if self.envelope_force_n <= self.contact_on_n:
+            raise ValueError(f"safe_force_n = {self.safe_force_n:g} N leaves no force for reading once "
+                             f"finger_motion_m ({self.finger_motion_m:g} m) is allowed for")
         if self.cap_margin_n >= self.force_cap_n:
             raise ValueError(f"cap_margin_n ({self.cap_margin_n:g}) must be below force_cap_n "
                              f"({self.force_cap_n:g})")
@@ -164,6 +310,8 @@ class SupervisorConfig:
         if self.stall_current_a <= self.rated_current_a:
             raise ValueError(f"stall_current_a ({self.stall_current_a:g}) must exceed rated_current_a "
                              f"({self.rated_current_a:g})")
+        if self.gear_efficiency > 1.0:
+            raise ValueError(f"gear_efficiency = {self.gear_efficiency:g} must be at most 1")
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], device: DeviceParams | None = None) -> SupervisorConfig:
@@ -173,10 +321,11 @@ class SupervisorConfig:
 
     @classmethod
     def for_device(cls, device: DeviceParams, **overrides: Any) -> SupervisorConfig:
-        """The defaults with the motor limits of ``device``, then ``overrides``.
+        """The defaults with the motor, drive and reader constants of ``device``, then ``overrides``.
 
         ``motor_resistance_ohm`` is the motor's R, ``stall_current_a`` the driver supply
-        over R and ``rated_current_a`` from :func:`rated_current_a`.
+        over R, ``rated_current_a`` from :func:`rated_current_a`; the drive and reader
+        constants from :func:`device_limits`.
 
         Examples
         --------
@@ -184,19 +333,60 @@ class SupervisorConfig:
         True
         """
         check_keys("SupervisorConfig", overrides, _FIELD_NAMES)
-        m = device.motor
-        derived = {"motor_resistance_ohm": m.resistance_ohm,
-                   "stall_current_a": device.driver_supply_v / m.resistance_ohm,
-                   "rated_current_a": rated_current_a(device)}
-        return cls(**{**derived, **overrides})
+        return cls(**{**device_limits(device), **overrides})
 
     @property
     def i2t_limit_a2s(self) -> float:
         """Trip level of the I^2 t integral, A^2 s."""
         return (self.stall_current_a ** 2 - self.rated_current_a ** 2) * self.overload_time_s
 
+    @property
+    def impact_mass_kg(self) -> float:
+        """eta M_p + m_b, kg: the mass whose kinetic energy reaches the finger (physics.limits eq. 2)."""
+        return self.gear_efficiency * self.pinion_mass_kg + self.board_mass_kg
+
+    def push_force_n(self, current_a: float, friction_scale: float = 1.0, weight_n: float | None = None) -> float:
+        """Steady force the drive pushes with at ``current_a`` (physics.limits eq. 1), N.
+
+        The constants are already at the rack line and through the gearhead, so the law is
+        called with ``kM = eta kM N/r``, ``N/r = eta = 1`` and ``T_f = friction_scale I_f eta kM N/r``.
+        """
+        return limits.push_force_bound_n(current_a, self.push_force_per_a_n, 1.0, 1.0,
+                                         friction_scale * self.friction_current_a * self.push_force_per_a_n,
+                                         self.weight_n if weight_n is None else weight_n)
+
+    def current_for_force_a(self, force_n: float) -> float:
+        """Current at which :meth:`push_force_n` equals ``force_n``, A."""
+        return limits.current_for_push_force_a(force_n, self.push_force_per_a_n, 1.0, 1.0,
+                                               self.friction_current_a * self.push_force_per_a_n, self.weight_n)
+
+    @property
+    def envelope_force_n(self) -> float:
+        """Force the drive may produce, N: ``safe_force_n`` less what :attr:`finger_motion_m` adds on
+        the design reader at the safe force (tangent stiffness ``b + m F``)."""
+        k = tangent_stiffness_n_per_m(self.safe_force_n, self.reader_b_n_per_m, self.reader_m_per_m)
+        return self.safe_force_n - k * self.finger_motion_m
+
+    @property
+    def current_limit_a(self) -> float:
+        """Current limit at rest: the steady push bound equals :attr:`envelope_force_n`, A."""
+        return self.current_for_force_a(self.envelope_force_n)
+
+    def drive_force_limit_n(self, speed_m_per_s: float) -> float:
+        """Largest drive force at ``speed_m_per_s`` whose impact still peaks at :attr:`envelope_force_n` (N; < 0: brake)."""
+        e = limits.impact_energy_j(max(speed_m_per_s, 0.0), self.pinion_mass_kg, self.board_mass_kg,
+                                   self.gear_efficiency)
+        return limits.drive_force_for_impact_n(e, self.envelope_force_n, self.reader_b_n_per_m, self.reader_m_per_m)
+
+    @property
+    def speed_limit_m_per_s(self) -> float:
+        """Approach speed at which the impact alone reaches :attr:`envelope_force_n` on the design reader, m/s."""
+        e = limits.absorbed_energy_j(0.0, self.envelope_force_n, self.reader_b_n_per_m, self.reader_m_per_m)
+        return limits.speed_for_energy_m_per_s(e, self.pinion_mass_kg, self.board_mass_kg, self.gear_efficiency)
+
 
 _FIELD_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(SupervisorConfig))
+_NOMINAL_LIMITS.update(device_limits(_NOMINAL))
 
 
 class _Window:
@@ -249,6 +439,7 @@ class Supervisor:
         self.inner = inner
         self.config = config
         self.name = f"supervised({getattr(inner, 'name', type(inner).__name__)})"
+        self._envelope = _envelope(config)
         self._clear()
 
     def _clear(self):
@@ -267,6 +458,17 @@ class Supervisor:
         self.est_win = _Window(c.stuck_window_s)
         self.cmd_win = _Window(c.stuck_window_s)
         self.drop_hist: deque = deque()
+        self.sp_win = _Window(c.release_window_s)
+        self.speed_win = _Window(c.speed_hold_s)
+        self.speed = 0.0
+        self.accel = 0.0
+        self.travel_m = 0.0
+        self.stuck_ref_n = math.nan
+        self.stuck_travel_m = 0.0
+        self.contact_travel_m = None
+        self.stall_s = 0.0
+        self.implausible_s = 0.0
+        self.current_limit_a = c.current_limit_a
         self.last_f = 0.0
 
     def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
@@ -294,6 +496,79 @@ class Supervisor:
         du = self.config.slew_v_per_s * dt
         return min(max(u, self.u_prev - du), self.u_prev + du)
 
+    def _motion(self, cur: float, dt_s: float) -> None:
+        """Rack speed from the back-EMF of the last period, travel integral, held peak speed."""
+        c = self.config
+        u = min(max(self.u_prev, -c.driver_supply_v), c.driver_supply_v)
+        v = limits.rack_speed_from_emf_m_per_s(u, cur, c.motor_resistance_ohm, c.back_emf_v_s_per_m, 1.0)
+        self.accel = (v - self.speed) / dt_s
+        self.speed = v
+        if abs(cur) > 0.5 * c.friction_current_a:     # an unpowered motor (a cut supply) reads its command as speed
+            self.travel_m = max(0.0, self.travel_m + v * dt_s)
+        self.speed_win.push(self.t, v)
+
+    def _envelope_cap(self, u: float, cur: float) -> float:
+        """Largest command that keeps the next period's current within the speed-dependent limit."""
+        c = self.config
+        v_held = max(self.speed_win.hi[0][1], 0.0)
+        i_lim = _interp(self._envelope, v_held)
+        self.current_limit_a = i_lim
+        u_applied = min(max(self.u_prev, -c.driver_supply_v), c.driver_supply_v)
+        return min(u, u_applied + c.motor_resistance_ohm * (i_lim - cur))
+
+    def _detect(self, f: float, sp: float, cur: float, dt_s: float) -> str | None:
+        """The detectors that need the motor current; the cause of a fault, or None."""
+        c = self.config
+        v = self.speed
+        moving = abs(v) > c.moving_speed_m_per_s
+        # a stuck code: the estimate does not change while the board travels
+        if f > c.contact_lost_n and self.in_contact:
+            if not abs(f - self.stuck_ref_n) <= c.stuck_tolerance_n:
+                self.stuck_ref_n = f
+                self.stuck_travel_m = 0.0
+            elif abs(cur) > 0.5 * c.friction_current_a:     # a driven motor: an unpowered one (a cut supply)
+                # draws no current and its command reads as speed
+                self.stuck_travel_m += abs(v) * dt_s
+                if self.stuck_travel_m > c.stuck_travel_m:
+                    return "fsr_stuck"
+        else:
+            self.stuck_ref_n = math.nan
+        # travel since the first contact against the compression the estimate allows on the soft reader
+        if self.in_contact:
+            if self.contact_travel_m is None:
+                self.contact_travel_m = self.travel_m
+            allowed = (compression_at_force_m(self.est_win.hi[0][1] + c.implausible_n, c.soft_b_n_per_m,
+                                              c.soft_m_per_m) + c.stuck_travel_m)
+            if self.travel_m - self.contact_travel_m > allowed:
+                return "fsr_implausible"
+        # no contact within the travel the gap allows
+        if not self.in_contact and self.travel_m > c.first_contact_travel_m:
+            return "fsr_no_contact"
+        # pushing and not moving: with no contact seen, or at the current limit
+        if not moving and ((f < c.contact_on_n and cur > c.current_for_force_a(c.contact_on_n))
+                           or cur > c.stall_fraction * c.current_limit_a):
+            self.stall_s += dt_s
+            if self.stall_s > c.stall_time_s:
+                return "motor_stalled"
+        else:
+            self.stall_s = 0.0
+        # the force the current implies while the board moves forward, against the estimate
+        if v > c.moving_speed_m_per_s:
+            a = max(self.accel, 0.0)
+            # lower edge of the friction band: break-away friction, guide friction, weight against
+            # the push, and the force that accelerates the rotor and the board
+            f_lo = (c.push_force_n(cur, c.friction_breakaway_ratio, -c.weight_n) - c.guide_static_n
+                    - c.impact_mass_kg * a)
+            if f_lo - self.est_win.hi[0][1] > c.implausible_n:
+                self.implausible_s += dt_s
+                if self.implausible_s > c.implausible_s:
+                    return "fsr_implausible"
+            else:
+                self.implausible_s = 0.0
+        else:
+            self.implausible_s = 0.0
+        return None
+
     def update(self, force_est_n: float, setpoint_n: float, dt_s: float, motor_current_a: float | None = None) -> float:
         """One period: run the detectors, then pass, shape or replace the inner command."""
         c = self.config
@@ -307,6 +582,7 @@ class Supervisor:
         cur = None if motor_current_a is None or not math.isfinite(motor_current_a) else float(motor_current_a)
         if cur is not None:
             self.theta = max(0.0, self.theta + (cur * cur - c.rated_current_a ** 2) * dt_s)
+            self._motion(cur, dt_s)
         if self.mode in ("retract", "hold"):
             return self._safe(cur, dt_s)
         # detectors that latch
@@ -318,11 +594,18 @@ class Supervisor:
             return self._safe(cur, dt_s)
         self.est_win.push(t, f)
         self.cmd_win.push(t, self.u_prev)
+        sp_in = float(setpoint_n)
+        self.sp_win.push(t, sp_in if math.isfinite(sp_in) else 0.0)
         moving = cur is None or abs(self.u_prev - c.motor_resistance_ohm * cur) > c.stuck_emf_v
         if (moving and self.in_contact and self.est_win.full(t) and self.est_win.lo[0][1] > c.contact_lost_n
                 and self.est_win.range() < c.stuck_tolerance_n and self.cmd_win.range() > c.stuck_command_v):
             self._trip("fsr_stuck")
             return self._safe(cur, dt_s)
+        if cur is not None and self.mode == "run":
+            cause = self._detect(f, sp_in, cur, dt_s)
+            if cause is not None:
+                self._trip(cause)
+                return self._safe(cur, dt_s)
         # contact tracking
         self.drop_hist.append((t, f))
         while self.drop_hist[0][0] < t - c.drop_window_s:
@@ -331,10 +614,14 @@ class Supervisor:
         if self.mode == "run":
             if f > c.contact_on_n:
                 self.in_contact = True
-            lost = f < c.contact_lost_n or (f_then - f > c.drop_n and self.u_prev > 0.0)
+            # an intended release (the setpoint fell, or asks for no contact) is not a loss
+            released = self.sp_win.range()
+            lost = ((f < c.contact_lost_n and sp_in > c.contact_on_n)
+                    or (f_then - f > c.drop_n + max(released, 0.0) and self.u_prev > 0.0))
             if self.in_contact and lost:
                 self.mode = "freeze"
                 self.freeze_t0 = t
+                self.contact_travel_m = None          # the compression check starts again at the next contact
                 self._event("contact lost: freeze")
         if self.mode == "freeze":
             if f > c.contact_on_n and f >= f_then and t - self.freeze_t0 > c.backoff_s:
@@ -349,8 +636,8 @@ class Supervisor:
             u = -c.retract_v if t - self.freeze_t0 <= c.backoff_s else 0.0
             self.u_prev = u
             return u
-        # run: the inner controller, watchdog, cap, slew
-        sp = min(float(setpoint_n), self._sp_max)
+        # run: the inner controller, watchdog, cap, slew, current and speed envelope
+        sp = min(sp_in, self._sp_max)
         u = self.inner.update(f, sp, dt_s, motor_current_a)
         if not math.isfinite(u):
             if self.nan_s == 0.0:
@@ -373,6 +660,8 @@ class Supervisor:
         elif f > lo and u > 0.0:
             u *= 1.0 - (f - lo) / c.cap_margin_n
         u = self._slew(u, dt_s)
+        if cur is not None:
+            u = self._envelope_cap(u, cur)
         self.u_prev = u
         return u
 
@@ -398,3 +687,28 @@ class Supervisor:
         u = self._slew(0.0, dt_s)
         self.u_prev = u
         return u
+
+
+def _envelope(c: SupervisorConfig) -> tuple[list[float], list[float]]:
+    """Current limit against rack speed: (speeds, currents), from rest to beyond the speed limit.
+
+    At each speed the drive force may not exceed :meth:`SupervisorConfig.drive_force_limit_n`;
+    beyond :attr:`SupervisorConfig.speed_limit_m_per_s` the limit is a braking current.
+    """
+    v_max = c.speed_limit_m_per_s
+    speeds = [v_max * k / 32 for k in range(33)]
+    currents = [c.current_for_force_a(max(c.drive_force_limit_n(v), 0.0)) for v in speeds]
+    speeds.append(1.05 * v_max)
+    currents.append(-c.friction_current_a)
+    return speeds, currents
+
+
+def _interp(table: tuple[list[float], list[float]], x: float) -> float:
+    xs, ys = table
+    if x <= xs[0]:
+        return ys[0]
+    if x >= xs[-1]:
+        return ys[-1]
+    k = bisect.bisect_right(xs, x)
+    x0, x1, y0, y1 = xs[k - 1], xs[k], ys[k - 1], ys[k]
+    return y0 + (y1 - y0) * (x - x0) / (x1 - x0)

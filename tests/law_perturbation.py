@@ -27,7 +27,8 @@ import time
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 COPY = ("ebraille_sim", "controllers", "tests", "scenarios", "pyproject.toml")
-DEFAULT_TESTS = ("tests/test_laws.py", "tests/test_plant_physics.py", "tests/test_sensor_chain.py")
+DEFAULT_TESTS = ("tests/test_laws.py", "tests/test_plant_physics.py", "tests/test_sensor_chain.py",
+                 "tests/test_supervisor.py")
 FACTOR = "1.05"
 
 LAWS = [
@@ -51,6 +52,22 @@ LAWS = [
     ("ADC", "ebraille_sim/physics/fsr.py", "adc_code", ["test_adc_rounds_down_and_clips_at_the_rails"]),
     ("estimator step", "ebraille_sim/estimation/blockmodels.py", "estimator_step",
      ["test_estimator_step_equals_lfilter_and_interp_on_a_random_input"]),
+    ("push force bound", "ebraille_sim/physics/limits.py", "push_force_bound_n",
+     ["test_push_force_bound_is_eta_km_n_over_r_less_friction_plus_weight"]),
+    ("current for a push force", "ebraille_sim/physics/limits.py", "current_for_push_force_a",
+     ["test_push_force_bound_is_eta_km_n_over_r_less_friction_plus_weight"]),
+    ("speed from back-EMF", "ebraille_sim/physics/limits.py", "rack_speed_from_emf_m_per_s",
+     ["test_speed_from_back_emf_and_impact_energy"]),
+    ("impact energy", "ebraille_sim/physics/limits.py", "impact_energy_j",
+     ["test_speed_from_back_emf_and_impact_energy"]),
+    ("speed for an energy", "ebraille_sim/physics/limits.py", "speed_for_energy_m_per_s",
+     ["test_speed_from_back_emf_and_impact_energy"]),
+    ("pulp elastic energy", "ebraille_sim/physics/limits.py", "elastic_energy_j",
+     ["test_pulp_energy_is_the_integral_of_the_elastic_law"]),
+    ("absorbed impact energy", "ebraille_sim/physics/limits.py", "absorbed_energy_j",
+     ["test_pulp_energy_is_the_integral_of_the_elastic_law"]),
+    ("drive force for an impact", "ebraille_sim/physics/limits.py", "drive_force_for_impact_n",
+     ["test_pulp_energy_is_the_integral_of_the_elastic_law"]),
 ]
 
 _RETURN = re.compile(r"^(\s*)return (.+)$")

@@ -57,13 +57,15 @@ def test_fsr_stuck_retracts():
     assert _retracted(tr)
 
 
-def test_motor_stall_trips_i2t_and_retracts_after_the_jam():
+def test_motor_stall_is_stopped_at_the_current_limit_and_retracts_after_the_jam():
+    from controllers.supervisor import SupervisorConfig
     tr = _run("fault_motor_stall").trace
     t = tr["t_s"]
     assert tr["force_true_n"].max() <= MAX_SAFE_N
     jam = (t >= 4.0) & (t < 6.0)
     assert np.ptp(tr["board_pos_m"][jam]) < 1e-6           # the jam holds the board
-    assert np.abs(tr["motor_current_a"][jam]).max() > 0.19   # the controller saturates into it
+    i_lim = SupervisorConfig().current_limit_a              # the controller saturates into the current limit
+    assert 0.95 * i_lim < tr["motor_current_a"][jam].max() < 1.05 * i_lim
     assert _retracted(tr)
 
 

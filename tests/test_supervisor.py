@@ -102,7 +102,8 @@ def test_stuck_reading_with_jammed_motor_is_left_to_i2t():
     sup.reset(force_est_n=1.0, setpoint_n=1.0)
     run(sup, 1.0, n=200, cur=0.0, jitter=0.0)
     sup.inner.u = 1.0
-    run(sup, 1.0, n=50, cur=1.0 / 21.2, jitter=0.0)              # stalled: no back-EMF
+    for _ in range(50):                                          # stalled: i = u/R, no back-EMF
+        sup.update(1.0, 1.0, 1e-3, sup.u_prev / 21.2)
     assert sup.fault is None
 
 
@@ -185,3 +186,148 @@ def test_force_cap_limit_is_the_tactile_maximum_plus_one_newton():
     from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
     assert FORCE_CAP_LIMIT_N == TACTILE_FORCE_MAX_N + 1.0 == 4.0
     assert SupervisorConfig(force_cap_n=4.0, out_of_range_n=5.0).force_cap_n == 4.0
+
+
+# ---------------------------------------------------------------- drive bounds (physics.limits)
+def test_push_force_bound_is_eta_km_n_over_r_less_friction_plus_weight():
+    from ebraille_sim.physics import limits
+    kt, g, eta, tf, w = 4.12e-3, 25600.0, 0.6, 0.034e-3, 0.0589
+    assert limits.push_force_bound_n(0.05, kt, g, eta, tf, w) == pytest.approx(0.6 * (105.472 * 0.05 - 0.8704) + w,
+                                                                              rel=1e-12)
+    i = limits.current_for_push_force_a(3.0, kt, g, eta, tf, w)
+    assert limits.push_force_bound_n(i, kt, g, eta, tf, w) == pytest.approx(3.0, rel=1e-12)
+    assert i == pytest.approx(((3.0 - w) / 0.6 / g + tf) / kt, rel=1e-12)
+
+
+def test_speed_from_back_emf_and_impact_energy():
+    from ebraille_sim.physics import limits
+    assert limits.rack_speed_from_emf_m_per_s(2.0, 0.05, 21.2, 4.116e-3, 25600.0) == pytest.approx(
+        (2.0 - 1.06) / 4.116e-3 / 25600.0, rel=1e-12)
+    e = limits.impact_energy_j(0.01, 3.4, 0.006, 0.6)
+    assert e == pytest.approx(0.5 * (0.6 * 3.4 + 0.006) * 1e-4, rel=1e-12)
+    assert limits.speed_for_energy_m_per_s(e, 3.4, 0.006, 0.6) == pytest.approx(0.01, rel=1e-12)
+
+
+def test_pulp_energy_is_the_integral_of_the_elastic_law():
+    from scipy.integrate import quad
+
+    from ebraille_sim.physics import limits
+    from ebraille_sim.physics.fingertip import elastic_force
+    b, m = 264.0, 1246.0
+    for d in (0.3e-3, 1.4e-3, 2.2e-3):
+        ref = quad(lambda x: elastic_force(x, b, m), 0.0, d)[0]
+        assert limits.elastic_energy_j(d, b, m) == pytest.approx(ref, rel=1e-9)
+    assert limits.elastic_energy_j(-1e-3, b, m) == 0.0
+    # absorbed energy above a drive of 1 N up to 3 N, against a direct integral
+    d0, d1 = math.log1p(m * 1.0 / b) / m, math.log1p(m * 3.0 / b) / m
+    ref = quad(lambda x: elastic_force(x, b, m) - 1.0, d0, d1)[0]
+    assert limits.absorbed_energy_j(1.0, 3.0, b, m) == pytest.approx(ref, rel=1e-9)
+    # the drive force that a given impact allows inverts it
+    assert limits.drive_force_for_impact_n(ref, 3.0, b, m) == pytest.approx(1.0, rel=1e-9)
+    assert limits.drive_force_for_impact_n(0.0, 3.0, b, m) == 3.0
+    assert limits.drive_force_for_impact_n(1.0, 3.0, b, m) < 0.0          # too much energy: brake
+
+
+def test_derived_limits_of_the_default_device():
+    c = SupervisorConfig()
+    assert c.push_force_per_a_n == pytest.approx(0.6 * 4.12e-3 * 64 / 2.5e-3, rel=1e-12)   # 63.28 N/A
+    assert c.envelope_force_n == pytest.approx(3.5 - (540 + 1448 * 3.5) * 45e-6, rel=1e-12)  # 3.25 N
+    assert c.current_limit_a == pytest.approx(0.0586, abs=2e-4)
+    assert c.speed_limit_m_per_s == pytest.approx(0.0402, abs=5e-4)
+    assert c.current_limit_a < c.rated_current_a < c.stall_current_a
+    assert c.drive_force_limit_n(0.0) == pytest.approx(c.envelope_force_n)
+    assert 1.8 < c.drive_force_limit_n(0.014) < 2.0                        # the 14 mm/s approach
+    from ebraille_sim.physics.params import DRIVETRAINS, MOTORS, DeviceParams
+    pololu = SupervisorConfig.for_device(DeviceParams(motor=MOTORS["pololu_lp_6v"],
+                                                      drivetrain=DRIVETRAINS["pololu_100"]))
+    assert pololu.push_force_per_a_n == pytest.approx(0.51 * 4.15e-3 * 100.37 / 2.5e-3, rel=1e-12)
+    assert pololu.friction_current_a == pytest.approx(0.02, rel=1e-12)           # T_f/kM = its no-load current
+    assert pololu.current_limit_a == pytest.approx(
+        (pololu.envelope_force_n - pololu.weight_n) / pololu.push_force_per_a_n + 0.02, rel=1e-12)
+    with pytest.raises(ValueError, match="safe_force_n = 4.5 N is above the 4 N"):
+        SupervisorConfig(safe_force_n=4.5)
+
+
+def consistent(sup, f, sp, n, u_free=None, dt=1e-3):
+    """``n`` periods of a stalled motor (current u/R) or a free one (no-load current)."""
+    c = sup.config
+    for _ in range(n):
+        cur = sup.u_prev / c.motor_resistance_ohm if u_free is None else c.friction_current_a
+        sup.update(f, sp, dt, cur)
+
+
+def test_envelope_limits_the_command_to_the_current_limit_at_rest():
+    sup = Supervisor(Const(6.0))
+    sup.reset(force_est_n=1.0, setpoint_n=1.0)
+    consistent(sup, 1.0, 1.0, 100)
+    c = sup.config
+    assert sup.u_prev == pytest.approx(c.motor_resistance_ohm * c.current_limit_a, rel=1e-6)
+
+
+def test_envelope_brakes_above_the_speed_limit():
+    sup = Supervisor(Const(6.0), SupervisorConfig(slew_v_per_s=1e6))
+    sup.reset(force_est_n=0.0, setpoint_n=1.0, command_v=6.0)
+    c = sup.config
+    fast = 1.2 * c.speed_limit_m_per_s * c.back_emf_v_s_per_m       # back-EMF of a board above the limit
+    u = sup.update(0.0, 1.0, 1e-3, (6.0 - fast) / c.motor_resistance_ohm)
+    assert u < fast                                                   # current reversed: braking
+
+
+def test_setpoint_release_is_not_a_contact_loss_but_a_real_drop_is():
+    sup = Supervisor(Const(0.5), SupervisorConfig(slew_v_per_s=1e6))
+    sup.reset(force_est_n=1.0, setpoint_n=1.0)
+    run(sup, 1.0, n=100)
+    run(sup, 0.6, sp=0.4, n=5)                    # the setpoint fell by 0.6 N: the estimate follows
+    assert sup.mode == "run"
+    run(sup, 0.6, sp=0.4, n=300)
+    run(sup, 0.2, sp=0.4, n=5)                    # a fall of 0.4 N with no release asked for
+    assert sup.mode == "freeze"
+
+
+def test_stuck_estimate_while_the_board_travels_latches():
+    sup = Supervisor(Const(0.7), SupervisorConfig(slew_v_per_s=1e6))
+    sup.reset(force_est_n=1.0, setpoint_n=1.0)
+    run(sup, 1.0, n=20)
+    c = sup.config
+    v = 2e-3                                      # the board moves at 2 mm/s, the estimate does not change
+    assert c.stuck_travel_m == pytest.approx(0.2e-3 + 0.01 * 0.04207, rel=1e-3)   # 0.62 mm
+    for _ in range(250):
+        sup.update(1.0, 1.0, 1e-3, (sup.u_prev - c.back_emf_v_s_per_m * v) / c.motor_resistance_ohm)
+    assert sup.fault is None                      # 0.5 mm: backlash plus one estimator period of travel
+    for _ in range(100):
+        sup.update(1.0, 1.0, 1e-3, (sup.u_prev - c.back_emf_v_s_per_m * v) / c.motor_resistance_ohm)
+    assert sup.fault == "fsr_stuck"
+
+
+def test_motor_pushing_without_motion_or_contact_is_stopped():
+    sup = Supervisor(Const(6.0))
+    sup.reset(force_est_n=0.0, setpoint_n=1.0)
+    consistent(sup, 0.0, 1.0, 400)
+    assert sup.fault is None
+    consistent(sup, 0.0, 1.0, 200)
+    assert sup.fault == "motor_stalled" and any("motor_stalled" in e for _, e in sup.events)
+
+
+def test_current_implying_more_force_than_the_estimate_latches():
+    sup = Supervisor(Const(6.0))
+    sup.reset(force_est_n=0.5, setpoint_n=1.0)
+    c = sup.config
+    v = 1e-3
+    for _ in range(400):                          # moving at 1 mm/s at the current limit, estimate 0.5 N
+        i = c.current_limit_a
+        sup.u_prev = c.motor_resistance_ohm * i + c.back_emf_v_s_per_m * v
+        sup.update(0.5 + 1e-3 * (sup.t * 1e3 % 3), 1.0, 1e-3, i)
+        if sup.fault:
+            break
+    assert sup.fault == "fsr_implausible"
+
+
+def test_supervisor_is_deterministic():
+    def trace():
+        sup = Supervisor(Const(6.0))
+        sup.reset(force_est_n=0.0, setpoint_n=1.0)
+        out = []
+        for k in range(300):
+            out.append(sup.update(0.3 * (k > 50), 1.0, 1e-3, sup.u_prev / 21.2 * 0.9))
+        return out
+    assert trace() == trace()

@@ -1,0 +1,144 @@
+"""Force, current and speed bounds of the drive: what a motor current can do to the finger.
+
+These laws bound the contact force from quantities the microcontroller measures without
+the force sensor: the motor current ``i``, the terminal voltage ``u`` and, through the
+back-EMF ``u - R i``, the motor speed.  They compose the laws of
+:mod:`~ebraille_sim.physics.motor` (``kM i N/r``), :mod:`~ebraille_sim.physics.drivetrain`
+(gear reflection, reflected inertia and torque) and :mod:`~ebraille_sim.physics.fingertip`
+(the exponential pulp).
+
+Steady push.  Moving the board toward the finger, the pinion side obeys
+``kM i N/r = F_mesh / eta + T_f N/r + M_p a`` (gear loss ``mu |F_mesh|`` with
+``mu = 1/eta - 1``, brush friction ``T_f``) and the board ``F_contact = F_mesh - F_guide +
+m g_along - m_b a``.  Friction only ever opposes the push, so the largest force a current
+can push with at constant speed is::
+
+    F_push(i) = eta (kM i - T_f) N/r + m_b g                           (1)
+
+(guide friction dropped, gravity counted as if the hand were upside down).  The
+efficiency ``eta`` is the bound in the pushing direction; the larger factor ``1/(1 - mu)``
+of the non-back-drivable gearhead only holds a force that is already there, it cannot
+raise it.
+
+Impact.  A board that arrives at speed ``v`` brings the kinetic energy of the rotor
+reflected through the gearhead (transmitted with ``eta``) and of the board::
+
+    E(v) = (eta M_p + m_b) v^2 / 2,      M_p = J (N/r)^2                (2)
+
+With a drive force ``F_d`` held from the compression where the pulp pushes back with
+``F_d``, the pulp's instantaneous elastic law absorbs ``E`` above ``F_d`` until the peak
+``F_pk``::
+
+    U(d(F_pk)) - U(d(F_d)) - F_d (d(F_pk) - d(F_d)) = E(v),
+    U(d) = (b/m) ((exp(m d) - 1)/m - d)                                  (3)
+
+Friction and the pulp's relaxation only lower the peak.
+
+Examples
+--------
+>>> from ebraille_sim.physics.params import DeviceParams
+>>> d = DeviceParams()
+>>> round(drive_bounds(d)["push_force_per_a_n"], 2)       # eta kM N/r, N/A
+63.28
+"""
+from __future__ import annotations
+
+import math
+
+from ebraille_sim.physics.drivetrain import reflected_force_n, reflected_inertia_kg, shaft_to_rack_per_m
+from ebraille_sim.physics.fingertip import compression_at_force_m, elastic_force
+from ebraille_sim.physics.motor import rack_force_n
+
+__all__ = ["push_force_bound_n", "current_for_push_force_a", "rack_speed_from_emf_m_per_s", "impact_energy_j",
+           "elastic_energy_j", "absorbed_energy_j", "drive_force_for_impact_n", "speed_for_energy_m_per_s",
+           "drive_bounds"]
+
+
+def push_force_bound_n(current_a, kt_nm_per_a, shaft_to_rack, gear_efficiency, friction_torque_nm, weight_n):
+    """Largest steady force (N) the drive pushes the finger with at motor current ``current_a``: eq. (1)."""
+    return gear_efficiency * (rack_force_n(current_a, kt_nm_per_a, shaft_to_rack)
+                              - reflected_force_n(friction_torque_nm, shaft_to_rack)) + weight_n
+
+
+def current_for_push_force_a(force_n, kt_nm_per_a, shaft_to_rack, gear_efficiency, friction_torque_nm, weight_n):
+    """Motor current (A) at which :func:`push_force_bound_n` equals ``force_n`` (its inverse)."""
+    return ((force_n - weight_n) / gear_efficiency / shaft_to_rack + friction_torque_nm) / kt_nm_per_a
+
+
+def rack_speed_from_emf_m_per_s(voltage_v, current_a, resistance_ohm, back_emf_v_s_per_rad, shaft_to_rack):
+    """Rack speed (m/s) read from the back-EMF: ``(u - R i) / kE / (N/r)``."""
+    return (voltage_v - resistance_ohm * current_a) / back_emf_v_s_per_rad / shaft_to_rack
+
+
+def impact_energy_j(speed_m_per_s, pinion_mass_kg, board_mass_kg, gear_efficiency):
+    """Kinetic energy (J) a board arriving at ``speed_m_per_s`` can put into the finger: eq. (2)."""
+    return 0.5 * (gear_efficiency * pinion_mass_kg + board_mass_kg) * speed_m_per_s * speed_m_per_s
+
+
+def speed_for_energy_m_per_s(energy_j, pinion_mass_kg, board_mass_kg, gear_efficiency):
+    """Speed (m/s) at which :func:`impact_energy_j` equals ``energy_j`` (its inverse)."""
+    return math.sqrt(2.0 * max(energy_j, 0.0) / (gear_efficiency * pinion_mass_kg + board_mass_kg))
+
+
+def elastic_energy_j(d_m, b_n_per_m, m_per_m):
+    """Energy (J) stored in the pulp's instantaneous elastic law at compression ``d_m``: ``U(d)`` of eq. (3)."""
+    if d_m <= 0.0:
+        return 0.0
+    return (elastic_force(d_m, b_n_per_m, m_per_m) - b_n_per_m * d_m) / m_per_m
+
+
+def absorbed_energy_j(drive_force_n, peak_force_n, b_n_per_m, m_per_m):
+    """Energy (J) the pulp absorbs above a constant drive ``F_d`` from ``d(F_d)`` to ``d(F_pk)``: eq. (3)."""
+    d0 = compression_at_force_m(drive_force_n, b_n_per_m, m_per_m)
+    d1 = compression_at_force_m(peak_force_n, b_n_per_m, m_per_m)
+    return (elastic_energy_j(d1, b_n_per_m, m_per_m) - elastic_energy_j(d0, b_n_per_m, m_per_m)
+            - drive_force_n * (d1 - d0))
+
+
+def drive_force_for_impact_n(energy_j, peak_force_n, b_n_per_m, m_per_m):
+    """Largest constant drive force (N) with which an impact of ``energy_j`` peaks at most at ``peak_force_n``.
+
+    Bisection on :func:`absorbed_energy_j`, which falls monotonically as the drive force rises
+    (0 at ``F_d = F_pk``).  Returns a negative value when even a zero drive force lets the
+    impact exceed the peak: the board must then be braked.
+    """
+    if energy_j <= 0.0:
+        return peak_force_n
+    if absorbed_energy_j(0.0, peak_force_n, b_n_per_m, m_per_m) < energy_j:
+        return -1.0
+    lo, hi = 0.0, peak_force_n
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        if absorbed_energy_j(mid, peak_force_n, b_n_per_m, m_per_m) >= energy_j:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+def drive_bounds(device) -> dict:
+    """Rack-line constants of ``device`` (a :class:`~ebraille_sim.physics.params.DeviceParams`) for the bounds.
+
+    Returns
+    -------
+    dict
+        ``push_force_per_a_n`` (eta kM N/r), ``friction_current_a`` (T_f/kM),
+        ``weight_n`` (m_b g), ``back_emf_v_s_per_m`` (kE N/r), ``pinion_mass_kg``
+        (J (N/r)^2), ``board_mass_kg``, ``impact_mass_kg`` (eta M_p + m_b),
+        ``gear_efficiency``, ``shaft_to_rack_per_m``.
+    """
+    m, dt = device.motor, device.drivetrain
+    g = shaft_to_rack_per_m(dt.gear_ratio, dt.pinion_radius_m)
+    eta = dt.gear_efficiency
+    mp = reflected_inertia_kg(m.rotor_inertia_kg_m2, g)
+    return {
+        "push_force_per_a_n": eta * rack_force_n(1.0, m.torque_constant_nm_per_a, g),
+        "friction_current_a": m.friction_torque_nm / m.torque_constant_nm_per_a,
+        "weight_n": dt.moving_mass_kg * device.gravity_m_per_s2,
+        "back_emf_v_s_per_m": m.back_emf_v_s_per_rad * g,
+        "pinion_mass_kg": mp,
+        "board_mass_kg": dt.moving_mass_kg,
+        "impact_mass_kg": eta * mp + dt.moving_mass_kg,
+        "gear_efficiency": eta,
+        "shaft_to_rack_per_m": g,
+    }

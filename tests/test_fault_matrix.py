@@ -1,0 +1,138 @@
+"""The fault matrix: every injected fault, alone and in pairs, in every phase, with the supervisor on.
+
+A cell is a scenario built here: a reader (nominal, or drawn from the population), a reading
+rate (60 or 120 wpm) with tremor, a phase (``onset``: the fault starts before first contact;
+``steady``: during reading at 1 N; ``step``: as the setpoint steps to 3 N, which the
+supervisor clips to 2.7 N) and one or two faults.  Contract in every cell: the true force at
+the finger stays at or below 3.5 N (the supervisor's ``safe_force_n``).
+
+``FAULTS`` also holds the sensor's plausible lies: a reading fixed at 0.2 V or 0.45 V (a
+stuck code in the force range), and a high-k FSR unit on a device calibrated for the nominal
+unit (it under-reads).  The fast test runs the single faults on the nominal reader at
+60 wpm; the slow one the pairs, 120 wpm and the population.  ``docs/make_safety_table.py``
+writes the table of docs/safety.md from :func:`run_cell`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import numpy as np
+import pytest
+
+from ebraille_sim.physics.params import FSRS
+from ebraille_sim.scenarios.population import sample_devices
+from ebraille_sim.scenarios.runner import run_scenario
+from ebraille_sim.scenarios.spec import parse_scenario
+
+SAFE_N = 3.5
+DURATION_S = 4.0
+READ_S = 1.0
+PHASE_START_S = {"onset": 0.02, "steady": 2.0, "step": 2.0}
+STEP_N = 3.0
+
+FAULTS = {
+    "fsr_open": {"kind": "fsr_open"},
+    "fsr_short": {"kind": "fsr_short"},
+    "fsr_stuck": {"kind": "fsr_stuck"},
+    "fsr_at_0.2V": {"kind": "fsr_value", "value_v": 0.2},
+    "fsr_at_0.45V": {"kind": "fsr_value", "value_v": 0.45},
+    "fsr_at_1.0V": {"kind": "fsr_value", "value_v": 1.0},
+    "high_k_unit": None,
+    "motor_stall": {"kind": "motor_stall", "duration_s": 1.0},
+    "controller_nan": {"kind": "controller_nan", "duration_s": 0.3},
+    "finger_withdrawn": {"kind": "finger_withdrawn", "duration_s": 0.6},
+}
+"""Fault names and their ``[[faults]]`` entry (``None``: a device fault, the high-k unit)."""
+
+
+def cell_spec(faults, phase, wpm=60, device=None):
+    """The scenario of one cell: ``faults`` (names of :data:`FAULTS`) injected in ``phase``."""
+    t0 = PHASE_START_S[phase]
+    entries = []
+    for name in faults:
+        e = FAULTS[name]
+        if e is not None:
+            entries.append({**e, "start_s": t0})
+    data = {
+        "name": "cell", "description": "fault matrix cell", "seed": 5, "duration_s": DURATION_S,
+        "reading": {"passage": "default", "wpm": wpm, "start_s": READ_S},
+        "setpoint": {"force_n": 1.0, "band_fraction": 0.1},
+        "finger": {"gap_m": 0.001},
+        "disturbances": {"tremor": {"rms_m": 15e-6, "band_hz": [8.0, 12.0], "transmission": 1.0}},
+        "supervisor": {},
+    }
+    if phase == "step":
+        data["setpoint"]["steps"] = [[t0, STEP_N]]
+    if entries:
+        data["faults"] = entries
+    spec = parse_scenario(data)
+    dev = device if device is not None else spec.device
+    if "high_k_unit" in faults:
+        dev = dataclasses.replace(dev, fsr=FSRS["high_k"])
+    return dataclasses.replace(spec, device=dev)
+
+
+def run_cell(faults, phase, wpm=60, device=None) -> dict:
+    """Peak true force and the supervisor's first fault or freeze after the fault starts."""
+    spec = cell_spec(faults, phase, wpm, device)
+    res = run_scenario(spec)
+    tr = res.trace
+    t0 = PHASE_START_S[phase]
+    return {"peak_n": float(tr["force_true_n"].max()),
+            "above_s": float(np.sum(tr["force_true_n"] > SAFE_N) * (tr["t_s"][1] - tr["t_s"][0])),
+            "t0_s": t0, "trace": tr}
+
+
+def detection(tr, t0):
+    """Time from ``t0`` to the first period in which the supervisor stops pushing (retract or hold)."""
+    late = (tr["t_s"] > t0 + 0.01) & (tr["command_v"] <= -1.9)
+    return float(tr["t_s"][late][0] - t0) if late.any() else None
+
+
+SINGLE = [(f,) for f in FAULTS]
+PAIRS = list(itertools.combinations(FAULTS, 2))
+PHASES = list(PHASE_START_S)
+
+
+@pytest.mark.parametrize("phase", PHASES)
+def test_single_faults_keep_the_true_force_safe(phase):
+    peaks = {f[0]: run_cell(f, phase)["peak_n"] for f in SINGLE}
+    assert max(peaks.values()) <= SAFE_N, peaks
+
+
+@pytest.mark.parametrize("case,phase", [(("fsr_at_0.2V",), "steady"), (("fsr_at_0.45V",), "steady"),
+                                        (("fsr_stuck",), "onset"), (("fsr_open",), "onset"),
+                                        (("fsr_at_0.45V",), "onset"), (("high_k_unit",), "step")])
+def test_the_sensor_lies_that_went_unseen_are_bounded(case, phase):
+    r = run_cell(case, phase)
+    assert r["peak_n"] <= SAFE_N and r["above_s"] == 0.0
+
+
+def test_a_sensor_reading_a_fixed_plausible_value_is_detected():
+    r = run_cell(("fsr_at_0.45V",), "steady")
+    d = detection(r["trace"], r["t0_s"])
+    assert d is not None and d < 1.8
+
+
+def test_without_the_supervisor_the_same_lie_presses_too_hard():
+    spec = cell_spec(("fsr_at_0.45V",), "steady")
+    spec = dataclasses.replace(spec, sections={k: v for k, v in spec.sections.items() if k != "supervisor"})
+    assert run_scenario(spec).trace["force_true_n"].max() > SAFE_N
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("phase", PHASES)
+def test_fault_pairs_at_120_wpm_keep_the_true_force_safe(phase):
+    peaks = {f: run_cell(f, phase, wpm=120)["peak_n"] for f in PAIRS}
+    worst = max(peaks, key=peaks.get)
+    assert peaks[worst] <= SAFE_N, (worst, peaks[worst])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("k", range(3))
+def test_single_faults_over_the_population(k):
+    dev = sample_devices(13, 3)[k]
+    peaks = {(f, p): run_cell(f, p, wpm=(60, 120)[k % 2], device=dev)["peak_n"] for f in SINGLE for p in PHASES}
+    worst = max(peaks, key=peaks.get)
+    assert peaks[worst] <= SAFE_N, (worst, peaks[worst])
