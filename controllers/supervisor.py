@@ -466,6 +466,7 @@ class Supervisor:
         self.stuck_ref_n = math.nan
         self.stuck_travel_m = 0.0
         self.contact_travel_m = None
+        self.cut_t = -math.inf
         self.stall_s = 0.0
         self.implausible_s = 0.0
         self.current_limit_a = c.current_limit_a
@@ -537,6 +538,12 @@ class Supervisor:
         if self.in_contact:
             if self.contact_travel_m is None:
                 self.contact_travel_m = self.travel_m
+            elif self.sp_win.hi[0][0] < self.sp_win.lo[0][0] and f > c.contact_on_n:
+                # an intended release (the setpoint fell): the board backs off and the travel
+                # reference restarts from the compression the estimate shows, so the back-EMF
+                # integral's drift over many presses (refresh mode) does not add up
+                self.contact_travel_m = max(self.contact_travel_m, self.travel_m - compression_at_force_m(
+                    f, c.soft_b_n_per_m, c.soft_m_per_m))
             allowed = (compression_at_force_m(self.est_win.hi[0][1] + c.implausible_n, c.soft_b_n_per_m,
                                               c.soft_m_per_m) + c.stuck_travel_m)
             if self.travel_m - self.contact_travel_m > allowed:
@@ -617,7 +624,8 @@ class Supervisor:
             # an intended release (the setpoint fell, or asks for no contact) is not a loss
             released = self.sp_win.range()
             lost = ((f < c.contact_lost_n and sp_in > c.contact_on_n)
-                    or (f_then - f > c.drop_n + max(released, 0.0) and self.u_prev > 0.0))
+                    or (f_then - f > c.drop_n + max(released, 0.0) and self.u_prev > 0.0
+                        and t - self.cut_t > c.drop_window_s))
             if self.in_contact and lost:
                 self.mode = "freeze"
                 self.freeze_t0 = t
@@ -654,6 +662,7 @@ class Supervisor:
             self._event("finite command again: resume")
             self.inner.reset(force_est_n=f, setpoint_n=sp, command_v=self.u_prev)
             u = self.u_prev
+        u_inner = u
         lo = c.force_cap_n - c.cap_margin_n
         if f >= c.force_cap_n:
             u = -c.retract_v
@@ -662,6 +671,8 @@ class Supervisor:
         u = self._slew(u, dt_s)
         if cur is not None:
             u = self._envelope_cap(u, cur)
+        if u < u_inner - 1e-9:
+            self.cut_t = t               # the supervisor held the push back: a drop that follows is its own
         self.u_prev = u
         return u
 

@@ -285,3 +285,27 @@ def test_safety_layer_latches_a_fault_and_ignores_the_agent_then():
 def test_safety_flag_is_validated():
     with pytest.raises(ValueError, match="safety"):
         ContactForceEnv(safety="yes")
+def test_safety_layer_is_on_by_default_and_holds_a_full_push_below_the_safe_limit():
+    """The agent pushes at full command on a stiff reader: with the safety layer the true
+    force stays below the supervisor's 3.5 N safe limit (the episode may still end at the
+    env's 3 N termination); the explicit opt-out ``safety=False`` lets the same push go far
+    past it."""
+    opts = {"disturbances": False, "gap_m": 0.5e-3, "setpoint_n": 1.0, "device": DeviceParams(finger=FINGERS["stiff"])}
+    env = ContactForceEnv(randomize_device=False)
+    assert env.config.safety
+    _, info = env.reset(seed=1, options=opts)
+    peak, term, trunc = 0.0, False, False
+    while not (term or trunc):
+        _, r, term, trunc, info = env.step(np.ones(1, np.float32))
+        peak = max(peak, info["force_true_n"])
+        assert info["action_v"] == pytest.approx(6.0)
+    assert 2.5 < peak < 3.5
+    off = ContactForceEnv(randomize_device=False, safety=False)
+    off.reset(seed=1, options=opts)
+    peak_off, term, trunc = 0.0, False, False
+    while not (term or trunc):
+        *_, term, trunc, info = off.step(np.ones(1, np.float32))
+        peak_off = max(peak_off, info["force_true_n"])
+    assert term and peak_off > 3.5 and "supervisor_mode" not in info
+
+

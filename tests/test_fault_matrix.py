@@ -117,8 +117,7 @@ def test_a_sensor_reading_a_fixed_plausible_value_is_detected():
 
 def test_without_the_supervisor_the_same_lie_presses_too_hard():
     spec = cell_spec(("fsr_at_0.45V",), "steady")
-    spec = dataclasses.replace(spec, sections={k: v for k, v in spec.sections.items() if k != "supervisor"})
-    assert run_scenario(spec).trace["force_true_n"].max() > SAFE_N
+    assert run_scenario(spec, supervised=False).trace["force_true_n"].max() > SAFE_N
 
 
 @pytest.mark.slow
