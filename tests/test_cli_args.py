@@ -137,6 +137,10 @@ EXTRA += [("regress", ["regress", "--only", "steady_90wpm", "--json", "{tmp}"], 
           ("regress", ["regress", "--only", "steady_90wpm", "--junit", "{tmp}/locked/new/j.xml"], "not writable")]
 
 
+NAMED_BY_VALUE = {"--only"}
+"""Options whose message names the bad value (the scenario) instead of the option."""
+
+
 def _option_cases():
     for cmd, options in OPTIONS.items():
         for option, values in options.items():
@@ -145,7 +149,8 @@ def _option_cases():
                 if option in argv:                       # replace the base's own value
                     i = argv.index(option)
                     del argv[i:i + 2]
-                yield (f"{cmd} {option}={value}", argv + [f"{option}={value}"], option)
+                named = pathlib.PurePath(value).name if option in NAMED_BY_VALUE else option
+                yield (f"{cmd} {option}={value}", argv + [f"{option}={value}"], named)
 
 
 CASES = list(_option_cases()) + [(" ".join(argv), argv, named) for _, argv, named in EXTRA]

@@ -258,7 +258,7 @@ def main(args) -> int:
         raise ValueError("--no-load-voltage needs --csv and a finite value (the bench knows its own)")
     for path in args.csv or ():
         if not pathlib.Path(path).exists():
-            raise ValueError(f"--csv {str(path)!r}: no such file")
+            raise ValueError(f"--csv {str(path)!r}: CSV file not found")
         if not pathlib.Path(path).is_file():
             raise ValueError(f"--csv {str(path)!r} is not a file")
     fit_options = {"seed": args.seed, "n_starts": args.starts or (1 if args.quick else 4),

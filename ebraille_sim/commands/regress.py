@@ -76,7 +76,7 @@ def _check_inputs(args) -> None:
     try:
         scenario_files(args.scenarios, args.only)
     except (ValueError, FileNotFoundError) as exc:
-        raise UserError(f"--only: {exc}" if args.only else str(exc)) from None
+        raise UserError(str(exc)) from None
     if args.controller is not None:
         try:
             controllers.make(args.controller)
