@@ -7,6 +7,12 @@ command ran but its checks failed: ``run`` when a scenario ``[criteria]`` limit 
 ``regress`` when a scenario moved from its baseline.  A warning (e.g. a setpoint below the
 tactile range) is one ``warning: ...`` line on stderr.
 
+Ctrl-C ends a command with ``error: interrupted`` and exit status 130, SIGTERM with
+``error: terminated (SIGTERM)`` and exit status 143; either way the command's output
+folder is left as it was (outputs are written into a staging folder and moved into
+place at the end, :mod:`ebraille_sim.tools.outputs`).  A failure of the file system
+while writing (disk full, permission denied) is one ``error: ...`` line, exit status 2.
+
 Every sub-command takes ``--json`` (print only the command's result as one JSON document
 on stdout; ``regress --json FILE`` writes it to FILE instead) and ``-q/--quiet`` (print
 nothing but errors and warnings, no progress); the exit status does not change.  Under
@@ -20,10 +26,33 @@ import importlib
 import io
 import os
 import pkgutil
+import signal
 import sys
+import threading
 import warnings
 
 from ebraille_sim import __version__
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread so that cleanup code runs as for Ctrl-C."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+@contextlib.contextmanager
+def _sigterm_as_exception():
+    """Turn SIGTERM into :class:`Terminated` for the block (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -92,7 +121,7 @@ def main(argv=None) -> int:
     divert = (contextlib.redirect_stdout(sys.stderr) if con.json else
               contextlib.redirect_stdout(io.StringIO()) if con.quiet else contextlib.nullcontext())
     try:
-        with warnings.catch_warnings(), divert:
+        with _sigterm_as_exception(), warnings.catch_warnings(), divert:
             warnings.showwarning = one_line
             code = int(table[args.command].main(args) or 0)
         if con.json and con.document is not None:
@@ -104,17 +133,28 @@ def main(argv=None) -> int:
             msg = msg.strip("'\"")
         print(f"error: {msg}", file=sys.stderr)
         return 2
+    except Terminated:
+        print("error: terminated (SIGTERM)", file=sys.stderr)
+        return 143
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:
-        # the reader of stdout went away (e.g. `| head`): stop quietly, as Unix tools do
-        try:
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(devnull, sys.stdout.fileno())
-        except (OSError, ValueError):
-            pass
-        return 0
+        return _closed_stdout()
+    except OSError as exc:
+        where = f": {exc.filename}" if exc.filename else ""
+        print(f"error: {exc.strerror or type(exc).__name__}{where}", file=sys.stderr)
+        return 2
+
+
+def _closed_stdout() -> int:
+    """The reader of stdout went away (e.g. ``| head``): stop quietly, as Unix tools do."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):
+        pass
+    return 0
 
 
 if __name__ == "__main__":

@@ -293,7 +293,7 @@ def test_force_overwrites_and_clears_stale_outputs(tmp_path, capsys):
                 "-q"]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["metrics.json", "notes.txt"]
     assert json.loads((out / "metrics.json").read_text())["seed"] == 5
-    assert not list(tmp_path.glob(".ebraille-*"))            # no temporary folder left
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o", "plain.toml"]   # no staging folder left
 
 
 @pytest.mark.skipif(importlib.util.find_spec("pyarrow") is not None, reason="pyarrow is installed")
@@ -450,3 +450,102 @@ def test_force_figure_names_controller_backend_and_its_vertical_lines(tmp_path, 
     starts = [float(s) for s in seen["starts"] if s <= seen["t_end"]]
     assert len(starts) >= 2
     assert seen["vlines"] == sorted(starts + [0.5])
+
+
+# ---------------------------------------------------------------- outputs all at once; interrupts
+
+_PAUSE_IN_WRITE = """
+import sys, time
+from ebraille_sim.tools import report
+
+def paused(path, trace):
+    with open(path, "w") as fh:              # half a trace, then a pause in the write phase
+        fh.write("t_s,setpoint_n\\n0.001,1.0\\n")
+    print("writing the trace", file=sys.stderr, flush=True)
+    time.sleep(120)
+
+report.write_trace_csv = paused
+from ebraille_sim.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_sigterm_in_the_write_phase_leaves_the_old_run_and_no_partial_files(tmp_path):
+    """SIGTERM while ``run`` writes: exit 143, one line, the earlier run untouched, nothing left over."""
+    import signal
+    import subprocess
+    import sys
+    out = tmp_path / "steady"
+    out.mkdir()
+    old = {"metrics.json": '{"seed": 7}\n', "trace.csv": "t_s\n0.001\n", "force.png": "png"}
+    for name, text in old.items():
+        (out / name).write_text(text)
+    p = subprocess.Popen([sys.executable, "-c", _PAUSE_IN_WRITE, "run", "steady_90wpm", "--duration", "3",
+                          "--out", str(out), "--force"], cwd=tmp_path, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+    seen = []
+    for line in p.stderr:                                    # wait until the write phase has begun
+        seen.append(line)
+        if line.startswith("writing the trace"):
+            break
+    else:
+        raise AssertionError("never reached the write phase: " + "".join(seen))
+    staging = [q.name for q in tmp_path.iterdir() if q.name.startswith("steady.incomplete-")]
+    assert len(staging) == 1 and (tmp_path / staging[0] / "trace.csv").is_file()   # the half-written trace
+    p.send_signal(signal.SIGTERM)
+    err = p.stderr.read()
+    p.wait(timeout=60)
+    assert p.returncode == 143 and err == "error: terminated (SIGTERM)\n" and "Traceback" not in err
+    assert sorted(q.name for q in tmp_path.iterdir()) == ["steady"]          # no staging folder left
+    assert {q.name: q.read_text() for q in out.iterdir()} == old             # the earlier run, as it was
+
+
+def test_an_interrupt_while_writing_a_new_run_leaves_nothing(tmp_path, capsys, monkeypatch):
+    from ebraille_sim.tools import report
+
+    def interrupted(path, trace):
+        pathlib.Path(path).write_text("t_s\n0.001\n")
+        raise KeyboardInterrupt
+    monkeypatch.setattr(report, "write_trace_csv", interrupted)
+    path = _scenario(tmp_path, "plain")
+    assert cli(["run", str(path), "--out", str(tmp_path / "o")]) == 130
+    assert capsys.readouterr().err.splitlines()[-1] == "error: interrupted"
+    assert sorted(q.name for q in tmp_path.iterdir()) == ["plain.toml"]
+
+
+def test_staged_moves_in_owned_outputs_and_keeps_the_rest(tmp_path):
+    from ebraille_sim.tools.outputs import INCOMPLETE, staged
+    out = tmp_path / "out"
+    owned = {"summary.txt": None, "stale.json": None, "figures": "*.png"}
+    with staged(out, owned) as folder:
+        assert (folder / INCOMPLETE).is_file() and folder.parent == tmp_path and not out.exists()
+        (folder / "summary.txt").write_text("one")
+        (folder / "figures").mkdir()
+        (folder / "figures" / "a.png").write_text("a1")
+        (folder / "figures" / "b.png").write_text("b1")
+    assert sorted(str(p.relative_to(out)) for p in out.rglob("*")) == ["figures", "figures/a.png",
+                                                                      "figures/b.png", "summary.txt"]
+    (out / "stale.json").write_text("old")                   # owned, not written next time: removed
+    (out / "notes.txt").write_text("mine")                   # not owned: kept
+    (out / "figures" / "mine.txt").write_text("mine")        # not an owned pattern: kept
+    with staged(out, owned) as folder:
+        (folder / "summary.txt").write_text("two")
+        (folder / "figures").mkdir()
+        (folder / "figures" / "a.png").write_text("a2")
+    assert {str(p.relative_to(out)): p.read_text() for p in out.rglob("*") if p.is_file()} == {
+        "summary.txt": "two", "notes.txt": "mine", "figures/a.png": "a2", "figures/mine.txt": "mine"}
+    with pytest.raises(RuntimeError), staged(out, owned) as folder:
+        (folder / "summary.txt").write_text("three")
+        raise RuntimeError("failed half-way")
+    assert (out / "summary.txt").read_text() == "two" and sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_sweep_without_figures_removes_the_old_figures(tmp_path, capsys):
+    out = tmp_path / "sw"
+    argv = ["sweep", "contact_onset", "--readers", "0", "--duration", "0.6", "-j", "1", "--out", str(out), "-q"]
+    assert cli(argv) == 0
+    assert list((out / "figures").glob("*.png"))
+    first = (out / "results.csv").read_text()
+    assert cli(argv + ["--no-figures", "--seed", "3"]) == 0
+    assert not (out / "figures").exists() and (out / "results.csv").read_text() != first
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["sw"]

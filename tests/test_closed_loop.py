@@ -211,7 +211,7 @@ def test_cli_run_writes_outputs(tmp_path, capsys):
 @pytest.mark.parametrize("argv,match", [
     (["run", "no_such_scenario"], "not found"),
     (["run", "steady_90wpm", "--seed", "-1"], "seed"),
-    (["run", "steady_90wpm", "--duration", "-2"], "duration_s must be a positive"),
+    (["run", "steady_90wpm", "--duration", "-2"], "argument --duration: must lie in (0, inf)"),
     (["run", "steady_90wpm", "--controller", "nope"], "nope"),
     (["run"], "required"),
 ])

@@ -267,7 +267,7 @@ def test_identify_command_on_recorded_csv(tmp_path, csv_records, capsys):
     (["--csv", "MISSING.csv"], "CSV file not found"),
     (["--kinds", "wiener,cubic"], "--kinds: 'cubic' is not one of"),
     (["--orders", "2,x"], "--orders: 'x' is not valid"),
-    (["--seed", "-1"], "--seed must be >= 0"),
+    (["--seed", "-1"], "argument --seed: a seed must lie in [0, 2**63)"),
     (["--no-load-voltage", "0.1"], "--no-load-voltage needs --csv"),
 ])
 def test_identify_command_errors_are_one_line(tmp_path, argv, match, capsys):

@@ -6,6 +6,12 @@ with :mod:`pkgutil`, so a new sub-command is a new module here.  Errors meant fo
 user are raised as :class:`UserError` (or ``ValueError``/``FileNotFoundError``) and
 printed as one ``error: ...`` line with exit status 2.
 
+Numeric options are parsed by :func:`whole` and :func:`number`, which refuse a value out
+of range (and NaN, infinities, fractions for whole numbers) while the command line is
+read: ``error: argument --seed: ...``, exit status 2, before any work.  A command checks
+what depends on its inputs (a duration against the memory of the run, the scenarios, the
+controllers, the output folder) at the top of its ``main``, still before any simulation.
+
 :mod:`ebraille_sim.cli` gives every sub-command ``--json`` and ``-q/--quiet`` and passes
 a :class:`Console` as ``args.console``: a command prints its human-readable lines with
 :meth:`Console.say`, hands its result to :meth:`Console.result` (printed as the one JSON
@@ -13,12 +19,19 @@ document under ``--json``) and shows progress only when :attr:`Console.progress`
 """
 from __future__ import annotations
 
+import argparse
 import builtins
 import json
 import math
 import os
 import pathlib
 import sys
+
+SEED_LIMIT = 2 ** 63
+"""Seeds are whole numbers in ``[0, SEED_LIMIT)``."""
+
+MAX_JOBS = 256
+"""Most local worker processes a command starts (``-j``)."""
 
 
 class UserError(Exception):
@@ -76,6 +89,89 @@ class Console:
         return json.dumps(plain(self.document), indent=2, allow_nan=False, default=str)
 
 
+def _shown(text) -> str:
+    text = str(text)
+    return repr(text if len(text) <= 40 else text[:37] + "...")
+
+
+def whole(lo: int, hi: int | None = None):
+    """An argparse ``type``: a whole number in ``[lo, hi]`` (``hi`` None: no upper bound).
+
+    >>> whole(1, 8)("3")
+    3
+    """
+    def parse(text):
+        try:
+            value = int(str(text).strip())
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {_shown(text)}") from None
+        if value < lo or (hi is not None and value > hi):
+            span = f"in [{lo}, {hi}]" if hi is not None else f">= {lo}"
+            raise argparse.ArgumentTypeError(f"must be a whole number {span}, got {_shown(text)}")
+        return value
+    parse.__name__ = "whole number"
+    return parse
+
+
+def seed(text) -> int:
+    """An argparse ``type``: a seed, a whole number in ``[0, 2**63)``."""
+    try:
+        value = int(str(text).strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {_shown(text)}") from None
+    if not 0 <= value < SEED_LIMIT:
+        raise argparse.ArgumentTypeError(f"a seed must lie in [0, 2**63), got {_shown(text)}")
+    return value
+
+
+def number(lo: float | None = None, hi: float | None = None, lo_open: bool = False, hi_open: bool = False,
+           allow_inf: bool = False):
+    """An argparse ``type``: a finite number in the interval ``lo..hi`` (open ends as flagged).
+
+    With ``allow_inf`` ``+inf`` is accepted too (meaning "no bound").
+
+    >>> number(0, None, lo_open=True)("2.5")
+    2.5
+    """
+    def parse(text):
+        try:
+            value = float(str(text).strip())
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {_shown(text)}") from None
+        if math.isnan(value) or (math.isinf(value) and not (allow_inf and value > 0)):
+            raise argparse.ArgumentTypeError(f"must be a finite number, got {_shown(text)}")
+        below = lo is not None and (value <= lo if lo_open else value < lo)
+        above = hi is not None and (value >= hi if hi_open else value > hi)
+        if below or above:
+            left = "-inf" if lo is None else f"{lo:g}"
+            right = ("inf" if hi is None else f"{hi:g}")
+            span = f"{'(' if lo_open or lo is None else '['}{left}, {right}{')' if hi_open or hi is None else ']'}"
+            raise argparse.ArgumentTypeError(f"must lie in {span}, got {_shown(text)}")
+        return value
+    parse.__name__ = "number"
+    return parse
+
+
+def check_duration(spec, duration_s, option: str = "--duration") -> None:
+    """Refuse a duration shorter than one control period or whose arrays exceed the memory bound.
+
+    The bound is :data:`ebraille_sim.scenarios.inputs.MAX_RUN_BYTES` over
+    :data:`~ebraille_sim.scenarios.inputs.BYTES_PER_CONTROL_SAMPLE` bytes per control
+    period of the scenario's control rate (the message gives the numbers).
+    """
+    from ebraille_sim.scenarios.inputs import check_run_size
+    if duration_s is None:
+        return
+    hz = spec.device.rates.control_rate_hz
+    if round(duration_s * hz) < 1:
+        raise UserError(f"{option} {duration_s:g} s is shorter than one control period "
+                        f"({1.0 / hz:g} s at control_hz = {hz:g})")
+    try:
+        check_run_size(spec, duration_s, f"{option} {duration_s:g} s")
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+
+
 def console(args) -> Console:
     """The :class:`Console` of parsed ``args`` (a plain one when called without the CLI)."""
     con = getattr(args, "console", None)
@@ -91,6 +187,8 @@ def check_out_dir(path, option: str = "--out") -> pathlib.Path:
     Nothing is created: the folder itself, or else its nearest existing parent, must be a
     folder this process may write into.
     """
+    if not str(path).strip():
+        raise UserError(f"{option} is empty; give a folder")
     p = pathlib.Path(path)
     if p.exists() and not p.is_dir():
         raise UserError(f"{option} {str(p)!r} is a file, not a folder")

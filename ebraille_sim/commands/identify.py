@@ -30,31 +30,39 @@ from __future__ import annotations
 import json
 import math
 import pathlib
-import shutil
-import tempfile
 import time
 
 NAME = "identify"
 HELP = "identify the FSR estimator models (virtual bench or recorded CSV); write fitness tables, plots and models"
 
+MAX_STARTS = 64
+"""Most starts per delay candidate (``--starts``)."""
+
+IDENTIFY_OWNED = {"fitness.json": None, "fitness.md": None, "summary.json": None, "dma.md": None, "dma.json": None,
+                  "creep.json": None, "models": "*.json", "plots": "*.png", "data": "*.csv"}
+"""What ``identify`` writes into its folder (of ``models/``, ``plots/``, ``data/`` only those files)."""
+
 
 def add_arguments(p):
+    from ebraille_sim.commands import number, seed, whole
     p.add_argument("--out", default="runs/identify", metavar="DIR", help="output folder (default: runs/identify)")
     p.add_argument("--csv", action="append", default=None, metavar="FILE",
                    help="recorded bench data with columns time_s, voltage_v, force_n; repeat for more "
                         "records; the first is the estimation record")
-    p.add_argument("--seed", type=int, default=0, help="master seed of the bench and the multi-start (default 0)")
+    p.add_argument("--seed", type=seed, default=0,
+                   help="master seed of the bench and the multi-start, in [0, 2**63) (default 0)")
     p.add_argument("--quick", action="store_true", help="one start and one delay candidate per model (about 4x faster)")
-    p.add_argument("--starts", type=int, default=None, metavar="N",
-                   help="starts per delay candidate (default 4, --quick 1)")
+    p.add_argument("--starts", type=whole(1, MAX_STARTS), default=None, metavar="N",
+                   help=f"starts per delay candidate, at most {MAX_STARTS} (default 4, --quick 1)")
     p.add_argument("--kinds", default="linear,hammerstein,wiener,hammerstein-wiener",
                    help="comma-separated model kinds (default: all four)")
     p.add_argument("--orders", default="2,3,4,5", help="comma-separated orders of the linear block (default 2,3,4,5)")
-    p.add_argument("--baseline-s", type=float, default=2.0, metavar="S",
-                   help="CSV: initial stretch at preload whose mean is removed (0: keep offsets; default 2)")
-    p.add_argument("--cutoff-hz", type=float, default=40.0, metavar="HZ",
-                   help="CSV: zero-phase low-pass cut-off (0: none; default 40)")
-    p.add_argument("--no-load-voltage", type=float, default=None, metavar="V",
+    p.add_argument("--baseline-s", type=number(0, 3600), default=2.0, metavar="S",
+                   help="CSV: initial stretch at preload whose mean is removed, in [0, 3600] s "
+                        "(0: keep offsets; default 2)")
+    p.add_argument("--cutoff-hz", type=number(0, 1e6), default=40.0, metavar="HZ",
+                   help="CSV: zero-phase low-pass cut-off, in [0, 1e6] Hz (0: none; default 40)")
+    p.add_argument("--no-load-voltage", type=number(0, 100), default=None, metavar="V",
                    help="CSV: divider voltage with the FSR unloaded, for the device versions of the models")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
 
@@ -233,6 +241,7 @@ def main(args) -> int:
     from ebraille_sim.identification import bench as B
     from ebraille_sim.identification import dma as D
     from ebraille_sim.identification.sysid import PAPER_FITNESS, shift_operating_point
+    from ebraille_sim.tools.outputs import staged
 
     con = console(args)
     if args.seed < 0:
@@ -247,6 +256,11 @@ def main(args) -> int:
         raise ValueError(f"--cutoff-hz must be a number >= 0, got {args.cutoff_hz}")
     if args.no_load_voltage is not None and not (args.csv and math.isfinite(args.no_load_voltage)):
         raise ValueError("--no-load-voltage needs --csv and a finite value (the bench knows its own)")
+    for path in args.csv or ():
+        if not pathlib.Path(path).exists():
+            raise ValueError(f"--csv {str(path)!r}: CSV file not found")
+        if not pathlib.Path(path).is_file():
+            raise ValueError(f"--csv {str(path)!r} is not a file")
     fit_options = {"seed": args.seed, "n_starts": args.starts or (1 if args.quick else 4),
                    "n_delay_candidates": 1 if args.quick else 2, "max_nfev": 100 if args.quick else 200}
 
@@ -309,9 +323,7 @@ def main(args) -> int:
     models, table, info = identify_all(records, estimation, kinds, orders, fit_options, log)
     total = time.perf_counter() - t0
 
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = pathlib.Path(tempfile.mkdtemp(prefix=".ebraille-identify-", dir=out.parent))
-    try:
+    with staged(out, IDENTIFY_OWNED) as tmp:
         _write_json(tmp / "fitness.json", {k: {str(o): v for o, v in by.items()} for k, by in table.items()})
         paper = None if args.csv else PAPER_FITNESS
         (tmp / "fitness.md").write_text(fitness_markdown(table, labels, paper, estimation, source), encoding="utf-8")
@@ -345,14 +357,6 @@ def main(args) -> int:
                     tmp / "models" / f"{k}-{o}-device.json")
             if not args.no_plots:
                 plot_fit(m, records, labels, tmp / "plots" / f"{k}-{o}.png")
-        out.mkdir(parents=True, exist_ok=True)
-        for item in sorted(tmp.rglob("*")):
-            if item.is_file():
-                dest = out / item.relative_to(tmp)
-                dest.parent.mkdir(parents=True, exist_ok=True)
-                shutil.move(str(item), str(dest))
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
 
     con.result({**summary, "fitness": {k: {str(o): v for o, v in by.items()} for k, by in table.items()},
                 "out": str(out)})

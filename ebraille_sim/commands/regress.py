@@ -9,6 +9,7 @@ EPILOG = ("exit status: 0 when every scenario matches its baseline and criteria,
 
 
 def add_arguments(p):
+    from ebraille_sim.commands import MAX_JOBS, whole
     p.add_argument("--update", action="store_true", help="rewrite the baselines from this run")
     p.add_argument("--only", nargs="+", metavar="NAME", default=None,
                    help="run only these scenarios: names (./scenarios first, then the shipped library) or "
@@ -18,29 +19,69 @@ def add_arguments(p):
     p.add_argument("--baselines", default=None, metavar="DIR", help="folder of baselines (default: baselines/ beside each scenario file)")
     p.add_argument("--controller", default=None,
                    help="check this controller (name or gains file) against the baselines instead of each scenario's")
-    p.add_argument("-j", "--jobs", type=int, default=1, metavar="N", help="scenarios run in parallel (default 1)")
+    p.add_argument("-j", "--jobs", type=whole(1, MAX_JOBS), default=1, metavar="N",
+                   help=f"scenarios run in parallel, at most {MAX_JOBS} (default 1)")
     p.add_argument("-v", "--verbose", action="store_true", help="list every compared metric, not only what moved")
     p.add_argument("--junit", default=None, metavar="FILE",
                    help="also write JUnit XML: one test case per scenario, failures list the moved metrics")
 
 
 def _prepare(option: str, path):
-    """The report file's folder, created now so a bad path fails before the runs."""
+    """The report file, checked now (not a folder, its folder writable) so a bad path fails before the runs."""
     import pathlib
+
+    from ebraille_sim.commands import UserError, check_out_dir
+    if not str(path).strip():
+        raise UserError(f"{option} is empty; give a file name")
     p = pathlib.Path(path)
     if p.is_dir():
-        raise ValueError(f"{option} {str(p)!r} is a folder; give a file name")
-    try:
-        p.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ValueError(f"{option}: cannot create folder {str(p.parent)!r}: {exc.strerror}") from None
+        raise UserError(f"{option} {str(p)!r} is a folder; give a file name")
+    check_out_dir(p.parent, option)
     return p
 
 
 def _write(p, text: str) -> None:
+    from ebraille_sim.tools.outputs import signals_held
+    p.parent.mkdir(parents=True, exist_ok=True)
     tmp = p.with_name(p.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(p)
+    try:
+        tmp.write_text(text, encoding="utf-8")
+        with signals_held():
+            tmp.replace(p)
+    finally:
+        with signals_held():
+            tmp.unlink(missing_ok=True)
+
+
+def _check_inputs(args) -> None:
+    """Scenario folder, scenarios, baselines folder and controller, checked before any run."""
+    import pathlib
+
+    import controllers
+
+    from ebraille_sim.commands import UserError, check_out_dir
+    from ebraille_sim.tools.regress import scenario_files
+    if args.scenarios is not None:
+        d = pathlib.Path(args.scenarios)
+        if not d.exists():
+            raise UserError(f"--scenarios {str(d)!r}: no such folder")
+        if not d.is_dir():
+            raise UserError(f"--scenarios {str(d)!r} is a file, not a folder")
+    if args.baselines is not None:
+        b = pathlib.Path(args.baselines)
+        if args.update:
+            check_out_dir(b, "--baselines")
+        elif b.exists() and not b.is_dir():
+            raise UserError(f"--baselines {str(b)!r} is a file, not a folder")
+    try:
+        scenario_files(args.scenarios, args.only)
+    except (ValueError, FileNotFoundError) as exc:
+        raise UserError(str(exc)) from None
+    if args.controller is not None:
+        try:
+            controllers.make(args.controller)
+        except (ValueError, FileNotFoundError, TypeError) as exc:
+            raise UserError(f"--controller {str(args.controller)!r}: {exc}") from None
 
 
 def main(args) -> int:
@@ -56,7 +97,8 @@ def main(args) -> int:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
     if args.update and args.controller:
         raise ValueError("--update writes baselines with each scenario's own controller; drop --controller")
-    junit = _prepare("--junit", args.junit) if args.junit else None
+    _check_inputs(args)
+    junit = _prepare("--junit", args.junit) if args.junit is not None else None
     json_path = _prepare("--json", args.json) if isinstance(args.json, str) else None
     t0 = time.perf_counter()
     checks = regress_scenarios(args.scenarios, only=args.only, update=args.update, controller=args.controller,

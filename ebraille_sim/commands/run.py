@@ -29,11 +29,14 @@ class _Backends:
 
 
 def add_arguments(p):
+    from ebraille_sim.commands import number, seed
     p.add_argument("scenario", help="scenario file or the name of a shipped scenario (see 'list')")
     p.add_argument("--controller", default=None,
                    help="controller name (see 'list') or a gains file (.toml/.json); default: the scenario's")
-    p.add_argument("--seed", type=int, default=None, help="master seed (default: the scenario's)")
-    p.add_argument("--duration", type=float, default=None, metavar="S", help="override the duration, s")
+    p.add_argument("--seed", type=seed, default=None, help="master seed, in [0, 2**63) (default: the scenario's)")
+    p.add_argument("--duration", type=number(0, None, lo_open=True), default=None, metavar="S",
+                   help="override the duration, s (at most what 2 GB of run arrays hold: "
+                        "about 2 h at the default 1 kHz control rate)")
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default: runs/SCENARIO)")
     p.add_argument("--force", action="store_true",
                    help="overwrite the outputs of an earlier run in --out (refused otherwise)")
@@ -89,13 +92,28 @@ def _targets(args, spec):
     return out, anim
 
 
+def _draw(frames, path, con):
+    """Draw the recorded frames to ``path``; returns the file (or frame folder) written."""
+    from ebraille_sim.commands import FrameProgress
+    from ebraille_sim.plant.mechanism import write_animation
+    bar = FrameProgress("drawing frames", enabled=con.progress)
+    try:
+        return write_animation(frames, path, fps=25.0, progress=bar)
+    finally:
+        bar.close()
+
+
 def main(args) -> int:
     import sys
 
-    from ebraille_sim.commands import FrameProgress, UserError, console
+    import pathlib
+
+    from ebraille_sim.commands import UserError, check_duration, console
     from ebraille_sim.scenarios.runner import make_controller, run_scenario
     from ebraille_sim.scenarios.spec import load_scenario
-    from ebraille_sim.tools.report import have_parquet, metrics_document, summary_table, write_outputs
+    from ebraille_sim.tools.outputs import staged
+    from ebraille_sim.tools.report import (RUN_OWNED, have_parquet, metrics_document, summary_table,
+                                           write_run_files)
 
     con = console(args)
     if args.seed is not None and args.seed < 0:
@@ -105,14 +123,20 @@ def main(args) -> int:
     if args.trace == "parquet" and not have_parquet():
         raise UserError("--trace parquet needs pyarrow, which is not installed; use --trace csv or none")
     spec = load_scenario(args.scenario)
+    check_duration(spec, args.duration)
     out, anim = _targets(args, spec)
+    try:
+        ctrl = make_controller(spec, args.controller)
+    except (ValueError, FileNotFoundError, TypeError) as exc:
+        if args.controller is None:
+            raise
+        raise UserError(f"--controller {str(args.controller)!r}: {exc}") from None
+    gains_file = args.controller if (args.controller is not None
+                                     and str(args.controller).lower().endswith((".toml", ".json"))) else None
     from ebraille_sim.scenarios.runner import supervisor_choice
     sup_on, sup_source = supervisor_choice(spec, not args.no_supervisor)
     if not sup_on:
         print(f"warning: safety supervisor {sup_source}", file=sys.stderr)
-    ctrl = make_controller(spec, args.controller)
-    gains_file = args.controller if (args.controller is not None
-                                     and str(args.controller).lower().endswith((".toml", ".json"))) else None
 
     def simulate():
         return run_scenario(spec, controller=ctrl, seed=args.seed, duration_s=args.duration,
@@ -126,15 +150,18 @@ def main(args) -> int:
         frames = rec.frames
     else:
         result = simulate()
-    written = write_outputs(result, out, plot=not args.no_plot, trace=args.trace, controller=ctrl,
-                            controller_file=gains_file, backend=args.backend)
-    if frames is not None:
-        from ebraille_sim.plant.mechanism import write_animation
-        bar = FrameProgress("drawing frames", enabled=con.progress)
-        try:
-            written.append(write_animation(frames, anim, fps=25.0, progress=bar))
-        finally:
-            bar.close()
+    inside = anim is not None and not args.animate           # the default: animation.gif in the run folder
+    drawn = None
+    with staged(out, RUN_OWNED) as folder:
+        names = write_run_files(result, folder, plot=not args.no_plot, trace=args.trace, controller=ctrl,
+                                controller_file=gains_file, backend=args.backend)
+        if inside:
+            drawn = _draw(frames, folder / anim.name, con)
+    written = [out / n for n in names]
+    if drawn is not None:
+        written.append(out / pathlib.Path(drawn).relative_to(folder))
+    elif frames is not None:
+        written.append(_draw(frames, anim, con))
     doc = metrics_document(result, ctrl, gains_file)
     doc["out"] = str(out)
     doc["files"] = [str(p) for p in written]

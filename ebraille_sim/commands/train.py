@@ -19,26 +19,49 @@ _PPO = {"n_steps": 1024, "batch_size": 256, "n_epochs": 10, "gamma": 0.99, "gae_
 _SAC = {"learning_starts": 5000, "batch_size": 256, "gamma": 0.99, "learning_rate": 3e-4, "buffer_size": 300_000}
 
 
+MAX_STEPS = 10 ** 9
+"""Most environment steps of ``--steps``."""
+
+TRAIN_SEED_LIMIT = 2 ** 32
+"""Env ``k`` is seeded with ``seed + k``, and NumPy's global seed must lie below 2**32."""
+
+TRAIN_OWNED = ("policy.zip", "policy.json")
+"""What ``train`` writes into its folder."""
+
+
 def add_arguments(p):
+    from ebraille_sim.commands import number, whole
     p.add_argument("--algo", choices=["ppo", "sac"], default="ppo", help="algorithm (default: ppo)")
-    p.add_argument("--steps", type=int, default=200_000, metavar="N", help="environment steps (default: 200000)")
+    p.add_argument("--steps", type=whole(1, MAX_STEPS), default=200_000, metavar="N",
+                   help=f"environment steps, in [1, {MAX_STEPS:.0e}] (default: 200000)")
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default: runs/train-ALGO)")
-    p.add_argument("--seed", type=int, default=0, help="master seed of training (default: 0)")
-    p.add_argument("--envs", type=int, default=4, metavar="N", help="environments stepped together (default: 4)")
-    p.add_argument("--control-rate", type=float, default=200.0, metavar="HZ",
-                   help="env step rate = the policy's control rate, Hz (default: 200)")
-    p.add_argument("--threads", type=int, default=1, metavar="N", help="PyTorch threads (default: 1)")
+    p.add_argument("--seed", type=whole(0, TRAIN_SEED_LIMIT - 1), default=0,
+                   help="master seed of training; seed + envs at most 2**32 (default: 0)")
+    p.add_argument("--envs", type=whole(1, 256), default=4, metavar="N",
+                   help="environments stepped together, in [1, 256] (default: 4)")
+    p.add_argument("--control-rate", type=number(1, 1e5), default=200.0, metavar="HZ",
+                   help="env step rate = the policy's control rate, Hz; divides the 10 kHz physics rate "
+                        "(default: 200)")
+    p.add_argument("--threads", type=whole(1, 64), default=1, metavar="N", help="PyTorch threads, in [1, 64] (default: 1)")
 
 
 def _check(args):
+    from ebraille_sim.rl.env import EnvConfig
     if args.steps < 1:
         raise ValueError(f"--steps must be >= 1, got {args.steps}")
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
+    if args.seed + args.envs > TRAIN_SEED_LIMIT:
+        raise ValueError(f"--seed {args.seed} with --envs {args.envs} seeds env {args.envs - 1} with "
+                         f"{args.seed + args.envs - 1}; seed + envs must be at most 2**32")
     if not 1 <= args.envs <= 256:
         raise ValueError(f"--envs must be in [1, 256], got {args.envs}")
     if not 1 <= args.threads <= 64:
         raise ValueError(f"--threads must be in [1, 64], got {args.threads}")
+    try:
+        EnvConfig(control_rate_hz=args.control_rate)
+    except ValueError as exc:
+        raise ValueError(f"--control-rate {args.control_rate:g}: {str(exc).split(': ', 1)[-1]}") from None
 
 
 def _progress_callback(report, total: int, reports: int = 50):
@@ -145,13 +168,17 @@ def main(args) -> int:
     import pathlib
 
     from ebraille_sim.commands import FrameProgress, check_out_dir, console
+    from ebraille_sim.tools.outputs import staged
     con = console(args)
     _check(args)
-    out = check_out_dir(args.out if args.out else pathlib.Path("runs") / f"train-{args.algo}")
+    out = check_out_dir(args.out if args.out is not None else pathlib.Path("runs") / f"train-{args.algo}")
     bar = FrameProgress(f"train {args.algo}", enabled=con.progress, every=1)
-    rec = train(args.algo, args.steps, out, seed=args.seed, n_envs=args.envs, control_rate_hz=args.control_rate,
-                threads=args.threads, progress=bar)
-    bar.close()
+    try:
+        with staged(out, TRAIN_OWNED) as folder:
+            rec = train(args.algo, args.steps, folder, seed=args.seed, n_envs=args.envs,
+                        control_rate_hz=args.control_rate, threads=args.threads, progress=bar)
+    finally:
+        bar.close()
     ret = rec["mean_episode_return_last_100"]
     con.result({"algo": args.algo, **rec, "out": str(out),
                 "files": [str(out / "policy.zip"), str(out / "policy.json")]})

@@ -25,12 +25,24 @@ HELP = ("tune PID gains over a population of readers and FSR units and several s
         "(Ms <= 1.6 by default); keep the shipped controller if it does better; write gains, report, figures")
 
 
+MAX_POPULATION = 1000
+"""Most random devices of ``--population``."""
+
+MAX_EVALUATIONS = 10_000
+"""Most cost evaluations of ``--evaluations``."""
+
+TUNE_OWNED = ("gains.toml", "gains_tuned.toml", "gains_hand.toml", "report.md", "report.json", "bode.png",
+              "nyquist.png", "population.png")
+"""What ``tune`` writes into its folder."""
+
+
 def add_arguments(p):
+    from ebraille_sim.commands import number, seed, whole
     p.add_argument("scenario", help="scenario file or the name of a shipped scenario (see 'list')")
-    p.add_argument("--population", type=int, default=8, metavar="N",
-                   help="random devices drawn besides the 5 presets (default 8)")
+    p.add_argument("--population", type=whole(0, MAX_POPULATION), default=8, metavar="N",
+                   help=f"random devices drawn besides the 5 presets (default 8, at most {MAX_POPULATION})")
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default runs/tune-SCENARIO)")
-    p.add_argument("--seed", type=int, default=0, help="population seed (default 0)")
+    p.add_argument("--seed", type=seed, default=0, help="population seed, in [0, 2**63) (default 0)")
     p.add_argument("--family", default="pid_scheduled", choices=["pid", "pid_scheduled", "pid_feedforward"],
                    help="fixed PID gains, gains scheduled on force with the reference map (default), "
                         "or that plus the friction-band feedforward")
@@ -40,13 +52,14 @@ def add_arguments(p):
                         "'single' (SCENARIO alone), "
                         "or a comma-separated list of scenarios added to SCENARIO "
                         "(NAME_unramped takes NAME's steps at once)")
-    p.add_argument("--evaluations", type=int, default=30, metavar="N", help="cost evaluations (default 30)")
-    p.add_argument("--duration", type=float, default=None, metavar="S",
+    p.add_argument("--evaluations", type=whole(4, MAX_EVALUATIONS), default=30, metavar="N",
+                   help=f"cost evaluations, in [4, {MAX_EVALUATIONS}] (default 30)")
+    p.add_argument("--duration", type=number(0, None, lo_open=True), default=None, metavar="S",
                    help="override the duration of SCENARIO, s (steady scenarios default to 12 s in 'standard')")
-    p.add_argument("--ms-max", type=float, default=1.6,
+    p.add_argument("--ms-max", type=number(1, None, lo_open=True, allow_inf=True), default=1.6,
                    help="bound on the sensitivity peak at every device and setpoint (default 1.6; 'inf' for none)")
-    p.add_argument("--ms-gain", type=float, default=1.0,
-                   help="describing-function factor applied to the loop in the Ms check (default 1: the "
+    p.add_argument("--ms-gain", type=number(0, 100, lo_open=True), default=1.0,
+                   help="describing-function factor in (0, 100] applied to the loop in the Ms check (default 1: the "
                         "sliding linearisation; e.g. 0.5 for the friction-band relaxation of docs/tuning.md)")
 
 
@@ -182,6 +195,17 @@ def _plot_population(rep: dict, path) -> None:
 
 
 def _scenarios(arg: str, spec, duration):
+    """The scenarios of the cost named by ``--scenarios``; a bad name is one line naming the option."""
+    from ebraille_sim.commands import UserError
+    if not any(n.strip() for n in arg.split(",")):
+        raise UserError(f"--scenarios {arg!r} names no scenario; give 'standard', 'single' or a list of names")
+    try:
+        return _scenario_list(arg, spec, duration)
+    except (ValueError, FileNotFoundError) as exc:
+        raise UserError(f"--scenarios {arg!r}: {exc}") from None
+
+
+def _scenario_list(arg: str, spec, duration):
     from ebraille_sim.analysis.robust import TuneScenario, standard_scenarios, unramped
 
     from ebraille_sim.scenarios.spec import load_scenario
@@ -206,16 +230,14 @@ def _scenarios(arg: str, spec, duration):
 
 def main(args) -> int:
     import json
-    import os
     import pathlib
-    import shutil
-    import tempfile
 
     from ebraille_sim.analysis.robust import family_ms_controller, gains_document, robust_tune, tuning_population
     from ebraille_sim.analysis.tuning import analyse_loop, plot_bode, plot_nyquist
 
-    from ebraille_sim.commands import FrameProgress, check_out_dir, console
+    from ebraille_sim.commands import FrameProgress, check_duration, check_out_dir, console
     from ebraille_sim.scenarios.spec import load_scenario
+    from ebraille_sim.tools.outputs import staged
 
     con = console(args)
     if args.population < 0:
@@ -231,6 +253,7 @@ def main(args) -> int:
     if not (math.isfinite(args.ms_gain) and args.ms_gain > 0):
         raise ValueError(f"--ms-gain must be finite and > 0, got {args.ms_gain}")
     spec = load_scenario(args.scenario)
+    check_duration(spec, args.duration)
     scenarios = _scenarios(args.scenarios, spec, args.duration)
     for sc in scenarios:
         end = sc.duration_s if sc.duration_s is not None else sc.spec.duration_s
@@ -238,7 +261,7 @@ def main(args) -> int:
             raise ValueError(f"scenario {sc.name!r} ends at {end:g} s, before its reading starts at "
                              f"{sc.spec.reading.start_s:g} s; the tuning cost is measured while reading "
                              f"(give a longer --duration)")
-    out = check_out_dir(args.out if args.out else pathlib.Path("runs") / f"tune-{spec.name}")
+    out = check_out_dir(args.out if args.out is not None else pathlib.Path("runs") / f"tune-{spec.name}")
     pop = tuning_population(args.population, seed=args.seed, base=spec.device)
     bar = FrameProgress(f"tune {spec.name}: runs", enabled=con.progress)
     try:
@@ -256,9 +279,7 @@ def main(args) -> int:
         cfg_at = (lambda c: (lambda f: c))(cfg_at)
     analyses = [analyse_loop(cfg_at(f), nominal, f) for f in res.forces_n]
     rep["nominal_loop"] = [a.summary() for a in analyses]
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = pathlib.Path(tempfile.mkdtemp(prefix=".ebraille-tune-", dir=out.parent))
-    try:
+    with staged(out, TUNE_OWNED) as tmp:
         reason = (f"kept the shipped {res.chosen.family}: {res.selection_reason}\n"
                   "the optimum under the bound is in gains_tuned.toml") if res.selected != "tuned" else ""
         (tmp / "gains.toml").write_text(_toml(res.gains_file(), reason))
@@ -272,11 +293,6 @@ def main(args) -> int:
         plot_nyquist(analyses, tmp / "nyquist.png", title=f"gains.toml loop, nominal reader ({spec.name})",
                      ms_limit=args.ms_max if math.isfinite(args.ms_max) else 2.0)
         _plot_population(rep, tmp / "population.png")
-        out.mkdir(parents=True, exist_ok=True)
-        for f in tmp.iterdir():
-            os.replace(f, out / f.name)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     g = res.gains_file()["gains"]
     ship_key = "shipped" if "shipped" in rep else "default"
     files = ["gains.toml"] + (["gains_tuned.toml"] if res.selected != "tuned" else []) + \

@@ -1,20 +1,17 @@
 """Run outputs: summary table, metrics.json, the trace (trace.csv or trace.parquet) and force.png.
 
-Files are written into a temporary folder beside the target and moved into place only
-when all of them are complete, so an interrupted or failed run leaves nothing half-way.
-A run folder holds one run: outputs of an earlier run that this one does not write
-(a force.png under ``--no-plot``, a trace of another format, an animation) are removed.
+Files are written into a staging folder beside the target and moved into place only
+when all of them are complete (:func:`ebraille_sim.tools.outputs.staged`), so an
+interrupted or failed run leaves nothing half-way.  A run folder holds one run: outputs
+of an earlier run that this one does not write (a force.png under ``--no-plot``, a trace
+of another format, an animation) are removed.
 """
 from __future__ import annotations
 
-import contextlib
 import csv
 import dataclasses
 import json
-import os
 import pathlib
-import shutil
-import tempfile
 
 import numpy as np
 
@@ -173,6 +170,9 @@ def plot_force(result: RunResult, path, controller_file=None, backend: str | Non
 RUN_OUTPUTS = ("metrics.json", "trace.csv", "trace.parquet", "force.png", "animation.gif", "animation")
 """The names a run writes into its folder (``animation`` is the PNG-frame folder drawn without Pillow)."""
 
+RUN_OWNED = {name: ("frame_*.png" if name == "animation" else None) for name in RUN_OUTPUTS}
+""":data:`RUN_OUTPUTS` for :func:`ebraille_sim.tools.outputs.staged`: of the frame folder a run owns only the frames."""
+
 TRACE_FORMATS = ("csv", "parquet", "none")
 
 
@@ -186,14 +186,8 @@ def existing_outputs(out_dir) -> list[pathlib.Path]:
 
 def remove_output(path) -> None:
     """Remove one run output: a file, or the frame folder's ``frame_*.png`` (and the folder once empty)."""
-    p = pathlib.Path(path)
-    if p.is_dir() and not p.is_symlink():
-        for f in p.glob("frame_*.png"):
-            f.unlink()
-        with contextlib.suppress(OSError):
-            p.rmdir()
-    elif p.exists() or p.is_symlink():
-        p.unlink()
+    from ebraille_sim.tools.outputs import remove_owned
+    remove_owned(path, RUN_OWNED)
 
 
 def have_parquet() -> bool:
@@ -217,10 +211,34 @@ def write_trace_parquet(path, trace: dict) -> None:
     pq.write_table(pa.table(cols), path)
 
 
+def write_run_files(result: RunResult, folder, plot: bool = True, trace: str = "csv", controller=None,
+                    controller_file=None, backend: str | None = None) -> list[str]:
+    """Write metrics.json, the trace and force.png straight into ``folder`` (which must exist).
+
+    The arguments are those of :func:`write_outputs`; returns the names written.
+    """
+    if trace not in TRACE_FORMATS:
+        raise ValueError(f"trace format must be one of {', '.join(TRACE_FORMATS)}, got {trace!r}")
+    folder = pathlib.Path(folder)
+    (folder / "metrics.json").write_text(json.dumps(
+        metrics_document(result, controller, controller_file), indent=2) + "\n")
+    if trace == "csv":
+        write_trace_csv(folder / "trace.csv", result.trace)
+    elif trace == "parquet":
+        write_trace_parquet(folder / "trace.parquet", result.trace)
+    if plot:
+        plot_force(result, folder / "force.png", controller_file, backend)
+    return [n for n in RUN_OUTPUTS if (folder / n).exists()]
+
+
 def write_outputs(result: RunResult, out_dir, plot: bool = True, trace: str = "csv",
                   clear_stale: bool = True, controller=None, controller_file=None,
                   backend: str | None = None) -> list[pathlib.Path]:
-    """Write metrics.json, the trace and force.png into ``out_dir`` (created if needed).
+    """Write metrics.json, the trace and force.png into ``out_dir`` (created if needed), all at once.
+
+    The files are written into a staging folder and moved into place together
+    (:func:`ebraille_sim.tools.outputs.staged`): an error or an interrupt leaves
+    ``out_dir`` as it was.
 
     Parameters
     ----------
@@ -242,28 +260,10 @@ def write_outputs(result: RunResult, out_dir, plot: bool = True, trace: str = "c
     list of pathlib.Path
         The files written.
     """
+    from ebraille_sim.tools.outputs import staged
     if trace not in TRACE_FORMATS:
         raise ValueError(f"trace format must be one of {', '.join(TRACE_FORMATS)}, got {trace!r}")
     out = pathlib.Path(out_dir)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = pathlib.Path(tempfile.mkdtemp(prefix=".ebraille-", dir=out.parent))
-    try:
-        (tmp / "metrics.json").write_text(json.dumps(
-            metrics_document(result, controller, controller_file), indent=2) + "\n")
-        if trace == "csv":
-            write_trace_csv(tmp / "trace.csv", result.trace)
-        elif trace == "parquet":
-            write_trace_parquet(tmp / "trace.parquet", result.trace)
-        if plot:
-            plot_force(result, tmp / "force.png", controller_file, backend)
-        out.mkdir(parents=True, exist_ok=True)
-        names = [n for n in RUN_OUTPUTS if (tmp / n).exists()]
-        if clear_stale:
-            for old in existing_outputs(out):
-                if old.name not in names:
-                    remove_output(old)
-        for name in names:
-            os.replace(tmp / name, out / name)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    with staged(out, RUN_OWNED if clear_stale else ()) as folder:
+        names = write_run_files(result, folder, plot, trace, controller, controller_file, backend)
     return [out / n for n in names]
