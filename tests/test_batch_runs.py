@@ -74,3 +74,28 @@ def test_a_failing_row_fails_alone_with_the_single_run_error(mode, message):
     for i in (0, 2):
         ref = run_scenario(**runs[i])
         np.testing.assert_array_equal(out[i].trace["force_true_n"], ref.trace["force_true_n"])
+
+
+@pytest.mark.parametrize("name", ["steady_90wpm", "refresh_60wpm"])
+def test_a_thinned_trace_keeps_the_metrics_and_every_kth_sample(name):
+    full = run_scenario(name, duration_s=4.0, seed=6)
+    drop = lambda m: {k: v for k, v in m.items() if k != "real_time_factor"}   # noqa: E731
+    for every in (7, None):
+        lean = run_scenario(name, duration_s=4.0, seed=6, trace_every=every)
+        assert drop(lean.metrics) == drop(full.metrics)
+        if every is None:
+            assert lean.trace == {}
+            continue
+        assert list(lean.trace) == list(full.trace)
+        for col, arr in full.trace.items():
+            np.testing.assert_array_equal(lean.trace[col], arr[every - 1::every], err_msg=col)
+    with pytest.raises(ValueError, match="trace_every must be a whole number >= 1 or None"):
+        run_scenario(name, duration_s=1.0, trace_every=0)
+
+
+def test_character_column_is_a_lookup_of_the_cells():
+    res = run_scenario("steady_90wpm", duration_s=3.0, seed=1)
+    ci, cells = res.trace["char_index"], res.schedule.cells
+    expected = np.array([cells[j].unicode if j >= 0 else "" for j in ci])
+    np.testing.assert_array_equal(res.trace["character"], expected)
+    assert res.trace["character"].dtype == expected.dtype and (ci >= 0).any() and (ci < 0).any()

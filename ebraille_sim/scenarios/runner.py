@@ -37,6 +37,7 @@ class RunResult:
     trace : dict of ndarray
         Named arrays of shape (n_steps,), sampled at the control rate (columns
         :data:`TRACE_COLUMNS`); sample ``k`` is the state at the end of control period ``k``.
+        With :func:`run_scenario`'s ``trace_every`` = k every k-th sample only; with None empty.
     schedule : ReadingSchedule
     controller_name : str
     seed : int
@@ -94,7 +95,7 @@ def prepare_run(scenario, controller=None, seed: int | None = None, duration_s: 
 
 
 def run_scenario(scenario, controller=None, seed: int | None = None, duration_s: float | None = None,
-                 backend: str = "lumped", device=None) -> RunResult:
+                 backend: str = "lumped", device=None, trace_every: int | None = 1) -> RunResult:
     """Simulate a scenario in closed loop.
 
     Parameters
@@ -113,24 +114,31 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     device : DeviceParams, optional
         Replaces the scenario's device (e.g. a reader drawn by
         :func:`ebraille_sim.scenarios.population.sample_devices`).
+    trace_every : int or None
+        Samples of the returned trace: 1 (default) keeps every control period; ``k`` keeps
+        every ``k``-th (samples ``k - 1, 2k - 1, ...``, the ends of periods ``k, 2k, ...``);
+        None returns no trace (an empty dict).  The metrics are always computed from every
+        control period and do not depend on it; above 1 the run holds only the true and
+        estimated force at the full rate, which bounds the memory of long sessions.
 
     Returns
     -------
     RunResult
     """
+    if trace_every is not None and (isinstance(trace_every, bool) or not isinstance(trace_every, (int, np.integer))
+                                    or trace_every < 1):
+        raise ValueError(f"trace_every must be a whole number >= 1 or None, got {trace_every!r}")
     spec, seed, run, ctrl = prepare_run(scenario, controller, seed, duration_s, device)
-    return _simulate(spec, seed, run, ctrl, backend)
+    if trace_every == 1:
+        return _simulate(spec, seed, run, ctrl, backend)
+    return _simulate_lean(spec, seed, run, ctrl, backend, trace_every)
 
 
 def _simulate(spec, seed, run, ctrl, backend: str) -> RunResult:
     """Closed loop of one prepared run, one control period per Python iteration."""
     dt, n = run.dt_s, run.n_steps
     sp = run.setpoint_n[:n].copy()
-    try:
-        plant = make_plant([spec.device], seeds=[run.sensor_seed], backend=backend)
-    except (ValueError, FileNotFoundError) as exc:
-        raise ScenarioError(f"{spec.source}: {exc}") from None
-    plant.set_finger(spec.finger.gap_m)
+    plant = _plant_for(spec, run, backend)
     profiles = run.profiles
     ctrl = wrap_controller(spec, ctrl, dt)
     tr = {c: np.zeros(n) for c in TRACE_COLUMNS if c not in ("character", "t_s", "setpoint_n", "char_index")}
@@ -167,8 +175,81 @@ def _simulate(spec, seed, run, ctrl, backend: str) -> RunResult:
     return _finish(spec, seed, run, tr, sp, wall, getattr(ctrl, "name", type(ctrl).__name__))
 
 
-def _finish(spec, seed, run, tr: dict, sp: np.ndarray, wall: float, controller_name: str) -> RunResult:
-    """Check a finished loop's trace, complete its columns and compute the metrics."""
+def _plant_for(spec, run, backend: str):
+    try:
+        plant = make_plant([spec.device], seeds=[run.sensor_seed], backend=backend)
+    except (ValueError, FileNotFoundError) as exc:
+        raise ScenarioError(f"{spec.source}: {exc}") from None
+    plant.set_finger(spec.finger.gap_m)
+    return plant
+
+
+def _simulate_lean(spec, seed, run, ctrl, backend: str, every: int | None) -> RunResult:
+    """:func:`_simulate` keeping the true and estimated force at every period (the metrics
+    need them) and the other trace columns at every ``every``-th period (None: not at all).
+
+    The same controller calls and plant steps as :func:`_simulate`, so the same metrics.
+    """
+    dt, n = run.dt_s, run.n_steps
+    sp = run.setpoint_n[:n].copy()
+    plant = _plant_for(spec, run, backend)
+    ctrl = wrap_controller(spec, ctrl, dt)
+    st = plant.state[0]
+    i_fc, i_fe, i_v, i_i, i_x, i_e = (S.contact_force_n, S.force_est_n, S.fsr_voltage_v,
+                                      S.current_a, S.board_pos_m, S.energy_j)
+    ctrl.reset(force_est_n=float(st[i_fe]), setpoint_n=float(sp[0]), command_v=0.0)
+    f_true, f_est = np.zeros(n), np.zeros(n)
+    n_kept = 0 if every is None else n // every
+    kept = {c: np.zeros(n_kept) for c in ("command_v", "fsr_voltage_v", "motor_current_a", "board_pos_m",
+                                           "energy_j")}
+    cmd_v, v_fsr, cur, xb, en = (kept["command_v"], kept["fsr_voltage_v"], kept["motor_current_a"],
+                                 kept["board_pos_m"], kept["energy_j"])
+    fe = float(st[i_fe])
+    i_a = 0.0
+    update = ctrl.update
+    advance = plant.advance
+    inp = plant.inputs[0]
+    varying = [(U[name], arr) for name, arr in run.profiles.items()]
+    due = -1 if every is None else every - 1          # next period whose end is kept
+    q = 0
+    wall0 = time.perf_counter()
+    for k in range(n):
+        for j, arr in varying:
+            inp[j] = arr[k]
+        c = update(fe, sp[k], dt, i_a)
+        advance(c)
+        fe = float(st[i_fe])
+        i_a = float(st[i_i])
+        f_true[k] = st[i_fc]
+        f_est[k] = fe
+        if k == due:
+            cmd_v[q] = c
+            v_fsr[q] = st[i_v]
+            cur[q] = i_a
+            xb[q] = st[i_x]
+            en[q] = st[i_e]
+            q += 1
+            due += every
+    wall = time.perf_counter() - wall0
+    energy_end = float(st[i_e]) if n else 0.0
+    name = getattr(ctrl, "name", type(ctrl).__name__)
+    tr = {"force_true_n": f_true, "force_est_n": f_est, "energy_j": np.array([energy_end])}
+    res = _finish(spec, seed, run, tr, sp, wall, name, keep_trace=False)
+    if every is None:
+        return res
+    sel = slice(every - 1, None, every)
+    out = {"t_s": ((np.arange(n) + 1) * dt)[sel], "setpoint_n": sp[sel], "force_true_n": f_true[sel].copy(),
+           "force_est_n": f_est[sel].copy(), **kept}
+    out["char_index"] = run.schedule.index_at(out["t_s"])
+    out["character"] = character_column(out["char_index"], run.schedule.cells)
+    res.trace = {c: out[c] for c in TRACE_COLUMNS}
+    return res
+
+
+def _finish(spec, seed, run, tr: dict, sp: np.ndarray, wall: float, controller_name: str,
+            keep_trace: bool = True) -> RunResult:
+    """Check a finished loop's trace, complete its columns and compute the metrics
+    (``keep_trace`` False: ``tr`` holds only what the metrics read; the result's trace is empty)."""
     f_true = tr["force_true_n"]
     if not np.all(np.isfinite(f_true)):
         raise FloatingPointError(f"{spec.source}: the simulation diverged (non-finite force)")
@@ -180,8 +261,9 @@ def _finish(spec, seed, run, tr: dict, sp: np.ndarray, wall: float, controller_n
     ci = schedule.index_at(t)
     tr["char_index"] = ci
     cells = schedule.cells
-    tr["character"] = character_column(ci, cells)
-    tr = {c: tr[c] for c in TRACE_COLUMNS}
+    if keep_trace:
+        tr["character"] = character_column(ci, cells)
+        tr = {c: tr[c] for c in TRACE_COLUMNS}
     window = tr
     if spec.reading.mode == "refresh":
         # refresh mode: a character's in-band window is the hold part of its dwell only
@@ -191,7 +273,7 @@ def _finish(spec, seed, run, tr: dict, sp: np.ndarray, wall: float, controller_n
     # electrotactile legibility beside the force metrics (stimulation during the same windows)
     from ebraille_sim.scenarios.legibility import legibility_metrics
     metrics.update(legibility_metrics(f_true, sp, window["char_index"], cells))
-    return RunResult(spec, metrics, tr, schedule, controller_name, seed)
+    return RunResult(spec, metrics, tr if keep_trace else {}, schedule, controller_name, seed)
 
 
 def character_column(char_index: np.ndarray, cells) -> np.ndarray:
