@@ -12,8 +12,8 @@ With ``parallel=True`` the rows are spread over threads with ``numba.prange``; r
 independent, so the result does not depend on the thread count.  The default
 (``parallel=None``) uses threads only where they pay: :func:`use_threads` (at least
 :data:`THREADS_MIN_CPUS` cores and :data:`THREADS_MIN_ENVS` sub-envs).  On a 2-core machine
-shared with other work one thread was faster at every size measured (1-1024 sub-envs:
-threads 0.02-0.42x of one thread, ``benchmarks/bench_env.py`` prints this table).
+shared with other work (load average 6) threads ran at 0.09-0.60x of one thread from 4 to
+1024 sub-envs and no faster at 1 (``benchmarks/bench_env.py`` prints this table).
 
 Sub-env ``i`` is exactly the scalar env reset with seed ``seed + i`` (or ``seeds[i]``): the
 same episode draws, the same packed rows (built by :meth:`ebraille_sim.plant.loop.Plant.from_devices`)
@@ -75,8 +75,8 @@ __all__ = ["ContactForceVectorEnv", "THREADS_MIN_CPUS", "THREADS_MIN_ENVS", "ste
            "step_rows_serial", "use_threads"]
 
 THREADS_MIN_CPUS = 4
-"""Fewest cores on which the default spreads rows over threads.  On 2 cores (shared) threads
-were slower than one thread at every size from 1 to 1024 sub-envs."""
+"""Fewest cores on which the default spreads rows over threads.  On 2 shared cores threads
+were slower than one thread at every size from 4 to 1024 sub-envs."""
 
 THREADS_MIN_ENVS = 256
 """Fewest sub-envs for which the default spreads rows over threads: below it a period's work
