@@ -58,6 +58,14 @@ def test_batched_runs_equal_single_runs_exactly():
         assert res.controller_name == ref.controller_name and res.seed == ref.seed
     assert batched[0].metrics["force_rmse_n"] is not None
     assert batched[0].metrics != batched[2].metrics                     # different readers
+    lean = run_batch(runs, keep_traces=False)
+    for a, b in zip(batched, lean):
+        if isinstance(a, Exception):
+            assert str(a) == str(b)
+            continue
+        assert b.trace == {}
+        assert {k: v for k, v in a.metrics.items() if k != "real_time_factor"} == \
+               {k: v for k, v in b.metrics.items() if k != "real_time_factor"}
 
 
 @pytest.mark.parametrize("mode, message", [("raise", "controller gave up"), ("nan", "command_v must be finite")])

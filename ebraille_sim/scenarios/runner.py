@@ -292,7 +292,7 @@ _BATCH_COLUMNS = ("force_true_n", "force_est_n", "fsr_voltage_v", "motor_current
 _RUN_ERRORS = (ValueError, FloatingPointError, FileNotFoundError)
 
 
-def run_batch(runs: list) -> list:
+def run_batch(runs: list, keep_traces: bool = True) -> list:
     """Several runs of :func:`run_scenario` (lumped plant), their plants advanced together.
 
     Runs with the same number of control periods and the same rates share one packed plant:
@@ -307,6 +307,9 @@ def run_batch(runs: list) -> list:
     runs : list of dict
         Keyword arguments of :func:`run_scenario` per run (``scenario``, ``controller``,
         ``seed``, ``duration_s``, ``device``; no ``backend``).
+    keep_traces : bool
+        False returns every result with an empty trace (its metrics unchanged): a sweep
+        keeps only metrics, so the batch's traces are not copied out.
 
     Returns
     -------
@@ -330,18 +333,20 @@ def run_batch(runs: list) -> list:
         size = max(1, BATCH_TRACE_BYTES // per_row)
         for j in range(0, len(members), size):
             part = members[j:j + size]
-            for i, res in zip((m[0] for m in part), _simulate_batch([m[1] for m in part])):
+            for i, res in zip((m[0] for m in part), _simulate_batch([m[1] for m in part], keep_traces)):
                 out[i] = res
     return out
 
 
-def _simulate_batch(prepared: list) -> list:
+def _simulate_batch(prepared: list, keep_traces: bool = True) -> list:
     """:func:`_simulate` of several prepared runs with equal length and rates, one plant."""
     from ebraille_sim.plant import kernel
     if len(prepared) == 1:
         spec, seed, run, ctrl = prepared[0]
         try:
-            return [_simulate(spec, seed, run, ctrl, "lumped")]
+            if keep_traces:
+                return [_simulate(spec, seed, run, ctrl, "lumped")]
+            return [_simulate_lean(spec, seed, run, ctrl, "lumped", None)]
         except _RUN_ERRORS as exc:
             return [exc]
     specs = [p[0] for p in prepared]
@@ -350,7 +355,7 @@ def _simulate_batch(prepared: list) -> list:
         plant = make_plant([s.device for s in specs], seeds=[r.sensor_seed for r in runs], backend="lumped")
     except (ValueError, FileNotFoundError):
         # one row cannot be packed: run each on its own, for the error of that row alone
-        return [r for p in prepared for r in _simulate_batch([p])]
+        return [r for p in prepared for r in _simulate_batch([p], keep_traces)]
     m = len(prepared)
     run0 = runs[0]
     dt, n = run0.dt_s, run0.n_steps
@@ -425,11 +430,17 @@ def _simulate_batch(prepared: list) -> list:
         ias = state[:, i_i].tolist()
     wall = (time.perf_counter() - wall0) / m
     for r in live:
-        tr = {col: np.ascontiguousarray(buf[:, r, q]) for q, col in enumerate(_BATCH_COLUMNS)}
-        tr["command_v"] = np.ascontiguousarray(cmd[:, r])
+        if keep_traces:
+            tr = {col: np.ascontiguousarray(buf[:, r, q]) for q, col in enumerate(_BATCH_COLUMNS)}
+            tr["command_v"] = np.ascontiguousarray(cmd[:, r])
+        else:                                           # what the metrics read
+            tr = {col: np.ascontiguousarray(buf[:, r, _BATCH_COLUMNS.index(col)])
+                  for col in ("force_true_n", "force_est_n")}
+            tr["energy_j"] = buf[-1:, r, _BATCH_COLUMNS.index("energy_j")].copy()
         spec, seed, run, _ = prepared[r]
         try:
-            out[r] = _finish(spec, seed, run, tr, np.ascontiguousarray(sp[:, r]), wall, names[r])
+            out[r] = _finish(spec, seed, run, tr, np.ascontiguousarray(sp[:, r]), wall, names[r],
+                             keep_trace=keep_traces)
         except _RUN_ERRORS as exc:
             out[r] = exc
     return out

@@ -229,7 +229,7 @@ def _run_batch(plan: SweepPlan, batch: list) -> list:
     (:func:`ebraille_sim.scenarios.runner.run_batch`; the same rows as :func:`run_episode`)."""
     from ebraille_sim.scenarios.runner import run_batch
     pairs = [_episode_run(plan, ep) for ep in batch]
-    results = run_batch([kw for _, kw in pairs])
+    results = run_batch([kw for _, kw in pairs], keep_traces=False)
     return [_complete(row, res) for (row, _), res in zip(pairs, results)]
 
 
