@@ -143,3 +143,11 @@ def test_threads_only_with_enough_cores_and_envs():
     assert ContactForceVectorEnv(num_envs=3, parallel=True).parallel is True
     with pytest.raises(ValueError, match="parallel must be True, False or None"):
         ContactForceVectorEnv(num_envs=3, parallel="yes")
+
+
+def test_vector_episode_bound_follows_the_control_rate():
+    envs = gym.make_vec(ENV_ID, num_envs=2, control_rate_hz=1000.0)
+    assert envs.unwrapped.max_episode_steps == 7000                 # 7 s at 1 kHz, not 1400 steps
+    envs.reset(seed=0, options={"wpm": 60.0})
+    assert int(envs.unwrapped._n_steps.min()) == 7000
+    envs.close()
