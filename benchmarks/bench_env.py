@@ -11,6 +11,13 @@
   on one thread; each also as a ratio to Pendulum-v1's single-env steps/s and to the
   1,000,000 env-steps/s target.
 
+* reset cost: the mean wall time of one ``reset()`` of the scalar env (a new device, its R2
+  calibration, episode inputs and packing) in units of one env step (a control period at
+  200 Hz) measured in the same run; the target is at most 20 steps.
+* threads: env-steps/s of the vector env's compiled row loop on threads (``prange``) and on
+  one thread at 1-1024 sub-envs, no resets; the ratio threads / one thread is what
+  :func:`ebraille_sim.rl.vector_env.use_threads` (the default of ``parallel``) is based on.
+
 Run:  python benchmarks/bench_env.py [--seconds 3] [--envs 1024] [--json FILE]
 """
 from __future__ import annotations
@@ -52,6 +59,69 @@ def single_steps_per_s(env, seconds: float, seed: int = 0) -> float:
         dt = time.perf_counter() - t0
         if dt >= seconds:
             return n / dt
+
+
+def reset_cost_in_steps(seconds: float, seed: int = 0, **kwargs) -> tuple[float, float, float]:
+    """(mean reset time in s, mean step time in s, their ratio) of one unwrapped scalar env,
+    steps and resets interleaved in the same loop so both see the same machine load."""
+    from ebraille_sim.rl.env import ContactForceEnv
+    env = ContactForceEnv(**kwargs)
+    env.reset(seed=seed)
+    for _ in range(20):
+        env.step(np.zeros(1, np.float32))
+    t_reset = t_step = 0.0
+    n_reset = n_step = 0
+    a = np.full(1, 0.1, np.float32)
+    t_end = time.perf_counter() + seconds
+    while time.perf_counter() < t_end:
+        t0 = time.perf_counter()
+        env.reset()
+        t1 = time.perf_counter()
+        for _ in range(20):
+            env.step(a)
+        t2 = time.perf_counter()
+        t_reset += t1 - t0
+        t_step += t2 - t1
+        n_reset += 1
+        n_step += 20
+    r, s = t_reset / n_reset, t_step / n_step
+    return r, s, r / s
+
+
+def thread_table(sizes=(1, 4, 16, 64, 256, 1024)) -> list[dict]:
+    """Env-steps/s of the vector env's row loop on threads and on one thread, no resets
+    (best of 3 timings).  Each variant steps a fresh vector env whose episodes (60 wpm, 1400
+    steps) outlast the 4 timed-and-warm-up passes: the row loop itself does not stop at an
+    episode's end."""
+    from ebraille_sim.rl.vector_env import step_rows, step_rows_serial
+    rows = []
+    for n in sizes:
+        steps = max(5, min(300, 20000 // n))
+        rates = {}
+        for label, fn in (("one_thread", step_rows_serial), ("threads", step_rows)):
+            venv = ContactForceVectorEnv(num_envs=n, parallel=False)
+            venv.reset(seed=0, options={"wpm": 60.0})
+            assert 4 * steps < int(venv._n_steps.min())
+            a = np.zeros(n)
+
+            def call():
+                fn(venv.state, venv.params, venv.inputs, venv._z, venv._c, venv._seq, venv._setpoint,
+                   venv._n_steps, a, venv._active, venv.config.substeps, venv._obs, venv._reward,
+                   venv._violation, venv._terminated, venv._truncated)
+            for _ in range(steps):
+                call()
+            best = float("inf")
+            for _ in range(3):
+                t0 = time.perf_counter()
+                for _ in range(steps):
+                    call()
+                best = min(best, time.perf_counter() - t0)
+            rates[label] = n * steps / best
+            venv.close()
+        rows.append({"envs": n, "one_thread_env_steps_per_s": rates["one_thread"],
+                     "threads_env_steps_per_s": rates["threads"],
+                     "ratio_threads_to_one": rates["threads"] / rates["one_thread"]})
+    return rows
 
 
 def _law(obs):
@@ -109,25 +179,38 @@ def main(argv=None):
     print(f"single env (unwrapped):          ours {ours_raw:10.0f} steps/s   Pendulum-v1 {pend_raw:10.0f} steps/s   "
           f"ratio {ours_raw / pend_raw:5.2f}")
 
+    r_s, s_s, ratio = reset_cost_in_steps(a.seconds)
+    res["reset"] = {"reset_s": r_s, "step_s": s_s, "reset_in_steps": ratio}
+    print(f"scalar env reset: {r_s * 1e3:.3f} ms, step {s_s * 1e3:.4f} ms (200 Hz): one reset = {ratio:.1f} steps")
+
+    from ebraille_sim.rl.vector_env import use_threads
+    res["threads"] = thread_table()
+    for row in res["threads"]:
+        print(f"vector env {row['envs']:5d} envs, no resets: one thread {row['one_thread_env_steps_per_s']:10.0f} "
+              f"env-steps/s, threads {row['threads_env_steps_per_s']:10.0f} env-steps/s, "
+              f"threads/one {row['ratio_threads_to_one']:5.2f}, default uses threads: {use_threads(row['envs'])}")
+
     rows = []
-    for label, resets, kwargs in [("200 Hz, autoresets, threads", True, {}),
-                                  ("200 Hz, no resets, threads", False, {}),
+    for label, resets, kwargs in [("200 Hz, autoresets, default", True, {}),
+                                  ("200 Hz, autoresets, threads", True, {"parallel": True}),
+                                  ("200 Hz, no resets, threads", False, {"parallel": True}),
                                   ("200 Hz, no resets, 1 thread", False, {"parallel": False}),
-                                  ("1 kHz, autoresets, threads", True, {"control_rate_hz": 1000.0}),
-                                  ("1 kHz, no resets, threads", False, {"control_rate_hz": 1000.0}),
+                                  ("1 kHz, autoresets, threads", True, {"control_rate_hz": 1000.0, "parallel": True}),
+                                  ("1 kHz, no resets, threads", False, {"control_rate_hz": 1000.0, "parallel": True}),
                                   ("1 kHz, no resets, 1 thread", False, {"control_rate_hz": 1000.0,
                                                                          "parallel": False})]:
         rate, ends, sub = vector_steps_per_s(a.seconds, a.envs, resets, **kwargs)
         rows.append({"case": label, "envs": a.envs, "substeps_per_step": sub, "env_steps_per_s": rate,
                      "physics_substeps_per_s": rate * sub, "episode_ends": ends,
                      "ratio_to_pendulum_single": rate / pend, "ratio_to_target": rate / TARGET_VECTOR})
-        print(f"vector env {a.envs} envs, {label:28s} ({sub:2d} substeps/step): {rate:11.0f} env-steps/s  "
+        print(f"vector env {a.envs} envs, {label:29s} ({sub:2d} substeps/step): {rate:11.0f} env-steps/s  "
               f"{rate * sub / 1e6:6.1f} M substeps/s  episode ends {ends:5d}  x{rate / pend:6.1f} Pendulum  "
               f"{rate / TARGET_VECTOR:5.2f} of 1M target")
     res["vector"] = rows
     res["machine"]["load_average_1min_at_end"] = os.getloadavg()[0]
     print(f"load average (1 min) at start {res['machine']['load_average_1min_at_start']:.2f}, "
           f"at end {res['machine']['load_average_1min_at_end']:.2f} on {os.cpu_count()} cores")
+    print(f"one reset = {ratio:.1f} env steps (target <= 20)")
     if a.json:
         with open(a.json, "w", encoding="utf-8") as fh:
             json.dump(res, fh, indent=2)

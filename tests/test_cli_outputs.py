@@ -179,7 +179,7 @@ def _argv(command: str, tmp_path: pathlib.Path, tag: str) -> list:
             assert cli(["regress", "--scenarios", str(d), "--update", "--quiet"]) == 0
         return ["regress", "--scenarios", str(d)]
     if command == "sweep":
-        return ["sweep", "contact_onset", "--rates", "90", "--readers", "2", "--duration", "0.6", "-j", "1",
+        return ["sweep", "contact_onset", "--rates", "90", "--readers", "2", "--duration", "2.1", "-j", "1",
                 "--no-figures", "--out", out]
     if command == "identify":
         csv_path = tmp_path / "square.csv"

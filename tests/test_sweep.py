@@ -10,8 +10,11 @@ from ebraille_sim.tools import sweep as S
 from ebraille_sim.cli import main as cli
 
 
+DURATION_S = 2.1          # reading starts at 2.0 s (contact_onset) and 1.5 s (steady_90wpm)
+
+
 def small_plan(**kw):
-    args = dict(rates=[60, 120], readers=2, controllers=["pid"], seed=3, duration_s=0.8)
+    args = dict(rates=[60, 120], readers=2, controllers=["pid"], seed=3, duration_s=DURATION_S)
     args.update(kw)
     return S.plan_sweep(["contact_onset", "steady_90wpm"], **args)
 
@@ -42,6 +45,8 @@ def test_plan_is_the_full_product_with_controller_independent_seeds(tmp_path):
     (dict(rates=[0]), "reading rate 0"),
     (dict(controllers=["lqr"]), "unknown controller 'lqr'"),
     (dict(duration_s=-1.0), "duration_s must be a positive finite number"),
+    (dict(duration_s=1.0), "episodes of 1 s end before scenario 'contact_onset' starts reading at 2 s"),
+    (dict(duration_s=2.0), "use a duration above 2 s"),
 ])
 def test_bad_plans_are_rejected(kw, msg):
     with pytest.raises(ValueError, match=msg):
@@ -71,11 +76,22 @@ def test_episode_rows_match_a_direct_run():
     row = S.run_episode(plan, ep)
     spec = plan.specs[ep.scenario]
     spec = dataclasses.replace(spec, reading=dataclasses.replace(spec.reading, wpm=ep.wpm))
-    res = run_scenario(spec, seed=ep.seed, duration_s=0.8, device=plan.devices[ep.scenario][ep.reader])
+    res = run_scenario(spec, seed=ep.seed, duration_s=DURATION_S, device=plan.devices[ep.scenario][ep.reader])
     for k, v in res.metrics.items():
         if k != "real_time_factor":
             assert row[k] == v, k
     assert row["fsr_k_ohm"] == plan.devices[ep.scenario][ep.reader].fsr.resistance_at_1n_ohm
+
+
+def test_batched_rows_equal_rows_of_single_episodes_and_every_force_metric_is_set():
+    plan = small_plan(controllers=["pid", "lqg"])
+    single = [S.run_episode(plan, ep) for ep in plan.episodes]
+    for batch_size in (None, 5):
+        res = S.run_sweep(plan, jobs=1, progress=False, batch_size=batch_size)
+        assert S.identical_results(res, S.SweepResult(single, res.columns, 0.0))
+    assert all(r["error"] == "" for r in single)
+    for metric in ("force_rmse_n", "in_band_fraction", "estimate_rmse_n", "char_in_band_fraction"):
+        assert all(r[metric] is not None and math.isfinite(r[metric]) for r in single), metric
 
 
 def test_cvar_and_losses():
@@ -92,7 +108,7 @@ def test_cvar_and_losses():
 
 def test_cli_writes_table_summary_and_figures(tmp_path, capsys):
     out = tmp_path / "sw"
-    code = cli(["sweep", "contact_onset", "--rates", "90", "--readers", "3", "--duration", "0.6", "-j", "1",
+    code = cli(["sweep", "contact_onset", "--rates", "90", "--readers", "3", "--duration", "2.1", "-j", "1",
                 "--out", str(out), "--no-progress", "--loss", "char_in_band_fraction"])
     assert code == 0
     text = capsys.readouterr().out
@@ -119,7 +135,7 @@ def test_thousand_episodes_on_dask_and_locally_are_identical(tmp_path):
     gains = tmp_path / "soft.toml"
     gains.write_text('controller = "pid"\n[gains]\nkp_v_per_n = 1.5\nki_v_per_ns = 6.0\n')
     plan = S.plan_sweep(["steady_90wpm", "tremor_90wpm"], rates=[60, 90, 120], readers=42,
-                        controllers=["pid", str(gains)], seed=11, replicates=2, duration_s=1.0)
+                        controllers=["pid", str(gains)], seed=11, replicates=2, duration_s=2.0)
     assert len(plan.episodes) == 1008
     t0 = time.perf_counter()
     local = S.run_sweep(plan, jobs=2, progress=False)

@@ -1,6 +1,8 @@
 """The native vector env: equal to N scalar envs, NEXT_STEP autoreset, batched step, errors."""
 from __future__ import annotations
 
+import os
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -128,3 +130,24 @@ def test_vector_render_gives_one_frame_per_env():
     frames = venv.render()
     assert len(frames) == 2 and frames[0].shape == (360, 720, 3)
     venv.close()
+
+
+def test_threads_only_with_enough_cores_and_envs():
+    from ebraille_sim.rl.vector_env import THREADS_MIN_CPUS, THREADS_MIN_ENVS, use_threads
+    assert not use_threads(1024, cpus=2)                       # measured: one thread wins on 2 cores
+    assert not use_threads(THREADS_MIN_ENVS - 1, cpus=64)
+    assert use_threads(THREADS_MIN_ENVS, cpus=THREADS_MIN_CPUS)
+    assert not use_threads(4096, cpus=None) or (os.cpu_count() or 1) >= THREADS_MIN_CPUS
+    venv = ContactForceVectorEnv(num_envs=3)
+    assert venv.parallel is use_threads(3) and venv.parallel is False
+    assert ContactForceVectorEnv(num_envs=3, parallel=True).parallel is True
+    with pytest.raises(ValueError, match="parallel must be True, False or None"):
+        ContactForceVectorEnv(num_envs=3, parallel="yes")
+
+
+def test_vector_episode_bound_follows_the_control_rate():
+    envs = gym.make_vec(ENV_ID, num_envs=2, control_rate_hz=1000.0)
+    assert envs.unwrapped.max_episode_steps == 7000                 # 7 s at 1 kHz, not 1400 steps
+    envs.reset(seed=0, options={"wpm": 60.0})
+    assert int(envs.unwrapped._n_steps.min()) == 7000
+    envs.close()

@@ -25,6 +25,7 @@ True
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import TYPE_CHECKING
 
@@ -103,12 +104,83 @@ def static_error_table(model, fsr, circuit, forces_n=(0.2, 0.3, 0.5, 0.75, 1.0, 
     return rows
 
 
+def _steady_map(model):
+    """The scalar map ``u -> model.steady_state(u)``, with the linear block's gain and the
+    nonlinearities' breakpoints read once (the same floating-point operations, so the same
+    numbers)."""
+    g = model.linear.steady_state_gain()
+    if not math.isfinite(g):
+        return model.steady_state              # raises as the model does
+
+    def pwl(nl):
+        if nl is None:
+            return None
+        xb = np.asarray(nl.x_bp, dtype=float)
+        yb = np.asarray(nl.y_bp, dtype=float)
+        slopes = nl.segment_slopes()
+        x0, xn, y0, yn, s0, sn = (float(v) for v in (xb[0], xb[-1], yb[0], yb[-1], slopes[0], slopes[-1]))
+
+        def f(x):
+            if x < x0:
+                return y0 + s0 * (x - x0)
+            if x > xn:
+                return yn + sn * (x - xn)
+            return float(np.interp(x, xb, yb))
+        return f
+
+    f_in, f_out = pwl(model.input_nl), pwl(model.output_nl)
+
+    def steady(u):
+        x = g * (u if f_in is None else f_in(u))
+        return x if f_out is None else f_out(x)
+    return steady
+
+
+@functools.lru_cache(maxsize=8)
+def _steady_map_of(spec: str):
+    return _steady_map(cached_model(spec))
+
+
+@functools.lru_cache(maxsize=4096)
+def _calibrated_r2(spec: str, fsr, circuit, force_n: float, hold_s: float) -> float | None:
+    """R2 (ohm) of :func:`calibrate_device` for one estimator, FSR unit and divider; None when
+    no R2 in [500, 50 000] ohm reads ``force_n`` exactly.  Cached: the parameters are frozen."""
+    import scipy.optimize
+    steady = _steady_map_of(spec)
+    # the calibration protocol's voltages with every R2-independent factor computed once
+    g_load = static_conductance(force_n * loading_branch_factor(fsr), fsr, load_time_s=hold_s)
+    g_zero = static_conductance(0.0, fsr)
+    supply, lsb, max_code = circuit.supply_v, circuit.adc_lsb_v, circuit.adc_max_code
+
+    def err(log_r2):
+        r2 = math.exp(log_r2)
+        v0 = divider_voltage(g_zero, r2, supply)
+        tare = adc_voltage(adc_code(v0, lsb, max_code), lsb)
+        return float(steady(divider_voltage(g_load, r2, supply) - tare)) - force_n
+
+    lo, hi = math.log(500.0), math.log(50000.0)
+    if err(lo) * err(hi) > 0:
+        return None
+    return math.exp(scipy.optimize.brentq(err, lo, hi, xtol=1e-6))
+
+
 def calibrate_device(device: DeviceParams, force_n: float = 1.0, hold_s: float = 20.0) -> DeviceParams:
     """Set R2 so that the device's estimator reads ``force_n`` exactly after a press and hold.
 
     One-point assembly calibration (the estimator is fixed; the potentiometer is turned):
-    solved by Brent's method on ln R2 in [ln 500, ln 50 000] ohm.
+    solved by Brent's method on ln R2 in [ln 500, ln 50 000] ohm.  The result depends only on
+    the estimator, the FSR unit and the divider and is cached per combination, so drawing the
+    same unit again costs a dictionary look-up.
     """
+    r2 = _calibrated_r2(device.estimator.model, device.fsr, device.circuit, float(force_n), float(hold_s))
+    if r2 is None:
+        return device
+    return dataclasses.replace(device, circuit=dataclasses.replace(device.circuit, r2_ohm=r2))
+
+
+def calibrate_device_reference(device: DeviceParams, force_n: float = 1.0, hold_s: float = 20.0) -> DeviceParams:
+    """:func:`calibrate_device` through :func:`steady_estimate` at every iterate, uncached
+    (the protocol as written; the cached path must give the same R2 to the last bit)."""
     import scipy.optimize
     model = cached_model(device.estimator.model)
     fsr, circuit = device.fsr, device.circuit

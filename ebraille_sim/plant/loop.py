@@ -21,6 +21,7 @@ True
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -94,8 +95,6 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     The estimator runs at its model's own rate, ``1/model.dt_s`` (the rate it was
     identified at); the sensor rate must be a whole multiple of it.
     """
-    import scipy.signal
-
     m, d, f, s, c, e, r = (device.motor, device.drivetrain, device.finger, device.fsr, device.circuit,
                            device.estimator, device.rates)
     check_step(device)
@@ -159,7 +158,7 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     for j in range(N_PLAYS):
         p[P[f"play_w{j}"]] = widths[j]
         p[P[f"play_weight{j}"]] = weights[j]
-    bb, aa = scipy.signal.butter(2, e.antialias_cutoff_hz, fs=r.sensor_rate_hz)
+    bb, aa = _antialias_filter(float(e.antialias_cutoff_hz), float(r.sensor_rate_hz))
     p[P.aa_b0], p[P.aa_b1], p[P.aa_b2] = bb
     p[P.aa_a1], p[P.aa_a2] = aa[1], aa[2]
     _pack_model(p, model)
@@ -169,7 +168,45 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     return p
 
 
+@functools.lru_cache(maxsize=64)
+def _antialias_filter(cutoff_hz: float, sensor_rate_hz: float) -> tuple:
+    """Second-order Butterworth anti-alias coefficients ``(b, a)`` (designed once per pair)."""
+    import scipy.signal
+    bb, aa = scipy.signal.butter(2, cutoff_hz, fs=sensor_rate_hz)
+    return tuple(float(x) for x in bb), tuple(float(x) for x in aa)
+
+
+@functools.lru_cache(maxsize=256)
+def _unit_step_state(num: tuple, den: tuple) -> np.ndarray:
+    """``scipy.signal.lfilter_zi(num, den)``: the filter state of a unit step's steady state
+    (computed once per filter; read-only)."""
+    import scipy.signal
+    zi = scipy.signal.lfilter_zi(np.array(num), np.array(den))
+    zi.setflags(write=False)
+    return zi
+
+
+_MODEL_ROWS: dict = {}
+_MODEL_SLOTS = [P[name] for name in P.keys() if name in ("est_len", "est_n_in", "est_n_out")
+                or name.startswith(("est_num", "est_den", "est_in_", "est_out_"))]
+
+
 def _pack_model(p: np.ndarray, model) -> None:
+    """Write the estimator model's slots of ``p`` (packed once per model object)."""
+    hit = _MODEL_ROWS.get(id(model))
+    if hit is None or hit[0] is not model:
+        row = np.zeros(N_PARAM)
+        _pack_model_rows(row, model)
+        mask = np.zeros(N_PARAM, dtype=bool)
+        mask[_MODEL_SLOTS] = True
+        hit = (model, row[mask], mask)
+        if len(_MODEL_ROWS) > 64:
+            _MODEL_ROWS.clear()
+        _MODEL_ROWS[id(model)] = hit
+    p[hit[2]] = hit[1]
+
+
+def _pack_model_rows(p: np.ndarray, model) -> None:
     arr = model.kernel_arrays()
     num, den = np.asarray(arr["num"], float), np.asarray(arr["den"], float)
     n = max(len(num), len(den))
@@ -215,17 +252,16 @@ def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None
 
 def _estimator_steady_state(s: np.ndarray, p: np.ndarray, u0: float) -> None:
     """Fill the anti-alias and estimator states for a constant input ``u0``."""
-    import scipy.signal
-    bb = np.array([p[P.aa_b0], p[P.aa_b1], p[P.aa_b2]])
-    aa = np.array([1.0, p[P.aa_a1], p[P.aa_a2]])
-    zi = scipy.signal.lfilter_zi(bb, aa) * u0
+    bb = (float(p[P.aa_b0]), float(p[P.aa_b1]), float(p[P.aa_b2]))
+    aa = (1.0, float(p[P.aa_a1]), float(p[P.aa_a2]))
+    zi = _unit_step_state(bb, aa) * u0
     s[S.aa_z1], s[S.aa_z2] = zi
     n = int(p[P.est_len])
     num = p[P.est_num0:P.est_num0 + n]
     den = p[P.est_den0:P.est_den0 + n]
     x0 = pwl_eval(u0, p, P.est_in_x0, P.est_in_y0, int(p[P.est_n_in]))
     if n >= 2:
-        zi = scipy.signal.lfilter_zi(num, den) * x0
+        zi = _unit_step_state(tuple(num.tolist()), tuple(den.tolist())) * x0
         s[S.est_z0:S.est_z0 + n - 1] = zi
     y0 = num.sum() / den.sum() * x0 if abs(den.sum()) > 1e-12 else 0.0
     f0 = pwl_eval(y0, p, P.est_out_x0, P.est_out_y0, int(p[P.est_n_out]))

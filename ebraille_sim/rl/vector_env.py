@@ -8,8 +8,12 @@ plant inputs (finger position, driver supply, ... as built for the episode's spe
 :func:`ebraille_sim.scenarios.inputs.build_run_inputs`), calls :func:`ebraille_sim.plant.kernel.advance` (the function that
 :meth:`ebraille_sim.plant.loop.Plant.advance` calls for one device) and then
 :func:`ebraille_sim.rl.env.post_step` (the scalar env's reward, termination and observation).
-With ``parallel=True`` (default) the rows are spread over threads with ``numba.prange``;
-rows are independent, so the result does not depend on the thread count.
+With ``parallel=True`` the rows are spread over threads with ``numba.prange``; rows are
+independent, so the result does not depend on the thread count.  The default
+(``parallel=None``) uses threads only where they pay: :func:`use_threads` (at least
+:data:`THREADS_MIN_CPUS` cores and :data:`THREADS_MIN_ENVS` sub-envs).  On a 2-core machine
+shared with other work (load average 6) threads ran at 0.09-0.60x of one thread from 4 to
+1024 sub-envs and no faster at 1 (``benchmarks/bench_env.py`` prints this table).
 
 Sub-env ``i`` is exactly the scalar env reset with seed ``seed + i`` (or ``seeds[i]``): the
 same episode draws, the same packed rows (built by :meth:`ebraille_sim.plant.loop.Plant.from_devices`)
@@ -39,6 +43,8 @@ Examples
 """
 from __future__ import annotations
 
+import os
+
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
@@ -67,7 +73,35 @@ from ebraille_sim.rl.env import (
 )
 from ebraille_sim.plant.layout import N_INPUT, N_PARAM, N_STATE, S, U
 
-__all__ = ["ContactForceVectorEnv", "step_row", "step_rows", "step_rows_serial"]
+__all__ = ["ContactForceVectorEnv", "THREADS_MIN_CPUS", "THREADS_MIN_ENVS", "step_row", "step_rows",
+           "step_rows_serial", "use_threads"]
+
+THREADS_MIN_CPUS = 4
+"""Fewest cores on which the default spreads rows over threads.  On 2 shared cores threads
+were slower than one thread at every size from 4 to 1024 sub-envs."""
+
+THREADS_MIN_ENVS = 256
+"""Fewest sub-envs for which the default spreads rows over threads: below it a period's work
+per row (10-50 physics substeps, a few microseconds) does not cover waking the threads."""
+
+
+def use_threads(num_envs: int, cpus: int | None = None) -> bool:
+    """Whether the default vector env steps its rows on threads.
+
+    Parameters
+    ----------
+    num_envs : int
+        Number of sub-envs.
+    cpus : int, optional
+        Cores available (default ``os.cpu_count()``).
+
+    Returns
+    -------
+    bool
+        True with at least :data:`THREADS_MIN_CPUS` cores and :data:`THREADS_MIN_ENVS` sub-envs.
+    """
+    cpus = os.cpu_count() if cpus is None else cpus
+    return (cpus or 1) >= THREADS_MIN_CPUS and num_envs >= THREADS_MIN_ENVS
 
 
 @njit(cache=True)
@@ -128,8 +162,9 @@ class ContactForceVectorEnv(VectorEnv):
         :meth:`~ebraille_sim.rl.env.EnvConfig.max_episode_steps`).
     render_mode : str, optional
         None or ``"rgb_array"`` (``render()`` returns one frame per sub-env).
-    parallel : bool
-        Spread the rows over threads (numba ``prange``); False runs them on one thread.
+    parallel : bool, optional
+        Spread the rows over threads (numba ``prange``); False runs them on one thread;
+        None (default) decides by :func:`use_threads` (number of sub-envs and cores).
     **env_kwargs
         The scalar env's arguments (:class:`ebraille_sim.rl.env.EnvConfig`); ``backend`` must be
         ``"lumped"``.
@@ -138,7 +173,7 @@ class ContactForceVectorEnv(VectorEnv):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25, "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None, render_mode: str | None = None,
-                 parallel: bool = True, **env_kwargs):
+                 parallel: bool | None = None, **env_kwargs):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         if max_episode_steps is not None and (isinstance(max_episode_steps, bool) or
@@ -147,6 +182,8 @@ class ContactForceVectorEnv(VectorEnv):
             raise ValueError(f"max_episode_steps must be an integer >= 1 or None, got {max_episode_steps!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode {render_mode!r} is not supported; allowed: None, rgb_array")
+        if parallel is not None and not isinstance(parallel, (bool, np.bool_)):
+            raise ValueError(f"parallel must be True, False or None, got {parallel!r}")
         backend = env_kwargs.pop("backend", "lumped")
         if backend != "lumped":
             raise ValueError(f"the vector env steps packed lumped plants; backend {backend!r} is not supported "
@@ -160,7 +197,7 @@ class ContactForceVectorEnv(VectorEnv):
         self.max_episode_steps = (self.config.max_episode_steps() if max_episode_steps is None
                                   else int(max_episode_steps))
         self.render_mode = render_mode
-        self.parallel = bool(parallel)
+        self.parallel = use_threads(self.num_envs) if parallel is None else bool(parallel)
         self._step_fn = step_rows if self.parallel else step_rows_serial
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)

@@ -55,6 +55,7 @@ Examples
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Iterable, Sequence
 
@@ -233,7 +234,9 @@ class Cell:
         return chr(0x2800 + self.mask)
 
 
+@functools.lru_cache(maxsize=1024)
 def _cell(char: str, dots: tuple[int, ...], kind: str, line_end: bool = False) -> Cell:
+    """The (immutable) cell of these fields, built and checked once."""
     return Cell(char=char, dots=dots, mask=dots_to_mask(dots), kind=kind, line_end=line_end)
 
 

@@ -269,12 +269,47 @@ def character_legibility(force_n, setpoint_n, char_index, cells, params: Legibil
     return out
 
 
+LEGIBILITY_CHUNK = 1 << 16
+"""Samples per block of :func:`legibility_metrics` (its temporaries stay a few MB however
+long the run)."""
+
+
 def legibility_metrics(force_n, setpoint_n, char_index, cells) -> dict:
     """The run metrics :data:`METRIC_NAMES`: legible fraction with both stimulator types.
 
-    Arguments as :func:`character_legibility`.
+    Arguments as :func:`character_legibility`, whose ``legible_char_fraction`` this is:
+    evaluated over blocks of :data:`LEGIBILITY_CHUNK` samples (the intensity is computed
+    per sample and the per-character counts add up exactly), so an hour-long run needs no
+    per-electrode array of the whole run.
     """
-    cc = character_legibility(force_n, setpoint_n, char_index, cells, DEFAULT)
-    cv = character_legibility(force_n, setpoint_n, char_index, cells, CONSTANT_VOLTAGE)
-    return {"legible_char_fraction": cc["legible_char_fraction"],
-            "legible_char_fraction_cv": cv["legible_char_fraction"]}
+    return {"legible_char_fraction": _legible_fraction(force_n, setpoint_n, char_index, cells, DEFAULT),
+            "legible_char_fraction_cv": _legible_fraction(force_n, setpoint_n, char_index, cells,
+                                                          CONSTANT_VOLTAGE)}
+
+
+def _legible_fraction(force_n, setpoint_n, char_index, cells, params: LegibilityParams):
+    ci = np.asarray(char_index)
+    f = np.asarray(force_n)
+    sp = np.asarray(setpoint_n)
+    n_cells = len(cells)
+    masks = np.array([c.mask for c in cells], dtype=np.int64)
+    n_ok = np.zeros(n_cells)
+    n_all = np.zeros(n_cells, dtype=np.int64)
+    shown = np.zeros(n_cells, dtype=bool)
+    lo, hi = params.band
+    for a in range(0, len(ci), LEGIBILITY_CHUNK):
+        part = ci[a:a + LEGIBILITY_CHUNK]
+        sel = part >= 0
+        if not sel.any():
+            continue
+        idx = part[sel]
+        dots = ((masks[idx][:, None] >> np.arange(6)) & 1).astype(bool)
+        ratio = relative_intensity(f[a:a + LEGIBILITY_CHUNK][sel], sp[a:a + LEGIBILITY_CHUNK][sel], params)
+        ok = np.all(((ratio >= lo) & (ratio <= hi)) | ~dots, axis=1)
+        n_ok += np.bincount(idx, weights=ok.astype(float), minlength=n_cells)
+        n_all += np.bincount(idx, minlength=n_cells)
+        shown[idx[dots.any(axis=1)]] = True
+    keep = np.nonzero(shown)[0]
+    if keep.size == 0:
+        return None
+    return float(np.mean(n_ok[keep] / n_all[keep] >= LEGIBLE_REQUIRED))

@@ -58,12 +58,16 @@ def settling_time(t_s, force_n, setpoint_n, band_fraction, hold_s=SETTLE_HOLD_S)
     ok = in_band(force_n, setpoint_n, band_fraction)
     dt = t_s[1] - t_s[0] if len(t_s) > 1 else 0.0
     need = max(1, int(round(hold_s / dt))) if dt > 0 else 1
-    run = 0
-    for k in range(touch[0], len(ok)):
-        run = run + 1 if ok[k] else 0
-        if run >= need:
-            return float(t_s[k - need + 1] - t_s[touch[0]])
-    return None
+    start = int(touch[0])
+    # the first window of ``need`` samples entirely in band, from the first contact on:
+    # in-band counts over every window by a cumulative sum (linear in the samples)
+    counts = np.concatenate(([0], np.cumsum(ok[start:], dtype=np.int64)))
+    if counts.size <= need:
+        return None
+    full = np.nonzero(counts[need:] - counts[:-need] == need)[0]
+    if full.size == 0:
+        return None
+    return float(t_s[start + int(full[0])] - t_s[start])
 
 
 def compute_metrics(trace: dict, reading_start_s: float, band_fraction: float, schedule=None,
@@ -104,13 +108,13 @@ def compute_metrics(trace: dict, reading_start_s: float, band_fraction: float, s
     else:
         m.update(force_rmse_n=None, force_mae_n=None, in_band_fraction=None, estimate_rmse_n=None,
                  contact_loss_count=0)
-    chars = np.unique(ci[ci >= 0])
+    # per displayed character: in-band samples / samples, one pass over the trace
+    shown = ci >= 0
+    n_all = np.bincount(ci[shown]) if shown.any() else np.zeros(0, dtype=np.int64)
+    chars = np.nonzero(n_all)[0]
     if chars.size:
-        good = 0
-        for c in chars:
-            sel = ci == c
-            if np.mean(ok[sel]) >= CHAR_IN_BAND_REQUIRED:
-                good += 1
+        n_ok = np.bincount(ci[shown], weights=ok[shown], minlength=n_all.size)
+        good = int(np.count_nonzero(n_ok[chars] / n_all[chars] >= CHAR_IN_BAND_REQUIRED))
         m["char_in_band_fraction"] = good / chars.size
     else:
         m["char_in_band_fraction"] = None

@@ -17,6 +17,7 @@ True
 
 from __future__ import annotations
 
+import functools
 from importlib import resources
 
 __all__ = ["DEFAULT_PASSAGE", "list_passages", "load_passage"]
@@ -43,12 +44,18 @@ def list_passages() -> list[str]:
     >>> list_passages()
     ['default', 'garden', 'letter', 'market']
     """
+    return list(_shipped_passages())
+
+
+@functools.lru_cache(maxsize=1)
+def _shipped_passages() -> tuple[str, ...]:
+    """The passage names of the installed package (listed once per process)."""
     names = [
         entry.name[: -len(_SUFFIX)]
         for entry in _passage_dir().iterdir()
         if entry.name.endswith(_SUFFIX) and entry.is_file()
     ]
-    return sorted(names)
+    return tuple(sorted(names))
 
 
 def load_passage(name: str) -> str:

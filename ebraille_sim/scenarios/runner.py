@@ -37,6 +37,7 @@ class RunResult:
     trace : dict of ndarray
         Named arrays of shape (n_steps,), sampled at the control rate (columns
         :data:`TRACE_COLUMNS`); sample ``k`` is the state at the end of control period ``k``.
+        With :func:`run_scenario`'s ``trace_every`` = k every k-th sample only; with None empty.
     schedule : ReadingSchedule
     controller_name : str
         The name of the controller chosen for the run (the scenario's or the override),
@@ -110,8 +111,27 @@ def wrap_controller(spec: ScenarioSpec, ctrl, dt_s: float, supervised: bool = Tr
     return ctrl
 
 
+def prepare_run(scenario, controller=None, seed: int | None = None, duration_s: float | None = None,
+                device=None) -> tuple:
+    """The spec, seed, run inputs and (unwrapped) controller of one run of :func:`run_scenario`."""
+    spec = scenario if isinstance(scenario, ScenarioSpec) else load_scenario(scenario)
+    if device is not None:
+        import dataclasses
+        spec = dataclasses.replace(spec, device=device)
+    if duration_s is not None:
+        if not (math.isfinite(duration_s) and duration_s > 0):
+            raise ScenarioError(f"duration_s must be a positive finite number, got {duration_s}")
+        import dataclasses
+        spec = dataclasses.replace(spec, duration_s=float(duration_s))
+    seed = spec.seed if seed is None else int(seed)
+    run = build_run_inputs(spec, seed)
+    ctrl = make_controller(spec, controller)
+    return spec, seed, run, ctrl
+
+
 def run_scenario(scenario, controller=None, seed: int | None = None, duration_s: float | None = None,
-                 backend: str = "lumped", device=None, supervised: bool = True) -> RunResult:
+                 backend: str = "lumped", device=None, trace_every: int | None = 1,
+                 supervised: bool = True) -> RunResult:
     """Simulate a scenario in closed loop.
 
     Parameters
@@ -130,6 +150,12 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     device : DeviceParams, optional
         Replaces the scenario's device (e.g. a reader drawn by
         :func:`ebraille_sim.scenarios.population.sample_devices`).
+    trace_every : int or None
+        Samples of the returned trace: 1 (default) keeps every control period; ``k`` keeps
+        every ``k``-th (samples ``k - 1, 2k - 1, ...``, the ends of periods ``k, 2k, ...``);
+        None returns no trace (an empty dict).  The metrics are always computed from every
+        control period and do not depend on it; above 1 the run holds only the true and
+        estimated force at the full rate, which bounds the memory of long sessions.
     supervised : bool
         False switches the safety supervisor off for this run (recorded in
         ``RunResult.supervisor``); True (default) leaves the scenario's choice, which is on
@@ -139,32 +165,25 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     -------
     RunResult
     """
-    spec = scenario if isinstance(scenario, ScenarioSpec) else load_scenario(scenario)
-    if device is not None:
-        import dataclasses
-        spec = dataclasses.replace(spec, device=device)
-    if duration_s is not None:
-        if not (math.isfinite(duration_s) and duration_s > 0):
-            raise ScenarioError(f"duration_s must be a positive finite number, got {duration_s}")
-        import dataclasses
-        spec = dataclasses.replace(spec, duration_s=float(duration_s))
-    seed = spec.seed if seed is None else int(seed)
-    sup_on, sup_source = supervisor_choice(spec, supervised)
-    run = build_run_inputs(spec, seed)
-    schedule = run.schedule
-    ctrl = make_controller(spec, controller)
+    if trace_every is not None and (isinstance(trace_every, bool) or not isinstance(trace_every, (int, np.integer))
+                                    or trace_every < 1):
+        raise ValueError(f"trace_every must be a whole number >= 1 or None, got {trace_every!r}")
+    spec, seed, run, ctrl = prepare_run(scenario, controller, seed, duration_s, device)
+    supervisor_choice(spec, supervised)
+    if trace_every == 1:
+        return _simulate(spec, seed, run, ctrl, backend, supervised)
+    return _simulate_lean(spec, seed, run, ctrl, backend, trace_every, supervised)
+
+
+def _simulate(spec, seed, run, ctrl, backend: str, supervised: bool = True) -> RunResult:
+    """Closed loop of one prepared run, one control period per Python iteration."""
     dt, n = run.dt_s, run.n_steps
-    t = (np.arange(n) + 1) * dt                  # sample k: the end of period k
     sp = run.setpoint_n[:n].copy()
-    try:
-        plant = make_plant([spec.device], seeds=[run.sensor_seed], backend=backend)
-    except (ValueError, FileNotFoundError) as exc:
-        raise ScenarioError(f"{spec.source}: {exc}") from None
-    plant.set_finger(spec.finger.gap_m)
+    plant = _plant_for(spec, run, backend)
     profiles = run.profiles
     chosen = ctrl
     ctrl = wrap_controller(spec, ctrl, dt, supervised)
-    tr = {c: np.zeros(n) for c in TRACE_COLUMNS if c != "character"}
+    tr = {c: np.zeros(n) for c in TRACE_COLUMNS if c not in ("character", "t_s", "setpoint_n", "char_index")}
     st = plant.state[0]
     # slot indices and trace columns bound to locals: the loop below runs once per control period
     i_fc, i_fe, i_v, i_i, i_x, i_e = (S.contact_force_n, S.force_est_n, S.fsr_voltage_v,
@@ -195,14 +214,99 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
         xb[k] = st[i_x]
         en[k] = st[i_e]
     wall = time.perf_counter() - wall0
+    return _with_supervisor(_finish(spec, seed, run, tr, sp, wall, _name(chosen)), spec, supervised, ctrl)
+
+
+def _plant_for(spec, run, backend: str):
+    try:
+        plant = make_plant([spec.device], seeds=[run.sensor_seed], backend=backend)
+    except (ValueError, FileNotFoundError) as exc:
+        raise ScenarioError(f"{spec.source}: {exc}") from None
+    plant.set_finger(spec.finger.gap_m)
+    return plant
+
+
+def _simulate_lean(spec, seed, run, ctrl, backend: str, every: int | None, supervised: bool = True) -> RunResult:
+    """:func:`_simulate` keeping the true and estimated force at every period (the metrics
+    need them) and the other trace columns at every ``every``-th period (None: not at all).
+
+    The same controller calls and plant steps as :func:`_simulate`, so the same metrics.
+    """
+    dt, n = run.dt_s, run.n_steps
+    sp = run.setpoint_n[:n].copy()
+    plant = _plant_for(spec, run, backend)
+    chosen = ctrl
+    ctrl = wrap_controller(spec, ctrl, dt, supervised)
+    st = plant.state[0]
+    i_fc, i_fe, i_v, i_i, i_x, i_e = (S.contact_force_n, S.force_est_n, S.fsr_voltage_v,
+                                      S.current_a, S.board_pos_m, S.energy_j)
+    ctrl.reset(force_est_n=float(st[i_fe]), setpoint_n=float(sp[0]), command_v=0.0)
+    f_true, f_est = np.zeros(n), np.zeros(n)
+    n_kept = 0 if every is None else n // every
+    kept = {c: np.zeros(n_kept) for c in ("command_v", "fsr_voltage_v", "motor_current_a", "board_pos_m",
+                                           "energy_j")}
+    cmd_v, v_fsr, cur, xb, en = (kept["command_v"], kept["fsr_voltage_v"], kept["motor_current_a"],
+                                 kept["board_pos_m"], kept["energy_j"])
+    fe = float(st[i_fe])
+    i_a = 0.0
+    update = ctrl.update
+    advance = plant.advance
+    inp = plant.inputs[0]
+    varying = [(U[name], arr) for name, arr in run.profiles.items()]
+    due = -1 if every is None else every - 1          # next period whose end is kept
+    q = 0
+    wall0 = time.perf_counter()
+    for k in range(n):
+        for j, arr in varying:
+            inp[j] = arr[k]
+        c = update(fe, sp[k], dt, i_a)
+        advance(c)
+        fe = float(st[i_fe])
+        i_a = float(st[i_i])
+        f_true[k] = st[i_fc]
+        f_est[k] = fe
+        if k == due:
+            cmd_v[q] = c
+            v_fsr[q] = st[i_v]
+            cur[q] = i_a
+            xb[q] = st[i_x]
+            en[q] = st[i_e]
+            q += 1
+            due += every
+    wall = time.perf_counter() - wall0
+    energy_end = float(st[i_e]) if n else 0.0
+    tr = {"force_true_n": f_true, "force_est_n": f_est, "energy_j": np.array([energy_end])}
+    res = _with_supervisor(_finish(spec, seed, run, tr, sp, wall, _name(chosen), keep_trace=False), spec,
+                           supervised, ctrl)
+    if every is None:
+        return res
+    sel = slice(every - 1, None, every)
+    out = {"t_s": ((np.arange(n) + 1) * dt)[sel], "setpoint_n": sp[sel], "force_true_n": f_true[sel].copy(),
+           "force_est_n": f_est[sel].copy(), **kept}
+    out["char_index"] = run.schedule.index_at(out["t_s"])
+    out["character"] = character_column(out["char_index"], run.schedule.cells)
+    res.trace = {c: out[c] for c in TRACE_COLUMNS}
+    return res
+
+
+def _finish(spec, seed, run, tr: dict, sp: np.ndarray, wall: float, controller_name: str,
+            keep_trace: bool = True) -> RunResult:
+    """Check a finished loop's trace, complete its columns and compute the metrics
+    (``keep_trace`` False: ``tr`` holds only what the metrics read; the result's trace is empty)."""
+    f_true = tr["force_true_n"]
     if not np.all(np.isfinite(f_true)):
         raise FloatingPointError(f"{spec.source}: the simulation diverged (non-finite force)")
+    schedule = run.schedule
+    n = run.n_steps
+    t = (np.arange(n) + 1) * run.dt_s             # sample k: the end of period k
     tr["t_s"] = t
     tr["setpoint_n"] = sp
     ci = schedule.index_at(t)
     tr["char_index"] = ci
     cells = schedule.cells
-    tr["character"] = np.array([cells[j].unicode if j >= 0 else "" for j in ci])
+    if keep_trace:
+        tr["character"] = character_column(ci, cells)
+        tr = {c: tr[c] for c in TRACE_COLUMNS}
     window = tr
     if spec.reading.mode == "refresh":
         # refresh mode: a character's in-band window is the hold part of its dwell only
@@ -212,11 +316,193 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     # electrotactile legibility beside the force metrics (stimulation during the same windows)
     from ebraille_sim.scenarios.legibility import legibility_metrics
     metrics.update(legibility_metrics(f_true, sp, window["char_index"], cells))
-    supervisor = {"enabled": sup_on, "source": sup_source}
-    if sup_on:
-        sup = _find_supervisor(ctrl)
-        supervisor.update(fault=sup.fault, events=[[t_ev, text] for t_ev, text in sup.events])
-    return RunResult(spec, metrics, tr, schedule, getattr(chosen, "name", type(chosen).__name__), seed, supervisor)
+    return RunResult(spec, metrics, tr if keep_trace else {}, schedule, controller_name, seed)
+
+
+def character_column(char_index: np.ndarray, cells) -> np.ndarray:
+    """The Unicode Braille character shown at each sample ("" where none), by table look-up."""
+    table = np.array([c.unicode for c in cells] + [""])
+    ci = np.asarray(char_index)
+    return table[np.where(ci >= 0, ci, len(cells))]
+
+
+BATCH_TRACE_BYTES = 256 * 2**20
+"""Most trace memory one batched plant of :func:`run_batch` holds (its rows are split to
+stay below it), bytes."""
+
+_BATCH_SLOTS = ("contact_force_n", "force_est_n", "fsr_voltage_v", "current_a", "board_pos_m", "energy_j")
+_BATCH_COLUMNS = ("force_true_n", "force_est_n", "fsr_voltage_v", "motor_current_a", "board_pos_m", "energy_j")
+_RUN_ERRORS = (ValueError, FloatingPointError, FileNotFoundError)
+
+
+def run_batch(runs: list, keep_traces: bool = True) -> list:
+    """Several runs of :func:`run_scenario` (lumped plant), their plants advanced together.
+
+    Runs with the same number of control periods and the same rates share one packed plant:
+    every control period calls each run's controller (Python objects, in a loop) and then
+    advances all rows in one compiled call (:func:`ebraille_sim.plant.kernel.advance_batch`).
+    Rows are independent, so every run's trace and metrics are those of :func:`run_scenario`
+    with the same arguments, exactly (``real_time_factor`` aside: the batch's loop time is
+    shared equally among its rows).
+
+    Parameters
+    ----------
+    runs : list of dict
+        Keyword arguments of :func:`run_scenario` per run (``scenario``, ``controller``,
+        ``seed``, ``duration_s``, ``device``; no ``backend``).
+    keep_traces : bool
+        False returns every result with an empty trace (its metrics unchanged): a sweep
+        keeps only metrics, so the batch's traces are not copied out.
+
+    Returns
+    -------
+    list
+        Per run, in order: its :class:`RunResult`, or the ``ValueError``,
+        ``FloatingPointError`` or ``FileNotFoundError`` that :func:`run_scenario` would have
+        raised for it.
+    """
+    out: list = [None] * len(runs)
+    groups: dict = {}
+    for i, kw in enumerate(runs):
+        try:
+            prepared = prepare_run(**kw)
+        except _RUN_ERRORS as exc:
+            out[i] = exc
+            continue
+        spec, _, run, _ = prepared
+        groups.setdefault((run.n_steps, run.dt_s, spec.device.rates), []).append((i, prepared))
+    for (n, _, _), members in groups.items():
+        per_row = 8 * max(1, n) * (len(_BATCH_COLUMNS) + 1)
+        size = max(1, BATCH_TRACE_BYTES // per_row)
+        for j in range(0, len(members), size):
+            part = members[j:j + size]
+            for i, res in zip((m[0] for m in part), _simulate_batch([m[1] for m in part], keep_traces)):
+                out[i] = res
+    return out
+
+
+def _simulate_batch(prepared: list, keep_traces: bool = True) -> list:
+    """:func:`_simulate` of several prepared runs with equal length and rates, one plant."""
+    from ebraille_sim.plant import kernel
+    if len(prepared) == 1:
+        spec, seed, run, ctrl = prepared[0]
+        try:
+            if keep_traces:
+                return [_simulate(spec, seed, run, ctrl, "lumped")]
+            return [_simulate_lean(spec, seed, run, ctrl, "lumped", None)]
+        except _RUN_ERRORS as exc:
+            return [exc]
+    specs = [p[0] for p in prepared]
+    runs = [p[2] for p in prepared]
+    try:
+        plant = make_plant([s.device for s in specs], seeds=[r.sensor_seed for r in runs], backend="lumped")
+    except (ValueError, FileNotFoundError):
+        # one row cannot be packed: run each on its own, for the error of that row alone
+        return [r for p in prepared for r in _simulate_batch([p], keep_traces)]
+    m = len(prepared)
+    run0 = runs[0]
+    dt, n = run0.dt_s, run0.n_steps
+    out: list = [None] * m
+    state, inputs = plant.state, plant.inputs
+    inputs[:, U.finger_pos_m] = [s.finger.gap_m for s in specs]
+    sp = np.stack([r.setpoint_n[:n] for r in runs], axis=1)           # (n, rows)
+    updates: list = [None] * m
+    names: list = [""] * m
+    wrapped: list = [None] * m
+    i_fe, i_i = S.force_est_n, S.current_a
+    for r, (spec, _, _, ctrl) in enumerate(prepared):
+        try:
+            names[r] = _name(ctrl)
+            ctrl = wrap_controller(spec, ctrl, dt)
+            ctrl.reset(force_est_n=float(state[r, i_fe]), setpoint_n=float(sp[0, r]), command_v=0.0)
+        except _RUN_ERRORS as exc:
+            out[r] = exc
+            continue
+        updates[r] = ctrl.update
+        wrapped[r] = ctrl
+    # inputs that vary: one column of the plant's inputs per name, all rows that have it
+    varying = []
+    for name in dict.fromkeys(k for r in runs for k in r.profiles):
+        rows = [r for r in range(m) if name in runs[r].profiles]
+        table = np.stack([runs[r].profiles[name] for r in rows], axis=1)  # (n, len(rows))
+        varying.append((U[name], None if len(rows) == m else np.array(rows), table))
+    slots = np.array([S[name] for name in _BATCH_SLOTS])
+    buf = np.empty((n, m, len(slots)))
+    cmd = np.zeros((n, m))
+    live = [r for r in range(m) if out[r] is None]
+    fes = state[:, i_fe].tolist()
+    ias = [0.0] * m
+    i_cmd = U.command_v
+    cmd_now = inputs[:, i_cmd]
+    cmd_now[:] = 0.0
+    cs = [0.0] * m
+    sub = plant.substeps
+    wall0 = time.perf_counter()
+    for k in range(n):
+        for j, rows, table in varying:
+            if rows is None:
+                inputs[:, j] = table[k]
+            else:
+                inputs[rows, j] = table[k]
+        sp_k = sp[k]
+        failed = False
+        for r in live:
+            try:
+                c = updates[r](fes[r], sp_k[r], dt, ias[r])
+                if type(c) is not float:
+                    c = float(c) if isinstance(c, (float, int)) else float(np.ravel(c)[0])
+            except _RUN_ERRORS as exc:
+                out[r] = exc
+                failed = True
+                c = 0.0
+            cs[r] = c
+        cmd_now[:] = cs
+        if not np.isfinite(cmd_now).all():
+            for r in live:
+                if out[r] is None and not math.isfinite(cs[r]):
+                    out[r] = ValueError(f"command_v must be finite, got {cs[r]}")
+            failed = True
+        if failed:                                   # a failed row holds a zero command from now on
+            for r in live:
+                if out[r] is not None:
+                    cs[r] = 0.0
+                    cmd_now[r] = 0.0
+            live = [r for r in live if out[r] is None]
+        kernel.advance_batch(state, plant.params, inputs, sub)
+        cmd[k] = cmd_now
+        buf[k] = state[:, slots]
+        fes = state[:, i_fe].tolist()
+        ias = state[:, i_i].tolist()
+    wall = (time.perf_counter() - wall0) / m
+    for r in live:
+        if keep_traces:
+            tr = {col: np.ascontiguousarray(buf[:, r, q]) for q, col in enumerate(_BATCH_COLUMNS)}
+            tr["command_v"] = np.ascontiguousarray(cmd[:, r])
+        else:                                           # what the metrics read
+            tr = {col: np.ascontiguousarray(buf[:, r, _BATCH_COLUMNS.index(col)])
+                  for col in ("force_true_n", "force_est_n")}
+            tr["energy_j"] = buf[-1:, r, _BATCH_COLUMNS.index("energy_j")].copy()
+        spec, seed, run, _ = prepared[r]
+        try:
+            out[r] = _with_supervisor(_finish(spec, seed, run, tr, np.ascontiguousarray(sp[:, r]), wall,
+                                              names[r], keep_trace=keep_traces), spec, True, wrapped[r])
+        except _RUN_ERRORS as exc:
+            out[r] = exc
+    return out
+
+
+def _with_supervisor(res: RunResult, spec, supervised: bool, wrapped) -> RunResult:
+    """``res`` with its :attr:`RunResult.supervisor` record (the choice, the fault, the events)."""
+    on, source = supervisor_choice(spec, supervised)
+    res.supervisor = {"enabled": on, "source": source}
+    if on:
+        sup = _find_supervisor(wrapped)
+        res.supervisor.update(fault=sup.fault, events=[[t_ev, text] for t_ev, text in sup.events])
+    return res
+
+
+def _name(ctrl) -> str:
+    return getattr(ctrl, "name", type(ctrl).__name__)
 
 
 def _find_supervisor(ctrl):

@@ -168,6 +168,11 @@ def plan_sweep(scenarios, rates=(), readers: int = 0, controllers=("pid",), seed
         spec = s if isinstance(s, ScenarioSpec) else load_scenario(s)
         if spec.name in specs:
             raise ValueError(f"scenario {spec.name!r} is listed twice")
+        length = spec.duration_s if duration_s is None else duration_s
+        if length is not None and length <= spec.reading.start_s:
+            raise ValueError(f"episodes of {length:g} s end before scenario {spec.name!r} starts reading at "
+                             f"{spec.reading.start_s:g} s (no force metric could be computed); use a duration "
+                             f"above {spec.reading.start_s:g} s")
         specs[spec.name] = spec
         devices[spec.name] = sample_devices(seed, readers, population, base=spec.device) if readers else []
     rate_list = list(rates) or [None]
@@ -184,9 +189,8 @@ def plan_sweep(scenarios, rates=(), readers: int = 0, controllers=("pid",), seed
     return SweepPlan(specs, devices, episodes, duration_s, seed)
 
 
-def run_episode(plan: SweepPlan, ep: Episode) -> dict:
-    """Run one episode; returns its row (metrics empty and ``error`` set if it failed)."""
-    from ebraille_sim.scenarios.runner import run_scenario
+def _episode_run(plan: SweepPlan, ep: Episode) -> tuple[dict, dict]:
+    """The row's plan and reader columns, and the keyword arguments of its run."""
     spec = plan.specs[ep.scenario]
     if ep.wpm is not None:
         spec = dataclasses.replace(spec, reading=dataclasses.replace(spec.reading, wpm=ep.wpm))
@@ -195,18 +199,38 @@ def run_episode(plan: SweepPlan, ep: Episode) -> dict:
            "controller": ep.controller, "replicate": ep.replicate, "seed": ep.seed}
     for col, get in READER_COLUMNS.items():
         row[col] = float(get(device))
-    try:
-        res = run_scenario(spec, controller=ep.controller, seed=ep.seed, duration_s=plan.duration_s, device=device)
-    except (ValueError, FloatingPointError, FileNotFoundError) as exc:
-        row["error"] = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+    return row, {"scenario": spec, "controller": ep.controller, "seed": ep.seed, "duration_s": plan.duration_s,
+                 "device": device}
+
+
+def _complete(row: dict, res) -> dict:
+    """Add a run's metrics (or its one-line error) to its row."""
+    if isinstance(res, Exception):
+        row["error"] = (str(res).strip().splitlines() or [type(res).__name__])[0]
         return row
     row.update(res.metrics)
     row["error"] = ""
     return row
 
 
+def run_episode(plan: SweepPlan, ep: Episode) -> dict:
+    """Run one episode on its own; returns its row (metrics empty and ``error`` set if it failed)."""
+    from ebraille_sim.scenarios.runner import run_scenario
+    row, kw = _episode_run(plan, ep)
+    try:
+        res = run_scenario(**kw)
+    except (ValueError, FloatingPointError, FileNotFoundError) as exc:
+        res = exc
+    return _complete(row, res)
+
+
 def _run_batch(plan: SweepPlan, batch: list) -> list:
-    return [run_episode(plan, ep) for ep in batch]
+    """Rows of several episodes, their plants advanced together
+    (:func:`ebraille_sim.scenarios.runner.run_batch`; the same rows as :func:`run_episode`)."""
+    from ebraille_sim.scenarios.runner import run_batch
+    pairs = [_episode_run(plan, ep) for ep in batch]
+    results = run_batch([kw for _, kw in pairs], keep_traces=False)
+    return [_complete(row, res) for (row, _), res in zip(pairs, results)]
 
 
 _WORKER_PLAN: SweepPlan | None = None
@@ -249,6 +273,14 @@ class _Progress:
             self._bar.close()
 
 
+SERIAL_BATCH = 256
+"""Episodes per batch in this process (``jobs = 1``): advanced together, a progress update each."""
+
+TASKS_PER_WORKER = 2
+"""Batches per worker process or Dask thread (default): enough to balance the load, few
+enough that each batch advances many episodes per compiled call."""
+
+
 def _batches(episodes: list, n_batches: int) -> list:
     size = max(1, math.ceil(len(episodes) / max(1, n_batches)))
     return [episodes[i:i + size] for i in range(0, len(episodes), size)]
@@ -278,7 +310,11 @@ def run_sweep(plan: SweepPlan, jobs: int | None = None, scheduler=None, progress
     progress : bool
         Show a progress bar on stderr.
     batch_size : int, optional
-        Episodes per task (default: about 8 tasks per worker).
+        Episodes per task (default: :data:`TASKS_PER_WORKER` tasks per worker; in this
+        process :data:`SERIAL_BATCH` episodes).  The episodes of a task that share a
+        scenario and a duration are advanced together in one compiled call per control
+        period (:func:`ebraille_sim.scenarios.runner.run_batch`); the rows do not depend on
+        the batching.
 
     Returns
     -------
@@ -297,9 +333,10 @@ def run_sweep(plan: SweepPlan, jobs: int | None = None, scheduler=None, progress
             if jobs < 1:
                 raise ValueError(f"jobs must be >= 1, got {jobs}")
             if jobs == 1 or len(eps) <= 1:
-                for ep in eps:
-                    rows.append(run_episode(plan, ep))
-                    bar.update(1)
+                for b in _batches(eps, math.ceil(len(eps) / (batch_size or SERIAL_BATCH))):
+                    part = _run_batch(plan, b)
+                    rows.extend(part)
+                    bar.update(len(part))
                 executor = "serial"
             else:
                 rows, executor = _run_local(plan, jobs, bar, batch_size), f"local x{jobs}"
@@ -311,7 +348,7 @@ def run_sweep(plan: SweepPlan, jobs: int | None = None, scheduler=None, progress
 
 def _run_local(plan, jobs, bar, batch_size):
     from concurrent.futures import ProcessPoolExecutor, as_completed
-    batches = _batches(plan.episodes, len(plan.episodes) // batch_size if batch_size else jobs * 8)
+    batches = _batches(plan.episodes, len(plan.episodes) // batch_size if batch_size else jobs * TASKS_PER_WORKER)
     rows = []
     ctx = process_context()
     with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_init_worker,
@@ -340,7 +377,8 @@ def _run_dask(plan, scheduler, bar, batch_size):
         client = scheduler
     try:
         n_workers = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info().get("workers", {}).values()))
-        batches = _batches(plan.episodes, len(plan.episodes) // batch_size if batch_size else n_workers * 8)
+        batches = _batches(plan.episodes,
+                           len(plan.episodes) // batch_size if batch_size else n_workers * TASKS_PER_WORKER)
         plan_f = client.scatter(plan, broadcast=True)
         futs = [client.submit(_run_batch, plan_f, b, pure=False) for b in batches]
         rows = []

@@ -1,0 +1,86 @@
+"""Cheap resets: the cached calibration and packing give the numbers of the uncached path."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from ebraille_sim.estimation import calibration
+from ebraille_sim.physics.params import DeviceParams, EstimatorParams
+from ebraille_sim.scenarios.population import PopulationSpec, sample_device
+
+
+@pytest.mark.parametrize("model", ["paper:wiener:5", "paper:hammerstein:3", "paper:linear:2"])
+def test_cached_calibration_is_bit_identical_to_the_protocol(model):
+    base = dataclasses.replace(DeviceParams(), estimator=EstimatorParams(model=model))
+    spec = dataclasses.replace(PopulationSpec(), calibrate=False)
+    devices = [sample_device(s, spec, base) for s in range(12)]
+    for dev in devices:
+        fast = calibration.calibrate_device(dev)
+        slow = calibration.calibrate_device_reference(dev)
+        assert fast.circuit.r2_ohm == slow.circuit.r2_ohm      # exact, not approximate
+        assert fast == slow
+    assert len({d.fsr for d in devices}) == len(devices)       # the units really differ
+
+
+def test_calibration_moves_r2_and_reads_the_calibration_force():
+    dev = DeviceParams()
+    cal = calibration.calibrate_device(dev, force_n=1.0, hold_s=20.0)
+    assert cal.circuit.r2_ohm != dev.circuit.r2_ohm
+    model = calibration.cached_model(dev.estimator.model)
+    est = calibration.steady_estimate(model, 1.0, cal.fsr, cal.circuit, 20.0)
+    assert est == pytest.approx(1.0, abs=1e-5)
+    # a different calibration force gives a different R2 (the cache key includes it)
+    assert calibration.calibrate_device(dev, force_n=2.0).circuit.r2_ohm != cal.circuit.r2_ohm
+
+
+def env_trace() -> dict:
+    """Observations, rewards and plant states of a few episodes (two seeds, 200 Hz and 1 kHz),
+    with resets inside; ``tests/data/env_reset_trace.npz`` holds the same record made by the
+    env before its resets were cached."""
+    import gymnasium as gym
+    import ebraille_sim  # noqa: F401  (registers the id)
+    out = {}
+    for rate in (200.0, 1000.0):
+        env = gym.make("EBraille/ContactForce-v0", control_rate_hz=rate)
+        for seed in (0, 7):
+            obs, _ = env.reset(seed=seed)
+            rows, rew = [obs], []
+            for k in range(2 * int(rate)):
+                obs, r, te, tr, _ = env.step(np.array([0.6 * np.sin(0.01 * k)], dtype=np.float32))
+                rows.append(obs)
+                rew.append(r)
+                if k == int(rate):
+                    out[f"state_{int(rate)}_{seed}"] = env.unwrapped.plant.state.copy()
+                if te or tr:
+                    obs, _ = env.reset()
+                    rows.append(obs)
+            obs, _ = env.reset()
+            rows.append(obs)
+            out[f"state0_{int(rate)}_{seed}"] = env.unwrapped.plant.state.copy()
+            out[f"obs_{int(rate)}_{seed}"] = np.array(rows)
+            out[f"rew_{int(rate)}_{seed}"] = np.array(rew)
+            out[f"r2_{int(rate)}_{seed}"] = np.array([env.unwrapped.episode.device.circuit.r2_ohm])
+    return out
+
+
+def test_env_trajectories_match_the_record_made_before_caching():
+    from pathlib import Path
+    stored = np.load(Path(__file__).parent / "data" / "env_reset_trace.npz")
+    now = env_trace()
+    assert sorted(stored.files) == sorted(now)
+    for key in stored.files:
+        np.testing.assert_array_equal(now[key], stored[key], err_msg=key)
+
+
+def test_resets_reuse_the_caches_and_the_next_episode_differs():
+    import gymnasium as gym
+    import ebraille_sim  # noqa: F401
+    env = gym.make("EBraille/ContactForce-v0", randomize_device=False)
+    o1, _ = env.reset(seed=5)
+    p1 = env.unwrapped.plant.params.copy()
+    seed1 = env.unwrapped.episode.sensor_seed
+    o2, _ = env.reset(seed=5)
+    np.testing.assert_array_equal(o1, o2)
+    np.testing.assert_array_equal(env.unwrapped.plant.params, p1)
+    env.reset()
+    assert env.unwrapped.episode.sensor_seed != seed1
