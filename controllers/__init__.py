@@ -205,3 +205,12 @@ def _make_lqg(**gains: Any) -> Controller:
 register("pid_scheduled", _make_scheduled)
 register("pid_feedforward", _make_feedforward)
 register("lqg", _make_lqg)
+
+
+def _make_actuator_bound(**gains: Any) -> Controller:
+    """Factory for ``"actuator_bound"``: the true-force reference of :mod:`controllers.bounds`."""
+    from controllers.bounds import make_actuator_bound
+    return make_actuator_bound(**gains)
+
+
+register("actuator_bound", _make_actuator_bound)

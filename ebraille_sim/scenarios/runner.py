@@ -122,17 +122,20 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
         raise ScenarioError(f"{spec.source}: {exc}") from None
     plant.set_finger(spec.finger.gap_m)
     profiles = run.profiles
+    # a reference controller that declares ``feedback = "true_force"`` (controllers.bounds) is fed
+    # the true contact force instead of the estimate; every other controller sees the estimate
+    i_fb = S.contact_force_n if getattr(ctrl, "feedback", "estimate") == "true_force" else S.force_est_n
     ctrl = wrap_controller(spec, ctrl, dt)
     tr = {c: np.zeros(n) for c in TRACE_COLUMNS if c != "character"}
     st = plant.state[0]
     # slot indices and trace columns bound to locals: the loop below runs once per control period
     i_fc, i_fe, i_v, i_i, i_x, i_e = (S.contact_force_n, S.force_est_n, S.fsr_voltage_v,
                                       S.current_a, S.board_pos_m, S.energy_j)
-    ctrl.reset(force_est_n=float(st[i_fe]), setpoint_n=float(sp[0]), command_v=0.0)
+    ctrl.reset(force_est_n=float(st[i_fb]), setpoint_n=float(sp[0]), command_v=0.0)
     f_true, f_est, v_fsr, cmd_v, cur, xb, en = (tr["force_true_n"], tr["force_est_n"], tr["fsr_voltage_v"],
                                                 tr["command_v"], tr["motor_current_a"], tr["board_pos_m"],
                                                 tr["energy_j"])
-    fe = float(st[i_fe])
+    fe = float(st[i_fb])
     i_a = 0.0
     update = ctrl.update
     advance = plant.advance
@@ -144,11 +147,11 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
             inp[j] = arr[k]
         c = update(fe, sp[k], dt, i_a)
         advance(c)
-        fe = float(st[i_fe])
+        fe = float(st[i_fb])
         i_a = float(st[i_i])
         cmd_v[k] = c
         f_true[k] = st[i_fc]
-        f_est[k] = fe
+        f_est[k] = st[i_fe]
         v_fsr[k] = st[i_v]
         cur[k] = i_a
         xb[k] = st[i_x]
