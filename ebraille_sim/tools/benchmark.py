@@ -396,10 +396,9 @@ def write_results(result: BenchmarkResult, out, summary: dict | None = None) -> 
     """Write ``benchmark.json`` and ``leaderboard.md`` into folder ``out``; return the paths."""
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    from ebraille_sim.commands import plain
     doc = results_document(result, summary)
     p_json, p_md = out / "benchmark.json", out / "leaderboard.md"
-    p_json.write_text(json.dumps(plain(doc), indent=1, allow_nan=False) + "\n")
+    p_json.write_text(json.dumps(doc, indent=1, allow_nan=False, default=float) + "\n")
     p_md.write_text(format_markdown(result, doc["summary"]))
     return [p_json, p_md]
 
