@@ -4,7 +4,7 @@ from __future__ import annotations
 NAME = "benchmark"
 HELP = "rank controllers on a fixed scenario suite over a reader population, beside the actuator and sensor bounds"
 EPILOG = ("score = 100 * mean over tracking scenarios of (CVaR10(in_band) + CVaR10(char_in_band)) / 2 "
-          "- 100 * fraction of episodes with peak force > 3 N.  CVaR10 is the mean of the worst 10 %% of "
+          "- 100 * fraction of episodes with peak force > 3 N.  CVaR10 is the mean of the worst 10 % of "
           "the readers.  actuator_bound: a controller fed the true force; sensor_bound: its force shifted by "
           "the estimator error (docs/benchmark.md).  The same command gives the same numbers.")
 

@@ -363,7 +363,7 @@ def format_markdown(result: BenchmarkResult, summary: dict | None = None) -> str
     order = _ranked(s)
     out = [f"Suite `{result.suite.name}` v{SUITE_VERSION}: {len(result.suite.scenarios)} scenarios x "
            f"{result.readers} readers.  `{score_formula()}`", "",
-           "| controller | score | max peak force (N) | episodes > 3 N |", "|---|---:|---:|---:|"]
+           "| controller | score | max peak force (N) | share of episodes > 3 N |", "|---|---:|---:|---:|"]
     for c in order:
         peak = max((v["peak_force_n_max"] or 0.0) for v in s[c]["scenarios"].values())
         name = f"*{c}* (bound)" if s[c]["bound"] else f"`{c}`"
@@ -398,7 +398,9 @@ def write_results(result: BenchmarkResult, out, summary: dict | None = None) -> 
     out.mkdir(parents=True, exist_ok=True)
     doc = results_document(result, summary)
     p_json, p_md = out / "benchmark.json", out / "leaderboard.md"
-    p_json.write_text(json.dumps(doc, indent=1, allow_nan=False, default=float) + "\n")
+    doc = dict(doc, rows=[{k: round(v, 6) if isinstance(v, float) else v for k, v in r.items()}
+                          for r in doc["rows"]])
+    p_json.write_text(json.dumps(doc, separators=(",", ":"), allow_nan=False, default=float) + "\n")
     p_md.write_text(format_markdown(result, doc["summary"]))
     return [p_json, p_md]
 
