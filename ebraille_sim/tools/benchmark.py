@@ -21,7 +21,9 @@ Score (higher is better, at most 100)::
     score = 100 * mean_s [ (CVaR_10(in_band_s) + CVaR_10(char_in_band_s)) / 2 ]
             - 100 * (fraction of all episodes whose peak force exceeds 3.0 N)
 
-with ``s`` over the tracking scenarios (the fault scenarios enter only the peak-force term).
+with ``s`` over the tracking scenarios (the fault scenarios enter only the peak-force term);
+an episode that fails (e.g. a diverged simulation) counts as one over 3.0 N and adds nothing
+to the CVaR.
 
 Bounds.  ``actuator_bound`` (:mod:`controllers.bounds`) is a controller fed the TRUE contact
 force at the control rate.  ``sensor_bound`` is derived from each ``actuator_bound``
