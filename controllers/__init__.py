@@ -23,7 +23,7 @@ Examples
 --------
 >>> import controllers
 >>> controllers.available()
-['lqg', 'pid', 'pid_feedforward', 'pid_scheduled']
+['actuator_bound', 'lqg', 'pid', 'pid_feedforward', 'pid_friction', 'pid_scheduled']
 >>> ctrl = controllers.make("pid", kp_v_per_n=1.0)
 >>> ctrl.config.kp_v_per_n
 1.0
@@ -147,7 +147,7 @@ def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
     >>> make("lqr")
     Traceback (most recent call last):
     ...
-    ValueError: unknown controller 'lqr'; available: lqg, pid, pid_feedforward, pid_scheduled (or give a path to a .toml/.json config file)
+    ValueError: unknown controller 'lqr'; available: actuator_bound, lqg, pid, pid_feedforward, pid_friction, pid_scheduled (or give a path to a .toml/.json config file)
     """
     spec = os.fspath(name_or_path)
     if spec.startswith(_POLICY_PREFIX):
@@ -205,3 +205,21 @@ def _make_lqg(**gains: Any) -> Controller:
 register("pid_scheduled", _make_scheduled)
 register("pid_feedforward", _make_feedforward)
 register("lqg", _make_lqg)
+
+
+def _make_actuator_bound(**gains: Any) -> Controller:
+    """Factory for ``"actuator_bound"``: the true-force reference of :mod:`controllers.bounds`."""
+    from controllers.bounds import make_actuator_bound
+    return make_actuator_bound(**gains)
+
+
+register("actuator_bound", _make_actuator_bound)
+
+
+def _make_friction(**gains: Any) -> Controller:
+    """Factory for ``"pid_friction"``: friction compensation keyed on the error (:mod:`controllers.friction`)."""
+    from controllers.friction import make_friction
+    return make_friction(**gains)
+
+
+register("pid_friction", _make_friction)

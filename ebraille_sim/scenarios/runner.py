@@ -181,6 +181,9 @@ def _simulate(spec, seed, run, ctrl, backend: str, supervised: bool = True) -> R
     sp = run.setpoint_n[:n].copy()
     plant = _plant_for(spec, run, backend)
     profiles = run.profiles
+    # a reference controller that declares ``feedback = "true_force"`` (controllers.bounds) is fed
+    # the true contact force instead of the estimate; every other controller sees the estimate
+    i_fb = S.contact_force_n if getattr(ctrl, "feedback", "estimate") == "true_force" else S.force_est_n
     chosen = ctrl
     ctrl = wrap_controller(spec, ctrl, dt, supervised)
     tr = {c: np.zeros(n) for c in TRACE_COLUMNS if c not in ("character", "t_s", "setpoint_n", "char_index")}
@@ -188,11 +191,11 @@ def _simulate(spec, seed, run, ctrl, backend: str, supervised: bool = True) -> R
     # slot indices and trace columns bound to locals: the loop below runs once per control period
     i_fc, i_fe, i_v, i_i, i_x, i_e = (S.contact_force_n, S.force_est_n, S.fsr_voltage_v,
                                       S.current_a, S.board_pos_m, S.energy_j)
-    ctrl.reset(force_est_n=float(st[i_fe]), setpoint_n=float(sp[0]), command_v=0.0)
+    ctrl.reset(force_est_n=float(st[i_fb]), setpoint_n=float(sp[0]), command_v=0.0)
     f_true, f_est, v_fsr, cmd_v, cur, xb, en = (tr["force_true_n"], tr["force_est_n"], tr["fsr_voltage_v"],
                                                 tr["command_v"], tr["motor_current_a"], tr["board_pos_m"],
                                                 tr["energy_j"])
-    fe = float(st[i_fe])
+    fe = float(st[i_fb])
     i_a = 0.0
     update = ctrl.update
     advance = plant.advance
@@ -204,11 +207,11 @@ def _simulate(spec, seed, run, ctrl, backend: str, supervised: bool = True) -> R
             inp[j] = arr[k]
         c = update(fe, sp[k], dt, i_a)
         advance(c)
-        fe = float(st[i_fe])
+        fe = float(st[i_fb])
         i_a = float(st[i_i])
         cmd_v[k] = c
         f_true[k] = st[i_fc]
-        f_est[k] = fe
+        f_est[k] = st[i_fe]
         v_fsr[k] = st[i_v]
         cur[k] = i_a
         xb[k] = st[i_x]
@@ -235,19 +238,20 @@ def _simulate_lean(spec, seed, run, ctrl, backend: str, every: int | None, super
     dt, n = run.dt_s, run.n_steps
     sp = run.setpoint_n[:n].copy()
     plant = _plant_for(spec, run, backend)
+    i_fb = S.contact_force_n if getattr(ctrl, "feedback", "estimate") == "true_force" else S.force_est_n
     chosen = ctrl
     ctrl = wrap_controller(spec, ctrl, dt, supervised)
     st = plant.state[0]
     i_fc, i_fe, i_v, i_i, i_x, i_e = (S.contact_force_n, S.force_est_n, S.fsr_voltage_v,
                                       S.current_a, S.board_pos_m, S.energy_j)
-    ctrl.reset(force_est_n=float(st[i_fe]), setpoint_n=float(sp[0]), command_v=0.0)
+    ctrl.reset(force_est_n=float(st[i_fb]), setpoint_n=float(sp[0]), command_v=0.0)
     f_true, f_est = np.zeros(n), np.zeros(n)
     n_kept = 0 if every is None else n // every
     kept = {c: np.zeros(n_kept) for c in ("command_v", "fsr_voltage_v", "motor_current_a", "board_pos_m",
                                            "energy_j")}
     cmd_v, v_fsr, cur, xb, en = (kept["command_v"], kept["fsr_voltage_v"], kept["motor_current_a"],
                                  kept["board_pos_m"], kept["energy_j"])
-    fe = float(st[i_fe])
+    fe = float(st[i_fb])
     i_a = 0.0
     update = ctrl.update
     advance = plant.advance
@@ -261,10 +265,10 @@ def _simulate_lean(spec, seed, run, ctrl, backend: str, every: int | None, super
             inp[j] = arr[k]
         c = update(fe, sp[k], dt, i_a)
         advance(c)
-        fe = float(st[i_fe])
+        fe = float(st[i_fb])
         i_a = float(st[i_i])
         f_true[k] = st[i_fc]
-        f_est[k] = fe
+        f_est[k] = st[i_fe]
         if k == due:
             cmd_v[q] = c
             v_fsr[q] = st[i_v]
@@ -384,6 +388,9 @@ def run_batch(runs: list, keep_traces: bool = True) -> list:
 def _simulate_batch(prepared: list, keep_traces: bool = True) -> list:
     """:func:`_simulate` of several prepared runs with equal length and rates, one plant."""
     from ebraille_sim.plant import kernel
+    if len(prepared) > 1 and any(getattr(p[3], "feedback", "estimate") == "true_force" for p in prepared):
+        # a controller fed the true force runs on its own (:func:`_simulate` reads it from the state)
+        return [r for p in prepared for r in _simulate_batch([p], keep_traces)]
     if len(prepared) == 1:
         spec, seed, run, ctrl = prepared[0]
         try:

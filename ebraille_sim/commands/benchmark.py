@@ -1,0 +1,60 @@
+"""``ebraille-sim benchmark``: controllers on a fixed suite x reader population, with bounds and a score."""
+from __future__ import annotations
+
+NAME = "benchmark"
+HELP = "rank controllers on a fixed scenario suite over a reader population, beside the actuator and sensor bounds"
+EPILOG = ("score = 100 * mean over tracking scenarios of (CVaR10(in_band) + CVaR10(char_in_band)) / 2 "
+          "- 100 * fraction of episodes with peak force > 3 N.  CVaR10 is the mean of the worst 10 % of "
+          "the readers.  actuator_bound: a controller fed the true force; sensor_bound: its force shifted by "
+          "the estimator error (docs/benchmark.md).  The same command gives the same numbers.")
+
+
+def add_arguments(p):
+    from ebraille_sim.tools.benchmark import SUITES
+    p.add_argument("controllers", nargs="+", metavar="CONTROLLER",
+                   help="registered names, gains files (.toml/.json) or policy:PATH")
+    p.add_argument("--suite", default="standard", metavar="NAME",
+                   help=f"scenario suite: {', '.join(sorted(SUITES))} (default standard)")
+    p.add_argument("--readers", type=int, default=None, metavar="N",
+                   help="readers per scenario: the nominal device and N-1 drawn ones (default: the suite's)")
+    p.add_argument("-j", "--jobs", type=int, default=1, metavar="N", help="local worker processes (default 1)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="write benchmark.json (the results file) and leaderboard.md into DIR")
+    p.add_argument("--compare", default=None, metavar="RESULTS.json",
+                   help="print the changes against an earlier benchmark.json of the same suite")
+    p.add_argument("--no-bounds", action="store_true", help="skip actuator_bound and sensor_bound")
+
+
+def main(args) -> int:
+    from ebraille_sim.commands import FrameProgress, UserError, check_out_dir, console
+    from ebraille_sim.tools import benchmark as bm
+
+    con = console(args)
+    suite = bm.get_suite(args.suite)
+    if args.readers is not None and args.readers < 1:
+        raise UserError(f"--readers must be >= 1, got {args.readers}")
+    if args.jobs < 1:
+        raise UserError(f"--jobs must be >= 1, got {args.jobs}")
+    out = check_out_dir(args.out) if args.out is not None else None
+    old = bm.load_results(args.compare) if args.compare is not None else None
+    if old is not None and (old["suite"], old["suite_version"]) != (suite.name, bm.SUITE_VERSION):
+        raise UserError(f"--compare {args.compare}: suite {old['suite']} v{old['suite_version']}, "
+                        f"this run is {suite.name} v{bm.SUITE_VERSION}")
+    progress = FrameProgress("episodes", enabled=con.progress and not con.json)
+    result = bm.run_benchmark(args.controllers, suite, readers=args.readers, jobs=args.jobs,
+                              bounds=not args.no_bounds, progress=progress)
+    progress.close()
+    summary = bm.summarise(result)
+    doc = bm.results_document(result, summary)
+    deltas = bm.compare(doc, old) if old is not None else None
+    files = bm.write_results(result, out, summary) if out is not None else []
+    con.result({**{k: v for k, v in doc.items() if k != "rows"}, "compare": deltas,
+                "files": [str(f) for f in files]})
+    con.say(bm.format_leaderboard(result, summary))
+    if deltas is not None:
+        con.say("")
+        con.say(bm.format_compare(deltas))
+    con.say(f"\n{len(result.rows)} episode rows in {result.wall_s:.1f} s on {result.jobs} process(es)")
+    if files:
+        con.say("wrote " + ", ".join(str(f) for f in files))
+    return 0

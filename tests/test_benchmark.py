@@ -1,0 +1,167 @@
+"""Controller benchmark: statistics, score, bounds, determinism, results file and comparison."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from ebraille_sim.cli import main as cli
+from ebraille_sim.scenarios.runner import run_scenario
+from ebraille_sim.tools import benchmark as B
+
+
+@pytest.fixture(scope="module")
+def quick():
+    res = B.run_benchmark(["pid"], suite="quick", jobs=1)
+    return res, B.summarise(res)
+
+
+def test_cvar_is_the_mean_of_the_worst_tail():
+    assert B.cvar_low([0.9, 0.5, 1.0, 0.8], 0.5) == pytest.approx(0.65)
+    assert B.cvar_low(list(np.linspace(0, 1, 20)), 0.1) == pytest.approx((0 + 1 / 19) / 2)
+    assert B.cvar_low([0.7]) == 0.7                       # one episode: the tail is that episode
+    assert math.isnan(B.cvar_low([]))
+
+
+def test_suites_are_fixed_and_plans_cover_every_episode():
+    std = B.get_suite("standard")
+    keys = [s.key for s in std.scenarios]
+    for need in ("reading_60wpm", "reading_200wpm", "setpoint_steps", "contact_onset", "tremor_90wpm",
+                 "pressing_90wpm", "strap_slip", "battery_sag", "everyday_session", "refresh_60wpm",
+                 "refresh_120wpm"):
+        assert need in keys
+    assert sum(s.fault for s in std.scenarios) == 2
+    plan = B.plan_episodes(["a", "b"], std, 3)
+    assert len(plan) == 2 * len(std.scenarios) * 3 and len(set(plan)) == len(plan)
+    with pytest.raises(ValueError, match="unknown suite 'huge'"):
+        B.get_suite("huge")
+    with pytest.raises(ValueError, match="readers must be >= 1"):
+        B.plan_episodes(["pid"], std, 0)
+
+
+def test_quick_suite_ranks_the_bounds_beside_the_controller(quick):
+    res, s = quick
+    assert res.controllers == ["pid", "actuator_bound", "sensor_bound"]
+    n_sc = len(res.suite.scenarios)
+    assert sum(r["controller"] == "pid" for r in res.rows) == n_sc * res.readers
+    # true-force feedback holds the force under pressing far better than the FSR-fed PID
+    press = {c: s[c]["scenarios"]["pressing_90wpm"] for c in s}
+    assert press["actuator_bound"]["in_band_fraction_cvar10"] > 0.95
+    assert press["pid"]["in_band_fraction_cvar10"] < 0.8
+    assert s["actuator_bound"]["score"] > s["sensor_bound"]["score"] > s["pid"]["score"]
+    # the sensor bound is not defined on a fault scenario (a broken lead is not an estimation error)
+    assert s["sensor_bound"]["scenarios"]["fault_fsr_open"]["episodes"] == 0
+    for c in s:
+        for key, st in s[c]["scenarios"].items():
+            if st["episodes"]:
+                assert st["in_band_fraction_cvar10"] <= st["in_band_fraction_median"] + 1e-12
+                assert st["peak_force_n_max"] <= 3.0
+    # the score is the stated formula
+    track = [sc.key for sc in res.suite.scenarios if not sc.fault]
+    want = 100 * np.mean([(s["pid"]["scenarios"][k]["in_band_fraction_cvar10"]
+                           + s["pid"]["scenarios"][k]["char_in_band_fraction_cvar10"]) / 2 for k in track])
+    assert s["pid"]["score"] == pytest.approx(want, abs=1e-3)
+    text = B.format_leaderboard(res, s)
+    assert "actuator_bound" in text and "(bound)" in text and "score =" in text
+    md = B.format_markdown(res, s)
+    assert md.count("| pressing_90wpm |") == 7
+
+
+def test_true_force_controllers_get_the_true_force_others_the_estimate():
+    seen = []
+
+    class Probe:
+        name, feedback = "probe", "true_force"
+
+        def reset(self, *, force_est_n, setpoint_n, command_v=0.0):
+            pass
+
+        def update(self, force_est_n, setpoint_n, dt_s, motor_current_a=None):
+            seen.append(force_est_n)
+            return 2.0
+
+    res = run_scenario("steady_90wpm", controller=Probe(), duration_s=0.5)
+    f_true, f_est = res.trace["force_true_n"], res.trace["force_est_n"]
+    assert np.array_equal(np.array(seen[1:]), f_true[:-1])
+    assert np.max(np.abs(f_true - f_est)) > 0.01             # the trace still records the estimate
+    Probe.feedback = "estimate"
+    seen.clear()
+    run_scenario("steady_90wpm", controller=Probe(), duration_s=0.5)
+    assert np.array_equal(np.array(seen[1:]), f_est[:-1])
+
+
+def test_same_command_twice_gives_identical_numbers_and_compare_shows_no_change(tmp_path, capsys):
+    args = ["benchmark", "pid", "--suite", "quick", "--readers", "1", "--out", str(tmp_path / "a"), "-q"]
+    assert cli(args) == 0
+    assert cli(args[:-3] + ["--out", str(tmp_path / "b"), "-j", "2", "--compare",
+                            str(tmp_path / "a" / "benchmark.json"), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    a = json.loads((tmp_path / "a" / "benchmark.json").read_text())
+    b = json.loads((tmp_path / "b" / "benchmark.json").read_text())
+    assert a["summary"] == b["summary"] and a["rows"] == b["rows"]
+    assert all(d["score"] == 0 for d in doc["compare"].values())
+    assert (tmp_path / "a" / "leaderboard.md").read_text().startswith("Suite `quick`")
+
+
+def test_compare_reports_deltas_and_refuses_another_suite(quick):
+    res, s = quick
+    new = B.results_document(res, s)
+    old = json.loads(json.dumps(new))
+    old["summary"]["pid"]["score"] -= 5.0
+    old["summary"]["pid"]["scenarios"]["pressing_90wpm"]["in_band_fraction_cvar10"] -= 0.1
+    d = B.compare(new, old)
+    assert d["pid"]["score"] == pytest.approx(5.0)
+    assert d["pid"]["scenarios"]["pressing_90wpm"]["in_band_fraction_cvar10"] == pytest.approx(0.1)
+    assert "pressing_90wpm: in_band_fraction_cvar10 +0.100" in B.format_compare(d)
+    old["suite_version"] = 0
+    with pytest.raises(ValueError, match="cannot compare suite quick"):
+        B.compare(new, old)
+
+
+@pytest.mark.parametrize("argv, msg", [
+    (["pid", "--suite", "huge"], "unknown suite 'huge'"),
+    (["pid", "--readers", "0"], "--readers must be >= 1"),
+    (["pid", "-j", "0"], "--jobs must be >= 1"),
+    (["lqr"], "unknown controller 'lqr'"),
+    (["actuator_bound"], "is a bound the benchmark adds itself"),
+    (["pid", "--compare", "missing.json"], "no results file"),
+])
+def test_bad_input_is_one_line(argv, msg, capsys):
+    assert cli(["benchmark", *argv, "--suite", "quick"] if "--suite" not in argv else ["benchmark", *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and msg in err[0]
+
+
+def test_compare_rejects_a_file_that_is_not_a_results_file(tmp_path, capsys):
+    p = tmp_path / "x.json"
+    p.write_text('{"a": 1}')
+    assert cli(["benchmark", "pid", "--suite", "quick", "--compare", str(p)]) == 2
+    assert "not a benchmark results file" in capsys.readouterr().err
+
+
+def test_friction_pid_jumps_across_the_friction_band_when_the_error_changes_sign():
+    import controllers
+    from controllers.friction import FrictionConfig
+    from controllers.schedule import ScheduledPID
+    c = controllers.make("pid_friction")
+    plain = ScheduledPID(FrictionConfig(), name="x")           # same gains, direction from the setpoint only
+    cfg, r = c.config, 1.0
+    band = 2 * c._v_per_n * (c._mu * r + c._fc)                # full width of the modelled friction band, V
+    assert 0.4 < band < 1.5
+    for ctrl in (c, plain):
+        ctrl.reset(force_est_n=r, setpoint_n=r, command_v=0.0)
+    y = c.reference(r)
+    u_push = c.update(y - 0.05, r, 1e-3)
+    u_pull = c.update(y + 0.05, r, 1e-3)
+    u_push_plain = plain.update(y - 0.05, r, 1e-3)
+    u_pull_plain = plain.update(y + 0.05, r, 1e-3)
+    assert (u_push - u_pull) - (u_push_plain - u_pull_plain) == pytest.approx(cfg.friction_fraction * band, rel=0.02)
+    assert u_push_plain - u_pull_plain > 0                     # P and D act the same in both
+    # inside the hysteresis the direction stays where it was
+    c.reset(force_est_n=r, setpoint_n=r, command_v=0.0)
+    tiny = 0.5 * cfg.hysteresis_fraction * r
+    assert c.update(y + tiny, r, 1e-3) > c.update(y + 2 * tiny, r, 1e-3) - 0.01
+    with pytest.raises(ValueError, match="friction_fraction"):
+        controllers.make("pid_friction", friction_fraction=1.5)
+    with pytest.raises(ValueError, match="needs feedforward = true"):
+        controllers.make("pid_friction", feedforward=False)
