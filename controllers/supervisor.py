@@ -467,6 +467,8 @@ class Supervisor:
         self.stuck_travel_m = 0.0
         self.contact_travel_m = None
         self.cut_t = -math.inf
+        self.sp_last = math.inf
+        self.fall_t = -math.inf
         self.stall_s = 0.0
         self.implausible_s = 0.0
         self.current_limit_a = c.current_limit_a
@@ -538,7 +540,7 @@ class Supervisor:
         if self.in_contact:
             if self.contact_travel_m is None:
                 self.contact_travel_m = self.travel_m
-            elif self.sp_win.hi[0][0] < self.sp_win.lo[0][0] and f > c.contact_on_n:
+            elif self.t - self.fall_t <= c.release_window_s and f > c.contact_on_n:
                 # an intended release (the setpoint fell): the board backs off and the travel
                 # reference restarts from the compression the estimate shows, so the back-EMF
                 # integral's drift over many presses (refresh mode) does not add up
@@ -602,7 +604,11 @@ class Supervisor:
         self.est_win.push(t, f)
         self.cmd_win.push(t, self.u_prev)
         sp_in = float(setpoint_n)
-        self.sp_win.push(t, sp_in if math.isfinite(sp_in) else 0.0)
+        sp_now = sp_in if math.isfinite(sp_in) else 0.0
+        if sp_now < self.sp_last - 1e-9:
+            self.fall_t = t                  # the setpoint fell: an intended release
+        self.sp_last = sp_now
+        self.sp_win.push(t, sp_now)
         moving = cur is None or abs(self.u_prev - c.motor_resistance_ohm * cur) > c.stuck_emf_v
         if (moving and self.in_contact and self.est_win.full(t) and self.est_win.lo[0][1] > c.contact_lost_n
                 and self.est_win.range() < c.stuck_tolerance_n and self.cmd_win.range() > c.stuck_command_v):
@@ -623,7 +629,8 @@ class Supervisor:
                 self.in_contact = True
             # an intended release (the setpoint fell, or asks for no contact) is not a loss
             released = self.sp_win.range()
-            lost = ((f < c.contact_lost_n and sp_in > c.contact_on_n)
+            fell = t - self.fall_t <= c.release_window_s
+            lost = ((f < c.contact_lost_n and sp_in > c.contact_on_n and not fell)
                     or (f_then - f > c.drop_n + max(released, 0.0) and self.u_prev > 0.0
                         and t - self.cut_t > c.drop_window_s))
             if self.in_contact and lost:

@@ -48,7 +48,10 @@ def test_quick_suite_ranks_the_bounds_beside_the_controller(quick):
     press = {c: s[c]["scenarios"]["pressing_90wpm"] for c in s}
     assert press["actuator_bound"]["in_band_fraction_cvar10"] > 0.95
     assert press["pid"]["in_band_fraction_cvar10"] < 0.8
-    assert s["actuator_bound"]["score"] > s["sensor_bound"]["score"] > s["pid"]["score"]
+    # both bounds above the controller (with the supervisor's current envelope on every run,
+    # refresh at 120 wpm is out of reach even with the true force, where the derived sensor
+    # bound can come out a little above the actuator bound)
+    assert min(s["actuator_bound"]["score"], s["sensor_bound"]["score"]) > s["pid"]["score"] + 10
     # the sensor bound is not defined on a fault scenario (a broken lead is not an estimation error)
     assert s["sensor_bound"]["scenarios"]["fault_fsr_open"]["episodes"] == 0
     for c in s:
@@ -80,14 +83,19 @@ def test_true_force_controllers_get_the_true_force_others_the_estimate():
             seen.append(force_est_n)
             return 2.0
 
-    res = run_scenario("steady_90wpm", controller=Probe(), duration_s=0.5)
+    res = run_scenario("steady_90wpm", controller=Probe(), duration_s=0.5, supervised=False)
     f_true, f_est = res.trace["force_true_n"], res.trace["force_est_n"]
     assert np.array_equal(np.array(seen[1:]), f_true[:-1])
     assert np.max(np.abs(f_true - f_est)) > 0.01             # the trace still records the estimate
     Probe.feedback = "estimate"
     seen.clear()
-    run_scenario("steady_90wpm", controller=Probe(), duration_s=0.5)
-    assert np.array_equal(np.array(seen[1:]), f_est[:-1])
+    res = run_scenario("steady_90wpm", controller=Probe(), duration_s=0.5, supervised=False)
+    assert np.array_equal(np.array(seen[1:]), res.trace["force_est_n"][:-1])
+    # the supervisor, on by default, sees what the controller sees: the true force here
+    Probe.feedback = "true_force"
+    seen.clear()
+    res = run_scenario("steady_90wpm", controller=Probe(), duration_s=0.5)
+    assert np.array_equal(np.array(seen[1:]), res.trace["force_true_n"][:-1])
 
 
 def test_same_command_twice_gives_identical_numbers_and_compare_shows_no_change(tmp_path, capsys):

@@ -542,7 +542,7 @@ def test_staged_moves_in_owned_outputs_and_keeps_the_rest(tmp_path):
 
 def test_sweep_without_figures_removes_the_old_figures(tmp_path, capsys):
     out = tmp_path / "sw"
-    argv = ["sweep", "contact_onset", "--readers", "0", "--duration", "0.6", "-j", "1", "--out", str(out), "-q"]
+    argv = ["sweep", "contact_onset", "--readers", "0", "--duration", "2.1", "-j", "1", "--out", str(out), "-q"]
     assert cli(argv) == 0
     assert list((out / "figures").glob("*.png"))
     first = (out / "results.csv").read_text()
