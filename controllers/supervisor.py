@@ -253,6 +253,13 @@ class SupervisorConfig:
     max_retract_s: float = 10.0
     out_of_range_n: float = 4.0
     stuck_window_s: float = 0.1
+    stuck_response_s: float = 0.05
+    travel_follow_s: float = 5.0
+    """Time constant with which the travel check's reference follows the finger's slow motion
+    (drift, pressing, strap slips) [E]: a board running into the finger faster than this while
+    the reading stays low is caught."""
+    """Time the estimate needs to show a command's effect [E]: the 10 ms estimator period, its
+    two-sample mean and the 20 Hz anti-alias filter (about 40 ms), rounded up."""
     stuck_tolerance_n: float = 2e-3
     stuck_command_v: float = 0.25
     stuck_emf_v: float = 0.05
@@ -456,7 +463,8 @@ class Supervisor:
         self.retract_t0 = 0.0
         self.moving_s = 0.0
         self.est_win = _Window(c.stuck_window_s)
-        self.cmd_win = _Window(c.stuck_window_s)
+        self.cmd_win = _Window(c.stuck_window_s - c.stuck_response_s)
+        self.cmd_delay: deque = deque()
         self.drop_hist: deque = deque()
         self.sp_win = _Window(c.release_window_s)
         self.speed_win = _Window(c.speed_hold_s)
@@ -540,12 +548,17 @@ class Supervisor:
         if self.in_contact:
             if self.contact_travel_m is None:
                 self.contact_travel_m = self.travel_m
-            elif self.t - self.fall_t <= c.release_window_s and f > c.contact_on_n:
-                # an intended release (the setpoint fell): the board backs off and the travel
-                # reference restarts from the compression the estimate shows, so the back-EMF
-                # integral's drift over many presses (refresh mode) does not add up
-                self.contact_travel_m = max(self.contact_travel_m, self.travel_m - compression_at_force_m(
-                    f, c.soft_b_n_per_m, c.soft_m_per_m))
+            elif f > c.contact_on_n:
+                # the reference follows where the pulp's surface must be for the estimate shown,
+                # at once on an intended release (the setpoint fell: the back-EMF integral's drift
+                # over many presses in refresh mode does not add up) and slowly otherwise (the
+                # finger drifts, presses and the strap slips over a session: only a fast mismatch,
+                # a board running into the finger while the reading stays low, trips)
+                target = self.travel_m - compression_at_force_m(f, c.soft_b_n_per_m, c.soft_m_per_m)
+                if self.t - self.fall_t <= c.release_window_s:
+                    self.contact_travel_m = max(self.contact_travel_m, target)
+                else:
+                    self.contact_travel_m += (target - self.contact_travel_m) * min(1.0, dt_s / c.travel_follow_s)
             allowed = (compression_at_force_m(self.est_win.hi[0][1] + c.implausible_n, c.soft_b_n_per_m,
                                               c.soft_m_per_m) + c.stuck_travel_m)
             if self.travel_m - self.contact_travel_m > allowed:
@@ -602,7 +615,11 @@ class Supervisor:
             self._trip("motor_overcurrent")
             return self._safe(cur, dt_s)
         self.est_win.push(t, f)
-        self.cmd_win.push(t, self.u_prev)
+        # the command window lags by the estimator's response: a command that moved within the
+        # last ``stuck_response_s`` cannot have shown in the estimate yet
+        self.cmd_delay.append((t, self.u_prev))
+        while self.cmd_delay[0][0] <= t - c.stuck_response_s:
+            self.cmd_win.push(*self.cmd_delay.popleft())
         sp_in = float(setpoint_n)
         sp_now = sp_in if math.isfinite(sp_in) else 0.0
         if sp_now < self.sp_last - 1e-9:
@@ -610,7 +627,7 @@ class Supervisor:
         self.sp_last = sp_now
         self.sp_win.push(t, sp_now)
         moving = cur is None or abs(self.u_prev - c.motor_resistance_ohm * cur) > c.stuck_emf_v
-        if (moving and self.in_contact and self.est_win.full(t) and self.est_win.lo[0][1] > c.contact_lost_n
+        if (moving and self.cmd_win.t0 is not None and self.in_contact and self.est_win.full(t) and self.est_win.lo[0][1] > c.contact_lost_n
                 and self.est_win.range() < c.stuck_tolerance_n and self.cmd_win.range() > c.stuck_command_v):
             self._trip("fsr_stuck")
             return self._safe(cur, dt_s)
