@@ -30,11 +30,11 @@ cause              detection
 ================== =====================================================================
 fsr_out_of_range   estimate above ``out_of_range_n`` (a short reads the supply: ~15 N),
                    or not finite
-fsr_stuck          in contact, over ``stuck_window_s`` the estimate stays above
-                   ``contact_lost_n`` and moves less than ``stuck_tolerance_n`` while the
-                   command moves more than ``stuck_command_v`` and the motor turns (its
-                   back-EMF ``u - R i`` exceeds ``stuck_emf_v``; a jammed motor draws
-                   ``u / R`` and is left to the I^2 t protection)
+fsr_stuck          (without a current measurement) in contact, over ``stuck_window_s`` the
+                   estimate stays above ``contact_lost_n`` and moves less than
+                   ``stuck_tolerance_n`` while the command of ``stuck_response_s`` earlier
+                   moved more than ``stuck_command_v``; with a current measurement the
+                   travel rule below decides
 motor_overcurrent  I^2 t: ``theta = int (i^2 - I_rated^2) dt`` (kept >= 0) exceeds
                    ``(I_stall^2 - I_rated^2) overload_time_s``
 contact_lost       after contact (estimate > ``contact_on_n``), a loss of contact
@@ -630,7 +630,10 @@ class Supervisor:
         self.sp_last = sp_now
         self.sp_win.push(t, sp_now)
         moving = cur is None or abs(self.u_prev - c.motor_resistance_ohm * cur) > c.stuck_emf_v
-        if (moving and self.cmd_win.t0 is not None and self.in_contact and self.est_win.full(t) and self.est_win.lo[0][1] > c.contact_lost_n
+        # without a current measurement only: with one, the travel the back-EMF integral gives
+        # decides (:meth:`_detect`); ``u - R i`` of one period reads as motion inside the
+        # gearhead's friction band and during a command step, where the board does not move
+        if (cur is None and moving and self.cmd_win.t0 is not None and self.in_contact and self.est_win.full(t) and self.est_win.lo[0][1] > c.contact_lost_n
                 and self.est_win.range() < c.stuck_tolerance_n and self.cmd_win.range() > c.stuck_command_v):
             self._trip("fsr_stuck")
             return self._safe(cur, dt_s)
