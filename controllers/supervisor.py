@@ -85,6 +85,7 @@ from __future__ import annotations
 
 import bisect
 import dataclasses
+import functools
 import math
 from collections import deque
 from collections.abc import Mapping
@@ -367,14 +368,14 @@ class SupervisorConfig:
         return limits.current_for_push_force_a(force_n, self.push_force_per_a_n, 1.0, 1.0,
                                                self.friction_current_a * self.push_force_per_a_n, self.weight_n)
 
-    @property
+    @functools.cached_property
     def envelope_force_n(self) -> float:
         """Force the drive may produce, N: ``safe_force_n`` less what :attr:`finger_motion_m` adds on
         the design reader at the safe force (tangent stiffness ``b + m F``)."""
         k = tangent_stiffness_n_per_m(self.safe_force_n, self.reader_b_n_per_m, self.reader_m_per_m)
         return self.safe_force_n - k * self.finger_motion_m
 
-    @property
+    @functools.cached_property
     def current_limit_a(self) -> float:
         """Current limit at rest: the steady push bound equals :attr:`envelope_force_n`, A."""
         return self.current_for_force_a(self.envelope_force_n)
@@ -408,17 +409,19 @@ class _Window:
     def push(self, t: float, x: float) -> None:
         if self.t0 is None:
             self.t0 = t
-        while self.lo and self.lo[-1][1] >= x:
-            self.lo.pop()
-        self.lo.append((t, x))
-        while self.hi and self.hi[-1][1] <= x:
-            self.hi.pop()
-        self.hi.append((t, x))
+        lo, hi = self.lo, self.hi
+        while lo and lo[-1][1] >= x:
+            lo.pop()
+        while hi and hi[-1][1] <= x:
+            hi.pop()
+        item = (t, x)
+        lo.append(item)
+        hi.append(item)
         cut = t - self.span
-        while self.lo[0][0] < cut:
-            self.lo.popleft()
-        while self.hi[0][0] < cut:
-            self.hi.popleft()
+        while lo[0][0] < cut:
+            lo.popleft()
+        while hi[0][0] < cut:
+            hi.popleft()
 
     def full(self, t: float) -> bool:
         return self.t0 is not None and t - self.t0 >= self.span
