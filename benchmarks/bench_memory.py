@@ -6,7 +6,7 @@ hour) with the full trace at the control rate (``trace_every=1``, what ``run_sce
 returns by default), with every 100th sample (``trace_every=100``), and without a trace
 (``trace_every=None``; metrics only).  A 60 s run of the same scenario, measured in the same
 script, gives the wall-time reference: the long run should take about ``duration / 60``
-times as long (the issue's target: within 1.2x of that, under 400 MB).  The metrics of the
+times as long (the target: within 1.2x of that, under 400 MB).  The metrics of the
 three cases must be equal (wall-clock metric aside); the script checks it.
 
 Run:  python benchmarks/bench_memory.py [--scenario everyday_session] [--duration 3600]
