@@ -135,7 +135,7 @@ def test_thousand_episodes_on_dask_and_locally_are_identical(tmp_path):
     gains = tmp_path / "soft.toml"
     gains.write_text('controller = "pid"\n[gains]\nkp_v_per_n = 1.5\nki_v_per_ns = 6.0\n')
     plan = S.plan_sweep(["steady_90wpm", "tremor_90wpm"], rates=[60, 90, 120], readers=42,
-                        controllers=["pid", str(gains)], seed=11, replicates=2, duration_s=2.0)
+                        controllers=["pid", str(gains)], seed=11, replicates=2, duration_s=1.7)
     assert len(plan.episodes) == 1008
     t0 = time.perf_counter()
     local = S.run_sweep(plan, jobs=2, progress=False)
