@@ -618,11 +618,13 @@ class Supervisor:
             self._trip("motor_overcurrent")
             return self._safe(cur, dt_s)
         self.est_win.push(t, f)
-        # the command window lags by the estimator's response: a command that moved within the
-        # last ``stuck_response_s`` cannot have shown in the estimate yet
-        self.cmd_delay.append((t, self.u_prev))
-        while self.cmd_delay[0][0] <= t - c.stuck_response_s:
-            self.cmd_win.push(*self.cmd_delay.popleft())
+        if cur is None:
+            # the command window (the stuck rule without a current measurement) lags by the
+            # estimator's response: a command that moved within the last ``stuck_response_s``
+            # cannot have shown in the estimate yet
+            self.cmd_delay.append((t, self.u_prev))
+            while self.cmd_delay[0][0] <= t - c.stuck_response_s:
+                self.cmd_win.push(*self.cmd_delay.popleft())
         sp_in = float(setpoint_n)
         sp_now = sp_in if math.isfinite(sp_in) else 0.0
         if sp_now < self.sp_last - 1e-9:

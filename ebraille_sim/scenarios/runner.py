@@ -176,48 +176,10 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
 
 
 def _simulate(spec, seed, run, ctrl, backend: str, supervised: bool = True) -> RunResult:
-    """Closed loop of one prepared run, one control period per Python iteration."""
-    dt, n = run.dt_s, run.n_steps
-    sp = run.setpoint_n[:n].copy()
-    plant = _plant_for(spec, run, backend)
-    profiles = run.profiles
-    # a reference controller that declares ``feedback = "true_force"`` (controllers.bounds) is fed
-    # the true contact force instead of the estimate; every other controller sees the estimate
-    i_fb = S.contact_force_n if getattr(ctrl, "feedback", "estimate") == "true_force" else S.force_est_n
-    chosen = ctrl
-    ctrl = wrap_controller(spec, ctrl, dt, supervised)
-    tr = {c: np.zeros(n) for c in TRACE_COLUMNS if c not in ("character", "t_s", "setpoint_n", "char_index")}
-    st = plant.state[0]
-    # slot indices and trace columns bound to locals: the loop below runs once per control period
-    i_fc, i_fe, i_v, i_i, i_x, i_e = (S.contact_force_n, S.force_est_n, S.fsr_voltage_v,
-                                      S.current_a, S.board_pos_m, S.energy_j)
-    ctrl.reset(force_est_n=float(st[i_fb]), setpoint_n=float(sp[0]), command_v=0.0)
-    f_true, f_est, v_fsr, cmd_v, cur, xb, en = (tr["force_true_n"], tr["force_est_n"], tr["fsr_voltage_v"],
-                                                tr["command_v"], tr["motor_current_a"], tr["board_pos_m"],
-                                                tr["energy_j"])
-    fe = float(st[i_fb])
-    i_a = 0.0
-    update = ctrl.update
-    advance = plant.advance
-    inp = plant.inputs[0]
-    varying = [(U[name], arr) for name, arr in profiles.items()]
-    wall0 = time.perf_counter()
-    for k in range(n):
-        for j, arr in varying:
-            inp[j] = arr[k]
-        c = update(fe, sp[k], dt, i_a)
-        advance(c)
-        fe = float(st[i_fb])
-        i_a = float(st[i_i])
-        cmd_v[k] = c
-        f_true[k] = st[i_fc]
-        f_est[k] = st[i_fe]
-        v_fsr[k] = st[i_v]
-        cur[k] = i_a
-        xb[k] = st[i_x]
-        en[k] = st[i_e]
-    wall = time.perf_counter() - wall0
-    return _with_supervisor(_finish(spec, seed, run, tr, sp, wall, _name(chosen)), spec, supervised, ctrl)
+    """Closed loop of one prepared run, one control period per Python iteration, full trace."""
+    sp, f_true, f_est, kept, _, wall, name, wrapped = _closed_loop(spec, run, ctrl, backend, 1, supervised)
+    tr = {"force_true_n": f_true, "force_est_n": f_est, **kept}
+    return _with_supervisor(_finish(spec, seed, run, tr, sp, wall, name), spec, supervised, wrapped)
 
 
 def _plant_for(spec, run, backend: str):
@@ -229,19 +191,23 @@ def _plant_for(spec, run, backend: str):
     return plant
 
 
-def _simulate_lean(spec, seed, run, ctrl, backend: str, every: int | None, supervised: bool = True) -> RunResult:
-    """:func:`_simulate` keeping the true and estimated force at every period (the metrics
-    need them) and the other trace columns at every ``every``-th period (None: not at all).
+def _closed_loop(spec, run, ctrl, backend: str, every: int | None, supervised: bool):
+    """The control loop of one prepared run: the true and estimated force at every period
+    (the metrics need them), the other trace columns at every ``every``-th (None: not at all).
 
-    The same controller calls and plant steps as :func:`_simulate`, so the same metrics.
+    Returns ``(setpoint, force_true, force_est, kept columns, energy at the end (J), wall s,
+    controller name, the wrapped controller)``.
     """
     dt, n = run.dt_s, run.n_steps
     sp = run.setpoint_n[:n].copy()
     plant = _plant_for(spec, run, backend)
+    # a reference controller that declares ``feedback = "true_force"`` (controllers.bounds) is fed
+    # the true contact force instead of the estimate; every other controller sees the estimate
     i_fb = S.contact_force_n if getattr(ctrl, "feedback", "estimate") == "true_force" else S.force_est_n
-    chosen = ctrl
+    ctrl_name = _name(ctrl)
     ctrl = wrap_controller(spec, ctrl, dt, supervised)
     st = plant.state[0]
+    # slot indices and trace columns bound to locals: the loop below runs once per control period
     i_fc, i_fe, i_v, i_i, i_x, i_e = (S.contact_force_n, S.force_est_n, S.fsr_voltage_v,
                                       S.current_a, S.board_pos_m, S.energy_j)
     ctrl.reset(force_est_n=float(st[i_fb]), setpoint_n=float(sp[0]), command_v=0.0)
@@ -279,9 +245,18 @@ def _simulate_lean(spec, seed, run, ctrl, backend: str, every: int | None, super
             due += every
     wall = time.perf_counter() - wall0
     energy_end = float(st[i_e]) if n else 0.0
+    return sp, f_true, f_est, kept, energy_end, wall, ctrl_name, ctrl
+
+
+def _simulate_lean(spec, seed, run, ctrl, backend: str, every: int | None, supervised: bool = True) -> RunResult:
+    """:func:`_simulate` keeping the true and estimated force at every period and the other
+    trace columns at every ``every``-th period (None: not at all); the same metrics."""
+    sp, f_true, f_est, kept, energy_end, wall, name, wrapped = _closed_loop(spec, run, ctrl, backend, every,
+                                                                            supervised)
+    dt, n = run.dt_s, run.n_steps
     tr = {"force_true_n": f_true, "force_est_n": f_est, "energy_j": np.array([energy_end])}
-    res = _with_supervisor(_finish(spec, seed, run, tr, sp, wall, _name(chosen), keep_trace=False), spec,
-                           supervised, ctrl)
+    res = _with_supervisor(_finish(spec, seed, run, tr, sp, wall, name, keep_trace=False), spec,
+                           supervised, wrapped)
     if every is None:
         return res
     sel = slice(every - 1, None, every)
