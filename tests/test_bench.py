@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ebraille_sim.identification import bench as B
-from ebraille_sim.physics.fsr import static_voltage
+from ebraille_sim.physics.fsr import static_resistance, static_voltage
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +79,8 @@ def test_record_is_100_hz_detrended_at_the_preload(square):
     bench = B.BenchParams()
     k = bench.film.stiffness_n_per_m(0.2)
     preload = round(bench.min_force_n / k / 1.5e-6) * 1.5e-6 * k
-    assert square.force_offset_n == pytest.approx(preload, abs=3e-3)
+    # held in displacement, the preload relaxes a little towards the film's relaxed stiffness
+    assert square.force_offset_n == pytest.approx(preload, abs=0.03)
     v_pre = static_voltage(preload, bench.device.fsr, bench.device.circuit)
     assert square.voltage_offset_v == pytest.approx(v_pre, rel=0.1)
 
@@ -111,22 +112,29 @@ def test_load_cell_noise_and_resolution(square):
     np.testing.assert_allclose(raw / lc.resolution_n, np.round(raw / lc.resolution_n), atol=1e-6)
 
 
-def test_film_force_follows_the_table3_stiffness():
-    bench = B.BenchParams(load_cell=B.LoadCellParams(noise_n_rms=0.0, resolution_n=0.0))
-    rec = B.run_profile(B.PAPER_PROFILES["triangle_0.25hz"], bench, seed=1)
-    k = bench.film.stiffness_n_per_m(0.25)
-    assert k == pytest.approx(np.mean([102.72e3, 101.39e3]))
-    # quasi-static profile: F = k y to within the tiny damping and mass terms
-    np.testing.assert_allclose(rec.true_force_n, k * rec.displacement_m, atol=k * 0.2e-6 + 1e-3)
-
-
-def test_film_holds_its_end_values_outside_the_band():
+def test_film_is_the_standard_linear_solid_fitted_to_table3_stiffness():
+    ke, k1, tau = B.fit_standard_linear_solid()
+    np.testing.assert_allclose((ke, k1, tau), B.SLS_FIT_TABLE3, rtol=2e-3)
     film = B.FilmParams()
-    assert film.stiffness_n_per_m(20.0) == film.stiffness_n_per_m(0.5)
-    assert film.damping_n_s_per_m(0.01) == film.damping_n_s_per_m(0.125)
-    eq = B.FilmParams(source="eq34")
-    assert eq.damping_n_s_per_m(0.375) == pytest.approx(53.96 * 0.375 ** 2 - 44.44 * 0.375 + 10.81)
-    assert eq.damping_n_s_per_m(20.0) == pytest.approx(eq.damping_n_s_per_m(0.5))
+    k = film.stiffness_n_per_m(np.array(B.TABLE3_FREQUENCIES_HZ))
+    assert np.max(np.abs(k / np.mean(B.TABLE3_STIFFNESS_N_PER_M, axis=0) - 1)) < 0.008
+    # causal: the storage stiffness rises monotonically, the damping falls, and it is kN s/m
+    f = np.logspace(-3, 2, 50)
+    assert np.all(np.diff(film.stiffness_n_per_m(f)) > 0) and np.all(np.diff(film.damping_n_s_per_m(f)) < 0)
+    assert film.damping_n_s_per_m(0.25) > 1000.0
+
+
+def test_film_force_in_the_time_domain_is_the_complex_stiffness():
+    film = B.FilmParams(mass_kg=0.0)
+    dt, f = 1e-3, 0.25
+    t = np.arange(int(40 / dt)) * dt
+    y = 1e-5 * np.sin(2 * np.pi * f * t)
+    force = film.force_n(y, np.zeros_like(y), dt)
+    sel = t > 20.0
+    x = np.column_stack([np.sin(2 * np.pi * f * t), np.cos(2 * np.pi * f * t)])[sel]
+    a, b = np.linalg.lstsq(x, force[sel] - force[sel].mean(), rcond=None)[0]
+    assert a / 1e-5 == pytest.approx(film.stiffness_n_per_m(f), rel=2e-3)
+    assert b / 1e-5 / (2 * np.pi * f) == pytest.approx(film.damping_n_s_per_m(f), rel=0.02)
 
 
 def test_same_seed_same_record_exactly():
@@ -145,19 +153,18 @@ def test_run_profiles_gives_each_profile_its_own_seed():
         B.run_profiles([B.PAPER_PROFILES["chirp"]] * 2)
 
 
-def test_hold_creep_follows_the_logarithmic_law():
+def test_constant_displacement_hold_raises_the_resistance_about_six_percent():
     rec = B.run_profile(B.HOLD_PROFILE, seed=2)
     creep = B.hold_creep(rec)
+    # the paper: about +6 % in 30 min under constant displacement; the film and fixture
+    # relax (the force falls) faster than the sensor's own creep raises its conductance
+    assert creep["creep_fraction"] == pytest.approx(0.06, abs=0.01)
+    n0 = rec.baseline_samples
+    f_start, f_end = rec.true_force_n[n0 + 200], rec.true_force_n[-200]
+    assert f_end < 0.85 * f_start
+    # under the same force held constant the sensor's resistance would fall instead
     fsr = B.BenchParams().device.fsr
-    # load-time clock: starts when the preload ramp passes the FSR's load threshold
-    # (0.2 s into the 1 s cosine ramp), then 2 s baseline, 1 s hold ramp, 1 s settle;
-    # each end is a one-second mean
-    t_on = math.acos(1.0 - 2.0 * fsr.load_threshold_n / 0.2) / math.pi
-    t0, t1 = 1.0 + 2.0 + 1.0 + 1.0 + 0.5 - t_on, 1.0 + 2.0 + 1800.0 - 0.5 - t_on
-    d = fsr.creep_per_decade
-    law = (1 + d * math.log10(1 + t1 / fsr.creep_t0_s)) / (1 + d * math.log10(1 + t0 / fsr.creep_t0_s)) - 1
-    assert creep["creep_fraction"] == pytest.approx(law, abs=0.002)
-    assert 0.03 < creep["creep_fraction"] < 0.07        # the paper: about +6 % in 30 min
+    assert static_resistance(f_start, fsr, load_time_s=1800.0) < static_resistance(f_start, fsr, load_time_s=2.0)
 
 
 # ---------------------------------------------------------------------------
@@ -195,8 +202,8 @@ def test_bench_params_are_validated():
         B.BenchParams(min_force_n=3.0, max_force_n=1.0)
     with pytest.raises(ValueError, match="load-cell range"):
         B.BenchParams(max_force_n=30.0)
-    with pytest.raises(ValueError, match="FilmParams.source"):
-        B.FilmParams(source="kelvin")
+    with pytest.raises(ValueError, match="FilmParams.branch_tau_s must be > 0"):
+        B.FilmParams(branch_tau_s=0.0)
     with pytest.raises(ValueError, match="noise_n_rms must be >= 0"):
         B.LoadCellParams(noise_n_rms=-1.0)
 

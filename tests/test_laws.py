@@ -25,8 +25,8 @@ from ebraille_sim.physics.drivetrain import (end_stop, friction_velocity_update,
 from ebraille_sim.physics.fingertip import (compression_m, contact_force, elastic_force, prony_coefficients,
                                             prony_step, tangent_stiffness_n_per_m)
 from ebraille_sim.physics.fsr import (F_EPS_N, FAULT_NONE, FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE,
-                                      N_PLAYS, adc_code, adc_sample, adc_voltage, conductance_s, creep_clock_step,
-                                      creep_factor, divider_voltage, hysteresis, lag_step, log_force, play_widths,
+                                      N_PLAYS, adc_code, adc_sample, adc_voltage, conductance_s, creep_force,
+                                      creep_state_step, divider_voltage, hysteresis, lag_step, log_force, play_widths,
                                       sensor_voltage, static_conductance, static_voltage, temperature_factor)
 from ebraille_sim.physics.motor import current_decay, current_step, driver_voltage, electrical_power_w, rack_force_n
 from ebraille_sim.physics.noise import noise_v, normal_at
@@ -175,7 +175,7 @@ def test_qlv_step_response_relaxes_to_c0_fe_with_the_three_time_constants():
             # and the continuous relaxation function G(t) to within the step's smearing
             g_t = f.relax_weight_inf + sum(c * math.exp(-t / tau) for c, tau in zip(cs, taus))
             assert fc == pytest.approx(fe * g_t, rel=0.03)
-    assert fc == pytest.approx(f.relax_weight_inf * fe + 0.1 * math.exp(-4.0 / 1.4), rel=1e-3)
+    assert fc == pytest.approx(f.relax_weight_inf * fe + f.relax_weight_3 * math.exp(-4.0 / 1.4), rel=1e-3)
 
 
 def test_qlv_ramp_is_exact_and_contact_only_pushes():
@@ -210,15 +210,26 @@ def test_fsr_conductance_power_law():
     assert 1.0 / conductance_s(1.0, k, n, 0.0, 1.0) == pytest.approx(10e3, rel=1e-12)
 
 
-def test_creep_factor_after_thirty_minutes_and_per_decade():
+def test_creep_terms_follow_the_force_and_add_only_while_loaded():
     s = FSRParams()
-    d, t0 = s.creep_per_decade, s.creep_t0_s
-    assert creep_factor(1800.0, d, t0) == pytest.approx(1.0 + s.creep_fraction_30min, rel=1e-12)
-    assert creep_factor(0.0, d, t0) == 1.0
-    assert creep_factor(99.0 * t0, d, t0) == pytest.approx(1.0 + 2 * d, rel=1e-12)    # two decades
-    # the creep clock counts while loaded and decays while unloaded
-    assert creep_clock_step(5.0, 0.5, 0.02, 1e-3, 0.99) == pytest.approx(5.001, rel=1e-15)
-    assert creep_clock_step(5.0, 0.01, 0.02, 1e-3, 0.99) == pytest.approx(4.95, rel=1e-15)
+    # one exact sample of a first-order term under a held force
+    assert creep_state_step(0.2, 1.5, 0.9) == pytest.approx(0.9 * 0.2 + 0.1 * 1.5, rel=1e-15)
+    assert creep_state_step(0.7, 0.0, 0.5) == pytest.approx(0.35, rel=1e-15)       # recovery
+    # the crept force: F + w sum z while loaded, F alone once the film is off the electrodes
+    st = np.array([0.0, 1.0, 2.0, 3.0])
+    pp = np.array([0.5, 0.25, 0.0])
+    f_c = creep_force(1.0, 1.0, st, 1, pp, 0, 0.1, 0.02, 3)
+    z = [0.5 * 1.0 + 0.5 * 1.0, 0.25 * 2.0 + 0.75 * 1.0, 1.0]
+    np.testing.assert_allclose(st[1:], z, rtol=1e-15)
+    assert f_c == pytest.approx(1.0 + 0.1 * sum(z), rel=1e-15)
+    assert creep_force(0.01, 0.01, st.copy(), 1, pp, 0, 0.1, 0.02, 3) == 0.01
+    # held gain: one term per decade rises by the per-decade weight per decade (+/- 10 %)
+    w = fsr.creep_term_weight(s.creep_per_decade, s.creep_tau_min_s, s.creep_tau_max_s)
+    assert w == pytest.approx(s.creep_per_decade, rel=1e-12)
+    g = [fsr.held_creep_gain(t, w, s.creep_tau_min_s, s.creep_tau_max_s, fsr.N_CREEP) for t in (0.1, 1.0, 10.0)]
+    assert fsr.held_creep_gain(0.0, w, s.creep_tau_min_s, s.creep_tau_max_s, fsr.N_CREEP) == 1.0
+    assert fsr.held_creep_gain(1e6, w, 0.01, 100.0, 5) == pytest.approx(1.0 + 5 * w, rel=1e-12)
+    assert g[1] - g[0] == pytest.approx(0.0295, abs=0.001) and g[2] - g[1] == pytest.approx(0.0297, abs=0.001)
     # temperature: datasheet -15 % at +60 K
     assert temperature_factor(60.0, s.temperature_coeff_per_k) == pytest.approx(0.85, rel=1e-12)
 
@@ -372,7 +383,7 @@ def test_state_layout_is_composed_from_the_module_declarations():
     # the order the state vector always had
     assert layout.STATE_NAMES[:5] == ["current_a", "pinion_pos_m", "pinion_vel_m_per_s", "board_pos_m",
                                       "board_vel_m_per_s"]
-    assert S.tare_v == 23 and S.play_0 == 24 and S.est_z0 == 28
+    assert S.tare_v == 22 and S.play_0 == 23 and S.creep_0_n == 27 and S.est_z0 == 32
 
 
 def _device_mid_press():
@@ -429,12 +440,11 @@ def _substep_by_hand(s, p, u):
     s[S.fsr_force_lagged_n] = lag_step(s[S.fsr_force_lagged_n], fc, p[P.fsr_lag_alpha])
     s[S.sensor_phase] = 0.0
     f_lag = s[S.fsr_force_lagged_n]
-    s[S.fsr_load_time_s] = creep_clock_step(s[S.fsr_load_time_s], f_lag, p[P.fsr_load_threshold_n], p[P.fsr_dt_s],
-                                            p[P.fsr_recovery_decay])
     f_eff = hysteresis(f_lag, s, S.play_0, p, P.play_w0, P.play_weight0, N_PLAYS)
-    scale = (creep_factor(s[S.fsr_load_time_s], p[P.fsr_creep_per_decade], p[P.fsr_creep_t0_s])
-             * temperature_factor(u[U.fsr_temp_offset_k], p[P.fsr_tempco_per_k]))
-    gs = conductance_s(f_eff, p[P.fsr_k_ohm], p[P.fsr_n], p[P.fsr_g_standoff_s], scale)
+    f_c = creep_force(f_eff, f_lag, s, S.creep_0_n, p, P.creep_a0, p[P.fsr_creep_weight], p[P.fsr_load_threshold_n],
+                      fsr.N_CREEP)
+    scale = temperature_factor(u[U.fsr_temp_offset_k], p[P.fsr_tempco_per_k])
+    gs = conductance_s(f_c, p[P.fsr_k_ohm], p[P.fsr_n], p[P.fsr_g_standoff_s], scale)
     fault = int(u[U.fsr_fault])
     v = sensor_voltage(fault, gs, p[P.r2_ohm], p[P.divider_supply_v], u[U.fsr_fault_value])
     v += noise_v(p[P.fsr_noise_v], p[P.seed], s[S.sensor_count])
@@ -477,9 +487,11 @@ def test_static_helpers_call_the_same_law_functions():
         assert s_fsr.resistance_ohm(force) == 1.0 / gs
         assert static_conductance(force, s_fsr) == gs
         assert static_voltage(force, s_fsr, c) == divider_voltage(gs, c.r2_ohm, c.supply_v)
-    scale = creep_factor(20.0, s_fsr.creep_per_decade, s_fsr.creep_t0_s)
+    w = fsr.creep_term_weight(s_fsr.creep_per_decade, s_fsr.creep_tau_min_s, s_fsr.creep_tau_max_s)
+    gain = fsr.held_creep_gain(20.0, w, s_fsr.creep_tau_min_s, s_fsr.creep_tau_max_s, fsr.N_CREEP)
     f_eff = 1.0 * loading_branch_factor(s_fsr)
-    g20 = conductance_s(f_eff, s_fsr.resistance_at_1n_ohm, s_fsr.exponent, 1 / s_fsr.standoff_resistance_ohm, scale)
+    g20 = conductance_s(f_eff * gain, s_fsr.resistance_at_1n_ohm, s_fsr.exponent, 1 / s_fsr.standoff_resistance_ohm,
+                        1.0)
     assert loading_voltage(1.0, s_fsr, c, 20.0) == divider_voltage(g20, c.r2_ohm, c.supply_v)
     dev = DeviceParams()
     k_pulp = tangent_stiffness_n_per_m(10.0, f.stiffness_b_n_per_m, f.exponent_m_per_m)
@@ -488,7 +500,7 @@ def test_static_helpers_call_the_same_law_functions():
 
 
 def test_kernel_adc_reads_the_static_voltage_exactly_without_memory_or_noise():
-    s_fsr = FSRParams(noise_v_rms=0.0, hysteresis_fraction=0.0, creep_fraction_30min=0.0)
+    s_fsr = FSRParams(noise_v_rms=0.0, hysteresis_fraction=0.0, creep_per_decade=0.0)
     c = CircuitParams(adc_bits=24)
     dev = DeviceParams(fsr=s_fsr, circuit=c)
     p = pack_params(dev, 0.0)

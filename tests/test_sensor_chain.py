@@ -42,7 +42,7 @@ def test_divider_voltage_at_a_known_resistance():
 
 
 def test_adc_reads_the_static_divider_voltage_without_noise_or_memory_effects():
-    fsr = FSRParams(noise_v_rms=0.0, hysteresis_fraction=0.0, creep_fraction_30min=0.0)
+    fsr = FSRParams(noise_v_rms=0.0, hysteresis_fraction=0.0, creep_per_decade=0.0)
     c = CircuitParams()
     dev, s, p, u = _sensor(fsr=fsr, circuit=c)
     for f in (0.3, 1.0, 2.5):
@@ -52,7 +52,7 @@ def test_adc_reads_the_static_divider_voltage_without_noise_or_memory_effects():
 
 
 def test_hysteresis_loop_has_the_datasheet_width():
-    fsr = FSRParams(noise_v_rms=0.0, creep_fraction_30min=0.0, hysteresis_fraction=0.10)
+    fsr = FSRParams(noise_v_rms=0.0, creep_per_decade=0.0, hysteresis_fraction=0.10)
     c = CircuitParams(adc_bits=20)
     dev, s, p, u = _sensor(fsr=fsr, circuit=c)
     for f in np.linspace(0.0, 3.0, 61):          # load to 3 N
@@ -69,23 +69,70 @@ def test_hysteresis_loop_has_the_datasheet_width():
     assert loading_branch_factor(fsr) == pytest.approx(0.9 ** (1 / (2 * 0.9)), rel=1e-12)
 
 
-def test_creep_adds_six_percent_resistance_over_thirty_minutes():
+def _path_conductance(s, fsr, c):
+    return 1 / _resistance_from(s[S["fsr_voltage_v"]], c) - 1 / fsr.standoff_resistance_ohm
+
+
+def test_conductance_rises_under_a_constant_force_by_one_to_five_percent_per_decade():
     fsr = FSRParams(noise_v_rms=0.0, hysteresis_fraction=0.0)
     c = CircuitParams(adc_bits=24)
-    rates = RateParams(control_rate_hz=100, sensor_rate_hz=100, physics_rate_hz=10000)
-    dev, s, p, u = _sensor(fsr=fsr, circuit=c, rates=rates)
-    _hold(s, p, u, 1.0, 0.02, rates)
-    r0 = static_resistance(1.0, fsr)
-    _hold(s, p, u, 1.0, 1800.0, rates)
-    r30 = _resistance_from(s[S["fsr_voltage_v"]], c)
-    # conduction path creeps by 6 %; the 10 MOhm stand-off path in parallel does not
-    g_path = 1 / r30 - 1 / fsr.standoff_resistance_ohm
-    g_path0 = 1 / r0 - 1 / fsr.standoff_resistance_ohm
-    assert g_path0 / g_path - 1 == pytest.approx(0.06, abs=0.002)
+    dev, s, p, u = _sensor(fsr=fsr, circuit=c)
+    _hold(s, p, u, 1.5, 0.1)
+    g = [_path_conductance(s, fsr, c)]
+    for seconds in (0.9, 9.0, 90.0):              # to 1, 10 and 100 s of load
+        _hold(s, p, u, 1.5, seconds)
+        g.append(_path_conductance(s, fsr, c))
+    per_decade = np.diff(g) / np.asarray(g[:-1])
+    assert np.all(per_decade > 0.01) and np.all(per_decade < 0.05)        # Interlink: < 5 %/decade
+    # the hereditary law, held from a recovered film, is the static helper's
+    assert g[-1] == pytest.approx(1 / static_resistance(1.5, fsr, load_time_s=100.0)
+                                  - 1 / fsr.standoff_resistance_ohm, rel=2e-3)
+
+
+def test_creep_recovers_after_unloading_and_remembers_a_short_pause():
+    fsr = FSRParams(noise_v_rms=0.0, hysteresis_fraction=0.0)
+    c = CircuitParams(adc_bits=24)
+    dev, s, p, u = _sensor(fsr=fsr, circuit=c)
+    _hold(s, p, u, 1.5, 0.05)
+    g_fresh = _path_conductance(s, fsr, c)
+    _hold(s, p, u, 1.5, 300.0)
+    g_crept = _path_conductance(s, fsr, c)
+    _hold(s, p, u, 0.0, 1.0)                      # short pause: most of the creep remains
+    _hold(s, p, u, 1.5, 0.05)
+    g_short = _path_conductance(s, fsr, c)
+    _hold(s, p, u, 0.0, 1500.0)                   # long rest: recovered
+    _hold(s, p, u, 1.5, 0.05)
+    g_rest = _path_conductance(s, fsr, c)
+    assert g_crept / g_fresh - 1 > 0.05
+    assert g_short / g_fresh - 1 > 0.04
+    assert g_rest / g_fresh == pytest.approx(1.0, abs=2e-3)
+
+
+def test_creep_makes_the_dc_gain_exceed_the_10_hz_gain_by_5_to_32_percent():
+    from ebraille_sim.physics.fsr import creep_frequency_response
+    fsr = FSRParams(noise_v_rms=0.0, hysteresis_fraction=0.0)
+    h0, h10 = creep_frequency_response(0.0, fsr), creep_frequency_response(10.0, fsr)
+    boost = abs(h0) / abs(h10) - 1.0
+    assert 0.05 <= boost <= 0.32                  # published dynamic FSR models: 5-32 %
+    # the kernel's small-signal response at 10 Hz after a long preload is the analytic one
+    c = CircuitParams(adc_bits=24)
+    dev, s, p, u = _sensor(fsr=fsr, circuit=c)
+    _hold(s, p, u, 1.5, 1000.0)
+    t = np.arange(2000) * 1e-3
+    g = np.empty(t.size)
+    for i, ti in enumerate(t):
+        _hold(s, p, u, 1.5 + 0.01 * math.sin(2 * math.pi * 10.0 * ti), 1e-3)
+        g[i] = _path_conductance(s, fsr, c)
+    x = np.column_stack([np.ones_like(t), np.sin(2 * np.pi * 10 * t), np.cos(2 * np.pi * 10 * t)])
+    coef = np.linalg.lstsq(x[1000:], g[1000:], rcond=None)[0]
+    amp = math.hypot(coef[1], coef[2])
+    g_held = 1 / static_resistance(1.5, fsr, load_time_s=1e4) - 1 / fsr.standoff_resistance_ohm
+    dc_slope = fsr.exponent * g_held / 1.5          # d G / d F of the fully crept film
+    assert amp / 0.01 / dc_slope == pytest.approx(abs(h10) / abs(h0), rel=0.03)
 
 
 def test_temperature_offset_shifts_resistance_by_the_coefficient():
-    fsr = FSRParams(noise_v_rms=0.0, hysteresis_fraction=0.0, creep_fraction_30min=0.0)
+    fsr = FSRParams(noise_v_rms=0.0, hysteresis_fraction=0.0, creep_per_decade=0.0)
     c = CircuitParams(adc_bits=24)
     dev, s, p, u = _sensor(fsr=fsr, circuit=c)
     u[U["fsr_temp_offset_k"]] = 60.0             # 25 -> 85 C: datasheet -15 %
@@ -96,7 +143,7 @@ def test_temperature_offset_shifts_resistance_by_the_coefficient():
 
 
 def test_sensor_noise_has_the_stated_rms_and_is_reproducible():
-    fsr = FSRParams(noise_v_rms=2e-3, hysteresis_fraction=0.0, creep_fraction_30min=0.0)
+    fsr = FSRParams(noise_v_rms=2e-3, hysteresis_fraction=0.0, creep_per_decade=0.0)
     c = CircuitParams(adc_bits=24)
     vals = []
     dev, s, p, u = _sensor(fsr=fsr, circuit=c, seed=11)

@@ -7,17 +7,19 @@ FFT filter and detrended by the preload offsets, as in the paper.  The chain, in
 the signal passes:
 
 1. **Profile.**  A target force between ``min_force_n`` and ``max_force_n`` (the tactile range
-   0.2-3 N, [R] seed paper) becomes a displacement command ``y_cmd = F / k(f_exc)`` with the
-   film stiffness at the profile's excitation frequency ``f_exc``.
+   0.2-3 N, [R] seed paper) becomes a displacement command ``y_cmd = F / k'(f_exc)`` with the
+   film's storage stiffness at the profile's excitation frequency ``f_exc``: the bench is
+   driven in displacement, as the paper's was.
 2. **Actuator.**  The command is quantised to the actuator's minimum controllable
    displacement (1.5 um, [R] seed paper) and followed by the position servo, a second-order
    low-pass (natural frequency and damping [E]), discretised exactly for a command
    interpolated linearly between samples (first-order hold, so that position and velocity
    stay consistent to well under a microsecond, which the DMA's damping estimate needs).
-3. **Film.**  The FSR stack is the paper's DMA element (eq. 5): ``F = k(f) y + c(f) y' +
-   m_ac y''`` with ``m_ac = 0.0491 g`` and ``k``, ``c`` functions of the excitation frequency
-   (:class:`FilmParams`: Table 3 interpolated, or the paper's fits eqs. 3-4, both held at
-   their end values outside the measured 0.125-0.5 Hz band).
+3. **Film.**  The FSR stack in its fixture is a causal viscoelastic solid run in the time
+   domain (:class:`FilmParams`): a spring and two Maxwell branches, the film's (the
+   standard linear solid fitted to Table 3's stiffness) and a slow fixture branch that
+   relaxes under the 30-minute constant-displacement hold; plus ``m_ac y''`` with
+   ``m_ac = 0.0491 g``.
 4. **FSR and divider.**  The force drives the project's FSR forward model through
    :func:`ebraille_sim.plant.kernel.advance_sensor_only` (lag, hysteresis, power law, creep,
    divider eq. 1, noise, ADC) at ``internal_rate_hz``; nothing of the conduction law is
@@ -61,6 +63,7 @@ from ebraille_sim.base.compiled import njit
 from ebraille_sim.base.fields import sourced
 from ebraille_sim.base.validation import check_number
 
+from ebraille_sim.physics.fingertip import prony_coefficients
 from ebraille_sim.plant.kernel import advance_sensor_only
 from ebraille_sim.plant.layout import N_INPUT, S, U
 from ebraille_sim.plant.loop import initial_state, pack_params
@@ -71,7 +74,7 @@ from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, CircuitParams, Devi
 __all__ = [
     "TABLE3_FREQUENCIES_HZ", "TABLE3_DAMPING_N_S_PER_M", "TABLE3_STIFFNESS_N_PER_M",
     "EQ3_DAMPING_COEFFS", "EQ4_STIFFNESS_COEFFS", "ACTUATED_MASS_KG",
-    "ActuatorParams", "LoadCellParams", "FilmParams", "BenchParams", "Profile", "BenchRecord",
+    "SLS_FIT_TABLE3", "fit_standard_linear_solid", "ActuatorParams", "LoadCellParams", "FilmParams", "BenchParams", "Profile", "BenchRecord",
     "chirp_schedule", "PAPER_PROFILES", "HOLD_PROFILE", "PROFILE_LABELS",
     "profile_signal", "run_profile", "run_profiles", "lowpass_fft", "condition", "load_csv",
     "hold_creep", "default_bench_device", "describe_bench", "CSV_COLUMNS",
@@ -130,62 +133,114 @@ class LoadCellParams:
         check_finite(self)
 
 
+SLS_FIT_TABLE3 = (89.47e3, 17.20e3, 1.008)
+"""[D] standard linear solid fitted to the means of Table 3's stiffness by least squares on the
+relative error: ``k'(f) = k_inf + k_1 (w tau)^2 / (1 + (w tau)^2)`` with ``k_inf`` = 89.47 kN/m,
+``k_1`` = 17.20 kN/m, ``tau`` = 1.008 s (N/m, N/m, s); within 0.7 % of all four points
+(:func:`fit_standard_linear_solid` recomputes it)."""
+
+
+def fit_standard_linear_solid(frequencies_hz=TABLE3_FREQUENCIES_HZ,
+                              stiffness_n_per_m=None) -> tuple[float, float, float]:
+    """Least-squares standard linear solid through storage-stiffness data.
+
+    Parameters
+    ----------
+    frequencies_hz : sequence of float
+        Excitation frequencies, Hz.
+    stiffness_n_per_m : sequence of float, optional
+        Storage stiffness at each frequency, N/m (default: the mean of Table 3's two tests).
+
+    Returns
+    -------
+    k_inf_n_per_m, k_1_n_per_m, tau_s : float
+        Relaxed stiffness, Maxwell-branch stiffness and its relaxation time.
+    """
+    import scipy.optimize
+
+    f = np.asarray(frequencies_hz, dtype=float)
+    k = (np.mean(TABLE3_STIFFNESS_N_PER_M, axis=0) if stiffness_n_per_m is None
+         else np.asarray(stiffness_n_per_m, dtype=float))
+    w = 2.0 * math.pi * f
+
+    def resid(x):
+        ke, k1, tau = x
+        wt2 = (w * tau) ** 2
+        return (ke + k1 * wt2 / (1.0 + wt2)) / k - 1.0
+
+    r = scipy.optimize.least_squares(resid, [0.9 * k.min(), k.max() - k.min(), 1.0 / w.mean()],
+                                     bounds=([0.0, 0.0, 1e-4], [np.inf, np.inf, 1e4]))
+    return float(r.x[0]), float(r.x[1]), float(r.x[2])
+
+
 @dataclass(frozen=True)
 class FilmParams:
-    """The FSR stack as the paper's DMA element (eq. 5) with frequency-dependent k and c.
+    """The FSR stack in its fixture as a causal viscoelastic solid (generalized Maxwell).
 
-    ``source = "table3"``: the means of the two DMA tests of Table 3, interpolated
-    (monotone cubic, PCHIP) between 0.125 and 0.5 Hz.  ``source = "eq34"``: the paper's
-    regressions eqs. 3-4 inside the same band.  In both cases ``k`` and ``c`` are held at
-    their band-edge values outside 0.125-0.5 Hz: eq. 3 extrapolated gives 20 N s/m at 1 Hz
-    and over 20 000 N s/m at 20 Hz, and nothing was measured there.
+    ``F = k_e y + h_1 + h_f + m_ac y''`` with two Maxwell branches
+    ``dh_i/dt = -h_i/tau_i + k_i dy/dt``: the film's branch (``k_1``, ``tau_1``) and a slow
+    fixture branch (``k_f``, ``tau_f``).  The storage stiffness is
+    ``k'(w) = k_e + sum_i k_i (w tau_i)^2/(1 + (w tau_i)^2)`` and the loss (as a damping)
+    ``c(w) = sum_i k_i tau_i/(1 + (w tau_i)^2)``.  ``k_e + k_f`` and ``k_1``, ``tau_1`` are
+    the standard linear solid fitted to Table 3's stiffness (:data:`SLS_FIT_TABLE3`; the
+    fixture branch is fully stiff at the DMA frequencies).  The fixture branch is what
+    relaxes under the paper's 30-minute constant-displacement hold.
 
-    The parameters depend on the excitation frequency, exactly as the paper's model does
-    ("a second-order system whose parameters are functions of the exciting frequency"):
-    a profile declares its excitation frequency (:func:`profile_signal`).
+    Table 3's damping (N s/m) is not reachable by this or any spring-plus-Maxwell material:
+    such a material's damping falls with frequency, and its storage stiffness can rise
+    between two frequencies by at most ``int c dw``; see
+    :func:`ebraille_sim.identification.dma.causal_stiffness_rise_bound_n_per_m`.
     """
-    source: str = sourced("table3", "-", "[R] seed paper Table 3 / eqs. 3-4")
     mass_kg: float = sourced(ACTUATED_MASS_KG, "kg", "[R] seed paper eq. 2, m_ac = 0.0491 g", nonneg=True)
+    equilibrium_stiffness_n_per_m: float = sourced(
+        SLS_FIT_TABLE3[0] - 10.6e3, "N/m", "[D] k_inf of the Table 3 fit (89.47 kN/m) minus the fixture "
+        "branch", positive=True)
+    branch_stiffness_n_per_m: float = sourced(SLS_FIT_TABLE3[1], "N/m", "[D] k_1 of the Table 3 fit",
+                                              nonneg=True)
+    branch_tau_s: float = sourced(SLS_FIT_TABLE3[2], "s", "[D] tau of the Table 3 fit", positive=True)
+    fixture_stiffness_n_per_m: float = sourced(
+        10.6e3, "N/m", "[D] solved so that the 30-minute constant-displacement hold raises the "
+        "resistance by 6 % ([R] seed paper) with the sensor's own creep included", nonneg=True)
+    fixture_tau_s: float = sourced(300.0, "s", "[E] minutes-scale stress relaxation of the polymer stack "
+                                   "and its adhesive fixture", positive=True)
     stiffness_scale: float = sourced(1.0, "-", "[E] multiplier for other FSR units or fixtures", positive=True)
-    damping_scale: float = sourced(1.0, "-", "[E] multiplier for other FSR units or fixtures", nonneg=True)
 
     def __post_init__(self):
         check_finite(self)
-        if self.source not in ("table3", "eq34"):
-            raise ValueError(f"FilmParams.source must be 'table3' or 'eq34', got {self.source!r}")
 
-    @property
-    def band_hz(self) -> tuple[float, float]:
-        """Frequency band of the DMA data, Hz; outside it k and c are held."""
-        return TABLE3_FREQUENCIES_HZ[0], TABLE3_FREQUENCIES_HZ[-1]
-
-    def _clamped(self, f_hz):
-        lo, hi = self.band_hz
-        return np.clip(np.asarray(f_hz, dtype=float), lo, hi)
+    def _branches(self):
+        return ((self.branch_stiffness_n_per_m, self.branch_tau_s),
+                (self.fixture_stiffness_n_per_m, self.fixture_tau_s))
 
     def stiffness_n_per_m(self, f_hz):
-        """Storage stiffness ``k(f)``, N/m (array or float like ``f_hz``)."""
-        f = self._clamped(f_hz)
-        if self.source == "eq34":
-            k = np.polyval(EQ4_STIFFNESS_COEFFS, f)
-        else:
-            k = _pchip(np.mean(TABLE3_STIFFNESS_N_PER_M, axis=0))(f)
+        """Storage stiffness ``k'(f)``, N/m (array or float like ``f_hz``)."""
+        w = 2.0 * math.pi * np.asarray(f_hz, dtype=float)
+        k = self.equilibrium_stiffness_n_per_m + sum(ki * (w * ti) ** 2 / (1.0 + (w * ti) ** 2)
+                                                     for ki, ti in self._branches())
         k = k * self.stiffness_scale
         return float(k) if np.ndim(k) == 0 else k
 
     def damping_n_s_per_m(self, f_hz):
-        """Damping ``c(f)``, N s/m (array or float like ``f_hz``)."""
-        f = self._clamped(f_hz)
-        if self.source == "eq34":
-            c = np.polyval(EQ3_DAMPING_COEFFS, f)
-        else:
-            c = _pchip(np.mean(TABLE3_DAMPING_N_S_PER_M, axis=0))(f)
-        c = c * self.damping_scale
+        """Loss as a damping, ``c(f) = k''/w``, N s/m (array or float like ``f_hz``)."""
+        w = 2.0 * math.pi * np.asarray(f_hz, dtype=float)
+        c = sum(ki * ti / (1.0 + (w * ti) ** 2) for ki, ti in self._branches()) * self.stiffness_scale
         return float(c) if np.ndim(c) == 0 else c
 
+    def force_n(self, y_m, a_m_per_s2, dt_s: float) -> np.ndarray:
+        """Force of the film for a displacement record ``y_m`` from rest (N), time domain.
 
-def _pchip(values):
-    return scipy.interpolate.PchipInterpolator(TABLE3_FREQUENCIES_HZ, values, extrapolate=False)
+        Each Maxwell branch is advanced exactly for ``y`` varying linearly between samples
+        (the ramp-invariant Prony step of :func:`ebraille_sim.physics.fingertip.prony_step`,
+        run as a first-order recursive filter); ``a_m_per_s2`` is the acceleration for the
+        inertial term.
+        """
+        y = np.asarray(y_m, dtype=float)
+        dy = np.diff(y, prepend=0.0)
+        f = self.equilibrium_stiffness_n_per_m * y
+        for ki, ti in self._branches():
+            (a,), (beta,) = prony_coefficients(dt_s, (ti,))
+            f = f + scipy.signal.lfilter([ki * beta], [1.0, -a], dy)
+        return f * self.stiffness_scale + self.mass_kg * np.asarray(a_m_per_s2, dtype=float)
 
 
 def default_bench_device() -> DeviceParams:
@@ -352,7 +407,8 @@ def profile_signal(profile: Profile, t_s: np.ndarray, bench: BenchParams) -> tup
         and hold start at ``min_force_n`` (the preload) and rise smoothly, the square and
         the staircase step up at ``t = 0``.
     excitation_hz : ndarray, shape (n,)
-        Frequency at which the film's ``k`` and ``c`` are taken, Hz.
+        Excitation frequency, Hz: the displacement command is the target force divided by
+        the film's storage stiffness at this frequency (the hold: its ramp, 0.5/ramp_s).
     """
     t = np.asarray(t_s, dtype=float)
     lo, hi = bench.min_force_n, bench.max_force_n
@@ -381,9 +437,10 @@ def profile_signal(profile: Profile, t_s: np.ndarray, bench: BenchParams) -> tup
         levels = np.asarray(levels, dtype=float) / up
         k = np.clip(np.floor(t * f0).astype(int), 0, n - 1)
         return lo + span * levels[k], exc
-    # hold
+    # hold: the half-cosine ramp is half a cycle at 0.5/ramp_s
     ramp = np.clip(t / bench.ramp_s, 0.0, 1.0)
-    return lo + span * profile.hold_fraction * 0.5 * (1.0 - np.cos(np.pi * ramp)), np.zeros_like(t)
+    return (lo + span * profile.hold_fraction * 0.5 * (1.0 - np.cos(np.pi * ramp)),
+            np.full_like(t, 0.5 / bench.ramp_s))
 
 
 # ---------------------------------------------------------------------------
@@ -604,13 +661,12 @@ def run_profile(profile: Profile, bench: BenchParams | None = None, seed=0) -> B
 
     film = bench.film
     k = film.stiffness_n_per_m(exc)
-    c = film.damping_n_s_per_m(exc)
     res = bench.actuator.resolution_m
     y_cmd = force_t / k
     if res > 0:
         y_cmd = np.round(y_cmd / res) * res
     y, v, a = _servo(y_cmd, dt, bench.actuator)
-    force = np.maximum(k * y + c * v + film.mass_kg * a, 0.0)
+    force = np.maximum(film.force_n(y, a, dt), 0.0)
 
     # FSR and divider through the project's sensor chain
     device = bench.device

@@ -80,7 +80,7 @@ from ebraille_sim.estimation.blockmodels import BlockModel, LinearBF, PiecewiseL
 from ebraille_sim.estimation.paper_models import KINDS, ORDERS, SAMPLE_TIME_S, paper_model
 
 __all__ = ["fit", "fit_report", "FitResult", "fitness", "paper_model", "simulate", "match_poles",
-           "shift_operating_point", "KINDS", "ORDERS", "PAPER_FITNESS", "PAPER_PROFILE_ORDER", "DEFAULT_MARGIN"]
+           "shift_operating_point", "compare_with_paper", "KINDS", "ORDERS", "PAPER_FITNESS", "PAPER_PROFILE_ORDER", "DEFAULT_MARGIN"]
 
 #: Poles must stay within ``|z| < 1 - DEFAULT_MARGIN`` during the search.
 DEFAULT_MARGIN = 1e-4
@@ -103,6 +103,65 @@ PAPER_FITNESS: dict[str, dict[int, dict[str, float]]] = {
     }.items()
 }
 """[R] seed paper, Tables 5-8: fitness (%) by kind, order and profile."""
+
+
+def compare_with_paper(table: dict, paper: dict | None = None) -> dict:
+    """How a fitness table (kind -> order -> profile -> %) ranks against the paper's Tables 5-8.
+
+    Parameters
+    ----------
+    table : dict
+        Fitness by kind, order and profile (e.g. ``fitness.json`` of ``ebraille-sim identify``).
+    paper : dict, optional
+        The reference table (default :data:`PAPER_FITNESS`).
+
+    Returns
+    -------
+    dict
+        ``best`` (kind, order, mean fitness) and ``paper_best``; ``ranks`` (model ``kind-order``
+        -> rank of its mean fitness among the models, 1 = best) and ``paper_ranks``;
+        ``spearman_cells`` (rank correlation over every common cell) and
+        ``spearman_means`` (over the model means); ``cells``, ``cells_within_5`` (cells
+        within 5 points of the paper); ``wiener_triangle_0.1hz`` (fitness by order, the
+        paper's and ours).
+    """
+    import scipy.stats
+
+    paper = PAPER_FITNESS if paper is None else paper
+    xs, ys, means, pmeans, keys = [], [], [], [], []
+    for kind, by_order in paper.items():
+        for order, row in by_order.items():
+            ours = table.get(kind, {}).get(order, table.get(kind, {}).get(str(order)))
+            if not ours:
+                continue
+            common = [name for name in row if name in ours]
+            xs += [ours[name] for name in common]
+            ys += [row[name] for name in common]
+            means.append(float(np.mean([ours[name] for name in common])))
+            pmeans.append(float(np.mean([row[name] for name in common])))
+            keys.append(f"{kind}-{order}")
+    if len(keys) < 2:
+        raise ValueError("the table shares fewer than two models with the paper's")
+
+    def ranks(vals):
+        order = np.argsort(-np.asarray(vals), kind="stable")
+        r = np.empty(len(vals), dtype=int)
+        r[order] = np.arange(1, len(vals) + 1)
+        return {k: int(v) for k, v in zip(keys, r)}
+
+    ib, ip = int(np.argmax(means)), int(np.argmax(pmeans))
+    tri = "triangle_0.1hz"
+    wiener = table.get("wiener", {})
+    return {
+        "best": (keys[ib], means[ib]), "paper_best": (keys[ip], pmeans[ip]),
+        "ranks": ranks(means), "paper_ranks": ranks(pmeans),
+        "spearman_cells": float(scipy.stats.spearmanr(xs, ys)[0]),
+        "spearman_means": float(scipy.stats.spearmanr(means, pmeans)[0]),
+        "cells": len(xs), "cells_within_5": int(np.sum(np.abs(np.subtract(xs, ys)) <= 5.0)),
+        "wiener_triangle_0.1hz": {
+            "ours": {int(o): float(v[tri]) for o, v in wiener.items() if tri in v},
+            "paper": {int(o): float(v[tri]) for o, v in paper.get("wiener", {}).items() if tri in v}},
+    }
 
 
 # ---------------------------------------------------------------------------

@@ -9,13 +9,20 @@ Chain, in the order the signal passes (each block from its physics):
    branch has the higher resistance by ``h`` = (R_F+ - R_F-)/R_F+ (10 %, datasheet).
    The play widths grow linearly and sum (weighted) to ``-ln(1-h)/(2n)``.  Its central
    (initial) branch is the static curve the estimator is calibrated on.
-3. **Power-law conduction with stand-off.** ``G = 1/R_so + F_eff^n / (k c_creep c_temp)``:
+3. **Power-law conduction with stand-off.** ``G = 1/R_so + F_c^n / (k c_temp)``:
    the tunnelling/contact path conducts ~F^n (Interlink: roughly 1/R in force), in
    parallel with the >10 MOhm unloaded film.
-4. **Creep.** While loaded, resistance creeps logarithmically in load time,
-   ``c_creep = 1 + d log10(1 + t_load/t0)``, with ``d`` set so that a 30 min hold gives
-   +6 % (seed paper's static test; datasheet: < 5 % per decade).  Unloaded, the load time
-   relaxes exponentially (recovery).
+4. **Creep (hereditary).**  The polymer's strain creeps under a held force and recovers
+   when the force is removed (a generalized Kelvin/Burgers solid, Paredes-Madrid et al.
+   2017), so the force the conduction law sees is
+   ``F_c = F_eff + w sum_i z_i``, ``dz_i/dt = (F_eff - z_i)/tau_i``, with ``N_CREEP``
+   retardation times spaced one per decade from ``tau_min`` to ``tau_max`` (10 ms-100 s)
+   and the weight ``w`` per decade.  Under a constant force the conductance therefore
+   *rises*, by about ``n w`` per decade of time (Interlink: < 5 % per decade), and a step
+   in force reaches the conduction law at once while the creep follows (a force change at
+   10 Hz sees less of the creep than a held one).  The creep term acts only while the film
+   touches the electrodes (lagged force above ``load_threshold_n``); the states keep their
+   memory and relax towards the applied force (recovery) at all times.
 5. **Temperature.** ``c_temp = 1 + alpha dT`` (datasheet: -15 % at +85 C).
 6. **Divider** (paper eq. 1), FSR to the supply, R2 to ground: ``V = Vs R2/(R2 + R)``.
 7. **Electrical noise** (Gaussian, from a counter-based generator, see :mod:`ebraille_sim.physics.noise`),
@@ -33,6 +40,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ebraille_sim.base.compiled import njit
 
 
@@ -42,13 +51,19 @@ N_PLAYS = 4
 F_EPS_N = 1e-3
 """Force offset inside the logarithm of the hysteresis operator (N)."""
 
-STATE_SLOTS = ("fsr_force_lagged_n", "fsr_load_time_s", "fsr_voltage_v", "fsr_code")
-"""State slots of the film and the ADC: lagged force, creep clock, quantised voltage, code."""
+N_CREEP = 5
+"""Retardation terms of the hereditary creep (one per decade of time, each one state slot)."""
+
+STATE_SLOTS = ("fsr_force_lagged_n", "fsr_voltage_v", "fsr_code")
+"""State slots of the film and the ADC: lagged force, quantised voltage, code."""
+
+CREEP_SLOTS = tuple(f"creep_{j}_n" for j in range(N_CREEP))
+"""State slots of the creep terms (hereditary force, N)."""
 
 HYSTERESIS_SLOTS = tuple(f"play_{j}" for j in range(N_PLAYS))
 """State slots of the play operators (outputs in ln N)."""
 
-OWNED_STATE_SLOTS = STATE_SLOTS + HYSTERESIS_SLOTS
+OWNED_STATE_SLOTS = STATE_SLOTS + HYSTERESIS_SLOTS + CREEP_SLOTS
 """Every state slot this module declares (see :mod:`ebraille_sim.plant.layout`)."""
 
 FAULT_NONE, FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE = 0, 1, 2, 3, 4
@@ -67,29 +82,56 @@ def lag_alpha(h_s: float, lag_s: float) -> float:
     return 1.0 - math.exp(-h_s / lag_s)
 
 
+def creep_taus_s(tau_min_s: float, tau_max_s: float) -> list[float]:
+    """Retardation times of the creep terms (s), spaced geometrically from ``tau_min_s`` to ``tau_max_s``."""
+    r = (tau_max_s / tau_min_s) ** (1.0 / (N_CREEP - 1))
+    return [tau_min_s * r ** j for j in range(N_CREEP)]
+
+
+def creep_term_weight(per_decade: float, tau_min_s: float, tau_max_s: float) -> float:
+    """Weight of each creep term such that the sum rises by ``per_decade`` per decade of time."""
+    return per_decade * math.log10(tau_max_s / tau_min_s) / (N_CREEP - 1)
+
+
+def creep_decay(dt_s: float, tau_s: float) -> float:
+    """Per-sample decay ``exp(-dt/tau)`` of a creep term."""
+    return math.exp(-dt_s / tau_s)
+
+
 @njit(cache=True, inline="always")
-def creep_clock_step(load_time_s, f_lagged_n, threshold_n, dt_s, recovery_decay):
-    """Load time after one sensor sample: counts up while loaded, decays while unloaded (s)."""
+def creep_state_step(z_n, f_eff_n, a):
+    """One exact sample of a creep term for a force held over the sample: ``z <- a z + (1-a) F`` (N)."""
+    return a * z_n + (1.0 - a) * f_eff_n
+
+
+@njit(cache=True, inline="always")
+def creep_force(f_eff_n, f_lagged_n, s, z0, p, a0, weight, threshold_n, n_terms):
+    """Hereditary creep: force seen by the conduction law, ``F_eff + w sum_i z_i`` (N).
+
+    Advances the creep states ``s[z0:z0+n_terms]`` in place (decays ``p[a0:...]``); the
+    creep adds only while the film is loaded (``f_lagged_n > threshold_n``).
+    """
+    acc = 0.0
+    for j in range(n_terms):
+        zj = creep_state_step(s[z0 + j], f_eff_n, p[a0 + j])
+        s[z0 + j] = zj
+        acc += zj
     if f_lagged_n > threshold_n:
-        return load_time_s + dt_s
-    return load_time_s * recovery_decay
-
-
-def recovery_decay(dt_s: float, recovery_s: float) -> float:
-    """Per-sample decay ``exp(-dt/tau)`` of the load time while unloaded."""
-    return math.exp(-dt_s / recovery_s)
+        return f_eff_n + weight * acc
+    return f_eff_n
 
 
 @njit(cache=True, inline="always")
-def creep_factor(load_time_s, per_decade, t0_s):
-    """Resistance factor of logarithmic creep, ``1 + d log10(1 + t_load/t0)``."""
-    return 1.0 + per_decade * math.log10(1.0 + load_time_s / t0_s)
-
-
-@njit(cache=True, inline="always")
-def creep_per_decade_for(fraction, hold_s, t0_s):
-    """Creep slope ``d`` per decade such that :func:`creep_factor` at ``hold_s`` is ``1 + fraction``."""
-    return fraction / math.log10(1.0 + hold_s / t0_s)
+def held_creep_gain(hold_s, weight, tau_min_s, tau_max_s, n_terms):
+    """Creep gain ``F_c/F = 1 + w sum_i (1 - exp(-t/tau_i))`` after holding a force ``hold_s`` (s)
+    on a recovered film (same retardation times as :func:`creep_taus_s`)."""
+    r = (tau_max_s / tau_min_s) ** (1.0 / (n_terms - 1))
+    acc = 0.0
+    tau = tau_min_s
+    for _ in range(n_terms):
+        acc += -math.expm1(-hold_s / tau)
+        tau *= r
+    return 1.0 + weight * acc
 
 
 @njit(cache=True, inline="always")
@@ -193,16 +235,42 @@ def play_widths(fsr) -> tuple[list[float], list[float]]:
     return [total * b / norm for b in base], weights
 
 
-def static_conductance(force_n: float, fsr, load_time_s: float = 0.0, temp_offset_k: float = 0.0) -> float:
-    """Conductance (S) on the central (virgin) branch, with optional creep and temperature.
+def creep_gain(hold_s, fsr):
+    """:func:`held_creep_gain` of an FSR after holding ``hold_s`` (s; float or array)."""
+    w = creep_term_weight(fsr.creep_per_decade, fsr.creep_tau_min_s, fsr.creep_tau_max_s)
+    f = np.vectorize(lambda t: held_creep_gain(float(t), w, fsr.creep_tau_min_s, fsr.creep_tau_max_s, N_CREEP))
+    out = f(np.asarray(hold_s, dtype=float))
+    return float(out) if np.ndim(out) == 0 else out
 
-    The same laws as the compiled loop: :func:`conductance_s` scaled by :func:`creep_factor`
-    and :func:`temperature_factor`.
+
+def creep_frequency_response(f_hz, fsr):
+    """Complex gain of the creep from the applied to the crept force at ``f_hz`` (Hz), small signal.
+
+    ``H(jw) = 1 + w sum_i 1/(1 + j w tau_i)``; ``H(0)`` is the fully crept gain.
     """
-    scale = (creep_factor(float(load_time_s), fsr.creep_per_decade, fsr.creep_t0_s)
-             * temperature_factor(float(temp_offset_k), fsr.temperature_coeff_per_k))
-    return conductance_s(float(force_n), fsr.resistance_at_1n_ohm, fsr.exponent,
-                         1.0 / fsr.standoff_resistance_ohm, scale)
+    w = creep_term_weight(fsr.creep_per_decade, fsr.creep_tau_min_s, fsr.creep_tau_max_s)
+    om = 2.0 * math.pi * np.asarray(f_hz, dtype=float)
+    return 1.0 + w * sum(1.0 / (1.0 + 1j * om * t) for t in creep_taus_s(fsr.creep_tau_min_s, fsr.creep_tau_max_s))
+
+
+def held_resistance_factor(hold_s, fsr):
+    """Resistance of a film held ``hold_s`` (s) at a constant force, relative to its
+    instantaneous value: ``creep_gain^-n`` (stand-off path neglected)."""
+    return np.asarray(creep_gain(hold_s, fsr)) ** (-fsr.exponent)
+
+
+def static_conductance(force_n: float, fsr, load_time_s: float = 0.0, temp_offset_k: float = 0.0) -> float:
+    """Conductance (S) on the central (virgin) branch after holding ``force_n`` for
+    ``load_time_s`` on a recovered film, with an optional temperature offset.
+
+    The same laws as the compiled loop: :func:`conductance_s` of the force grown by
+    :func:`held_creep_gain` (when above the load threshold), scaled by :func:`temperature_factor`.
+    """
+    f = float(force_n)
+    if f > fsr.load_threshold_n:
+        f *= creep_gain(float(load_time_s), fsr)
+    scale = temperature_factor(float(temp_offset_k), fsr.temperature_coeff_per_k)
+    return conductance_s(f, fsr.resistance_at_1n_ohm, fsr.exponent, 1.0 / fsr.standoff_resistance_ohm, scale)
 
 
 def static_resistance(force_n: float, fsr, load_time_s: float = 0.0, temp_offset_k: float = 0.0) -> float:

@@ -23,7 +23,7 @@ Per physics step ``h`` (default 0.1 ms), with the command held over the control 
    end stops (:func:`~ebraille_sim.physics.drivetrain.end_stop`);
 5. fingertip QLV contact force from the new board position
    (:func:`~ebraille_sim.physics.fingertip.prony_step`, :func:`~ebraille_sim.physics.fingertip.contact_force`);
-6. FSR mechanical lag; at every sensor sample the creep clock, hysteresis, conduction,
+6. FSR mechanical lag; at every sensor sample the hysteresis, hereditary creep, conduction,
    divider (or fault), noise and ADC, then the anti-alias filter; at every estimator
    sample the block-oriented estimator (:func:`~ebraille_sim.estimation.blockmodels.estimator_step`).
 
@@ -40,11 +40,11 @@ from ebraille_sim.physics.drivetrain import (end_stop, friction_velocity_update,
                                              mesh_force, shaft_speed_rad_per_s, stribeck, viscous_force_n,
                                              weight_along_n)
 from ebraille_sim.physics.fingertip import compression_m, contact_force, elastic_force, prony_step
-from ebraille_sim.physics.fsr import (adc_sample, adc_voltage, conductance_s, creep_clock_step, creep_factor,
-                                      hysteresis, lag_step, sensor_voltage, temperature_factor)
+from ebraille_sim.physics.fsr import (adc_sample, adc_voltage, conductance_s, creep_force, hysteresis, lag_step,
+                                      sensor_voltage, temperature_factor)
 from ebraille_sim.physics.motor import current_step, driver_voltage, electrical_power_w, rack_force_n
 from ebraille_sim.physics.noise import noise_v
-from ebraille_sim.plant.layout import MAX_BREAKPOINTS, MAX_TF_LEN, N_PLAYS, P, S, U
+from ebraille_sim.plant.layout import MAX_BREAKPOINTS, MAX_TF_LEN, N_CREEP, N_PLAYS, P, S, U
 
 assert MAX_TF_LEN >= 2 and MAX_BREAKPOINTS >= 2
 
@@ -63,12 +63,11 @@ def estimator_update(s, p, u):
 def sensor_sample(s, p, u):
     """One ADC sample of the FSR divider, then the anti-alias filter and the estimator."""
     f_lag = s[S.fsr_force_lagged_n]
-    s[S.fsr_load_time_s] = creep_clock_step(s[S.fsr_load_time_s], f_lag, p[P.fsr_load_threshold_n],
-                                            p[P.fsr_dt_s], p[P.fsr_recovery_decay])
     f_eff = hysteresis(f_lag, s, S.play_0, p, P.play_w0, P.play_weight0, N_PLAYS)
-    scale = (creep_factor(s[S.fsr_load_time_s], p[P.fsr_creep_per_decade], p[P.fsr_creep_t0_s])
-             * temperature_factor(u[U.fsr_temp_offset_k], p[P.fsr_tempco_per_k]))
-    g = conductance_s(f_eff, p[P.fsr_k_ohm], p[P.fsr_n], p[P.fsr_g_standoff_s], scale)
+    f_c = creep_force(f_eff, f_lag, s, S.creep_0_n, p, P.creep_a0, p[P.fsr_creep_weight], p[P.fsr_load_threshold_n],
+                      N_CREEP)
+    scale = temperature_factor(u[U.fsr_temp_offset_k], p[P.fsr_tempco_per_k])
+    g = conductance_s(f_c, p[P.fsr_k_ohm], p[P.fsr_n], p[P.fsr_g_standoff_s], scale)
     fault = int(u[U.fsr_fault])
     v = sensor_voltage(fault, g, p[P.r2_ohm], p[P.divider_supply_v], u[U.fsr_fault_value])
     v += noise_v(p[P.fsr_noise_v], p[P.seed], s[S.sensor_count])

@@ -32,7 +32,7 @@ from ebraille_sim.physics import fingertip as _fingertip
 from ebraille_sim.physics import fsr as _fsr
 from ebraille_sim.physics import motor as _motor
 from ebraille_sim.physics import noise as _noise
-from ebraille_sim.physics.fsr import N_PLAYS
+from ebraille_sim.physics.fsr import N_CREEP, N_PLAYS
 
 
 class _Slots(tuple):
@@ -82,7 +82,7 @@ samples since the last estimate, and the simulated time."""
 STATE_BLOCKS = (
     _motor.STATE_SLOTS, _drivetrain.STATE_SLOTS, _fingertip.STATE_SLOTS, _fsr.STATE_SLOTS,
     _est.ANTIALIAS_SLOTS, LOOP_STATE_SLOTS[:2], _noise.STATE_SLOTS, _est.OUTPUT_SLOTS,
-    _motor.ENERGY_SLOTS, LOOP_STATE_SLOTS[2:], _est.TARE_SLOTS, _fsr.HYSTERESIS_SLOTS, _est.FILTER_SLOTS,
+    _motor.ENERGY_SLOTS, LOOP_STATE_SLOTS[2:], _est.TARE_SLOTS, _fsr.HYSTERESIS_SLOTS, _fsr.CREEP_SLOTS, _est.FILTER_SLOTS,
 )
 """The modules' slot declarations in state-vector order."""
 
@@ -111,13 +111,14 @@ PARAM_NAMES = [
     "finger_b_n_per_m", "finger_m_per_m", "relax_c0", "relax_c1", "relax_c2", "relax_c3",
     "relax_a1", "relax_a2", "relax_a3", "relax_beta1", "relax_beta2", "relax_beta3",
     # FSR and circuit
-    "fsr_lag_alpha", "fsr_k_ohm", "fsr_n", "fsr_g_standoff_s", "fsr_creep_per_decade", "fsr_creep_t0_s",
-    "fsr_recovery_decay", "fsr_load_threshold_n", "fsr_tempco_per_k", "fsr_noise_v", "fsr_dt_s",
+    "fsr_lag_alpha", "fsr_k_ohm", "fsr_n", "fsr_g_standoff_s", "fsr_creep_weight",
+    "fsr_load_threshold_n", "fsr_tempco_per_k", "fsr_noise_v",
     "r2_ohm", "divider_supply_v", "adc_lsb_v", "adc_max_code",
     "aa_b0", "aa_b1", "aa_b2", "aa_a1", "aa_a2",
     "est_len", "est_n_in", "est_n_out", "est_clamp", "est_nyquist_average",
     "seed",
-] + [f"play_w{j}" for j in range(N_PLAYS)] + [f"play_weight{j}" for j in range(N_PLAYS)] \
+] + [f"creep_a{j}" for j in range(N_CREEP)] \
+  + [f"play_w{j}" for j in range(N_PLAYS)] + [f"play_weight{j}" for j in range(N_PLAYS)] \
   + [f"est_num{j}" for j in range(MAX_TF_LEN)] + [f"est_den{j}" for j in range(MAX_TF_LEN)] \
   + [f"est_in_x{j}" for j in range(MAX_BREAKPOINTS)] + [f"est_in_y{j}" for j in range(MAX_BREAKPOINTS)] \
   + [f"est_out_x{j}" for j in range(MAX_BREAKPOINTS)] + [f"est_out_y{j}" for j in range(MAX_BREAKPOINTS)]

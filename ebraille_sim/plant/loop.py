@@ -32,8 +32,8 @@ from ebraille_sim.estimation.models import load_estimator
 from ebraille_sim.physics.drivetrain import (mesh_damping_n_s_per_m, reflected_force_n, reflected_inertia_kg,
                                              shaft_to_rack_per_m)
 from ebraille_sim.physics.fingertip import prony_coefficients, tangent_stiffness_n_per_m
-from ebraille_sim.physics.fsr import (adc_code, adc_voltage, lag_alpha, log_force, play_widths, recovery_decay,
-                                      static_voltage)
+from ebraille_sim.physics.fsr import (adc_code, adc_voltage, creep_decay, creep_taus_s, creep_term_weight, lag_alpha,
+                                      log_force, play_widths, static_voltage)
 from ebraille_sim.physics.motor import current_decay
 from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.plant import kernel
@@ -142,14 +142,13 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     p[P.fsr_k_ohm] = s.resistance_at_1n_ohm
     p[P.fsr_n] = s.exponent
     p[P.fsr_g_standoff_s] = 1.0 / s.standoff_resistance_ohm
-    p[P.fsr_creep_per_decade] = s.creep_per_decade
-    p[P.fsr_creep_t0_s] = s.creep_t0_s
     dt_sensor = 1.0 / r.sensor_rate_hz
-    p[P.fsr_recovery_decay] = recovery_decay(dt_sensor, s.creep_recovery_s)
+    p[P.fsr_creep_weight] = creep_term_weight(s.creep_per_decade, s.creep_tau_min_s, s.creep_tau_max_s)
+    for j, tau in enumerate(creep_taus_s(s.creep_tau_min_s, s.creep_tau_max_s)):
+        p[P[f"creep_a{j}"]] = creep_decay(dt_sensor, tau)
     p[P.fsr_load_threshold_n] = s.load_threshold_n
     p[P.fsr_tempco_per_k] = s.temperature_coeff_per_k
     p[P.fsr_noise_v] = s.noise_v_rms
-    p[P.fsr_dt_s] = dt_sensor
     p[P.r2_ohm] = c.r2_ohm
     p[P.divider_supply_v] = c.supply_v
     p[P.adc_lsb_v] = c.adc_lsb_v

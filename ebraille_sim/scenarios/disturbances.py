@@ -38,14 +38,16 @@ Finger position convention: ``finger_pos_m`` is the pulp surface relative to the
 frame along the board travel; a positive change moves the pulp away from the board (less
 compression, less force).
 
-**Pre-loaded creep through the temperature input.**  The sensor kernel scales the film
-resistance by ``c_creep(t_load) (1 + alpha u_T)``, with ``t_load`` the plant's own load
-clock and ``u_T`` the ``fsr_temp_offset_k`` input.  A run that starts ``t_off`` into a
-session must see ``c_creep(t_off + t_load)`` instead; the ratio
-``D = c_creep(t_off + t) / c_creep(t)`` (with the load clock taken to start at t = 0,
-which the first contact follows within a few tenths of a second) is folded exactly
-into the same input: ``u_T = ((1 + alpha dT) D - 1) / alpha``, where ``dT`` is the
-temperature offset of ``fsr_temperature`` (0 without it).
+**Pre-loaded creep through the temperature input.**  The sensor kernel creeps from a
+recovered film at the start of a run (hereditary creep,
+:func:`ebraille_sim.physics.fsr.creep_force`) and scales the film resistance by
+``(1 + alpha u_T)``, with ``u_T`` the ``fsr_temp_offset_k`` input.  A run that starts
+``t_off`` into a session of held contact must see the resistance of a film crept for
+``t_off + t``; for a held force the ratio ``D = c(t_off + t) / c(t)`` of
+:func:`ebraille_sim.physics.fsr.held_resistance_factor` (load taken to start at t = 0,
+which the first contact follows within a few tenths of a second) is folded into the same
+input: ``u_T = ((1 + alpha dT) D - 1) / alpha``, where ``dT`` is the temperature offset of
+``fsr_temperature`` (0 without it).
 
 Every parameter, its unit, range and source are listed by :func:`parameter_table` (and in
 ``docs/scenarios.md``); the class docstrings give the equations.
@@ -75,6 +77,7 @@ import numpy as np
 
 from ebraille_sim.base.fields import sourced
 from ebraille_sim.base.validation import check_keys, check_number, check_pair
+from ebraille_sim.physics.fsr import held_resistance_factor
 from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2
 from ebraille_sim.scenarios.spec import ScenarioError, check_section_table
 
@@ -340,21 +343,20 @@ class FSRTemperature:
 class FSRDrift:
     """A long session: the run starts ``session_offset_s`` into continuous loading.
 
-    The sensor model's creep ``c(t) = 1 + d log10(1 + t/t0)`` (per-unit ``d`` and ``t0``
-    from the device's FSR; the seed paper's +6 % over 30 min, datasheet < 5 % per decade)
-    is advanced by the offset: the run sees ``c(t_off + t)`` instead of ``c(t)``.  Folded
-    into the temperature input (module docstring).  A reading session of 30 min to 2 h
-    [E] gives offsets of 1800-7200 s; standard FSR ink drifts about 12 % in conductance
-    over 48 h ([R] Sensitronics), the same logarithmic law.
+    The sensor model's resistance under a held force, ``c(t)``
+    (:func:`ebraille_sim.physics.fsr.held_resistance_factor`: conductance rising about
+    2.7 % per decade, datasheet < 5 % per decade), is advanced by the offset: the run sees
+    ``c(t_off + t)`` instead of ``c(t)``.  Folded into the temperature input (module
+    docstring).  A reading session of 30 min to 2 h [E] gives offsets of 1800-7200 s;
+    standard FSR ink drifts about 12 % in conductance over 48 h ([R] Sensitronics).
     """
     session_offset_s: float = sourced(1800.0, "s", "[E] 30 min into a session; creep law of "
-                                 "the FSR model ([R] +6 % in 30 min, seed paper)",
+                                 "the FSR model (hereditary creep, conductance rising under load)",
                                      lo=0.0, hi=7 * 24 * 3600.0, kind="float")
 
     def factor(self, t_s, fsr):
-        d, t0 = fsr.creep_per_decade, fsr.creep_t0_s
         t = np.maximum(t_s, 0.0)
-        return (1.0 + d * np.log10(1.0 + (self.session_offset_s + t) / t0)) / (1.0 + d * np.log10(1.0 + t / t0))
+        return held_resistance_factor(self.session_offset_s + t, fsr) / held_resistance_factor(t, fsr)
 
 
 @dataclass(frozen=True)

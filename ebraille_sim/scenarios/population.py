@@ -10,11 +10,11 @@ parameter                   distribution                source
 ==========================  ==========================  =========================================
 pulp b (stiffness)          log-uniform x[0.5, 2]        [E] sweep range of parameters table 1.4
 pulp m (exponent)           uniform x[0.85, 1.15]        [E] same
-relaxation c0               uniform [0.3, 0.5]           [E]; c1..c3 rescaled to keep sum 1
+relaxation c0               uniform [0.1, 0.2]           [E] around the tap-dissipation fit; c1..c3 rescaled
 FSR k (R at 1 N)            log-normal, sigma 0.2        [R] part-to-part 15-25 % (Interlink guide)
 FSR exponent n              uniform [0.8, 1.0]           [D] fits 0.77-1.0
 FSR hysteresis              uniform [0.05, 0.15]         [R] datasheet +10 % average
-FSR creep over 30 min       uniform [0.03, 0.09]         [R] paper +6 %; datasheet < 5 %/decade
+FSR creep per decade        uniform [0.01, 0.05]         [R] datasheet < 5 %/decade (conductance)
 motor R, kM                 normal, 5 % / 3 % (1 sigma)  [E] winding and magnet tolerances
 gear efficiency             uniform [0.5, 0.7]           [R] 0.53 (3 stages) - 0.7 (Faulhaber)
 guide Coulomb friction      log-uniform [0.05, 0.3] N    [E] parameters table 3
@@ -51,11 +51,11 @@ class PopulationSpec:
     """Spreads of a device population (see the module table for sources)."""
     finger_b_scale: tuple[float, float] = (0.5, 2.0)
     finger_m_scale: tuple[float, float] = (0.85, 1.15)
-    relax_c0: tuple[float, float] = (0.3, 0.5)
+    relax_c0: tuple[float, float] = (0.1, 0.2)
     fsr_k_sigma_ln: float = 0.2
     fsr_exponent: tuple[float, float] = (0.8, 1.0)
     fsr_hysteresis: tuple[float, float] = (0.05, 0.15)
-    fsr_creep_30min: tuple[float, float] = (0.03, 0.09)
+    fsr_creep_per_decade: tuple[float, float] = (0.01, 0.05)
     motor_r_sigma: float = 0.05
     motor_k_sigma: float = 0.03
     gear_efficiency: tuple[float, float] = (0.5, 0.7)
@@ -109,11 +109,11 @@ def sample_fsr(rng: np.random.Generator, spec: PopulationSpec, base):
     """An FSR unit drawn around ``base``."""
     k = base.resistance_at_1n_ohm * float(math.exp(rng.normal(0.0, spec.fsr_k_sigma_ln)))
     src = tuple((f, "drawn from PopulationSpec (ebraille_sim/scenarios/population.py)") for f in (
-        "resistance_at_1n_ohm", "exponent", "hysteresis_fraction", "creep_fraction_30min"))
+        "resistance_at_1n_ohm", "exponent", "hysteresis_fraction", "creep_per_decade"))
     return replace_checked(base, name="drawn", sources=src, resistance_at_1n_ohm=k,
                            exponent=float(rng.uniform(*spec.fsr_exponent)),
                            hysteresis_fraction=float(rng.uniform(*spec.fsr_hysteresis)),
-                           creep_fraction_30min=float(rng.uniform(*spec.fsr_creep_30min)))
+                           creep_per_decade=float(rng.uniform(*spec.fsr_creep_per_decade)))
 
 
 def sample_motor(rng: np.random.Generator, spec: PopulationSpec, base):

@@ -70,7 +70,7 @@ READER_COLUMNS = {
     "fsr_k_ohm": lambda d: d.fsr.resistance_at_1n_ohm,
     "fsr_exponent": lambda d: d.fsr.exponent,
     "fsr_hysteresis": lambda d: d.fsr.hysteresis_fraction,
-    "fsr_creep_30min": lambda d: d.fsr.creep_fraction_30min,
+    "fsr_creep_per_decade": lambda d: d.fsr.creep_per_decade,
     "r2_ohm": lambda d: d.circuit.r2_ohm,
     "gear_efficiency": lambda d: d.drivetrain.gear_efficiency,
     "guide_coulomb_n": lambda d: d.drivetrain.guide_coulomb_n,
