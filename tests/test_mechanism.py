@@ -247,7 +247,7 @@ def test_step_check_rejects_a_too_coarse_rate_with_one_line():
     with pytest.raises(ValueError, match="physics_rate_hz 200 is too low") as exc:
         check_mechanism_step(DeviceParams(), MechanismParams(physics_rate_hz=200.0))
     assert "\n" not in str(exc.value)
-    assert check_mechanism_step(DeviceParams(), MechanismParams()) == pytest.approx(0.63, abs=0.01)
+    assert check_mechanism_step(DeviceParams(), MechanismParams()) == pytest.approx(0.41, abs=0.01)
     with pytest.raises(ValueError, match="physics_rate_hz 1000 is too low"):
         check_mechanism_step(DeviceParams(), MechanismParams(physics_rate_hz=1000.0))
 

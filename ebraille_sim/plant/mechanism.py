@@ -75,9 +75,10 @@ and the spring force from the old position plus an implicit damper ``k h`` is th
 backward-Euler step ``F = k x_new``, stable at any step (its extra damping acts on the
 parasitic ~400 Hz mesh mode only).  The pulp springs stay explicit:
 :func:`check_mechanism_step` computes the stiffest mode of the racks and board on the
-pulp (mesh in its gap, fully relaxed 3 N contact, w = 1266 rad/s) and rejects
-``w h > 1``.  The default 2 kHz gives ``w h = 0.63``; the modes the force loop sees
-(the pulp against the reflected inertia) have ``w h`` near 0.03.  ``physics_rate_hz =
+pulp (mesh in its gap, fully relaxed 3 N contact, w = 2049 rad/s with the pulp's
+c0 = 0.15) and rejects ``w h > 1``.  The default 5 kHz (a whole multiple of the 1 kHz
+control rate) gives ``w h = 0.41``; the modes the force loop sees (the pulp against the
+reflected inertia) have ``w h`` near 0.01.  ``physics_rate_hz =
 10000`` runs the mechanism at the lumped plant's own step.
 
 Examples
@@ -162,7 +163,7 @@ class MechanismParams:
         "nu = 0.5: 7.1 mm at 1 N, 9.0 mm at 2 N", positive=True)
     n_contacts: int = sourced(3, "-", "[E] contact strips across the width (2 or more)", positive=True)
     physics_rate_hz: float = sourced(
-        2000.0, "Hz", "[D] w h = 0.63 for the stiffest explicit mode (pulp on the free board), 0.03 for the "
+        5000.0, "Hz", "[D] w h = 0.41 for the stiffest explicit mode (pulp on the free board), 0.01 for the "
         "modes of the force loop (see check_mechanism_step)", positive=True)
     solver_iterations: int = sourced(10, "-", "[E] Chipmunk's default", positive=True)
     error_correction_per_step: float = sourced(
