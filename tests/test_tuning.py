@@ -28,7 +28,8 @@ def test_operating_point_closed_form_and_solver_agree(force):
     f = dev.finger
     assert op.elastic_force_n == pytest.approx(force / f.relax_weight_inf)
     assert op.compression_m == pytest.approx(f.compression_at_m(force, relaxed=True))
-    assert op.tangent_stiffness_n_per_m == pytest.approx(f.stiffness_b_n_per_m + f.exponent_m_per_m * force / 0.4)
+    assert op.tangent_stiffness_n_per_m == pytest.approx(
+        f.stiffness_b_n_per_m + f.exponent_m_per_m * force / f.relax_weight_inf)
     # pressing edge of the friction band: (1 + mu) Fm + Fc at the motor
     g = dev.drivetrain.gear_ratio / dev.drivetrain.pinion_radius_m
     mu = dev.drivetrain.gear_loss_coefficient
