@@ -14,7 +14,7 @@ loop controls.  The chain, per control sample and per electrode:
 2. **Electrode coverage**: electrode ``e`` (a disc of diameter ``D_e`` centred at
    ``c_e``, the Braille dot positions at pitch ``p``) touches the skin over the
    intersection of its disc with the contact disc; ``phi_e = A_overlap / A_e`` in [0, 1].
-3. **Electrode-skin impedance** (parameters table 4.2 [E])::
+3. **Electrode-skin impedance** (law [E], unsourced: parameters table 4.2 suggests the form)::
 
        Z(F) = Z_inf + (Z_0 - Z_inf) exp(-F / F_z)
 
@@ -41,6 +41,12 @@ counted.
 
 Parameters and sources
 ----------------------
+The Hertz patch at 1 N is 3.56 mm in radius, 40 mm² in area; measured fingertip contact
+areas at that force are larger (roughly twice), so the coverage is an estimate [E].  The
+impedance law and its three constants are [E]/[M], and the 2 mA current is a design choice
+[E] that copies the example stimulus of Akhtar et al. 2018 [R]; the legibility metrics
+compare controllers on one chain, they do not predict absolute percepts.
+
 ======================  ==========  =====================================================
 parameter               default     source
 ======================  ==========  =====================================================
@@ -49,10 +55,11 @@ pulp modulus E          0.1 MPa     [R] 0.07-0.2 MPa Hertzian fit (parameters 1.
 Poisson ratio nu        0.5         [E] nearly incompressible soft tissue
 electrode pitch p       2.4 mm      [E] 2.3-2.5 mm to mimic the 2.34 mm dot spacing [R]
 electrode diameter D_e  1.2 mm      [E] 1-1.5 mm (parameters table 4.1)
+Z(F) law                exp. fall   [E] unsourced form
 Z_0 (touching)          400 kOhm    [M] 10 kOhm-1 MOhm dry fingertip (Kaczmarek 1991)
 Z_inf (pressed)         30 kOhm     [M] same range, moist/pressed end
 F_z                     0.5 N       [E] 0.3-1 N (parameters table 4.2)
-I_0                     2 mA        [R] Akhtar et al. 2018 (2 mA, 200 us, 20 Hz)
+I_0                     2 mA        [E] choice; [R] Akhtar et al. 2018 used 2 mA, 200 us, 20 Hz
 compliance V_c          300 V       [M] 50-300 V fingertip stimulators (Kaczmarek 1991)
 dynamic range DR        2.0         [M] fingertip discomfort/threshold current ratio,
                                     small on the fingertip (Kaczmarek 1991); with the
@@ -96,7 +103,8 @@ constant-voltage one (:data:`CONSTANT_VOLTAGE`)."""
 @dataclass(frozen=True)
 class LegibilityParams:
     """Electrode array, skin contact and stimulator (sources in the module table)."""
-    pulp_radius_m: float = sourced(8e-3, "m", "[E] parameters table 1.5")
+    pulp_radius_m: float = sourced(8e-3, "m", "[E] parameters table 1.5; the Hertz patch (40 mm2 at 1 N) is "
+                                   "smaller than measured fingertip contact areas")
     pulp_modulus_pa: float = sourced(0.1e6, "Pa", "[R] 0.07-0.2 MPa Hertzian fit")
     poisson_ratio: float = sourced(0.5, "-", "[E] nearly incompressible tissue")
     pitch_m: float = sourced(2.4e-3, "m", "[E] 2.3-2.5 mm; Braille dot spacing 2.34 mm [R]")
@@ -105,9 +113,10 @@ class LegibilityParams:
     array_offset_y_m: float = sourced(0.0, "m", "[E] array centred on the contact patch")
     impedance_touch_ohm: float = sourced(400e3, "ohm", "[M] Kaczmarek 1991, 10 k-1 M dry fingertip")
     impedance_pressed_ohm: float = sourced(30e3, "ohm", "[M] same range, pressed end")
-    impedance_force_scale_n: float = sourced(0.5, "N", "[E] F_z 0.3-1 N, parameters table 4.2")
+    impedance_force_scale_n: float = sourced(0.5, "N", "[E] F_z 0.3-1 N of the unsourced exponential "
+                                             "impedance law, parameters table 4.2")
     mode: str = sourced("constant_current", "-", "constant_current | constant_voltage")
-    current_a: float = sourced(2e-3, "A", "[R] Akhtar et al. 2018")
+    current_a: float = sourced(2e-3, "A", "[E] design choice, the example stimulus of [R] Akhtar et al. 2018")
     compliance_v: float = sourced(300.0, "V", "[M] 50-300 V")
     dynamic_range: float = sourced(2.0, "-", "[M] discomfort/threshold ratio on the fingertip")
 
