@@ -34,10 +34,19 @@ all friction (``s = 0``).  The Stribeck rise below 0.5 mm/s is neglected.
 (the long-time stiffness is ``c0 K``).
 
 *FSR.*  After a monotone press every play operator of the hysteresis sits on its edge and
-moves with the input, so the slope is that of the static loading-branch voltage
-:func:`ebraille_sim.estimation.calibration.loading_voltage` with the creep reached after
-``load_time_s``; the creep itself (a 1.4-decade-per-hour effect) is frozen.  ADC
-quantisation and noise are left out.
+moves with the input (``dF_eff = c_h dF_l``, ``c_h`` the loading-branch factor of
+:func:`ebraille_sim.estimation.calibration.loading_branch_factor`).  The hereditary creep
+(:func:`ebraille_sim.physics.fsr.creep_force`) stays dynamic: the operating point is the
+force held for ``load_time_s`` on a recovered film (creep states ``z_i = F_eff (1 -
+exp(-t/tau_i))``, the voltage of
+:func:`ebraille_sim.estimation.calibration.loading_voltage`), and a small change sees
+``dF_c = dF_eff + w sum_i dz_i`` with ``dz_i`` advanced by
+:func:`ebraille_sim.physics.fsr.creep_state_step` at every sensor sample, i.e. the
+frequency response ``1 + w sum_i (1 - a_i)/(1 - a_i z^-1)`` of the creep terms
+(:func:`ebraille_sim.physics.fsr.creep_frequency_response` in continuous time): about 1 at
+the loop's crossover, the fully crept ``1 + N w`` only at DC.  The divider slope
+``dV/dF_c`` is taken at the crept force ``F_c``.  ADC quantisation and noise are left
+out.
 
 Sampled-data form (the method)
 ------------------------------
@@ -50,7 +59,8 @@ equivalent:
 
 1. the continuous part above is discretised exactly at the control period (zero-order
    hold, which is what the kernel does: the command is held over the period);
-2. it is put in series with the anti-alias biquad at the same rate;
+2. it is put in series with the creep terms (:func:`creep_model`, at the sensor rate, as the
+   kernel advances them) and the anti-alias biquad at the same rate;
 3. for the open-loop plant, the command is held over ``N`` control periods and the
    sampled model is lifted to the estimator rate (``A^N``, ``sum A^j B``) and put in series
    with the estimator: :func:`linearize` returns this model with ``dt`` = 0.01 s;
@@ -89,13 +99,14 @@ import scipy.linalg
 import scipy.optimize
 import scipy.signal
 
+from ebraille_sim.physics import fsr as _fsr
 from ebraille_sim.physics.drivetrain import mesh_damping_n_s_per_m, mesh_force, reflected, shaft_to_rack_per_m
 from ebraille_sim.physics.fingertip import elastic_force, tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import DeviceParams
 
 __all__ = [
     "OperatingPoint", "LoopAnalysis", "FRICTION_RULES", "CONTINUOUS_STATES",
-    "operating_point", "contact_plant_system", "continuous_model", "sensor_models",
+    "operating_point", "contact_plant_system", "continuous_model", "sensor_models", "creep_model", "CREEP_STATES",
     "linearize", "pid_statespace", "lift", "loop_models", "analyse_loop", "sensitivity_peak",
     "LoopMargins", "loop_margins",
     "simc_pid", "foptd_fit", "plot_bode", "plot_nyquist",
@@ -133,6 +144,8 @@ class OperatingPoint:
     fsr_voltage_v: float
     """Noise-free divider voltage on the loading branch, V."""
     fsr_slope_v_per_n: float
+    """Instantaneous slope of the divider voltage in the contact force on the loading branch,
+    V/N (creep states held: the high-frequency gain of the sensor)."""
     estimator_input_v: float
     """Tared voltage seen by the estimator, V."""
     estimator_linear_output: float
@@ -144,6 +157,8 @@ class OperatingPoint:
     friction: str
     solver_residual: float
     """Largest state-derivative residual of ``find_operating_point``'s answer."""
+    load_time_s: float = 20.0
+    """Time the force has been held on a recovered film (the creep states' age), s."""
 
 
 # the scalar laws of the plant, evaluated in Python (the code the kernel compiles)
@@ -238,19 +253,26 @@ def contact_plant_system(device: DeviceParams = DeviceParams(), friction: str = 
 
 
 def _sensor_point(device: DeviceParams, force_n: float, load_time_s: float, model=None, direction: float = 1.0):
-    """Loading-branch voltage, its slope and the estimator's operating values.
+    """Loading-branch voltage, its instantaneous slope and the estimator's operating values.
 
-    At a breakpoint of a piecewise-linear map the slope of the segment the signal enters
-    when the force moves in ``direction`` (+1 rising, -1 falling) is used.
+    The slope is ``c_h dV/dF_c`` at the crept force of a press held ``load_time_s``: the creep
+    states are held (their small-signal dynamics are :func:`creep_model`).  At a breakpoint of
+    a piecewise-linear map the slope of the segment the signal enters when the force moves in
+    ``direction`` (+1 rising, -1 falling) is used.
     """
-    from ebraille_sim.estimation.calibration import _tare, loading_voltage
+    from ebraille_sim.estimation.calibration import _tare, loading_branch_factor, loading_voltage
     from ebraille_sim.estimation.models import load_estimator
     model = model if model is not None else load_estimator(device.estimator.model)
     fsr, circ = device.fsr, device.circuit
     v0 = loading_voltage(force_n, fsr, circ, load_time_s)
-    h = 1e-4 * max(force_n, 1e-2)
-    slope = (loading_voltage(force_n + h, fsr, circ, load_time_s)
-             - loading_voltage(force_n - h, fsr, circ, load_time_s)) / (2 * h)
+    c_h = loading_branch_factor(fsr)
+    f_c = force_n * c_h * (_fsr.creep_gain(load_time_s, fsr) if force_n * c_h > fsr.load_threshold_n else 1.0)
+
+    def v_of_crept(f):
+        # the divider voltage of a crept force (no further creep: load time 0)
+        return _fsr.divider_voltage(_fsr.static_conductance(f, fsr, 0.0), circ.r2_ohm, circ.supply_v)
+    h = 1e-4 * max(f_c, 1e-2)
+    slope = c_h * (v_of_crept(f_c + h) - v_of_crept(f_c - h)) / (2 * h)
     tare = _tare(fsr, circ) if device.estimator.tare_at_start else 0.0
     u0 = v0 - tare
     w0 = model._in(u0)
@@ -263,6 +285,36 @@ def _sensor_point(device: DeviceParams, force_n: float, load_time_s: float, mode
     out_slope = 1.0 if model.output_nl is None else float(model.output_nl.slope_at(y0 + dy))
     est = float(model.steady_state(u0))
     return model, v0, slope, u0, in_slope, y0, out_slope, est
+
+
+CREEP_STATES = [f"fsr_creep_{j}_v" for j in range(_fsr.N_CREEP)]
+"""States of :func:`creep_model`: the creep terms as divider-voltage deviations."""
+
+
+def creep_model(device: DeviceParams = DeviceParams()) -> control.StateSpace:
+    """Small-signal hereditary creep at the sensor rate, instantaneous voltage in, voltage out.
+
+    The kernel advances every creep term once per sensor sample with
+    :func:`ebraille_sim.physics.fsr.creep_state_step` (``z <- a z + (1 - a) F_eff``) and adds
+    ``w sum_i z_i`` of the *new* states to the force (:func:`ebraille_sim.physics.fsr.creep_force`).
+    Linear in its arguments, the law gives ``a`` and ``1 - a`` as its values on unit inputs;
+    with the input ``x`` the instantaneous voltage deviation (slope times ``dF_l``, which
+    scales the force deviation the terms follow by a constant), the model is
+    ``zeta+ = a zeta + (1-a) x``, ``y = x + w sum_i (a_i zeta_i + (1-a_i) x)``, with the
+    weight ``w`` and decays ``a_i`` that :func:`ebraille_sim.plant.loop.pack_params` packs.
+    Its gain is ``1 + w sum_i (1 - a_i)`` at the Nyquist frequency and ``1 + N w`` at DC.
+    """
+    fsr = device.fsr
+    dt = 1.0 / device.rates.sensor_rate_hz
+    w = _fsr.creep_term_weight(fsr.creep_per_decade, fsr.creep_tau_min_s, fsr.creep_tau_max_s)
+    step = _fsr.creep_state_step.py_func
+    a = np.array([step(1.0, 0.0, _fsr.creep_decay(dt, tau)) for tau in _fsr.creep_taus_s(fsr.creep_tau_min_s,
+                                                                                            fsr.creep_tau_max_s)])
+    b = np.array([step(0.0, 1.0, _fsr.creep_decay(dt, tau)) for tau in _fsr.creep_taus_s(fsr.creep_tau_min_s,
+                                                                                            fsr.creep_tau_max_s)])
+    return control.ss(np.diag(a), b.reshape(-1, 1), (w * a).reshape(1, -1), [[1.0 + w * float(np.sum(b))]],
+                      dt=dt, inputs=["fsr_voltage_inst_v"], outputs=["fsr_voltage_v"], states=list(CREEP_STATES),
+                      name="creep")
 
 
 def operating_point(device: DeviceParams = DeviceParams(), force_n: float = 1.0, *,
@@ -324,7 +376,8 @@ def operating_point(device: DeviceParams = DeviceParams(), force_n: float = 1.0,
                           pinion_pos_m=xp0, mesh_force_n=fm0, current_a=i0, command_v=v0,
                           fsr_voltage_v=vf, fsr_slope_v_per_n=slope, estimator_input_v=u_est,
                           estimator_linear_output=y_lin, estimator_output_slope_n=out_slope,
-                          estimate_n=est, friction=friction, solver_residual=residual)
+                          estimate_n=est, friction=friction, solver_residual=residual,
+                          load_time_s=float(load_time_s))
 
 
 def continuous_model(device: DeviceParams = DeviceParams(), op: OperatingPoint | None = None, *,
@@ -408,7 +461,7 @@ def sensor_models(device: DeviceParams = DeviceParams(), op: OperatingPoint | No
                         name="antialias")
     from ebraille_sim.estimation.models import load_estimator
     model, _, _, _, in_slope, _, out_slope, _ = _sensor_point(
-        device, op.force_n, 20.0, model, direction=-1.0 if op.friction == "release" else 1.0)
+        device, op.force_n, op.load_time_s, model, direction=-1.0 if op.friction == "release" else 1.0)
     model = model if model is not None else load_estimator(device.estimator.model)
     num = np.asarray(model.linear.numerator(), float)
     den = np.asarray(model.linear.denominator(), float)
@@ -459,11 +512,11 @@ def _sampled_front(device: DeviceParams, op: OperatingPoint) -> tuple[control.St
     h = 1.0 / device.rates.control_rate_hz
     dt_sys = control.c2d(ct[1, 0], h, method="zoh")
     dt_sys = control.ss(dt_sys.A, dt_sys.B, dt_sys.C, dt_sys.D, dt=h, inputs=["command_v"],
-                        outputs=["fsr_voltage_v"], states=list(CONTINUOUS_STATES))
+                        outputs=["fsr_voltage_inst_v"], states=list(CONTINUOUS_STATES))
     aa, est = sensor_models(device, op)
-    front = control.series(dt_sys, aa)
+    front = control.series(control.series(dt_sys, creep_model(device)), aa)
     front = control.ss(front.A, front.B, front.C, front.D, dt=h, inputs=["command_v"], outputs=["aa_out_v"],
-                       states=list(CONTINUOUS_STATES) + ["aa_z1", "aa_z2"], name="front")
+                       states=list(CONTINUOUS_STATES) + CREEP_STATES + ["aa_z1", "aa_z2"], name="front")
     return front, est
 
 
@@ -484,7 +537,7 @@ def linearize(device: DeviceParams = DeviceParams(), force_n: float = 1.0, *, fr
     A discrete-time ``control.StateSpace`` at the estimator's period (0.01 s): the input
     is the command held over one estimator period, the output the estimate produced at
     the end of it (see the module docstring for the sampled-data method).  States, in
-    order: :data:`CONTINUOUS_STATES`, ``aa_z1``, ``aa_z2``, ``est_z0...``,
+    order: :data:`CONTINUOUS_STATES`, :data:`CREEP_STATES`, ``aa_z1``, ``aa_z2``, ``est_z0...``,
     ``est_raw_prev_n``; all are deviations from the operating point.
 
     Parameters
@@ -497,7 +550,9 @@ def linearize(device: DeviceParams = DeviceParams(), force_n: float = 1.0, *, fr
     finger_pos_m : float
         Pulp surface position (the scenario's gap), m; it only shifts positions.
     load_time_s : float
-        FSR creep clock at the operating point, s.
+        Time the operating force has been held on a recovered FSR film, s: it sets the creep
+        states and the divider slope at the operating point; the creep's small-signal
+        dynamics are in the model (:func:`creep_model`).
     return_point : bool
         Also return the :class:`OperatingPoint`.
 
@@ -897,18 +952,26 @@ def analyse_loop(controller, device: DeviceParams = DeviceParams(), force_n: flo
 def foptd_fit(plant: control.StateSpace, t_end_s: float = 6.0) -> tuple[float, float, float]:
     """First-order-plus-delay fit ``k e^{-theta s}/(tau s + 1)`` of a stable plant's step.
 
-    Uses the 28 % / 63 % two-point method on the step response of ``plant``
-    (Smith's method); returns ``(k, tau_s, theta_s)``.
+    Uses the 28 % / 63 % two-point method on the step response of ``plant`` (Smith's
+    method), with the crossing times interpolated between samples; returns
+    ``(k, tau_s, theta_s)``.  ``k`` is the response reached at ``t_end_s``: the FSR creep's
+    10-100 s terms raise the DC gain by a few per cent more over minutes, which the
+    controller's integral action takes up and a fit of the loop's time scale must not
+    stretch over.  The delay is at least one sample period of the plant: the estimate is
+    held over it, and a shorter delay cannot be read from the samples (with the pulp's
+    tap-dissipation weights the two-point delay of the estimator-rate step is 5 ms).
     """
     t = np.arange(0.0, t_end_s, plant.dt)
     r = control.step_response(plant, T=t)
     y = np.asarray(r.outputs).ravel()
-    k = float(np.real(control.dcgain(plant)))
-    t28 = float(np.interp(0.283 * k, y, r.time)) if np.all(np.diff(y[y < 0.7 * k]) >= -1e-12) else \
-        float(r.time[np.argmax(y >= 0.283 * k)])
-    t63 = float(r.time[np.argmax(y >= 0.632 * k)])
+    k = float(y[-1])
+
+    def crossing(level):
+        j = int(np.argmax(y >= level))
+        return float(r.time[j - 1] + (level - y[j - 1]) / (y[j] - y[j - 1]) * (r.time[j] - r.time[j - 1]))
+    t28, t63 = crossing(0.283 * k), crossing(0.632 * k)
     tau = 1.5 * (t63 - t28)
-    theta = max(t63 - tau, 0.0)
+    theta = max(t63 - tau, plant.dt)
     return k, tau, theta
 
 
