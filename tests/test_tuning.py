@@ -366,9 +366,10 @@ def test_tune_report_gives_margins_only_for_a_stable_loop(tmp_path):
     from ebraille_sim.commands.tune import _loop_cells
     fixed = dataclasses.replace(DEFAULT_PID, schedule_above_n=None)
     a1, a2 = analyse_loop(DEFAULT_PID, force_n=1.0), analyse_loop(fixed, force_n=2.0)
-    assert _loop_cells(a1.summary()) == ["stable", "21.7 deg at 6.46 Hz", "1.29 at 8.09 Hz", "5.15"]
+    # tap-dissipation pulp and dynamic creep terms (test_margins.test_default_pid_margins_at_1n_and_0_6n)
+    assert _loop_cells(a1.summary()) == ["stable", "42.2 deg at 6.03 Hz", "1.54 at 9.73 Hz", "3.08"]
     assert _loop_cells(a2.summary()) == ["unstable", "-", "-", "unstable"]
-    assert a1.margin_label() == "PM 21.7 deg at 6.46 Hz, GM 1.29"
+    assert a1.margin_label() == "PM 42.2 deg at 6.03 Hz, GM 1.54"
     plot_bode([a1, a2], tmp_path / "bode.png")
     assert (tmp_path / "bode.png").stat().st_size > 10_000
 
