@@ -219,19 +219,27 @@ def _centred_press(backend, setpoint_n=1.0, steps=2000):
     plant.set_finger(GAP_M)
     ctrl = controllers.make("pid")
     ctrl.reset(force_est_n=float(plant.force_est_n[0]), setpoint_n=setpoint_n, command_v=0.0)
-    force = np.empty(steps)
+    force, est = np.empty(steps), np.empty(steps)
     for k in range(steps):
         plant.advance(ctrl.update(float(plant.force_est_n[0]), setpoint_n, plant.control_dt_s,
                                   float(plant.motor_current_a[0])))
-        force[k] = plant.contact_force_n[0]
-    return force
+        force[k], est[k] = plant.contact_force_n[0], plant.force_est_n[0]
+    return force, est
 
 
 def test_lumped_and_pymunk_agree_on_a_centred_press():
-    """PID at 1 N from a 1 mm gap, 2 s.  Measured: RMS difference 1.7 % of the setpoint,
-    onsets one control period apart, last-second means 0.5 % apart."""
-    lum, mec = _centred_press("lumped"), _centred_press("pymunk")
+    """PID at 1 N from a 1 mm gap, 2 s.  Measured: RMS difference 2.0 % of the setpoint,
+    onsets one control period apart; last-second means of the estimate 0.07 % apart
+    (1.0051 / 1.0044 N) and of the true force 2.4 % (0.9815 / 1.0053 N).  Both backends
+    feed the same sensor laws (kernel.sensor_substep); the true forces differ by the
+    branch of the rate-independent hysteresis each ends on after the onset overshoot and
+    the friction-limited wiggles (play outputs 0.023-0.059 above ln F in the lumped plant,
+    0.005-0.047 in the mechanism, which reaches its 1.08 N peak 280 ms later): the loop
+    holds the estimate, and the true force may sit anywhere in the 10 % hysteresis band.
+    A finer mechanism step does not close it (10 kHz: 2.9 %)."""
+    (lum, lum_est), (mec, mec_est) = _centred_press("lumped"), _centred_press("pymunk")
     rms = math.sqrt(float(np.mean((lum - mec) ** 2))) / 1.0
     assert rms < 0.03
     assert abs(int(np.argmax(lum > 0)) - int(np.argmax(mec > 0))) <= 2
-    assert mec[-1000:].mean() == pytest.approx(lum[-1000:].mean(), rel=0.01)
+    assert mec_est[-1000:].mean() == pytest.approx(lum_est[-1000:].mean(), rel=0.005)
+    assert mec[-1000:].mean() == pytest.approx(lum[-1000:].mean(), rel=0.03)
