@@ -43,6 +43,7 @@ OPTIONS = {
         "--controller": ["no_such_controller", "{tmp}/missing.toml", "{tmp}/missing.json"],
         "--backend": ["nope", ""],
         "--trace": ["xml", ""],
+        "--trace-rate": _floats(["0", "-100"]) + ["300", "5000"],   # must divide the 1 kHz control rate
         "--animate": ["{tmp}/anim.gif"],                    # without --backend pymunk
     },
     "sweep": {
