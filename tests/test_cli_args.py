@@ -76,6 +76,7 @@ OPTIONS = {
         "--baseline-s": _floats(["-1"]),
         "--cutoff-hz": _floats(["-1"]),
         "--no-load-voltage": ["0.5"],                          # without --csv
+        "--jobs": _ints(["0", "-1"], "257"),
     },
     "train": {
         "--algo": ["dqn"],
