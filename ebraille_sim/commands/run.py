@@ -15,7 +15,7 @@ class _Backends:
     """The names of :data:`ebraille_sim.plant.loop.PLANT_BACKENDS`, read when argparse asks."""
 
     def _names(self) -> list:
-        from ebraille_sim.plant.loop import PLANT_BACKENDS
+        from ebraille_sim.plant.backends import PLANT_BACKENDS
         return list(PLANT_BACKENDS)
 
     def __iter__(self):
