@@ -115,16 +115,6 @@ def test_number_sign_not_repeated_after_colon_or_hyphen_between_digits():
     assert kinds_of("7:15") == ["number_sign", "digit", "punctuation", "digit", "digit"]
 
 
-def test_baseline_compatible_repeats_number_sign_and_keeps_spaced_hyphen():
-    assert cells_to_unicode(text_to_cells("7:15", baseline_compatible=True)) == "⠼⠛⠒⠼⠁⠑"
-    assert cells_to_unicode(text_to_cells("1-2", baseline_compatible=True)) == "⠼⠁⠤⠼⠃"
-    assert cells_to_unicode(text_to_cells("go - now", baseline_compatible=True)) == "⠛⠕⠀⠤⠀⠝⠕⠺"
-    assert cells_to_unicode(text_to_cells("go -- now", baseline_compatible=True)) == "⠛⠕⠀⠤⠤⠀⠝⠕⠺"
-    # the rules that no shipped text used are the same in both modes
-    for text in ("wait...", "'hi' it's", "50%", "3/4", "and/or", "go--now", "1,000.5"):
-        assert text_to_cells(text, baseline_compatible=True) == text_to_cells(text)
-
-
 def test_comma_and_decimal_point_inside_number():
     assert dots_of("1,000") == [(3, 4, 5, 6), (1,), (2,), (2, 4, 5), (2, 4, 5), (2, 4, 5)]
     assert dots_of("2.5") == [(3, 4, 5, 6), (1, 2), (4, 6), (1, 5)]
@@ -149,7 +139,6 @@ def test_no_letter_sign_when_not_needed():
 def test_letter_sign_after_number_and_hyphen():
     # liblouis en-us-g1: "1-a" -> number sign, 1, hyphen, letter sign, a
     assert kinds_of("3-a") == ["number_sign", "digit", "punctuation", "letter_sign", "letter"]
-    assert kinds_of("3-a", baseline_compatible=True) == ["number_sign", "digit", "punctuation", "letter"]
     assert kinds_of("3D") == ["number_sign", "digit", "capital_sign", "letter"]
 
 

@@ -93,14 +93,6 @@ Differences from liblouis ``en-us-g1.ctb``
     is unspaced, ``’`` and ``s'`` close an open quotation, and ``…`` is
     rejected.
 
-Scenario baselines
-    ``baseline_compatible=True`` reproduces the two rules of the
-    transcription the scenario baselines in ``scenarios/baselines`` were
-    recorded with: a hyphen between two spaces stays a hyphen between two
-    empty cells (and spaces around ``--`` are kept), and a colon or hyphen
-    after a digit ends the number, so the number sign is repeated
-    (``7:15`` gives number sign, 7, colon, number sign, 1, 5).
-
 Dot numbering and bit masks follow the Unicode Braille Patterns block:
 dots 1-2-3 run down the left column, dots 4-5-6 down the right column, and
 dot *k* sets bit *k*-1 of the mask, so a cell's character is
@@ -401,7 +393,7 @@ def _opens_single_quote(text: str, i: int) -> bool:
 
 
 def text_to_cells(
-    text: str, *, double_capital: bool = True, baseline_compatible: bool = False
+    text: str, *, double_capital: bool = True
 ) -> list[Cell]:
     """Transcribe text into English Grade 1 (EBAE, uncontracted) Braille cells.
 
@@ -415,13 +407,6 @@ def text_to_cells(
         If True (default), a run of two or more consecutive uppercase ASCII
         letters gets the double capital sign (two dot-6 cells) instead of a
         capital sign before each letter.
-    baseline_compatible : bool, optional
-        If True, keep a hyphen between two spaces as a spaced hyphen (and
-        the spaces around ``--``), and end a number at a colon or hyphen so
-        that the number sign is repeated, as in the transcription the
-        scenario baselines were recorded with. Default False (EBAE dash and
-        number rules; see the module docstring).
-
     Returns
     -------
     list of Cell
@@ -473,7 +458,6 @@ def text_to_cells(
             in_number
             and ch in _MIDNUM_DOTS
             and _is_digit(text, i + 1)
-            and not (baseline_compatible and ch in ":-")
         ):
             cells.append(_cell(ch, _MIDNUM_DOTS[ch], "punctuation"))
             i += 1
@@ -499,7 +483,6 @@ def text_to_cells(
 
         if (
             in_number
-            and not baseline_compatible
             and ch == "-"
             and i + 1 < n
             and text[i + 1].isascii()
@@ -513,7 +496,7 @@ def text_to_cells(
         in_number = False
 
         if ch == " ":
-            dash = 0 if baseline_compatible else _spaced_dash_length(text, i)
+            dash = _spaced_dash_length(text, i)
             if dash:
                 # EBAE writes the dash unspaced: both print spaces are dropped
                 signs(text[i + 1], _DASH_DOTS)

@@ -153,7 +153,7 @@ def _cells_of(text: str) -> tuple:
     from ebraille_sim.scenarios.braille import text_to_cells
     # the transcription the scenario baselines were recorded with (spaced hyphen, number
     # sign repeated after ':' and '-'); see ebraille_sim.scenarios.braille
-    return tuple(text_to_cells(text, baseline_compatible=True))
+    return tuple(text_to_cells(text))
 
 
 def build_schedule_for(spec: ScenarioSpec, rng: np.random.Generator):
