@@ -69,15 +69,35 @@ until it frees itself.  Without a current measurement the retract lasts ``retrac
 Scenario section ``[supervisor]`` (:func:`validate_section`, :func:`wrap_controller`):
 every :class:`SupervisorConfig` field may be given; ``enabled = false`` disables it.
 
+Compiled period
+---------------
+The supervisor's whole state (modes, detectors, the running min/max windows as ring buffers,
+the event log) lives in one float64 array and its configuration in another
+(:meth:`Supervisor.compiled`, :meth:`SupervisorConfig.pack`); one period is two compiled
+functions around the inner controller, which a compiled loop calls directly::
+
+    code, u, sp_inner = supervise_begin(sv, cfg, f, sp, dt, cur)       # cur NaN: no current
+    if code == 1:                                   # run: the inner controller proposes
+        u_inner = inner.update(f, sp_inner, dt, cur_or_None)
+        code2, u, reset_cmd = supervise_end(sv, cfg, u_inner, f, sp, dt, cur)
+        if code2 == 1:                              # finite command again: bumpless resume
+            inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=reset_cmd)
+    elif code == 2:                                 # contact regained: resume from 0 V
+        inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=0.0)
+    # the command is u
+
+:meth:`Supervisor.update` is exactly this.  The windows are sized for control periods of at
+least :data:`MIN_CONTROL_PERIOD_S`; the event log keeps :data:`EVENT_CAPACITY` events.
+
 Examples
 --------
 >>> from controllers import make
 >>> sup = Supervisor(make("pid"))
 >>> sup.reset(force_est_n=0.0, setpoint_n=1.0)
->>> sup.update(0.0, 5.0, 1e-3)      # setpoint clipped to 2.7 N; slew limit 0.6 V per ms
-0.6
->>> sup.update(float("nan"), 1.0, 1e-3)   # a NaN estimate: latched fault, retract begins
-0.0
+>>> round(sup.update(0.0, 5.0, 1e-3), 4)      # setpoint clipped to 2.7 N; the PID's first step
+0.1035
+>>> round(sup.update(float("nan"), 1.0, 1e-3), 4)   # a NaN estimate: latched fault, retract (slew 0.6 V/ms)
+-0.4965
 >>> sup.fault, sup.mode
 ('fsr_out_of_range', 'retract')
 """
@@ -102,7 +122,8 @@ from ebraille_sim.physics.params import FINGERS, TACTILE_FORCE_MAX_N, DevicePara
 from controllers.base import check_dt
 
 __all__ = ["SupervisorConfig", "Supervisor", "RATED_CURRENT_A", "RATED_TO_STALL", "rated_current_a",
-           "FORCE_CAP_LIMIT_N", "SAFE_FORCE_N", "device_limits"]
+           "FORCE_CAP_LIMIT_N", "SAFE_FORCE_N", "device_limits", "supervise_begin", "supervise_end",
+           "MIN_CONTROL_PERIOD_S", "MAX_WINDOW_SAMPLES", "EVENT_CAPACITY", "MODES", "FAULTS", "SV", "CF"]
 
 _NOMINAL = DeviceParams()
 
@@ -760,8 +781,11 @@ def _detect(sv, cfg, f, cur, dt):
             sv[SV.contact_travel_m] = sv[SV.travel_m]
             sv[SV.contact_travel_set] = 1.0
         elif f > cfg[CF.contact_on_n]:
-            # the reference follows where the pulp's surface must be for the estimate shown, at once
-            # on an intended release and slowly otherwise (see the reference's comment in the docs)
+            # the reference follows where the pulp's surface must be for the estimate shown,
+            # at once on an intended release (the setpoint fell: the back-EMF integral's drift
+            # over many presses in refresh mode does not add up) and slowly otherwise (the
+            # finger drifts, presses and the strap slips over a session: only a fast mismatch,
+            # a board running into the finger while the reading stays low, trips)
             target = sv[SV.travel_m] - compression_at_force_m(f, cfg[CF.soft_b_n_per_m], cfg[CF.soft_m_per_m])
             if sv[SV.t] - sv[SV.fall_t] <= cfg[CF.release_window_s]:
                 sv[SV.contact_travel_m] = _pymax(sv[SV.contact_travel_m], target)
@@ -850,7 +874,9 @@ def supervise_begin(sv, cfg, f, sp, dt, cur):
         return 0, _safe(sv, cfg, cur, dt), math.nan
     _win_push(sv, cfg, SV.est_win_t0, CF.est_win_span, t, f)
     if not has_cur:
-        # the command window lags by the estimator's response (see Supervisor.update)
+        # the command window (the stuck rule without a current measurement) lags by the
+        # estimator's response: a command that moved within the last ``stuck_response_s``
+        # cannot have shown in the estimate yet
         _append(sv, cfg, SV.cmd_delay_head, CF.cmd_delay_base, t, sv[SV.u_prev])
         while True:
             k = _at(sv, cfg, SV.cmd_delay_head, CF.cmd_delay_base, 0)
@@ -865,6 +891,9 @@ def supervise_begin(sv, cfg, f, sp, dt, cur):
     sv[SV.sp_last] = sp_now
     _win_push(sv, cfg, SV.sp_win_t0, CF.sp_win_span, t, sp_now)
     moving = (not has_cur) or abs(sv[SV.u_prev] - cfg[CF.motor_resistance_ohm] * cur) > cfg[CF.stuck_emf_v]
+    # without a current measurement only: with one, the travel the back-EMF integral gives
+    # decides (:func:`_detect`); ``u - R i`` of one period reads as motion inside the
+    # gearhead's friction band and during a command step, where the board does not move
     if (not has_cur and moving and not math.isnan(sv[SV.cmd_win_t0]) and sv[SV.in_contact] != 0.0
             and _win_full(sv, cfg, SV.est_win_t0, CF.est_win_span, t)
             and _win_lo(sv, cfg, SV.est_win_t0, CF.est_win_span) > cfg[CF.contact_lost_n]
