@@ -345,8 +345,8 @@ def test_config_pack_is_cached_and_holds_the_envelope():
     n = int(cfg[CF.envelope_n])
     speeds, currents = ref._envelope(c)
     assert cfg[len(CF):len(CF) + n].tolist() == speeds and cfg[len(CF) + n:].tolist() == currents
-    for x in np.linspace(-0.01, 1.2 * speeds[-1], 997):
-        assert csup._interp_envelope(cfg, x) == ref._interp((speeds, currents), float(x))
+    for x in np.linspace(-0.01, 1.2 * speeds[-1], 997).tolist() + speeds:      # between and on the points
+        assert csup._interp_envelope(cfg, x) == ref._interp((speeds, currents), x)
     assert cfg[CF.min_dt_s] == MIN_CONTROL_PERIOD_S
     assert cfg[CF.state_len] * 8 < 200_000          # bytes of one supervisor's state: sane for a vector env
 
