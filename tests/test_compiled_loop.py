@@ -251,3 +251,18 @@ def test_the_compiled_pid_follows_the_recursion_of_the_pid_docstring():
         u = min(max(v, cfg.u_min_v), cfg.u_max_v)
         w_prev, e_prev, res_prev = w, r - y, u - v
         assert pid.update(y, r, h) == u
+
+
+def test_a_batch_of_unsupervised_rows_runs_each_row_in_one_compiled_call(loop_calls):
+    import dataclasses
+    from ebraille_sim.scenarios.spec import load_scenario
+    spec = load_scenario("pressing_90wpm")
+    spec = dataclasses.replace(spec, sections={**spec.sections, "supervisor": {"enabled": False}})
+    runs = [{"scenario": spec, "controller": name, "seed": seed, "duration_s": 1.5}
+            for name, seed in (("pid", 1), ("lqg", 2), ("pid_friction", 3))]
+    batch = runner.run_batch(runs)
+    assert len(loop_calls) == 3
+    for kw, res in zip(runs, batch):
+        single = ebraille_sim.run_scenario(**kw)
+        assert not single.supervisor["enabled"]
+        _assert_same_runs(res, single)
