@@ -120,34 +120,29 @@ def test_true_force_feedback_in_the_compiled_loop():
     assert np.array_equal(bound.trace["command_v"], again.trace["command_v"])
 
 
-def test_supervised_runs_keep_the_per_period_loop_until_the_supervisor_is_compiled(loop_calls):
-    res = ebraille_sim.run_scenario("steady_90wpm", controller="pid", duration_s=0.5)
-    assert res.supervisor["enabled"]
-    assert len(loop_calls) == (1 if compiled_loop.SUPERVISOR_HOOKS else 0)
+SUPERVISED_CASES = [("steady_90wpm", "pid", 3.0), ("setpoint_steps", "pid", 6.0), ("contact_onset", "pid", 3.0),
+                    ("pressing_90wpm", "pid_feedforward", 4.0), ("refresh_120wpm", "lqg", 3.0),
+                    ("battery_sag", "pid_friction", 4.0), ("fault_fsr_stuck", "pid", 6.0),
+                    ("fault_motor_stall", "pid", 6.0), ("fault_finger_withdrawn", "pid_scheduled", 8.0),
+                    ("fault_fsr_open", "pid", 6.0), ("fault_fsr_short", "actuator_bound", 6.0)]
 
 
-@pytest.mark.skipif(compiled_loop.SUPERVISOR_HOOKS, reason="the supervisor's own hooks are in use")
-def test_the_supervised_branch_with_pass_through_hooks_equals_the_unsupervised_loop():
-    """Until the supervisor is compiled the hooks pass every command through; the supervised
-    branch of the loop then runs exactly the unsupervised loop."""
-    spec, _, run, ctrl = runner.prepare_run("setpoint_steps", "pid", duration_s=2.0)
-    outs = []
-    for supervised in (False, True):
-        c = controllers.make("pid")
-        plant = runner._plant_for(spec, run, "lumped")
-        st = plant.state[0]
-        c.reset(force_est_n=float(st[runner.S.force_est_n]), setpoint_n=float(run.setpoint_n[0]), command_v=0.0)
-        kind, cs, cp = c.compiled()
-        n = run.n_steps
-        slots, table = compiled_loop.profile_arrays(run.profiles, n)
-        f_true, f_est, kept = np.zeros(n), np.zeros(n), np.zeros((len(compiled_loop.KEPT), n))
-        status = compiled_loop.run_loop(st, plant.params[0], plant.inputs[0], plant.substeps, kind, cs, cp,
-                                        supervised, np.zeros(0), np.zeros(0), run.setpoint_n[:n].copy(), run.dt_s,
-                                        runner.S.force_est_n, slots, table, 1, f_true, f_est, kept)
-        assert status[0] == compiled_loop.OK and status[1] == n
-        outs.append((f_true, f_est, kept))
-    for a, b in zip(*outs):
-        assert np.array_equal(a, b)
+@pytest.mark.parametrize("scenario, controller, duration", SUPERVISED_CASES)
+def test_supervised_runs_use_the_compiled_loop_and_equal_the_per_period_loop(scenario, controller, duration,
+                                                                             loop_calls, monkeypatch):
+    """With the safety supervisor on (the default) the compiled loop steps the supervisor's
+    compiled period around the compiled controller: every trace column, the metrics and the
+    supervisor's record (fault, events) equal the per-period loop's, where the Python
+    Supervisor calls the Python controller, faults and mid-run inner resets included."""
+    fast = ebraille_sim.run_scenario(scenario, controller=controller, duration_s=duration)
+    assert fast.supervisor["enabled"] and len(loop_calls) == 1
+    monkeypatch.setattr(runner, "_USE_COMPILED_LOOP", False)
+    slow = ebraille_sim.run_scenario(scenario, controller=controller, duration_s=duration)
+    assert len(loop_calls) == 1
+    _assert_same_runs(fast, slow)
+    assert fast.supervisor == slow.supervisor
+    if scenario in ("fault_fsr_stuck", "fault_motor_stall"):
+        assert fast.supervisor["fault"] is not None and fast.supervisor["events"]
 
 
 def test_a_bad_setpoint_raises_the_controllers_error_in_the_compiled_loop():

@@ -11,8 +11,7 @@ the same, in the same order, so the trace is the per-period loop's to the last b
 
 Supervised runs: with ``supervised`` true, every period goes through the safety supervisor's
 compiled hooks ``supervise_begin`` and ``supervise_end`` of :mod:`controllers.supervisor`
-(taken from there when that module provides them; :data:`SUPERVISOR_HOOKS` says whether it
-does), which decide whether the inner controller runs, with which setpoint, and when it is
+(the same functions the Python :class:`controllers.supervisor.Supervisor` calls), which decide whether the inner controller runs, with which setpoint, and when it is
 reset.  The hooks are module-level compiled functions, bound when this module is compiled,
 so the loop stays one cacheable function.
 
@@ -32,23 +31,9 @@ from ebraille_sim.base.compiled import njit
 from ebraille_sim.plant.kernel import advance
 from ebraille_sim.plant.layout import S, U
 
-try:
-    from controllers.supervisor import supervise_begin, supervise_end
-    SUPERVISOR_HOOKS = True
-except ImportError:
-    SUPERVISOR_HOOKS = False
+from controllers.supervisor import supervise_begin, supervise_end
 
-    @njit(cache=True)
-    def supervise_begin(sv, cfg, f, sp, dt, cur):
-        """Stand-in until the supervisor has compiled hooks: always run the inner controller."""
-        return 1, 0.0, sp
-
-    @njit(cache=True)
-    def supervise_end(sv, cfg, u_inner, f, sp, dt, cur):
-        """Stand-in until the supervisor has compiled hooks: pass the inner command through."""
-        return 0, u_inner, 0.0
-
-__all__ = ["KEPT", "ROW", "OK", "BAD_CONTROLLER_INPUT", "BAD_COMMAND", "SUPERVISOR_HOOKS", "run_loop", "profile_arrays"]
+__all__ = ["KEPT", "ROW", "OK", "BAD_CONTROLLER_INPUT", "BAD_COMMAND", "run_loop", "profile_arrays"]
 
 KEPT = ("command_v", "fsr_voltage_v", "motor_current_a", "board_pos_m", "energy_j")
 """Rows of the ``kept`` array of :func:`run_loop`, in order (trace column names)."""

@@ -236,8 +236,7 @@ def _loop_form(ctrl, wrapped, plant, backend: str):
 
     It can on the lumped plant with one device, for a controller ``ctrl`` with a compiled
     form (:func:`controllers.compiled.compiled_form`) that runs unwrapped, or wrapped only in
-    the safety supervisor once the supervisor has compiled hooks
-    (:data:`ebraille_sim.scenarios.compiled_loop.SUPERVISOR_HOOKS`) and a compiled form.
+    an enabled safety supervisor (whose period is compiled too).
     """
     from ebraille_sim.plant.loop import Plant
     if backend != "lumped" or type(plant) is not Plant or plant.n != 1:
@@ -257,8 +256,7 @@ def _compiled_controller(ctrl, wrapped):
     if wrapped is ctrl:
         return kind, cstate, cparams, None, None
     from controllers.supervisor import Supervisor
-    from ebraille_sim.scenarios.compiled_loop import SUPERVISOR_HOOKS
-    if SUPERVISOR_HOOKS and type(wrapped) is Supervisor and wrapped.inner is ctrl:
+    if type(wrapped) is Supervisor and wrapped.inner is ctrl:
         sv = compiled_form(wrapped)
         if sv is not None:
             return kind, cstate, cparams, sv[0], sv[1]
