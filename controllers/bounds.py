@@ -66,6 +66,12 @@ class TrueForce:
         """The inner controller's gains (what a gains file for this entry sets)."""
         return self.inner.config
 
+    def compiled(self):
+        """The inner controller's compiled form ``(kind, state, params)``, or None without one
+        (the runner feeds it the true force, as it does this wrapper)."""
+        get = getattr(self.inner, "compiled", None)
+        return get() if callable(get) else None
+
     def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
         """Reset the inner controller (``force_est_n`` is the true force here)."""
         self.inner.reset(force_est_n=force_est_n, setpoint_n=setpoint_n, command_v=command_v)

@@ -50,9 +50,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from ebraille_sim.base.validation import check_keys, check_number, replace_checked
-from ebraille_sim.physics.params import TACTILE_FORCE_MIN_N, DeviceParams
+from ebraille_sim.physics.params import DeviceParams
 
-from controllers.base import check_update_args
+from controllers.compiled import feedforward_v as compiled_feedforward_v
 from controllers.schedule import ScheduleConfig, ScheduledPID
 
 __all__ = ["FrictionConfig", "FrictionPID", "DEFAULT_FRICTION", "make_friction"]
@@ -118,25 +118,16 @@ class FrictionPID(ScheduledPID):
             raise TypeError(f"config must be a FrictionConfig, got {type(config).__name__}")
         super().__init__(config, device=device, name=name)
 
+    def _friction_params(self) -> dict:
+        """The friction compensation's parameters of the compiled step: on, its fraction and
+        its hysteresis (the direction latch on the error runs in
+        :func:`controllers.compiled.pid_step`, before the parent's setpoint-rate rule)."""
+        return {"friction": 1.0, "friction_fraction": self.config.friction_fraction,
+                "hysteresis_fraction": self.config.hysteresis_fraction}
+
     def feedforward_v(self, setpoint_n: float, rate_n_per_s: float, direction: float = 1.0) -> float:
         """The parent's ``u_ff`` with its friction part scaled by ``friction_fraction``."""
-        full = super().feedforward_v(setpoint_n, rate_n_per_s, direction)
-        frac = self.config.friction_fraction
-        if frac == 1.0 or abs(rate_n_per_s) >= self.config.rate_deadband_n_per_s:
-            return full
-        middle = super().feedforward_v(setpoint_n, rate_n_per_s, 0.0)
-        return middle + frac * (full - middle)
-
-    def update(self, force_est_n: float, setpoint_n: float, dt_s: float, motor_current_a=None) -> float:
-        """One sample: latch the friction direction on the error, then the scheduled PID step."""
-        y, sp, h = check_update_args(force_est_n, setpoint_n, dt_s)
-        e = self.reference(sp) - y
-        tol = self.config.hysteresis_fraction * max(sp, TACTILE_FORCE_MIN_N)
-        if e > tol:
-            self._dir = 1.0
-        elif e < -tol:
-            self._dir = -1.0
-        return super().update(y, sp, h, motor_current_a)
+        return compiled_feedforward_v(self._p, float(setpoint_n), float(rate_n_per_s), float(direction))
 
 
 _FIELDS = tuple(f.name for f in dataclasses.fields(FrictionConfig))

@@ -46,6 +46,7 @@ import numpy as np
 from ebraille_sim.base.validation import check_number, replace_checked
 
 from controllers.base import check_reset_args, check_update_args
+from controllers.compiled import KIND_LQG, lqg_params, lqg_reset, lqg_state, lqg_step
 
 __all__ = ["LQGConfig", "LQG", "design", "config_from"]
 
@@ -128,13 +129,15 @@ class LQG:
         self._A, self._B, self._C = d["A"], d["B"][:, 0], d["C"][0]
         self._K, self._kz, self._L = d["K"][0], d["kz"], d["L"][:, 0]
         self._Nx, self._Nu, self._u0, self._y0 = d["Nx"], d["Nu"], d["u0"], d["y0"]
-        self._clear()
+        self._p = lqg_params(sample_s=config.sample_s, u_min_v=config.u_min_v, u_max_v=config.u_max_v,
+                             u0_v=self._u0, y0_n=self._y0, nu_v_per_n=self._Nu, kz=self._kz, A=self._A,
+                             B=self._B, C=self._C, K=self._K, L=self._L, Nx=self._Nx)
+        self._s = lqg_state(self._A.shape[0])
 
-    def _clear(self):
-        self._x = np.zeros(self._A.shape[0])
-        self._z = 0.0
-        self._acc = math.inf
-        self._u = 0.0
+    def compiled(self) -> tuple[int, np.ndarray, np.ndarray]:
+        """``(kind, state, params)`` of the compiled step (:mod:`controllers.compiled`): the
+        live vectors, so a compiled loop leaves its final state in this controller."""
+        return KIND_LQG, self._s, self._p
 
     def statespace(self) -> control.StateSpace:
         """The linear controller at ``sample_s``: inputs (setpoint, estimate), output command deviation.
@@ -159,38 +162,15 @@ class LQG:
         return control.ss(Ac, Bc, Cc, Dc, dt=ts, inputs=["setpoint_n", "force_est_n"], outputs=["command_v"])
 
     def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
+        """Bumpless start: the observer at the model's steady state for ``force_est_n``, the
+        integrator so that the first command equals ``command_v`` (clamped to the limits)."""
         force_est_n, setpoint_n, command_v = check_reset_args(force_est_n, setpoint_n, command_v)
-        self._clear()
-        c = self.config
-        u0 = min(max(command_v, c.u_min_v), c.u_max_v)
-        dr = setpoint_n - self._y0
-        self._x = self._Nx * (force_est_n - self._y0)
-        # integrator so that the first command equals u0
-        u_wo = self._u0 + self._Nu * dr - self._K @ (self._x - self._Nx * dr)
-        self._z = -(u0 - u_wo) / self._kz if self._kz != 0 else 0.0
-        self._u = u0
+        lqg_reset(self._s, self._p, force_est_n, setpoint_n, command_v)
 
     def update(self, force_est_n: float, setpoint_n: float, dt_s: float, motor_current_a=None) -> float:
-        check_update_args(force_est_n, setpoint_n, dt_s)
-        c = self.config
-        self._acc = self._acc + dt_s if math.isfinite(self._acc) else c.sample_s
-        if self._acc < c.sample_s - 1e-9:
-            return self._u
-        self._acc -= c.sample_s
-        y = force_est_n - self._y0
-        dr = setpoint_n - self._y0
-        self._x = self._x + self._L * (y - self._C @ self._x)
-        z_new = self._z + c.sample_s * (y - dr)
-        v = self._u0 + self._Nu * dr - self._K @ (self._x - self._Nx * dr) - self._kz * z_new
-        u = min(max(v, c.u_min_v), c.u_max_v)
-        if u == v:
-            self._z = z_new
-        else:
-            v = self._u0 + self._Nu * dr - self._K @ (self._x - self._Nx * dr) - self._kz * self._z
-            u = min(max(v, c.u_min_v), c.u_max_v)
-        self._x = self._A @ self._x + self._B * (u - self._u0)
-        self._u = float(u)
-        return self._u
+        """One call: a new command once a full ``sample_s`` has elapsed, else the held one (V)."""
+        y, r, h = check_update_args(force_est_n, setpoint_n, dt_s)
+        return lqg_step(self._s, self._p, y, r, h)
 
 
 def config_from(**gains) -> LQGConfig:

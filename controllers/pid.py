@@ -81,11 +81,14 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 from ebraille_sim.base.validation import check_finite, check_keys, check_number
 from ebraille_sim.physics.fingertip import tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N, DeviceParams
 
 from controllers.base import check_update_args
+from controllers.compiled import KIND_PID, PS, core_reset, core_step, pid_params, pid_reset, pid_state, pid_step
 
 __all__ = ["DEFAULT_PID", "PID", "PIDConfig", "PIDCore", "pid_from_dict", "tracking_time_s"]
 
@@ -156,6 +159,14 @@ class PIDCore:
     are arguments of every step, so a caller may schedule them; :class:`PID` passes
     constants, :class:`controllers.schedule.ScheduledPID` scheduled gains, a feedforward
     and a mapped reference.  Arguments are not validated here (the callers do it once).
+    The state lives in a float64 vector (slots :data:`controllers.compiled.PS`) and the
+    recursion is the compiled :func:`controllers.compiled.core_step`.
+
+    Parameters
+    ----------
+    state : ndarray or None, optional
+        The state vector to work on (shared with the controller that owns it); None
+        (default) makes a new one.
 
     Attributes
     ----------
@@ -179,10 +190,29 @@ class PIDCore:
     0.5
     """
 
-    __slots__ = ("i", "d", "w_prev", "e_prev", "res_prev", "primed")
+    __slots__ = ("s",)
 
-    def __init__(self) -> None:
+    def __init__(self, state: np.ndarray | None = None) -> None:
+        self.s = pid_state() if state is None else state
         self.clear()
+
+    def _get(slot: int):
+        return property(lambda self: float(self.s[slot]), lambda self, v: self.s.__setitem__(slot, v))
+
+    i = _get(PS.integrator_v)
+    d = _get(PS.derivative_v)
+    w_prev = _get(PS.prev_derivative_input_n)
+    e_prev = _get(PS.prev_error_n)
+    res_prev = _get(PS.prev_saturation_residual_v)
+    del _get
+
+    @property
+    def primed(self) -> bool:
+        return bool(self.s[PS.primed] != 0.0)
+
+    @primed.setter
+    def primed(self, value: bool) -> None:
+        self.s[PS.primed] = 1.0 if value else 0.0
 
     def clear(self) -> None:
         """Zero the state; the next step takes its measurement as derivative memory."""
@@ -198,12 +228,7 @@ class PIDCore:
 
         ``u0`` must already lie within the output limits.
         """
-        self.i = u0 - kp * (b * r - y) - ff
-        self.d = 0.0
-        self.w_prev = c * r - y
-        self.e_prev = 0.0
-        self.res_prev = 0.0
-        self.primed = True
+        core_reset(self.s, y, r, u0, kp, b, c, ff)
 
     def step(self, y: float, r: float, h: float, kp: float, ki: float, kd: float, tf: float,
              b: float, c: float, inv_tt: float, ff: float, umin: float, umax: float) -> float:
@@ -212,30 +237,7 @@ class PIDCore:
         ``inv_tt`` is ``1/Tt`` (:func:`tracking_gain_per_s`), ``ff`` the feedforward added
         before the saturation, ``tf`` the derivative filter time constant (s).
         """
-        a = h * inv_tt
-        if a > 1.0:
-            a = 1.0
-        i = self.i + ki * h * self.e_prev + a * self.res_prev
-
-        w = c * r - y
-        if not self.primed:
-            self.w_prev = w
-            self.primed = True
-        d = (tf * self.d + kd * (w - self.w_prev)) / (tf + h)
-
-        v = kp * (b * r - y) + i + d + ff
-        u = v
-        if u > umax:
-            u = umax
-        elif u < umin:
-            u = umin
-
-        self.i = i
-        self.d = d
-        self.w_prev = w
-        self.e_prev = r - y
-        self.res_prev = u - v
-        return u
+        return core_step(self.s, y, r, h, kp, ki, kd, tf, b, c, inv_tt, ff, umin, umax)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -475,40 +477,29 @@ class PID:
 
     name: str = "pid"
 
-    __slots__ = (
-        "_cfg",
-        "_kp",
-        "_ki",
-        "_kd",
-        "_tf",
-        "_b",
-        "_c",
-        "_umin",
-        "_umax",
-        "_ff",
-        "_inv_tt",
-        "_core",
-        "_r_sched",
-        "_scale",
-    )
+    __slots__ = ("_cfg", "_core", "_p")
 
     def __init__(self, config: PIDConfig) -> None:
         if not isinstance(config, PIDConfig):
             raise TypeError(f"config must be a PIDConfig, got {type(config).__name__}")
         self._cfg = config
-        self._kp = config.kp_v_per_n
-        self._ki = config.ki_v_per_ns
-        self._kd = config.kd_vs_per_n
-        self._tf = config.derivative_filter_s
-        self._b = config.setpoint_weight_p
-        self._c = config.setpoint_weight_d
-        self._umin = config.u_min_v
-        self._umax = config.u_max_v
-        self._ff = config.feedforward_v
-        self._inv_tt = tracking_gain_per_s(config.effective_tracking_time_s)
+        finger = DeviceParams().finger
+        f_s = config.schedule_above_n
+        self._p = pid_params(
+            variant=0.0, kp_v_per_n=config.kp_v_per_n, ki_v_per_ns=config.ki_v_per_ns,
+            kd_vs_per_n=config.kd_vs_per_n, derivative_filter_s=config.derivative_filter_s,
+            setpoint_weight_p=config.setpoint_weight_p, setpoint_weight_d=config.setpoint_weight_d,
+            u_min_v=config.u_min_v, u_max_v=config.u_max_v,
+            tracking_gain_per_s=tracking_gain_per_s(config.effective_tracking_time_s),
+            feedforward_v=config.feedforward_v, schedule_above=0.0 if f_s is None else 1.0,
+            schedule_above_n=0.0 if f_s is None else f_s, finger_b_n_per_m=finger.stiffness_b_n_per_m,
+            finger_m_per_m=finger.exponent_m_per_m, relax_weight_inf=finger.relax_weight_inf)
         self._core = PIDCore()
-        self._r_sched = math.nan
-        self._scale = 1.0
+
+    def compiled(self) -> tuple[int, np.ndarray, np.ndarray]:
+        """``(kind, state, params)`` of the compiled step (:mod:`controllers.compiled`): the
+        live vectors, so a compiled loop leaves its final state in this controller."""
+        return KIND_PID, self._core.s, self._p
 
     @property
     def config(self) -> PIDConfig:
@@ -552,8 +543,7 @@ class PID:
         """
         y = check_finite("force_est_n", force_est_n)
         r = check_finite("setpoint_n", setpoint_n)
-        u0 = min(max(check_finite("command_v", command_v), self._umin), self._umax)
-        self._core.reset(y, r, u0, self._kp * self._gain_scale(r), self._b, self._c, self._ff)
+        pid_reset(self._core.s, self._p, y, r, check_finite("command_v", command_v))
 
     def update(
         self,
@@ -586,19 +576,7 @@ class PID:
             If ``dt_s`` is not finite and > 0, or a force is not finite.
         """
         y, r, h = check_update_args(force_est_n, setpoint_n, dt_s)
-        if self._cfg.schedule_above_n is None:
-            return self._core.step(y, r, h, self._kp, self._ki, self._kd, self._tf, self._b, self._c,
-                                   self._inv_tt, self._ff, self._umin, self._umax)
-        a = self._gain_scale(r)      # the derived tracking time depends on gain ratios only
-        return self._core.step(y, r, h, self._kp * a, self._ki * a, self._kd * a, self._tf, self._b, self._c,
-                               self._inv_tt, self._ff, self._umin, self._umax)
-
-    def _gain_scale(self, r: float) -> float:
-        """:meth:`PIDConfig.gain_scale` at ``r``, cached for a repeated setpoint."""
-        if r != self._r_sched:
-            self._r_sched = r
-            self._scale = self._cfg.gain_scale(r)
-        return self._scale
+        return pid_step(self._core.s, self._p, y, r, h)
 
     def state(self) -> dict[str, float | None]:
         """Return the internal state as a small dict of floats.

@@ -57,7 +57,6 @@ True
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -69,8 +68,9 @@ from ebraille_sim.physics.drivetrain import shaft_to_rack_per_m
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N, DeviceParams
 
 from controllers.base import check_reset_args, check_update_args
-from controllers.pid import (PIDConfig, PIDCore, pulp_stiffness_n_per_m, stiffness_ratio, tracking_gain_per_s,
-                             tracking_time_s)
+from controllers.compiled import (KIND_PID, MAP_POINTS, PP, PS, map_reference, model_feedforward_v, pid_params,
+                                  pid_reset, pid_step, scheduled_gains)
+from controllers.pid import PIDConfig, PIDCore
 
 __all__ = ["ScheduleConfig", "ScheduledPID", "make_scheduled", "make_feedforward", "RECOMMENDED", "MS_1_6", "HAND"]
 
@@ -175,32 +175,57 @@ class ScheduledPID:
         self.config = config
         self.name = name
         self._dev = device
-        m, d = device.motor, device.drivetrain
+        m, d, finger = device.motor, device.drivetrain, device.finger
         g = shaft_to_rack_per_m(d.gear_ratio, d.pinion_radius_m)
         self._v_per_n = m.resistance_ohm / (m.torque_constant_nm_per_a * g)
         self._mu = d.gear_loss_coefficient
         self._fc = m.friction_torque_nm * g + d.guide_coulomb_n
         self._ke_g = m.back_emf_v_s_per_rad * g
+        c = config
+        self._p = pid_params(
+            variant=1.0, kp_v_per_n=c.kp_v_per_n, ki_v_per_ns=c.ki_v_per_ns, kd_vs_per_n=c.kd_vs_per_n,
+            derivative_filter_s=c.derivative_filter_s, setpoint_weight_p=c.setpoint_weight_p,
+            setpoint_weight_d=c.setpoint_weight_d, u_min_v=c.u_min_v, u_max_v=c.u_max_v,
+            finger_b_n_per_m=finger.stiffness_b_n_per_m, finger_m_per_m=finger.exponent_m_per_m,
+            relax_weight_inf=finger.relax_weight_inf, schedule=float(c.schedule),
+            schedule_on_estimate=float(c.schedule_on == "estimate"), reference_force_n=c.reference_force_n,
+            tracking_time_given=float(c.tracking_time_s is not None),
+            tracking_time_s=0.0 if c.tracking_time_s is None else c.tracking_time_s,
+            feedforward=float(c.feedforward),
+            command_per_force_v_per_n=self._v_per_n, gear_mu=self._mu, coulomb_n=self._fc,
+            back_emf_v_s_per_m=self._ke_g, rate_deadband_n_per_s=c.rate_deadband_n_per_s,
+            reference_map=float(c.reference_map), **self._friction_params())
         if config.reference_map:
             from ebraille_sim.estimation.calibration import calibrate_device, steady_estimate
             from ebraille_sim.estimation.models import load_estimator
             dev = calibrate_device(device)
             model = load_estimator(dev.estimator.model)
-            self._map_f = np.linspace(F_MIN_N, F_MAX_N, 57)
+            self._map_f = np.linspace(F_MIN_N, F_MAX_N, MAP_POINTS)
             self._map_e = np.array([steady_estimate(model, f, dev.fsr, dev.circuit, 20.0) for f in self._map_f])
+            self._p[PP.map_force_n0:PP.map_force_n0 + MAP_POINTS] = self._map_f
+            self._p[PP.map_estimate_n0:PP.map_estimate_n0 + MAP_POINTS] = self._map_e
         self._core = PIDCore()
         self._clear()
 
+    def _friction_params(self) -> dict:
+        """The friction compensation's parameters (:mod:`controllers.friction`); none here."""
+        return {}
+
     def _clear(self):
         self._core.clear()
-        self._r_prev = None
-        self._dir = 1.0
+        s = self._core.s
+        s[PS.prev_setpoint_n] = 0.0
+        s[PS.has_prev_setpoint] = 0.0
+        s[PS.direction] = 1.0
+
+    def compiled(self) -> tuple[int, np.ndarray, np.ndarray]:
+        """``(kind, state, params)`` of the compiled step (:mod:`controllers.compiled`): the
+        live vectors, so a compiled loop leaves its final state in this controller."""
+        return KIND_PID, self._core.s, self._p
 
     def gains_at(self, force_n: float) -> tuple[float, float, float]:
         """``(kp, ki, kd)`` scheduled at ``force_n``."""
-        c = self.config
-        a = stiffness_ratio(force_n, c.reference_force_n, self._dev) if c.schedule else 1.0
-        return c.kp_v_per_n * a, c.ki_v_per_ns * a, c.kd_vs_per_n * a
+        return scheduled_gains(self._p, float(force_n))
 
     def pid_config_at(self, force_n: float) -> PIDConfig:
         """The equivalent fixed :class:`~controllers.pid.PIDConfig` at ``force_n`` (for analysis)."""
@@ -212,46 +237,22 @@ class ScheduledPID:
 
     def reference(self, setpoint_n: float) -> float:
         """The estimate regulated for the true-force setpoint (identity without the map)."""
-        if not self.config.reference_map:
-            return setpoint_n
-        if setpoint_n <= F_MIN_N:
-            return float(setpoint_n * self._map_e[0] / self._map_f[0])
-        return float(np.interp(setpoint_n, self._map_f, self._map_e))
+        return map_reference(self._p, float(setpoint_n))
 
     def feedforward_v(self, setpoint_n: float, rate_n_per_s: float, direction: float = 1.0) -> float:
         """``u_ff`` of the module docstring; ``direction`` is the latched ``s`` (overridden by
         the sign of a rate beyond the dead band)."""
-        if not self.config.feedforward:
-            return 0.0
-        r = max(setpoint_n, 0.0)
-        s = direction if abs(rate_n_per_s) < self.config.rate_deadband_n_per_s else math.copysign(1.0, rate_n_per_s)
-        k = pulp_stiffness_n_per_m(max(r, F_MIN_N), self._dev)
-        return self._v_per_n * ((1.0 + s * self._mu) * r + s * self._fc) + self._ke_g * rate_n_per_s / k
+        return model_feedforward_v(self._p, float(setpoint_n), float(rate_n_per_s), float(direction))
 
     def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
         """Bumpless start from ``command_v`` (see :meth:`controllers.pid.PID.reset`)."""
         y, sp, u = check_reset_args(force_est_n, setpoint_n, command_v)
-        self._clear()
-        c = self.config
-        kp, _, _ = self.gains_at(y if c.schedule_on == "estimate" else sp)
-        u0 = min(max(u, c.u_min_v), c.u_max_v)
-        self._core.reset(y, self.reference(sp), u0, kp, c.setpoint_weight_p, c.setpoint_weight_d,
-                         self.feedforward_v(sp, 0.0))
-        self._r_prev = sp
+        pid_reset(self._core.s, self._p, y, sp, u)
 
     def update(self, force_est_n: float, setpoint_n: float, dt_s: float, motor_current_a=None) -> float:
         """One sample: schedule the gains, map the reference, add the feedforward, run the PID step."""
         y, sp, h = check_update_args(force_est_n, setpoint_n, dt_s)
-        c = self.config
-        rate = 0.0 if self._r_prev is None else (sp - self._r_prev) / h
-        self._r_prev = sp
-        if abs(rate) >= c.rate_deadband_n_per_s:
-            self._dir = math.copysign(1.0, rate)
-        kp, ki, kd = self.gains_at(y if c.schedule_on == "estimate" else sp)
-        inv_tt = tracking_gain_per_s(tracking_time_s(kp, ki, kd, c.tracking_time_s))
-        return self._core.step(y, self.reference(sp), h, kp, ki, kd, c.derivative_filter_s,
-                               c.setpoint_weight_p, c.setpoint_weight_d, inv_tt,
-                               self.feedforward_v(sp, rate, self._dir), c.u_min_v, c.u_max_v)
+        return pid_step(self._core.s, self._p, y, sp, h)
 
 
 def _config(defaults: dict, gains: dict) -> ScheduleConfig:

@@ -69,29 +69,51 @@ until it frees itself.  Without a current measurement the retract lasts ``retrac
 Scenario section ``[supervisor]`` (:func:`validate_section`, :func:`wrap_controller`):
 every :class:`SupervisorConfig` field may be given; ``enabled = false`` disables it.
 
+Compiled period
+---------------
+The supervisor's whole state (modes, detectors, the running min/max windows as ring buffers,
+the event log) lives in one float64 array and its configuration in another
+(:meth:`Supervisor.compiled`, :meth:`SupervisorConfig.pack`); one period is two compiled
+functions around the inner controller, which a compiled loop calls directly::
+
+    code, u, sp_inner = supervise_begin(sv, cfg, f, sp, dt, cur)       # cur NaN: no current
+    if code == 1:                                   # run: the inner controller proposes
+        u_inner = inner.update(f, sp_inner, dt, cur_or_None)
+        code2, u, reset_cmd = supervise_end(sv, cfg, u_inner, f, sp, dt, cur)
+        if code2 == 1:                              # finite command again: bumpless resume
+            inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=reset_cmd)
+    elif code == 2:                                 # contact regained: resume from 0 V
+        inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=0.0)
+    # the command is u
+
+:meth:`Supervisor.update` is exactly this.  The windows are sized for control periods of at
+least :data:`MIN_CONTROL_PERIOD_S`; the event log keeps :data:`EVENT_CAPACITY` events.
+
 Examples
 --------
 >>> from controllers import make
 >>> sup = Supervisor(make("pid"))
 >>> sup.reset(force_est_n=0.0, setpoint_n=1.0)
->>> sup.update(0.0, 5.0, 1e-3)      # setpoint clipped to 2.7 N; slew limit 0.6 V per ms
-0.6
->>> sup.update(float("nan"), 1.0, 1e-3)   # a NaN estimate: latched fault, retract begins
-0.0
+>>> round(sup.update(0.0, 5.0, 1e-3), 4)      # setpoint clipped to 2.7 N; the PID's first step
+0.1035
+>>> round(sup.update(float("nan"), 1.0, 1e-3), 4)   # a NaN estimate: latched fault, retract (slew 0.6 V/ms)
+-0.4965
 >>> sup.fault, sup.mode
 ('fsr_out_of_range', 'retract')
 """
 from __future__ import annotations
 
-import bisect
+import collections
 import dataclasses
 import functools
 import math
-from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
+from ebraille_sim.base.compiled import njit
 from ebraille_sim.base.validation import check_bool, check_keys, check_number
 from ebraille_sim.physics import limits
 from ebraille_sim.physics.fingertip import compression_at_force_m, tangent_stiffness_n_per_m
@@ -100,7 +122,8 @@ from ebraille_sim.physics.params import FINGERS, TACTILE_FORCE_MAX_N, DevicePara
 from controllers.base import check_dt
 
 __all__ = ["SupervisorConfig", "Supervisor", "RATED_CURRENT_A", "RATED_TO_STALL", "rated_current_a",
-           "FORCE_CAP_LIMIT_N", "SAFE_FORCE_N", "device_limits"]
+           "FORCE_CAP_LIMIT_N", "SAFE_FORCE_N", "device_limits", "supervise_begin", "supervise_end",
+           "MIN_CONTROL_PERIOD_S", "MAX_WINDOW_SAMPLES", "EVENT_CAPACITY", "MODES", "FAULTS", "SV", "CF"]
 
 _NOMINAL = DeviceParams()
 
@@ -392,46 +415,609 @@ class SupervisorConfig:
         e = limits.absorbed_energy_j(0.0, self.envelope_force_n, self.reader_b_n_per_m, self.reader_m_per_m)
         return limits.speed_for_energy_m_per_s(e, self.pinion_mass_kg, self.board_mass_kg, self.gear_efficiency)
 
+    def pack(self) -> np.ndarray:
+        """The configuration array the compiled period reads (:func:`supervise_begin`), computed once.
+
+        Holds the fields and derived constants, the layout of the state array (ring buffer
+        bases and capacities, sized for control periods of at least :data:`MIN_CONTROL_PERIOD_S`)
+        and the speed envelope table.  The array is cached and shared: do not modify it.
+        """
+        packed = self.__dict__.get("_packed")
+        if packed is None:
+            packed = _pack(self)
+            self.__dict__["_packed"] = packed
+        return packed
+
 
 _FIELD_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(SupervisorConfig))
 _NOMINAL_LIMITS.update(device_limits(_NOMINAL))
 
 
-class _Window:
-    """Running min and max over the last ``span_s`` seconds (monotonic deques)."""
+MIN_CONTROL_PERIOD_S = 1e-4
+"""Shortest control period the detector windows are sized for, s: the nominal 10 kHz physics
+step [E] (the control rate is a whole fraction of the physics rate; the shipped scenarios
+control at 1 kHz).  A shorter period is a one-line error at :meth:`Supervisor.update`."""
 
-    def __init__(self, span_s: float):
-        self.span = span_s
-        self.lo: deque = deque()
-        self.hi: deque = deque()
-        self.t0 = None
+MAX_WINDOW_SAMPLES = 1 << 15
+"""Most samples one detector window is sized for [E]: a window longer than
+``MAX_WINDOW_SAMPLES * MIN_CONTROL_PERIOD_S`` (3.3 s) raises the shortest period accepted to
+its span over this count, so that a long window does not take megabytes."""
 
-    def push(self, t: float, x: float) -> None:
-        if self.t0 is None:
-            self.t0 = t
-        lo, hi = self.lo, self.hi
-        while lo and lo[-1][1] >= x:
-            lo.pop()
-        while hi and hi[-1][1] <= x:
-            hi.pop()
-        item = (t, x)
-        lo.append(item)
-        hi.append(item)
-        cut = t - self.span
-        while lo[0][0] < cut:
-            lo.popleft()
-        while hi[0][0] < cut:
-            hi.popleft()
+EVENT_CAPACITY = 256
+"""Events the state array records after a reset; later ones are counted (the last entry of
+:attr:`Supervisor.events` says how many were not recorded)."""
 
-    def full(self, t: float) -> bool:
-        return self.t0 is not None and t - self.t0 >= self.span
+MODES = ("run", "freeze", "retract", "hold")
+"""Modes by code (the ``mode`` slot of the state array)."""
 
-    def range(self) -> float:
-        return self.hi[0][1] - self.lo[0][1]
+FAULTS = ("fsr_out_of_range", "fsr_stuck", "motor_overcurrent", "contact_lost", "controller_nonfinite",
+          "fsr_implausible", "fsr_no_contact", "motor_stalled")
+"""Fault causes; the ``fault`` slot holds 0 (none) or the cause's position here plus one."""
+
+_EVENT_TEXTS = ("fault {}: retract", "contact lost: freeze", "contact regained: resume",
+                "non-finite command: hold", "finite command again: resume", "retracted: hold")
+_EVENT_NAMES = ("fault", "contact_lost", "contact_regained", "nonfinite", "finite_again", "retracted")
+
+_WINDOWS = ("est_win", "cmd_win", "sp_win", "speed_win")
+"""Running min and max windows: the estimate (stuck rule), the delayed command (stuck rule
+without a current), the setpoint (release) and the rack speed (held peak)."""
+_QUEUES = ("cmd_delay", "drop_hist")
+"""Plain time-ordered queues: the command delayed by ``stuck_response_s`` and the recent
+estimates of the drop rule."""
+
+_STATE_SCALARS = ("mode", "fault", "t", "u_prev", "theta", "nan_s", "in_contact", "freeze_t0", "retract_t0",
+                  "moving_s", "speed", "accel", "travel_m", "stuck_ref_n", "stuck_travel_m", "contact_travel_m",
+                  "contact_travel_set", "cut_t", "sp_last", "fall_t", "stall_s", "implausible_s", "current_limit_a",
+                  "last_f", "event_count", "events_dropped", "first_dropped_t")
+_CFG_SCALARS = ("force_cap_n", "cap_margin_n", "sp_max_n", "slew_v_per_s", "rated_current_sq_a2", "i2t_limit_a2s",
+                "motor_resistance_ohm", "driver_supply_v", "back_emf_v_s_per_m", "half_friction_current_a",
+                "moving_speed_m_per_s", "stuck_tolerance_n", "contact_lost_n", "contact_on_n", "stuck_travel_m",
+                "soft_b_n_per_m", "soft_m_per_m", "release_window_s", "travel_follow_s", "implausible_n",
+                "first_contact_travel_m", "contact_current_a", "stall_fraction", "current_limit_a", "stall_time_s",
+                "push_force_per_a_n", "breakaway_friction_n", "push_weight_n", "guide_static_n", "impact_mass_kg",
+                "implausible_s", "out_of_range_n", "stuck_response_s", "stuck_emf_v", "stuck_command_v",
+                "drop_window_s", "drop_n", "backoff_s", "contact_loss_timeout_s", "retract_v", "watchdog_timeout_s",
+                "retract_s", "retract_moving_s", "max_retract_s", "min_dt_s", "events_base", "events_cap",
+                "envelope_n", "envelope_base", "state_len")
+
+
+def _record(kind: str, names, start: int = 0):
+    """A read-only record of indices (a named tuple): compiled code reads its fields as constants."""
+    return collections.namedtuple(kind, names)(*range(start, start + len(names)))
+
+
+# A window is five consecutive state slots (t0, lo head, lo count, hi head, hi count) and five
+# consecutive configuration slots (span, lo base, lo capacity, hi base, hi capacity); a queue
+# is two of each (head, count; base, capacity).  The compiled helpers index from the first.
+SV = _record("SupervisorStateSlots", _STATE_SCALARS
+             + tuple(f"{w}_{s}" for w in _WINDOWS for s in ("t0", "lo_head", "lo_count", "hi_head", "hi_count"))
+             + tuple(f"{q}_{s}" for q in _QUEUES for s in ("head", "count")))
+"""Slots of the supervisor's state array (the ring buffers and the events follow them)."""
+CF = _record("SupervisorConfigSlots", _CFG_SCALARS
+             + tuple(f"{w}_{s}" for w in _WINDOWS for s in ("span", "lo_base", "lo_cap", "hi_base", "hi_cap"))
+             + tuple(f"{q}_{s}" for q in _QUEUES for s in ("base", "cap")))
+"""Slots of the supervisor's configuration array (the speed envelope table follows them)."""
+MODE = _record("SupervisorModes", MODES)
+FAULT = _record("SupervisorFaults", FAULTS, start=1)
+EVENT = _record("SupervisorEvents", _EVENT_NAMES)
+_N_HEADER = len(SV)
+
+
+def _window_capacity(span_s: float, min_dt_s: float) -> int:
+    """Entries a window or queue over ``span_s`` can hold at periods >= ``min_dt_s`` (with rounding margin)."""
+    return int(max(span_s, 0.0) / min_dt_s * (1.0 + 1e-6)) + 4
+
+
+def _pack(c: SupervisorConfig) -> np.ndarray:
+    """The configuration array of ``c``: derived constants, buffer layout, speed envelope."""
+    spans = {"est_win": c.stuck_window_s, "cmd_win": c.stuck_window_s - c.stuck_response_s,
+             "sp_win": c.release_window_s, "speed_win": c.speed_hold_s,
+             "cmd_delay": c.stuck_response_s, "drop_hist": c.drop_window_s}
+    min_dt = max(MIN_CONTROL_PERIOD_S, max(spans.values()) / MAX_WINDOW_SAMPLES)
+    speeds, currents = _envelope(c)
+    vals = {
+        "force_cap_n": c.force_cap_n, "cap_margin_n": c.cap_margin_n, "sp_max_n": c.force_cap_n - c.cap_margin_n,
+        "slew_v_per_s": c.slew_v_per_s, "rated_current_sq_a2": c.rated_current_a ** 2,
+        "i2t_limit_a2s": c.i2t_limit_a2s, "motor_resistance_ohm": c.motor_resistance_ohm,
+        "driver_supply_v": c.driver_supply_v, "back_emf_v_s_per_m": c.back_emf_v_s_per_m,
+        "half_friction_current_a": 0.5 * c.friction_current_a, "moving_speed_m_per_s": c.moving_speed_m_per_s,
+        "stuck_tolerance_n": c.stuck_tolerance_n, "contact_lost_n": c.contact_lost_n,
+        "contact_on_n": c.contact_on_n, "stuck_travel_m": c.stuck_travel_m, "soft_b_n_per_m": c.soft_b_n_per_m,
+        "soft_m_per_m": c.soft_m_per_m, "release_window_s": c.release_window_s,
+        "travel_follow_s": c.travel_follow_s, "implausible_n": c.implausible_n,
+        "first_contact_travel_m": c.first_contact_travel_m, "contact_current_a": c.current_for_force_a(c.contact_on_n),
+        "stall_fraction": c.stall_fraction, "current_limit_a": c.current_limit_a, "stall_time_s": c.stall_time_s,
+        "push_force_per_a_n": c.push_force_per_a_n,
+        "breakaway_friction_n": c.friction_breakaway_ratio * c.friction_current_a * c.push_force_per_a_n,
+        "push_weight_n": -c.weight_n, "guide_static_n": c.guide_static_n, "impact_mass_kg": c.impact_mass_kg,
+        "implausible_s": c.implausible_s, "out_of_range_n": c.out_of_range_n,
+        "stuck_response_s": c.stuck_response_s, "stuck_emf_v": c.stuck_emf_v,
+        "stuck_command_v": c.stuck_command_v, "drop_window_s": c.drop_window_s, "drop_n": c.drop_n,
+        "backoff_s": c.backoff_s, "contact_loss_timeout_s": c.contact_loss_timeout_s, "retract_v": c.retract_v,
+        "watchdog_timeout_s": c.watchdog_timeout_s, "retract_s": c.retract_s,
+        "retract_moving_s": c.retract_moving_s, "max_retract_s": c.max_retract_s, "min_dt_s": min_dt,
+        "events_cap": EVENT_CAPACITY, "envelope_n": len(speeds), "envelope_base": len(CF),
+    }
+    pos = _N_HEADER
+    for w in _WINDOWS:
+        cap = _window_capacity(spans[w], min_dt)
+        vals[f"{w}_span"] = spans[w]
+        for side in ("lo", "hi"):
+            vals[f"{w}_{side}_base"], vals[f"{w}_{side}_cap"] = pos, cap
+            pos += 2 * cap
+    for q in _QUEUES:
+        cap = _window_capacity(spans[q], min_dt)
+        vals[f"{q}_base"], vals[f"{q}_cap"] = pos, cap
+        pos += 2 * cap
+    vals["events_base"] = pos
+    vals["state_len"] = pos + 3 * EVENT_CAPACITY
+    cfg = np.empty(len(CF) + 2 * len(speeds))
+    for name, k in zip(CF._fields, CF):
+        cfg[k] = vals[name]
+    cfg[len(CF):] = speeds + currents
+    return cfg
+
+
+def _initial_state(c: SupervisorConfig) -> np.ndarray:
+    """The header of the state array after a reset (the ring buffers are empty by their counts)."""
+    h = np.zeros(_N_HEADER)
+    for name in ("stuck_ref_n", "contact_travel_m", "first_dropped_t") + tuple(f"{w}_t0" for w in _WINDOWS):
+        h[getattr(SV, name)] = math.nan
+    h[SV.cut_t] = -math.inf
+    h[SV.sp_last] = math.inf
+    h[SV.fall_t] = -math.inf
+    h[SV.current_limit_a] = c.current_limit_a
+    return h
+
+
+# ---- compiled period --------------------------------------------------------------------------
+
+@njit(cache=True, inline="always")
+def _pymin(a, b):
+    """Python's ``min(a, b)``: ``a`` unless ``b < a`` (so a NaN in ``b`` gives ``a``)."""
+    return b if b < a else a
+
+
+@njit(cache=True, inline="always")
+def _pymax(a, b):
+    """Python's ``max(a, b)``: ``a`` unless ``b > a``."""
+    return b if b > a else a
+
+
+@njit(cache=True, inline="always")
+def _at(sv, cfg, head, base, i):
+    """Index in ``sv`` of the time of entry ``i`` (0: front) of the ring at slots ``head``/``base``."""
+    return int(cfg[base]) + 2 * ((int(sv[head]) + i) % int(cfg[base + 1]))
+
+
+@njit(cache=True)
+def _append(sv, cfg, head, base, t, x):
+    n = int(sv[head + 1])
+    if n >= int(cfg[base + 1]):
+        raise ValueError("supervisor window full: the control period is below the shortest it was sized for")
+    k = _at(sv, cfg, head, base, n)
+    sv[k] = t
+    sv[k + 1] = x
+    sv[head + 1] = n + 1
+
+
+@njit(cache=True, inline="always")
+def _pop_front(sv, cfg, head, base):
+    sv[head] = (int(sv[head]) + 1) % int(cfg[base + 1])
+    sv[head + 1] -= 1.0
+
+
+@njit(cache=True)
+def _cut_front(sv, cfg, head, base, cut):
+    """Drop the front entries older than ``cut`` (a window emptied this way is a configuration error)."""
+    while True:
+        if sv[head + 1] <= 0.0:
+            raise ValueError("supervisor window empty: stuck_response_s must not exceed stuck_window_s")
+        if sv[_at(sv, cfg, head, base, 0)] < cut:
+            _pop_front(sv, cfg, head, base)
+        else:
+            break
+
+
+@njit(cache=True)
+def _win_push(sv, cfg, w, wc, t, x):
+    """Running min/max push (monotonic deques) of the window at state slot ``w``, config slot ``wc``."""
+    if math.isnan(sv[w]):
+        sv[w] = t
+    lo, hi = w + 1, w + 3
+    while sv[lo + 1] > 0.0 and sv[_at(sv, cfg, lo, wc + 1, int(sv[lo + 1]) - 1) + 1] >= x:
+        sv[lo + 1] -= 1.0
+    while sv[hi + 1] > 0.0 and sv[_at(sv, cfg, hi, wc + 3, int(sv[hi + 1]) - 1) + 1] <= x:
+        sv[hi + 1] -= 1.0
+    _append(sv, cfg, lo, wc + 1, t, x)
+    _append(sv, cfg, hi, wc + 3, t, x)
+    cut = t - cfg[wc]
+    _cut_front(sv, cfg, lo, wc + 1, cut)
+    _cut_front(sv, cfg, hi, wc + 3, cut)
+
+
+@njit(cache=True, inline="always")
+def _win_lo(sv, cfg, w, wc):
+    return sv[_at(sv, cfg, w + 1, wc + 1, 0) + 1]
+
+
+@njit(cache=True, inline="always")
+def _win_hi(sv, cfg, w, wc):
+    return sv[_at(sv, cfg, w + 3, wc + 3, 0) + 1]
+
+
+@njit(cache=True, inline="always")
+def _win_range(sv, cfg, w, wc):
+    return _win_hi(sv, cfg, w, wc) - _win_lo(sv, cfg, w, wc)
+
+
+@njit(cache=True, inline="always")
+def _win_full(sv, cfg, w, wc, t):
+    return not math.isnan(sv[w]) and t - sv[w] >= cfg[wc]
+
+
+@njit(cache=True)
+def _event(sv, cfg, code, value):
+    n = int(sv[SV.event_count])
+    if n < int(cfg[CF.events_cap]):
+        k = int(cfg[CF.events_base]) + 3 * n
+        sv[k] = sv[SV.t]
+        sv[k + 1] = code
+        sv[k + 2] = value
+        sv[SV.event_count] = n + 1
+    else:
+        if sv[SV.events_dropped] == 0.0:
+            sv[SV.first_dropped_t] = sv[SV.t]
+        sv[SV.events_dropped] += 1.0
+
+
+@njit(cache=True)
+def _trip(sv, cfg, cause):
+    if sv[SV.fault] == 0.0:
+        sv[SV.fault] = cause
+        sv[SV.mode] = MODE.retract
+        sv[SV.retract_t0] = sv[SV.t]
+        sv[SV.moving_s] = 0.0
+        _event(sv, cfg, EVENT.fault, cause)
+
+
+@njit(cache=True, inline="always")
+def _slew(sv, cfg, u, dt):
+    du = cfg[CF.slew_v_per_s] * dt
+    return _pymin(_pymax(u, sv[SV.u_prev] - du), sv[SV.u_prev] + du)
+
+
+@njit(cache=True)
+def _safe(sv, cfg, cur, dt):
+    """Command of the latched safe state: retract, then hold at 0 V."""
+    if sv[SV.mode] == MODE.retract:
+        el = sv[SV.t] - sv[SV.retract_t0]
+        if math.isnan(cur):
+            done = el >= cfg[CF.retract_s]
+        else:
+            stalled = abs(cur) > 0.6 * cfg[CF.retract_v] / cfg[CF.motor_resistance_ohm]
+            if not stalled and el > 0.01:
+                sv[SV.moving_s] += dt
+            done = (sv[SV.moving_s] >= cfg[CF.retract_moving_s] and stalled) or el >= cfg[CF.max_retract_s]
+        if done:
+            sv[SV.mode] = MODE.hold
+            _event(sv, cfg, EVENT.retracted, 0.0)
+        else:
+            u = _slew(sv, cfg, -cfg[CF.retract_v], dt)
+            sv[SV.u_prev] = u
+            return u
+    u = _slew(sv, cfg, 0.0, dt)
+    sv[SV.u_prev] = u
+    return u
+
+
+@njit(cache=True)
+def _motion(sv, cfg, cur, dt):
+    """Rack speed from the back-EMF of the last period, travel integral, held peak speed."""
+    vs = cfg[CF.driver_supply_v]
+    u = _pymin(_pymax(sv[SV.u_prev], -vs), vs)
+    v = limits.rack_speed_from_emf_m_per_s(u, cur, cfg[CF.motor_resistance_ohm], cfg[CF.back_emf_v_s_per_m], 1.0)
+    sv[SV.accel] = (v - sv[SV.speed]) / dt
+    sv[SV.speed] = v
+    if abs(cur) > cfg[CF.half_friction_current_a]:     # an unpowered motor (a cut supply) reads its command as speed
+        sv[SV.travel_m] = _pymax(0.0, sv[SV.travel_m] + v * dt)
+    _win_push(sv, cfg, SV.speed_win_t0, CF.speed_win_span, sv[SV.t], v)
+
+
+@njit(cache=True)
+def _interp_envelope(cfg, x):
+    """Current limit at speed ``x`` from the envelope table: linear between the points (``bisect_right``)."""
+    n = int(cfg[CF.envelope_n])
+    b = int(cfg[CF.envelope_base])
+    if x <= cfg[b]:
+        return cfg[b + n]
+    if x >= cfg[b + n - 1]:
+        return cfg[b + 2 * n - 1]
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if x < cfg[b + mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    if lo >= n:                       # x is NaN: no interval holds it
+        return math.nan
+    x0, x1, y0, y1 = cfg[b + lo - 1], cfg[b + lo], cfg[b + n + lo - 1], cfg[b + n + lo]
+    return y0 + (y1 - y0) * (x - x0) / (x1 - x0)
+
+
+@njit(cache=True)
+def _envelope_cap(sv, cfg, u, cur):
+    """Largest command that keeps the next period's current within the speed-dependent limit."""
+    v_held = _pymax(_win_hi(sv, cfg, SV.speed_win_t0, CF.speed_win_span), 0.0)
+    i_lim = _interp_envelope(cfg, v_held)
+    sv[SV.current_limit_a] = i_lim
+    vs = cfg[CF.driver_supply_v]
+    u_applied = _pymin(_pymax(sv[SV.u_prev], -vs), vs)
+    return _pymin(u, u_applied + cfg[CF.motor_resistance_ohm] * (i_lim - cur))
+
+
+@njit(cache=True)
+def _detect(sv, cfg, f, cur, dt):
+    """The detectors that need the motor current; the fault code, or 0."""
+    v = sv[SV.speed]
+    moving = abs(v) > cfg[CF.moving_speed_m_per_s]
+    in_contact = sv[SV.in_contact] != 0.0
+    # a stuck code: the estimate does not change while the board travels
+    if f > cfg[CF.contact_lost_n] and in_contact:
+        if not abs(f - sv[SV.stuck_ref_n]) <= cfg[CF.stuck_tolerance_n]:
+            sv[SV.stuck_ref_n] = f
+            sv[SV.stuck_travel_m] = 0.0
+        elif abs(cur) > cfg[CF.half_friction_current_a]:    # a driven motor: an unpowered one (a cut supply)
+            # draws no current and its command reads as speed
+            sv[SV.stuck_travel_m] += abs(v) * dt
+            if sv[SV.stuck_travel_m] > cfg[CF.stuck_travel_m]:
+                return FAULT.fsr_stuck
+    else:
+        sv[SV.stuck_ref_n] = math.nan
+    # travel since the first contact against the compression the estimate allows on the soft reader
+    if in_contact:
+        if sv[SV.contact_travel_set] == 0.0:
+            sv[SV.contact_travel_m] = sv[SV.travel_m]
+            sv[SV.contact_travel_set] = 1.0
+        elif f > cfg[CF.contact_on_n]:
+            # the reference follows where the pulp's surface must be for the estimate shown,
+            # at once on an intended release (the setpoint fell: the back-EMF integral's drift
+            # over many presses in refresh mode does not add up) and slowly otherwise (the
+            # finger drifts, presses and the strap slips over a session: only a fast mismatch,
+            # a board running into the finger while the reading stays low, trips)
+            target = sv[SV.travel_m] - compression_at_force_m(f, cfg[CF.soft_b_n_per_m], cfg[CF.soft_m_per_m])
+            if sv[SV.t] - sv[SV.fall_t] <= cfg[CF.release_window_s]:
+                sv[SV.contact_travel_m] = _pymax(sv[SV.contact_travel_m], target)
+            else:
+                sv[SV.contact_travel_m] = sv[SV.contact_travel_m] + (target - sv[SV.contact_travel_m]) * _pymin(
+                    1.0, dt / cfg[CF.travel_follow_s])
+        allowed = (compression_at_force_m(_win_hi(sv, cfg, SV.est_win_t0, CF.est_win_span) + cfg[CF.implausible_n],
+                                          cfg[CF.soft_b_n_per_m], cfg[CF.soft_m_per_m]) + cfg[CF.stuck_travel_m])
+        if sv[SV.travel_m] - sv[SV.contact_travel_m] > allowed:
+            return FAULT.fsr_implausible
+    # no contact within the travel the gap allows
+    if not in_contact and sv[SV.travel_m] > cfg[CF.first_contact_travel_m]:
+        return FAULT.fsr_no_contact
+    # pushing and not moving: with no contact seen, or at the current limit
+    if not moving and ((f < cfg[CF.contact_on_n] and cur > cfg[CF.contact_current_a])
+                       or cur > cfg[CF.stall_fraction] * cfg[CF.current_limit_a]):
+        sv[SV.stall_s] += dt
+        if sv[SV.stall_s] > cfg[CF.stall_time_s]:
+            return FAULT.motor_stalled
+    else:
+        sv[SV.stall_s] = 0.0
+    # the force the current implies while the board moves forward, against the estimate
+    if v > cfg[CF.moving_speed_m_per_s]:
+        a = _pymax(sv[SV.accel], 0.0)
+        # lower edge of the friction band: break-away friction, guide friction, weight against
+        # the push, and the force that accelerates the rotor and the board
+        f_lo = (limits.push_force_bound_n(cur, cfg[CF.push_force_per_a_n], 1.0, 1.0, cfg[CF.breakaway_friction_n],
+                                          cfg[CF.push_weight_n]) - cfg[CF.guide_static_n]
+                - cfg[CF.impact_mass_kg] * a)
+        if f_lo - _win_hi(sv, cfg, SV.est_win_t0, CF.est_win_span) > cfg[CF.implausible_n]:
+            sv[SV.implausible_s] += dt
+            if sv[SV.implausible_s] > cfg[CF.implausible_s]:
+                return FAULT.fsr_implausible
+        else:
+            sv[SV.implausible_s] = 0.0
+    else:
+        sv[SV.implausible_s] = 0.0
+    return 0
+
+
+@njit(cache=True)
+def supervise_begin(sv, cfg, f, sp, dt, cur):
+    """First half of one supervised period: detectors, contact tracking, the safe states.
+
+    Parameters
+    ----------
+    sv, cfg : ndarray of float64
+        The state and configuration arrays of :meth:`Supervisor.compiled`.
+    f : float
+        Force estimate, N.
+    sp : float
+        Setpoint, N.
+    dt : float
+        Control period, s (at least the configuration's ``min_dt_s``).
+    cur : float
+        Measured motor current, A; NaN (or any non-finite value) when there is none.
+
+    Returns
+    -------
+    code : int
+        0: the command is ``u`` and the inner controller is not called.  1: call the inner
+        controller with ``(f, sp_inner, dt, current)`` and pass its command to
+        :func:`supervise_end`.  2: contact regained; reset the inner controller with
+        ``force_est_n=f, setpoint_n=sp_inner, command_v=0.0``; the command is ``u`` (0 V).
+    u : float
+        Command, V (NaN for code 1).
+    sp_inner : float
+        Setpoint for the inner controller, N (clipped to ``force_cap_n - cap_margin_n``).
+    """
+    sv[SV.t] += dt
+    t = sv[SV.t]
+    has_cur = math.isfinite(cur)
+    if not has_cur:
+        cur = math.nan
+    else:
+        sv[SV.theta] = _pymax(0.0, sv[SV.theta] + (cur * cur - cfg[CF.rated_current_sq_a2]) * dt)
+        _motion(sv, cfg, cur, dt)
+    if sv[SV.mode] == MODE.retract or sv[SV.mode] == MODE.hold:
+        return 0, _safe(sv, cfg, cur, dt), math.nan
+    # detectors that latch
+    if not math.isfinite(f) or f > cfg[CF.out_of_range_n]:
+        _trip(sv, cfg, FAULT.fsr_out_of_range)
+        return 0, _safe(sv, cfg, cur, dt), math.nan
+    if sv[SV.theta] > cfg[CF.i2t_limit_a2s]:
+        _trip(sv, cfg, FAULT.motor_overcurrent)
+        return 0, _safe(sv, cfg, cur, dt), math.nan
+    _win_push(sv, cfg, SV.est_win_t0, CF.est_win_span, t, f)
+    if not has_cur:
+        # the command window (the stuck rule without a current measurement) lags by the
+        # estimator's response: a command that moved within the last ``stuck_response_s``
+        # cannot have shown in the estimate yet
+        _append(sv, cfg, SV.cmd_delay_head, CF.cmd_delay_base, t, sv[SV.u_prev])
+        while True:
+            k = _at(sv, cfg, SV.cmd_delay_head, CF.cmd_delay_base, 0)
+            if not sv[k] <= t - cfg[CF.stuck_response_s]:
+                break
+            t_old, u_old = sv[k], sv[k + 1]
+            _pop_front(sv, cfg, SV.cmd_delay_head, CF.cmd_delay_base)
+            _win_push(sv, cfg, SV.cmd_win_t0, CF.cmd_win_span, t_old, u_old)
+    sp_now = sp if math.isfinite(sp) else 0.0
+    if sp_now < sv[SV.sp_last] - 1e-9:
+        sv[SV.fall_t] = t                  # the setpoint fell: an intended release
+    sv[SV.sp_last] = sp_now
+    _win_push(sv, cfg, SV.sp_win_t0, CF.sp_win_span, t, sp_now)
+    moving = (not has_cur) or abs(sv[SV.u_prev] - cfg[CF.motor_resistance_ohm] * cur) > cfg[CF.stuck_emf_v]
+    # without a current measurement only: with one, the travel the back-EMF integral gives
+    # decides (:func:`_detect`); ``u - R i`` of one period reads as motion inside the
+    # gearhead's friction band and during a command step, where the board does not move
+    if (not has_cur and moving and not math.isnan(sv[SV.cmd_win_t0]) and sv[SV.in_contact] != 0.0
+            and _win_full(sv, cfg, SV.est_win_t0, CF.est_win_span, t)
+            and _win_lo(sv, cfg, SV.est_win_t0, CF.est_win_span) > cfg[CF.contact_lost_n]
+            and _win_range(sv, cfg, SV.est_win_t0, CF.est_win_span) < cfg[CF.stuck_tolerance_n]
+            and _win_range(sv, cfg, SV.cmd_win_t0, CF.cmd_win_span) > cfg[CF.stuck_command_v]):
+        _trip(sv, cfg, FAULT.fsr_stuck)
+        return 0, _safe(sv, cfg, cur, dt), math.nan
+    if has_cur and sv[SV.mode] == MODE.run:
+        cause = _detect(sv, cfg, f, cur, dt)
+        if cause != 0:
+            _trip(sv, cfg, cause)
+            return 0, _safe(sv, cfg, cur, dt), math.nan
+    # contact tracking
+    _append(sv, cfg, SV.drop_hist_head, CF.drop_hist_base, t, f)
+    while sv[_at(sv, cfg, SV.drop_hist_head, CF.drop_hist_base, 0)] < t - cfg[CF.drop_window_s]:
+        _pop_front(sv, cfg, SV.drop_hist_head, CF.drop_hist_base)
+    f_then = sv[_at(sv, cfg, SV.drop_hist_head, CF.drop_hist_base, 0) + 1]
+    if sv[SV.mode] == MODE.run:
+        if f > cfg[CF.contact_on_n]:
+            sv[SV.in_contact] = 1.0
+        # an intended release (the setpoint fell, or asks for no contact) is not a loss
+        released = _win_range(sv, cfg, SV.sp_win_t0, CF.sp_win_span)
+        fell = t - sv[SV.fall_t] <= cfg[CF.release_window_s]
+        lost = ((f < cfg[CF.contact_lost_n] and sp > cfg[CF.contact_on_n] and not fell)
+                or (f_then - f > cfg[CF.drop_n] + _pymax(released, 0.0) and sv[SV.u_prev] > 0.0
+                    and t - sv[SV.cut_t] > cfg[CF.drop_window_s]))
+        if sv[SV.in_contact] != 0.0 and lost:
+            sv[SV.mode] = MODE.freeze
+            sv[SV.freeze_t0] = t
+            sv[SV.contact_travel_m] = math.nan       # the compression check starts again at the next contact
+            sv[SV.contact_travel_set] = 0.0
+            _event(sv, cfg, EVENT.contact_lost, 0.0)
+    if sv[SV.mode] == MODE.freeze:
+        since = t - sv[SV.freeze_t0]
+        if f > cfg[CF.contact_on_n] and f >= f_then and since > cfg[CF.backoff_s]:
+            sv[SV.mode] = MODE.run
+            _event(sv, cfg, EVENT.contact_regained, 0.0)
+            sv[SV.u_prev] = 0.0
+            return 2, 0.0, _pymin(sp, cfg[CF.sp_max_n])
+        if since > cfg[CF.contact_loss_timeout_s]:
+            _trip(sv, cfg, FAULT.contact_lost)
+            return 0, _safe(sv, cfg, cur, dt), math.nan
+        u = -cfg[CF.retract_v] if since <= cfg[CF.backoff_s] else 0.0
+        sv[SV.u_prev] = u
+        return 0, u, math.nan
+    return 1, math.nan, _pymin(sp, cfg[CF.sp_max_n])
+
+
+@njit(cache=True)
+def supervise_end(sv, cfg, u, f, sp, dt, cur):
+    """Second half of a period whose :func:`supervise_begin` gave code 1: shape the inner command.
+
+    Parameters
+    ----------
+    sv, cfg : ndarray of float64
+        As for :func:`supervise_begin`.
+    u : float
+        The inner controller's command, V (any value: a non-finite one is the watchdog's case).
+    f, sp, dt, cur : float
+        As passed to :func:`supervise_begin` in the same period.
+
+    Returns
+    -------
+    code : int
+        1: the command is finite again after a non-finite stretch; reset the inner controller
+        with ``force_est_n=f, setpoint_n=sp_inner, command_v=reset_cmd``.  0 otherwise.
+    u : float
+        Command, V.
+    reset_cmd : float
+        Command to reset the inner controller from (code 1), V; NaN otherwise.
+    """
+    if not math.isfinite(cur):
+        cur = math.nan
+    if not math.isfinite(u):
+        if sv[SV.nan_s] == 0.0:
+            _event(sv, cfg, EVENT.nonfinite, 0.0)
+        sv[SV.nan_s] += dt
+        if sv[SV.nan_s] > cfg[CF.watchdog_timeout_s]:
+            _trip(sv, cfg, FAULT.controller_nonfinite)
+            return 0, _safe(sv, cfg, cur, dt), math.nan
+        u = _slew(sv, cfg, 0.0, dt)
+        sv[SV.u_prev] = u
+        return 0, u, math.nan
+    code = 0
+    reset_cmd = math.nan
+    if sv[SV.nan_s] > 0.0:
+        sv[SV.nan_s] = 0.0
+        _event(sv, cfg, EVENT.finite_again, 0.0)
+        code = 1
+        reset_cmd = sv[SV.u_prev]
+        u = sv[SV.u_prev]
+    u_inner = u
+    lo = cfg[CF.force_cap_n] - cfg[CF.cap_margin_n]
+    if f >= cfg[CF.force_cap_n]:
+        u = -cfg[CF.retract_v]
+    elif f > lo and u > 0.0:
+        u *= 1.0 - (f - lo) / cfg[CF.cap_margin_n]
+    u = _slew(sv, cfg, u, dt)
+    if not math.isnan(cur):
+        u = _envelope_cap(sv, cfg, u, cur)
+    if u < u_inner - 1e-9:
+        sv[SV.cut_t] = sv[SV.t]            # the supervisor held the push back: a drop that follows is its own
+    sv[SV.u_prev] = u
+    return code, u, reset_cmd
+
+
+# ---- Python wrapper -----------------------------------------------------------------------------
+
+def _scalar(name: str) -> property:
+    k = getattr(SV, name)
+
+    def get(self) -> float:
+        return float(self._sv[k])
+
+    def set_(self, value: float) -> None:
+        self._sv[k] = value
+
+    return property(get, set_, doc=f"``{name}`` of the state array (see :func:`supervise_begin`).")
 
 
 class Supervisor:
     """Safety wrapper around a :class:`~controllers.base.Controller` (see the module docstring).
+
+    The state lives in a float64 array (:meth:`compiled`); the attributes below decode it.
 
     Attributes
     ----------
@@ -449,150 +1035,100 @@ class Supervisor:
         self.inner = inner
         self.config = config
         self.name = f"supervised({getattr(inner, 'name', type(inner).__name__)})"
-        self._envelope = _envelope(config)
+        self._cfg = config.pack().copy()
+        self._sv = np.zeros(int(self._cfg[CF.state_len]))
+        self._sv0 = _initial_state(config)
+        self._min_dt = float(self._cfg[CF.min_dt_s])
         self._clear()
 
+    def compiled(self):
+        """The live ``(state, config)`` float64 arrays of the compiled period, or None when disabled.
+
+        :func:`supervise_begin` and :func:`supervise_end` advance ``state`` in place; the
+        attributes of this object read it, before and after.  ``config`` holds the derived
+        constants, the buffer layout and the speed envelope (:meth:`SupervisorConfig.pack`);
+        the events are rows ``(time, code, value)`` inside ``state``.
+        """
+        if not self.config.enabled:
+            return None
+        return self._sv, self._cfg
+
     def _clear(self):
-        c = self.config
-        self.mode = "run"
-        self.fault = None
-        self.events = []
-        self.t = 0.0
-        self.u_prev = 0.0
-        self.theta = 0.0
-        self.nan_s = 0.0
-        self.in_contact = False
-        self.freeze_t0 = 0.0
-        self.retract_t0 = 0.0
-        self.moving_s = 0.0
-        self.est_win = _Window(c.stuck_window_s)
-        self.cmd_win = _Window(c.stuck_window_s - c.stuck_response_s)
-        self.cmd_delay: deque = deque()
-        self.drop_hist: deque = deque()
-        self.sp_win = _Window(c.release_window_s)
-        self.speed_win = _Window(c.speed_hold_s)
-        self.speed = 0.0
-        self.accel = 0.0
-        self.travel_m = 0.0
-        self.stuck_ref_n = math.nan
-        self.stuck_travel_m = 0.0
-        self.contact_travel_m = None
-        self.cut_t = -math.inf
-        self.sp_last = math.inf
-        self.fall_t = -math.inf
-        self.stall_s = 0.0
-        self.implausible_s = 0.0
-        self.current_limit_a = c.current_limit_a
-        self.last_f = 0.0
+        self._sv[:_N_HEADER] = self._sv0
 
     def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
         """Clear faults and detectors and reset the inner controller bumplessly."""
         self._clear()
-        self.u_prev = float(command_v) if math.isfinite(command_v) else 0.0
+        self._sv[SV.u_prev] = float(command_v) if math.isfinite(command_v) else 0.0
         self.inner.reset(force_est_n=force_est_n, setpoint_n=min(setpoint_n, self._sp_max), command_v=command_v)
 
     @property
     def _sp_max(self) -> float:
         return self.config.force_cap_n - self.config.cap_margin_n
 
-    def _event(self, text: str) -> None:
-        self.events.append((round(self.t, 6), text))
+    @property
+    def mode(self) -> str:
+        return MODES[int(self._sv[SV.mode])]
 
-    def _trip(self, cause: str) -> None:
-        if self.fault is None:
-            self.fault = cause
-            self.mode = "retract"
-            self.retract_t0 = self.t
-            self.moving_s = 0.0
-            self._event(f"fault {cause}: retract")
+    @mode.setter
+    def mode(self, value: str) -> None:
+        self._sv[SV.mode] = MODES.index(value)
 
-    def _slew(self, u: float, dt: float) -> float:
-        du = self.config.slew_v_per_s * dt
-        return min(max(u, self.u_prev - du), self.u_prev + du)
+    @property
+    def fault(self) -> str | None:
+        k = int(self._sv[SV.fault])
+        return None if k == 0 else FAULTS[k - 1]
 
-    def _motion(self, cur: float, dt_s: float) -> None:
-        """Rack speed from the back-EMF of the last period, travel integral, held peak speed."""
-        c = self.config
-        u = min(max(self.u_prev, -c.driver_supply_v), c.driver_supply_v)
-        v = limits.rack_speed_from_emf_m_per_s(u, cur, c.motor_resistance_ohm, c.back_emf_v_s_per_m, 1.0)
-        self.accel = (v - self.speed) / dt_s
-        self.speed = v
-        if abs(cur) > 0.5 * c.friction_current_a:     # an unpowered motor (a cut supply) reads its command as speed
-            self.travel_m = max(0.0, self.travel_m + v * dt_s)
-        self.speed_win.push(self.t, v)
+    @fault.setter
+    def fault(self, value: str | None) -> None:
+        self._sv[SV.fault] = 0 if value is None else FAULTS.index(value) + 1
 
-    def _envelope_cap(self, u: float, cur: float) -> float:
-        """Largest command that keeps the next period's current within the speed-dependent limit."""
-        c = self.config
-        v_held = max(self.speed_win.hi[0][1], 0.0)
-        i_lim = _interp(self._envelope, v_held)
-        self.current_limit_a = i_lim
-        u_applied = min(max(self.u_prev, -c.driver_supply_v), c.driver_supply_v)
-        return min(u, u_applied + c.motor_resistance_ohm * (i_lim - cur))
+    @property
+    def in_contact(self) -> bool:
+        return bool(self._sv[SV.in_contact])
 
-    def _detect(self, f: float, sp: float, cur: float, dt_s: float) -> str | None:
-        """The detectors that need the motor current; the cause of a fault, or None."""
-        c = self.config
-        v = self.speed
-        moving = abs(v) > c.moving_speed_m_per_s
-        # a stuck code: the estimate does not change while the board travels
-        if f > c.contact_lost_n and self.in_contact:
-            if not abs(f - self.stuck_ref_n) <= c.stuck_tolerance_n:
-                self.stuck_ref_n = f
-                self.stuck_travel_m = 0.0
-            elif abs(cur) > 0.5 * c.friction_current_a:     # a driven motor: an unpowered one (a cut supply)
-                # draws no current and its command reads as speed
-                self.stuck_travel_m += abs(v) * dt_s
-                if self.stuck_travel_m > c.stuck_travel_m:
-                    return "fsr_stuck"
-        else:
-            self.stuck_ref_n = math.nan
-        # travel since the first contact against the compression the estimate allows on the soft reader
-        if self.in_contact:
-            if self.contact_travel_m is None:
-                self.contact_travel_m = self.travel_m
-            elif f > c.contact_on_n:
-                # the reference follows where the pulp's surface must be for the estimate shown,
-                # at once on an intended release (the setpoint fell: the back-EMF integral's drift
-                # over many presses in refresh mode does not add up) and slowly otherwise (the
-                # finger drifts, presses and the strap slips over a session: only a fast mismatch,
-                # a board running into the finger while the reading stays low, trips)
-                target = self.travel_m - compression_at_force_m(f, c.soft_b_n_per_m, c.soft_m_per_m)
-                if self.t - self.fall_t <= c.release_window_s:
-                    self.contact_travel_m = max(self.contact_travel_m, target)
-                else:
-                    self.contact_travel_m += (target - self.contact_travel_m) * min(1.0, dt_s / c.travel_follow_s)
-            allowed = (compression_at_force_m(self.est_win.hi[0][1] + c.implausible_n, c.soft_b_n_per_m,
-                                              c.soft_m_per_m) + c.stuck_travel_m)
-            if self.travel_m - self.contact_travel_m > allowed:
-                return "fsr_implausible"
-        # no contact within the travel the gap allows
-        if not self.in_contact and self.travel_m > c.first_contact_travel_m:
-            return "fsr_no_contact"
-        # pushing and not moving: with no contact seen, or at the current limit
-        if not moving and ((f < c.contact_on_n and cur > c.current_for_force_a(c.contact_on_n))
-                           or cur > c.stall_fraction * c.current_limit_a):
-            self.stall_s += dt_s
-            if self.stall_s > c.stall_time_s:
-                return "motor_stalled"
-        else:
-            self.stall_s = 0.0
-        # the force the current implies while the board moves forward, against the estimate
-        if v > c.moving_speed_m_per_s:
-            a = max(self.accel, 0.0)
-            # lower edge of the friction band: break-away friction, guide friction, weight against
-            # the push, and the force that accelerates the rotor and the board
-            f_lo = (c.push_force_n(cur, c.friction_breakaway_ratio, -c.weight_n) - c.guide_static_n
-                    - c.impact_mass_kg * a)
-            if f_lo - self.est_win.hi[0][1] > c.implausible_n:
-                self.implausible_s += dt_s
-                if self.implausible_s > c.implausible_s:
-                    return "fsr_implausible"
-            else:
-                self.implausible_s = 0.0
-        else:
-            self.implausible_s = 0.0
-        return None
+    @in_contact.setter
+    def in_contact(self, value: bool) -> None:
+        self._sv[SV.in_contact] = bool(value)
+
+    @property
+    def contact_travel_m(self) -> float | None:
+        return float(self._sv[SV.contact_travel_m]) if self._sv[SV.contact_travel_set] else None
+
+    @property
+    def events(self) -> list[tuple[float, str]]:
+        sv = self._sv
+        n = int(sv[SV.event_count])
+        base = int(self._cfg[CF.events_base])
+        out = []
+        for t, code, value in sv[base:base + 3 * n].reshape(n, 3).tolist():
+            text = _EVENT_TEXTS[int(code)]
+            out.append((round(t, 6), text.format(FAULTS[int(value) - 1]) if code == EVENT.fault else text))
+        dropped = int(sv[SV.events_dropped])
+        if dropped:
+            out.append((round(float(sv[SV.first_dropped_t]), 6),
+                        f"event log full: {dropped} events from here on not recorded"))
+        return out
+
+    t = _scalar("t")
+    u_prev = _scalar("u_prev")
+    theta = _scalar("theta")
+    nan_s = _scalar("nan_s")
+    freeze_t0 = _scalar("freeze_t0")
+    retract_t0 = _scalar("retract_t0")
+    moving_s = _scalar("moving_s")
+    speed = _scalar("speed")
+    accel = _scalar("accel")
+    travel_m = _scalar("travel_m")
+    stuck_ref_n = _scalar("stuck_ref_n")
+    stuck_travel_m = _scalar("stuck_travel_m")
+    cut_t = _scalar("cut_t")
+    sp_last = _scalar("sp_last")
+    fall_t = _scalar("fall_t")
+    stall_s = _scalar("stall_s")
+    implausible_s = _scalar("implausible_s")
+    current_limit_a = _scalar("current_limit_a")
+    last_f = _scalar("last_f")
 
     def update(self, force_est_n: float, setpoint_n: float, dt_s: float, motor_current_a: float | None = None) -> float:
         """One period: run the detectors, then pass, shape or replace the inner command."""
@@ -601,134 +1137,21 @@ class Supervisor:
             check_dt(dt_s)
         if not c.enabled:
             return self.inner.update(force_est_n, setpoint_n, dt_s, motor_current_a)
-        self.t += dt_s
-        t = self.t
+        if dt_s < self._min_dt:
+            raise ValueError(f"dt_s = {dt_s:g} s is below the {self._min_dt:g} s shortest control period the "
+                             f"supervisor's windows are sized for (MIN_CONTROL_PERIOD_S, MAX_WINDOW_SAMPLES)")
         f = float(force_est_n)
-        cur = None if motor_current_a is None or not math.isfinite(motor_current_a) else float(motor_current_a)
-        if cur is not None:
-            self.theta = max(0.0, self.theta + (cur * cur - c.rated_current_a ** 2) * dt_s)
-            self._motion(cur, dt_s)
-        if self.mode in ("retract", "hold"):
-            return self._safe(cur, dt_s)
-        # detectors that latch
-        if not math.isfinite(f) or f > c.out_of_range_n:
-            self._trip("fsr_out_of_range")
-            return self._safe(cur, dt_s)
-        if self.theta > c.i2t_limit_a2s:
-            self._trip("motor_overcurrent")
-            return self._safe(cur, dt_s)
-        self.est_win.push(t, f)
-        if cur is None:
-            # the command window (the stuck rule without a current measurement) lags by the
-            # estimator's response: a command that moved within the last ``stuck_response_s``
-            # cannot have shown in the estimate yet
-            self.cmd_delay.append((t, self.u_prev))
-            while self.cmd_delay[0][0] <= t - c.stuck_response_s:
-                self.cmd_win.push(*self.cmd_delay.popleft())
-        sp_in = float(setpoint_n)
-        sp_now = sp_in if math.isfinite(sp_in) else 0.0
-        if sp_now < self.sp_last - 1e-9:
-            self.fall_t = t                  # the setpoint fell: an intended release
-        self.sp_last = sp_now
-        self.sp_win.push(t, sp_now)
-        moving = cur is None or abs(self.u_prev - c.motor_resistance_ohm * cur) > c.stuck_emf_v
-        # without a current measurement only: with one, the travel the back-EMF integral gives
-        # decides (:meth:`_detect`); ``u - R i`` of one period reads as motion inside the
-        # gearhead's friction band and during a command step, where the board does not move
-        if (cur is None and moving and self.cmd_win.t0 is not None and self.in_contact and self.est_win.full(t) and self.est_win.lo[0][1] > c.contact_lost_n
-                and self.est_win.range() < c.stuck_tolerance_n and self.cmd_win.range() > c.stuck_command_v):
-            self._trip("fsr_stuck")
-            return self._safe(cur, dt_s)
-        if cur is not None and self.mode == "run":
-            cause = self._detect(f, sp_in, cur, dt_s)
-            if cause is not None:
-                self._trip(cause)
-                return self._safe(cur, dt_s)
-        # contact tracking
-        self.drop_hist.append((t, f))
-        while self.drop_hist[0][0] < t - c.drop_window_s:
-            self.drop_hist.popleft()
-        f_then = self.drop_hist[0][1]
-        if self.mode == "run":
-            if f > c.contact_on_n:
-                self.in_contact = True
-            # an intended release (the setpoint fell, or asks for no contact) is not a loss
-            released = self.sp_win.range()
-            fell = t - self.fall_t <= c.release_window_s
-            lost = ((f < c.contact_lost_n and sp_in > c.contact_on_n and not fell)
-                    or (f_then - f > c.drop_n + max(released, 0.0) and self.u_prev > 0.0
-                        and t - self.cut_t > c.drop_window_s))
-            if self.in_contact and lost:
-                self.mode = "freeze"
-                self.freeze_t0 = t
-                self.contact_travel_m = None          # the compression check starts again at the next contact
-                self._event("contact lost: freeze")
-        if self.mode == "freeze":
-            if f > c.contact_on_n and f >= f_then and t - self.freeze_t0 > c.backoff_s:
-                self.mode = "run"
-                self._event("contact regained: resume")
-                self.inner.reset(force_est_n=f, setpoint_n=min(setpoint_n, self._sp_max), command_v=0.0)
-                self.u_prev = 0.0
-                return 0.0
-            if t - self.freeze_t0 > c.contact_loss_timeout_s:
-                self._trip("contact_lost")
-                return self._safe(cur, dt_s)
-            u = -c.retract_v if t - self.freeze_t0 <= c.backoff_s else 0.0
-            self.u_prev = u
-            return u
-        # run: the inner controller, watchdog, cap, slew, current and speed envelope
-        sp = min(sp_in, self._sp_max)
-        u = self.inner.update(f, sp, dt_s, motor_current_a)
-        if not math.isfinite(u):
-            if self.nan_s == 0.0:
-                self._event("non-finite command: hold")
-            self.nan_s += dt_s
-            if self.nan_s > c.watchdog_timeout_s:
-                self._trip("controller_nonfinite")
-                return self._safe(cur, dt_s)
-            u = self._slew(0.0, dt_s)
-            self.u_prev = u
-            return u
-        if self.nan_s > 0.0:
-            self.nan_s = 0.0
-            self._event("finite command again: resume")
-            self.inner.reset(force_est_n=f, setpoint_n=sp, command_v=self.u_prev)
-            u = self.u_prev
-        u_inner = u
-        lo = c.force_cap_n - c.cap_margin_n
-        if f >= c.force_cap_n:
-            u = -c.retract_v
-        elif f > lo and u > 0.0:
-            u *= 1.0 - (f - lo) / c.cap_margin_n
-        u = self._slew(u, dt_s)
-        if cur is not None:
-            u = self._envelope_cap(u, cur)
-        if u < u_inner - 1e-9:
-            self.cut_t = t               # the supervisor held the push back: a drop that follows is its own
-        self.u_prev = u
-        return u
-
-    def _safe(self, cur, dt_s) -> float:
-        """Command of the latched safe state: retract, then hold at 0 V."""
-        c = self.config
-        if self.mode == "retract":
-            el = self.t - self.retract_t0
-            if cur is None:
-                done = el >= c.retract_s
-            else:
-                stalled = abs(cur) > 0.6 * c.retract_v / c.motor_resistance_ohm
-                if not stalled and el > 0.01:
-                    self.moving_s += dt_s
-                done = (self.moving_s >= c.retract_moving_s and stalled) or el >= c.max_retract_s
-            if done:
-                self.mode = "hold"
-                self._event("retracted: hold")
-            else:
-                u = self._slew(-c.retract_v, dt_s)
-                self.u_prev = u
-                return u
-        u = self._slew(0.0, dt_s)
-        self.u_prev = u
+        sp = float(setpoint_n)
+        dt = float(dt_s)
+        cur = math.nan if motor_current_a is None or not math.isfinite(motor_current_a) else float(motor_current_a)
+        code, u, sp_inner = supervise_begin(self._sv, self._cfg, f, sp, dt, cur)
+        if code == 1:
+            u_inner = self.inner.update(f, sp_inner, dt_s, motor_current_a)
+            code, u, reset_cmd = supervise_end(self._sv, self._cfg, float(u_inner), f, sp, dt, cur)
+            if code == 1:
+                self.inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=reset_cmd)
+        elif code == 2:
+            self.inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=0.0)
         return u
 
 
@@ -744,14 +1167,3 @@ def _envelope(c: SupervisorConfig) -> tuple[list[float], list[float]]:
     speeds.append(1.05 * v_max)
     currents.append(-c.friction_current_a)
     return speeds, currents
-
-
-def _interp(table: tuple[list[float], list[float]], x: float) -> float:
-    xs, ys = table
-    if x <= xs[0]:
-        return ys[0]
-    if x >= xs[-1]:
-        return ys[-1]
-    k = bisect.bisect_right(xs, x)
-    x0, x1, y0, y1 = xs[k - 1], xs[k], ys[k - 1], ys[k]
-    return y0 + (y1 - y0) * (x - x0) / (x1 - x0)

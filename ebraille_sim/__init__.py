@@ -1,7 +1,8 @@
 """ebraille-sim: closed-loop contact-force simulator for a finger-wearable E-Braille reader.
 
 Importing the package registers the Gymnasium environment id ``EBraille/ContactForce-v0``
-and has no other side effect.  ``run_scenario`` and ``RunResult`` are loaded on first use,
+(at once if Gymnasium is loaded, else when it is: the package does not import it) and has
+no other side effect.  ``run_scenario`` and ``RunResult`` are loaded on first use,
 so ``import ebraille_sim`` stays light.
 """
 from __future__ import annotations
@@ -18,6 +19,6 @@ def __getattr__(name):
     raise AttributeError(f"module 'ebraille_sim' has no attribute {name!r}")
 
 
-from ebraille_sim.rl.registration import register_envs as _register_envs  # noqa: E402
+from ebraille_sim.rl.registration import register_when_gymnasium_loads as _register  # noqa: E402
 
-_register_envs()
+_register()

@@ -160,10 +160,28 @@ def _modules_after(statement: str) -> set[str]:
 
 
 def test_importing_the_package_is_light():
-    """``import ebraille_sim`` registers the env id but loads no heavy dependency."""
-    mods = _modules_after("import ebraille_sim, gymnasium as gym\nassert 'EBraille/ContactForce-v0' in gym.registry")
+    """``import ebraille_sim`` registers the env id but loads no heavy dependency (not even
+    Gymnasium or NumPy); the id is there whichever of the two is imported first."""
     heavy = {"numba", "scipy", "matplotlib", "pymunk", "control", "ebraille_sim.rl.env", "ebraille_sim.plant.kernel"}
-    assert not heavy & mods, heavy & mods
+    assert not (heavy | {"gymnasium", "numpy"}) & _modules_after("import ebraille_sim")
+    for first, second in (("ebraille_sim", "gymnasium as gym"), ("gymnasium as gym", "ebraille_sim")):
+        mods = _modules_after(f"import {first}\nimport {second}\nassert 'EBraille/ContactForce-v0' in gym.registry")
+        assert not heavy & mods, heavy & mods
+
+
+def test_the_command_line_help_loads_no_simulator():
+    """``ebraille-sim --help`` and every command's help parse without Numba, SciPy or plotting."""
+    from ebraille_sim.commands.benchmark import SUITE_NAMES
+    from ebraille_sim.tools.benchmark import SUITES
+    assert SUITE_NAMES == tuple(sorted(SUITES))
+    code = ("import contextlib, io\nfrom ebraille_sim.cli import main\n"
+            "for argv in (['--help'], ['run', '--help'], ['benchmark', '--help'], ['sweep', '--help'],"
+            " ['identify', '--help'], ['tune', '--help'], ['train', '--help'], ['regress', '--help'], ['list', '--help']):\n"
+            "    with contextlib.redirect_stdout(io.StringIO()):\n"
+            "        try:\n            main(argv)\n        except SystemExit:\n            pass")
+    mods = _modules_after(code)
+    assert not {"numba", "scipy", "matplotlib", "pymunk", "control", "gymnasium"} & mods, \
+        {"numba", "scipy", "matplotlib", "pymunk", "control", "gymnasium"} & mods
 
 
 def test_a_scenario_run_loads_no_plotting_or_analysis_library():

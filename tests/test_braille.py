@@ -108,8 +108,11 @@ def test_number_sign_once_per_run_of_digits():
     assert kinds_of("42 7") == ["number_sign", "digit", "digit", "space", "number_sign", "digit"]
 
 
-def test_number_sign_repeated_after_colon():
-    assert cells_to_unicode(text_to_cells("7:15")) == "⠼⠛⠒⠼⠁⠑"
+def test_number_sign_not_repeated_after_colon_or_hyphen_between_digits():
+    # EBAE / liblouis en-us-g1 "midnum : 25" and "midnum - 36"
+    assert cells_to_unicode(text_to_cells("7:15")) == "⠼⠛⠒⠁⠑"
+    assert cells_to_unicode(text_to_cells("555-1212")) == "⠼⠑⠑⠑⠤⠁⠃⠁⠃"
+    assert kinds_of("7:15") == ["number_sign", "digit", "punctuation", "digit", "digit"]
 
 
 def test_comma_and_decimal_point_inside_number():
@@ -129,7 +132,13 @@ def test_letter_sign_after_digits_for_a_to_j():
 def test_no_letter_sign_when_not_needed():
     assert kinds_of("2nd") == ["number_sign", "digit", "letter", "letter"]
     assert kinds_of("3 a") == ["number_sign", "digit", "space", "letter"]
-    assert kinds_of("3-a") == ["number_sign", "digit", "punctuation", "letter"]
+    assert kinds_of("3-x") == ["number_sign", "digit", "punctuation", "letter"]
+    assert kinds_of("3-D") == ["number_sign", "digit", "punctuation", "capital_sign", "letter"]
+
+
+def test_letter_sign_after_number_and_hyphen():
+    # liblouis en-us-g1: "1-a" -> number sign, 1, hyphen, letter sign, a
+    assert kinds_of("3-a") == ["number_sign", "digit", "punctuation", "letter_sign", "letter"]
     assert kinds_of("3D") == ["number_sign", "digit", "capital_sign", "letter"]
 
 
@@ -189,6 +198,65 @@ def test_error_names_character_and_position():
         text_to_cells("a@b")
     with pytest.raises(ValueError, match=r"'\\t' at position 0"):
         text_to_cells("\tx")
+
+
+def test_error_lists_the_accepted_characters():
+    with pytest.raises(ValueError) as info:
+        text_to_cells("wait\u2026")
+    message = str(info.value)
+    assert "\n" not in message
+    assert message.startswith("cannot transcribe '\u2026' at position 4 to Grade 1 Braille; accepted: ")
+    for shown in ("A-Z a-z", "0-9", "%", "/", "\u2014", "\u2018"):
+        assert shown in message
+    for bad in "&@*_\t\u20ac[":
+        with pytest.raises(ValueError, match="accepted: letters"):
+            text_to_cells(f"ok {bad}")
+
+
+def test_accepted_characters_all_transcribe():
+    from ebraille_sim.scenarios.braille import ACCEPTED_CHARACTERS
+
+    for ch in ACCEPTED_CHARACTERS:
+        assert text_to_cells(f"x{ch}y")
+    assert "\t" not in ACCEPTED_CHARACTERS and "\u2026" not in ACCEPTED_CHARACTERS
+
+
+def test_dash_cells_and_spacing():
+    dash = [(3, 6), (3, 6)]
+    assert dots_of("a--b")[1:3] == dash
+    assert kinds_of("go - now") == ["letter"] * 2 + ["punctuation"] * 2 + ["letter"] * 3
+    assert dots_of("go \u2014 now") == dots_of("go--now") == dots_of("go -- now")
+    # spacing other than one space on each side is kept
+    assert dots_of("go -now")[2:4] == [(), (3, 6)]
+    assert dots_of("go  -  now")[2:7] == [(), (), (3, 6), (), ()]
+    assert dots_of("go---now")[2:5] == [(3, 6)] * 3
+
+
+def test_ellipsis_is_three_dot_3_cells():
+    assert dots_of("so...")[2:] == [(3,), (3,), (3,)]
+    assert dots_of("so . . . now") == dots_of("so ... now")
+    assert [c.char for c in text_to_cells("...")] == ["."] * 3
+    assert dots_of("2.5") == [(3, 4, 5, 6), (1, 2), (4, 6), (1, 5)]
+
+
+def test_percent_and_slash():
+    assert dots_of("5%") == [(3, 4, 5, 6), (1, 5), (4,), (2, 5), (1, 2, 3, 4)]
+    assert kinds_of("5%6")[-2:] == ["number_sign", "digit"]      # % ends the number
+    assert dots_of("3/4") == [(3, 4, 5, 6), (1, 4), (3, 4), (1, 4, 5)]
+    assert dots_of("a/b") == [(1,), (4, 5, 6), (3, 4), (1, 2)]
+
+
+def test_single_quotes_open_close_and_apostrophe():
+    open_, close, apostrophe = [(6,), (2, 3, 6)], [(3, 5, 6), (3,)], [(3,)]
+    assert dots_of("'no'") == open_ + [(1, 3, 4, 5), (1, 3, 5)] + close
+    assert dots_of("it's")[2:3] == apostrophe
+    assert dots_of("dogs' bones")[4:5] == apostrophe              # no quotation open
+    assert dots_of("'em")[:1] == apostrophe and dots_of("'Twas")[:1] == apostrophe
+    # a word-final s' or a typographic ’ closes an open quotation (liblouis writes an apostrophe)
+    assert dots_of("'yes' no")[5:7] == close
+    assert dots_of("\u2018hi\u2019")[-2:] == close
+    assert dots_of("\u2018tom\u2019s")[5:6] == apostrophe
+    assert dots_of("'") == apostrophe
 
 
 def test_empty_text():

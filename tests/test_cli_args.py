@@ -43,6 +43,7 @@ OPTIONS = {
         "--controller": ["no_such_controller", "{tmp}/missing.toml", "{tmp}/missing.json"],
         "--backend": ["nope", ""],
         "--trace": ["xml", ""],
+        "--trace-rate": _floats(["0", "-100"]) + ["300", "5000"],   # must divide the 1 kHz control rate
         "--animate": ["{tmp}/anim.gif"],                    # without --backend pymunk
     },
     "sweep": {
@@ -75,6 +76,7 @@ OPTIONS = {
         "--baseline-s": _floats(["-1"]),
         "--cutoff-hz": _floats(["-1"]),
         "--no-load-voltage": ["0.5"],                          # without --csv
+        "--jobs": _ints(["0", "-1"], "257"),
     },
     "train": {
         "--algo": ["dqn"],

@@ -549,3 +549,23 @@ def test_sweep_without_figures_removes_the_old_figures(tmp_path, capsys):
     assert cli(argv + ["--no-figures", "--seed", "3"]) == 0
     assert not (out / "figures").exists() and (out / "results.csv").read_text() != first
     assert sorted(p.name for p in tmp_path.iterdir()) == ["sw"]
+
+
+def test_trace_rate_keeps_every_kth_period_and_the_full_rate_metrics(tmp_path):
+    """``--trace-rate 100`` at the 1 kHz control rate: trace.csv holds the ends of periods
+    10, 20, ... (the same rows as the full trace's every tenth), metrics.json is unchanged."""
+    import csv
+    import json
+    full, thin = tmp_path / "full", tmp_path / "thin"
+    common = ["run", "steady_90wpm", "--duration", "2", "--no-plot", "--quiet"]
+    assert cli(common + ["--out", str(full)]) == 0
+    assert cli(common + ["--out", str(thin), "--trace-rate", "100"]) == 0
+    rows_full = list(csv.reader((full / "trace.csv").open(encoding="utf-8")))
+    rows_thin = list(csv.reader((thin / "trace.csv").open(encoding="utf-8")))
+    assert rows_thin[0] == rows_full[0]
+    assert len(rows_full) - 1 == 2000 and len(rows_thin) - 1 == 200
+    assert rows_thin[1:] == rows_full[10::10]
+    m_full = json.loads((full / "metrics.json").read_text())["metrics"]
+    m_thin = json.loads((thin / "metrics.json").read_text())["metrics"]
+    drop = {"wall_time_s", "real_time_factor"}
+    assert {k: v for k, v in m_full.items() if k not in drop} == {k: v for k, v in m_thin.items() if k not in drop}

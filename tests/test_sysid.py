@@ -263,6 +263,57 @@ def test_identify_command_on_recorded_csv(tmp_path, csv_records, capsys):
     assert "Best model by mean fitness" in capsys.readouterr().out
 
 
+def test_identify_in_parallel_gives_the_serial_models_and_plots_reuse_the_scoring_runs(tmp_path, csv_records):
+    """``-j 2`` fits in two processes: the same fitness table as one process (each fit is
+    seeded alone); the plot shows the scoring simulation (its panel titles are the table's
+    fitness values).
+
+    The fits agree to the optimiser's tolerance, not bit for bit: numpy's reductions round
+    differently with the arrays' memory alignment, and a fit whose cost is flat along some
+    direction ends at slightly different parameters (estimation record within 1e-6 points,
+    the other record within 0.05 points).
+    """
+    import json
+
+    from ebraille_sim.cli import main
+    from ebraille_sim.commands.identify import FitPlotter, _envelope, identify_all
+    from ebraille_sim.identification import bench
+    from ebraille_sim.identification.sysid import fitness, simulate
+
+    outs = {}
+    for jobs in ("1", "2"):
+        outs[jobs] = tmp_path / f"j{jobs}"
+        assert main(["identify", "--csv", str(csv_records[0]), "--csv", str(csv_records[1]), "--kinds",
+                     "linear,hammerstein", "--orders", "2,3", "--quick", "--out", str(outs[jobs]), "-j", jobs,
+                     "--quiet"]) == 0
+    t1, t2 = (json.loads((outs[j] / "fitness.json").read_text()) for j in ("1", "2"))
+    assert t1.keys() == t2.keys()
+    for kind in t1:
+        for order in t1[kind]:
+            assert t1[kind][order]["square_0.2hz"] == pytest.approx(t2[kind][order]["square_0.2hz"], abs=1e-6)
+            assert t1[kind][order]["triangle_0.25hz"] == pytest.approx(t2[kind][order]["triangle_0.25hz"], abs=0.05)
+    for name in ("linear-2", "hammerstein-3"):
+        assert (outs["2"] / "plots" / f"{name}.png").stat().st_size > 10_000
+    recs = {r.stem: bench.load_csv(r) for r in csv_records}
+    sims: dict = {}
+    models, table, _ = identify_all(recs, next(iter(recs)), ["linear"], [2], {"n_starts": 1, "max_nfev": 50},
+                                    sims=sims)
+    m = models[("linear", 2)]
+    for name, rec in recs.items():
+        np.testing.assert_array_equal(sims[("linear", 2)][name], simulate(m, rec.voltage_v))
+        assert table["linear"][2][name] == fitness(rec.force_n, sims[("linear", 2)][name])
+    plotter = FitPlotter(recs, {})
+    plotter.draw(m, tmp_path / "p.png", sims[("linear", 2)])
+    titles = [ax.get_title() for ax, *_ in plotter.panels]
+    plotter.close()
+    assert titles == [f"{name}: {table['linear'][2][name]:.2f} %" for name in recs]
+    # the drawn envelope keeps every sample's extremes
+    rec = next(iter(recs.values()))
+    t_env, y_env = _envelope(rec.time_s, rec.force_n, 200)
+    assert len(y_env) == 200 and y_env.max() == rec.force_n.max() and y_env.min() == rec.force_n.min()
+    assert np.all(np.diff(t_env) >= 0)
+
+
 @pytest.mark.parametrize("argv, match", [
     (["--csv", "MISSING.csv"], "CSV file not found"),
     (["--kinds", "wiener,cubic"], "--kinds: 'cubic' is not one of"),

@@ -9,12 +9,16 @@ EPILOG = ("score = 100 * mean over tracking scenarios of (CVaR10(in_band) + CVaR
           "the estimator error (docs/benchmark.md).  The same command gives the same numbers.")
 
 
+SUITE_NAMES = ("quick", "standard")
+"""The names of :data:`ebraille_sim.tools.benchmark.SUITES` (kept here so that the help
+loads no simulator; a test checks they agree)."""
+
+
 def add_arguments(p):
-    from ebraille_sim.tools.benchmark import SUITES
     p.add_argument("controllers", nargs="+", metavar="CONTROLLER",
                    help="registered names, gains files (.toml/.json) or policy:PATH")
     p.add_argument("--suite", default="standard", metavar="NAME",
-                   help=f"scenario suite: {', '.join(sorted(SUITES))} (default standard)")
+                   help=f"scenario suite: {', '.join(SUITE_NAMES)} (default standard)")
     p.add_argument("--readers", type=int, default=None, metavar="N",
                    help="readers per scenario: the nominal device and N-1 drawn ones (default: the suite's)")
     p.add_argument("-j", "--jobs", type=int, default=1, metavar="N", help="local worker processes (default 1)")

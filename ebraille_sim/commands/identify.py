@@ -65,6 +65,8 @@ def add_arguments(p):
     p.add_argument("--no-load-voltage", type=number(0, 100), default=None, metavar="V",
                    help="CSV: divider voltage with the FSR unloaded, for the device versions of the models")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("-j", "--jobs", type=whole(1, 256), default=1, metavar="N",
+                   help="worker processes fitting the models side by side (default 1; same results for any N)")
 
 
 def _parse_list(text: str, name: str, allowed, convert=str):
@@ -85,8 +87,39 @@ def _parse_list(text: str, name: str, allowed, convert=str):
     return out
 
 
-def identify_all(records: dict, estimation: str, kinds, orders, fit_options: dict, log=None):
+def _fit_one(job):
+    """Fit and score one ``(kind, order)`` (a worker's unit; seeded by ``fit_options``, so the
+    result does not depend on which process runs it or in which order)."""
+    from ebraille_sim.identification.sysid import fit_report, fitness, simulate
+    kind, order, records, estimation, fit_options = job
+    est = records[estimation]
+    t0 = time.perf_counter()
+    rep = fit_report(kind, est.voltage_v, est.force_n, order, dt_s=est.dt_s, **fit_options)
+    seconds = time.perf_counter() - t0
+    m = rep.model
+    sims = {name: simulate(m, rec.voltage_v) for name, rec in records.items()}
+    scores = {name: fitness(rec.force_n, sims[name]) for name, rec in records.items()}
+    poles = m.linear.poles()
+    info = {"nk": rep.nk, "estimation_fitness": rep.fitness_pct, "seconds": seconds,
+            "poles": [[float(p.real), float(p.imag)] for p in poles],
+            "max_abs_pole": float(max(abs(p) for p in poles)) if len(poles) else 0.0,
+            "stable": bool(m.linear.is_stable()),
+            "linear_fitness_by_nk": {str(k): v for k, v in rep.linear_fitness_by_nk.items()}}
+    return m, scores, info, sims
+
+
+def identify_all(records: dict, estimation: str, kinds, orders, fit_options: dict, log=None, jobs: int = 1,
+                 sims: dict | None = None):
     """Identify every kind and order on ``records[estimation]`` and score it on every record.
+
+    Parameters
+    ----------
+    jobs : int
+        Worker processes fitting models side by side (1: in this process).  The results do
+        not depend on it: every fit is seeded by ``fit_options`` alone.
+    sims : dict, optional
+        Filled with ``(kind, order) -> record name -> simulated force`` (the scoring
+        simulations, reused by :func:`plot_fit`).
 
     Returns
     -------
@@ -97,29 +130,25 @@ def identify_all(records: dict, estimation: str, kinds, orders, fit_options: dic
     info : dict
         ``"kind-order" -> {nk, estimation_fitness, poles, max_abs_pole, stable, seconds}``.
     """
-    from ebraille_sim.identification.sysid import fit_report, fitness, simulate
+    jobs_list = [(kind, order, records, estimation, fit_options) for kind in kinds for order in orders]
+    if jobs > 1 and len(jobs_list) > 1:
+        from concurrent.futures import ProcessPoolExecutor
 
-    est = records[estimation]
+        from ebraille_sim.tools.parallel import process_context
+        with ProcessPoolExecutor(max_workers=min(jobs, len(jobs_list)), mp_context=process_context()) as pool:
+            done = list(pool.map(_fit_one, jobs_list))
+    else:
+        done = map(_fit_one, jobs_list)
     models, table, info = {}, {}, {}
-    for kind in kinds:
-        table[kind] = {}
-        for order in orders:
-            t0 = time.perf_counter()
-            rep = fit_report(kind, est.voltage_v, est.force_n, order, dt_s=est.dt_s, **fit_options)
-            dt = time.perf_counter() - t0
-            m = rep.model
-            models[(kind, order)] = m
-            table[kind][order] = {name: fitness(rec.force_n, simulate(m, rec.voltage_v))
-                                  for name, rec in records.items()}
-            poles = m.linear.poles()
-            info[f"{kind}-{order}"] = {
-                "nk": rep.nk, "estimation_fitness": rep.fitness_pct, "seconds": dt,
-                "poles": [[float(p.real), float(p.imag)] for p in poles],
-                "max_abs_pole": float(max(abs(p) for p in poles)) if len(poles) else 0.0,
-                "stable": bool(m.linear.is_stable()),
-                "linear_fitness_by_nk": {str(k): v for k, v in rep.linear_fitness_by_nk.items()}}
-            if log:
-                log(f"  {kind:<19} order {order}: nk={rep.nk}  estimation fit {rep.fitness_pct:6.2f} %  ({dt:.1f} s)")
+    for (kind, order, *_), (m, scores, inf, sim) in zip(jobs_list, done):
+        models[(kind, order)] = m
+        table.setdefault(kind, {})[order] = scores
+        info[f"{kind}-{order}"] = inf
+        if sims is not None:
+            sims[(kind, order)] = sim
+        if log:
+            log(f"  {kind:<19} order {order}: nk={inf['nk']}  estimation fit {inf['estimation_fitness']:6.2f} %  "
+                f"({inf['seconds']:.1f} s)")
     return models, table, info
 
 
@@ -169,33 +198,85 @@ def fitness_markdown(table: dict, labels: dict, paper: dict | None, estimation: 
     return "\n".join(lines)
 
 
-def plot_fit(model, records: dict, labels: dict, path) -> None:
+PLOT_POINTS = 1200
+"""Points per drawn line: a longer record is drawn as the minimum and maximum of each of
+``PLOT_POINTS / 2`` time buckets (its visible envelope at the figure's resolution)."""
+
+
+def _envelope(t: np.ndarray, y: np.ndarray, points: int = PLOT_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """``(t, y)`` reduced to the minimum and maximum of ``points // 2`` equal buckets, in time order."""
+    import numpy as np
+    n = len(y)
+    buckets = points // 2
+    if n <= points or buckets < 1:
+        return t, y
+    edges = np.linspace(0, n, buckets + 1).astype(int)
+    lo = np.minimum.reduceat(y, edges[:-1])
+    hi = np.maximum.reduceat(y, edges[:-1])
+    t_mid = 0.5 * (t[edges[:-1]] + t[np.maximum(edges[1:] - 1, edges[:-1])])
+    return np.repeat(t_mid, 2), np.column_stack([lo, hi]).ravel()
+
+
+class FitPlotter:
+    """One figure of panels (one per record) redrawn for each model: the layout is computed once.
+
+    Parameters
+    ----------
+    records : dict
+        Record name -> record (``time_s``, ``force_n``, ``voltage_v``).
+    labels : dict
+        Record name -> panel title.
+    """
+
+    def __init__(self, records: dict, labels: dict):
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        self._plt = plt
+        self.records = records
+        self.labels = labels
+        n = len(records)
+        cols = 2 if n > 1 else 1
+        rows = math.ceil(n / cols)
+        self.fig, axes = plt.subplots(rows, cols, figsize=(6.0 * cols, 2.4 * rows), squeeze=False)
+        self.panels = []
+        for ax, (name, rec) in zip(axes.ravel(), records.items()):
+            ax.plot(*_envelope(rec.time_s, rec.force_n), color="0.2", lw=0.8, label="measured")
+            (line,) = ax.plot(*_envelope(rec.time_s, rec.force_n), color="tab:orange", lw=0.8, label="model")
+            ax.set_title(f"{labels.get(name, name)}: 100.00 %", fontsize=9)
+            ax.set_xlabel("time (s)", fontsize=8)
+            ax.set_ylabel("force (N)", fontsize=8)
+            ax.tick_params(labelsize=7)
+            self.panels.append((ax, name, rec, line))
+        for ax in axes.ravel()[n:]:
+            ax.axis("off")
+        axes[0, 0].legend(fontsize=7, loc="upper right")
+        self.title = self.fig.suptitle("model", fontsize=10)
+        self.fig.tight_layout()
+
+    def draw(self, model, path, sims: dict | None = None) -> None:
+        """Draw ``model`` (its simulated force on every record: ``sims`` when given) to ``path``."""
+        from ebraille_sim.identification.sysid import fitness, simulate
+        for ax, name, rec, line in self.panels:
+            y = sims[name] if sims is not None else simulate(model, rec.voltage_v)
+            line.set_data(*_envelope(rec.time_s, y))
+            ax.set_title(f"{self.labels.get(name, name)}: {fitness(rec.force_n, y):.2f} %", fontsize=9)
+            ax.relim()
+            ax.autoscale_view()
+        self.title.set_text(model.name)
+        self.fig.savefig(path, dpi=90)
+
+    def close(self) -> None:
+        self._plt.close(self.fig)
+
+
+def plot_fit(model, records: dict, labels: dict, path, sims: dict | None = None) -> None:
     """Measured and modelled force of one model on every record (one panel each)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ebraille_sim.identification.sysid import fitness, simulate
-
-    n = len(records)
-    cols = 2 if n > 1 else 1
-    rows = math.ceil(n / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(6.0 * cols, 2.4 * rows), squeeze=False)
-    for ax, (name, rec) in zip(axes.ravel(), records.items()):
-        y = simulate(model, rec.voltage_v)
-        ax.plot(rec.time_s, rec.force_n, color="0.2", lw=0.8, label="measured")
-        ax.plot(rec.time_s, y, color="tab:orange", lw=0.8, label="model")
-        ax.set_title(f"{labels.get(name, name)}: {fitness(rec.force_n, y):.2f} %", fontsize=9)
-        ax.set_xlabel("time (s)", fontsize=8)
-        ax.set_ylabel("force (N)", fontsize=8)
-        ax.tick_params(labelsize=7)
-    for ax in axes.ravel()[n:]:
-        ax.axis("off")
-    axes[0, 0].legend(fontsize=7, loc="upper right")
-    fig.suptitle(model.name, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    plotter = FitPlotter(records, labels)
+    try:
+        plotter.draw(model, path, sims)
+    finally:
+        plotter.close()
 
 
 def dma_markdown(ideal_rows, real_rows, coeffs, eq6, eq6_paper_a, a_fit, labels) -> str:
@@ -320,7 +401,9 @@ def main(args) -> int:
 
     log(f"identifying {len(kinds)} kind(s) x {len(orders)} order(s) on {estimation} ...")
     t0 = time.perf_counter()
-    models, table, info = identify_all(records, estimation, kinds, orders, fit_options, log)
+    sims: dict = {}
+    models, table, info = identify_all(records, estimation, kinds, orders, fit_options, log, jobs=args.jobs,
+                                       sims=sims)
     total = time.perf_counter() - t0
 
     with staged(out, IDENTIFY_OWNED) as tmp:
@@ -341,8 +424,10 @@ def main(args) -> int:
                 rec.to_csv(tmp / "data" / f"{name}.csv")
         _write_json(tmp / "summary.json", summary)
         (tmp / "models").mkdir()
+        plotter = None
         if not args.no_plots:
             (tmp / "plots").mkdir()
+            plotter = FitPlotter(records, labels)
         est = records[estimation]
         if no_load_v is not None:
             offsets = {"input_offset_v": est.voltage_offset_v - no_load_v, "output_offset_n": est.force_offset_n,
@@ -355,8 +440,10 @@ def main(args) -> int:
                 shift_operating_point(m, offsets["input_offset_v"], offsets["output_offset_n"],
                                       name=m.name + ", device (tared at no load)").save(
                     tmp / "models" / f"{k}-{o}-device.json")
-            if not args.no_plots:
-                plot_fit(m, records, labels, tmp / "plots" / f"{k}-{o}.png")
+            if plotter is not None:
+                plotter.draw(m, tmp / "plots" / f"{k}-{o}.png", sims[(k, o)])
+        if plotter is not None:
+            plotter.close()
 
     con.result({**summary, "fitness": {k: {str(o): v for o, v in by.items()} for k, by in table.items()},
                 "out": str(out)})

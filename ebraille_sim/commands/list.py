@@ -20,7 +20,7 @@ def catalogue() -> dict:
     import controllers
     from ebraille_sim.estimation.paper_models import KINDS, ORDERS
     from ebraille_sim.physics import params
-    from ebraille_sim.plant.loop import PLANT_BACKENDS
+    from ebraille_sim.plant.backends import PLANT_BACKENDS
     from ebraille_sim.scenarios.spec import library_dir, list_scenarios, load_scenario, resolve_scenario_path
 
     lib = library_dir()

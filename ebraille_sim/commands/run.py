@@ -15,7 +15,7 @@ class _Backends:
     """The names of :data:`ebraille_sim.plant.loop.PLANT_BACKENDS`, read when argparse asks."""
 
     def _names(self) -> list:
-        from ebraille_sim.plant.loop import PLANT_BACKENDS
+        from ebraille_sim.plant.backends import PLANT_BACKENDS
         return list(PLANT_BACKENDS)
 
     def __iter__(self):
@@ -44,6 +44,9 @@ def add_arguments(p):
                    help="plant model: %(choices)s (default: %(default)s)")
     p.add_argument("--trace", default="csv", choices=("csv", "parquet", "none"),
                    help="trace file: trace.csv (default), trace.parquet (needs pyarrow) or none")
+    p.add_argument("--trace-rate", type=number(0, None, lo_open=True), default=None, metavar="HZ",
+                   help="samples per second kept in the trace and the plot (default: every control period); "
+                        "must divide the control rate; the metrics always use every period")
     p.add_argument("--no-plot", action="store_true", help="skip force.png")
     p.add_argument("--no-supervisor", action="store_true",
                    help="run without the safety supervisor (on by default; the choice is printed and "
@@ -65,6 +68,29 @@ def failed_criteria(result) -> list[str]:
             lines.append(f"criterion failed: {c['metric']} = {shown}, expected {op} {c['limit']:g} "
                          f"([criteria] {key})")
     return lines
+
+
+def trace_every(spec, args) -> int | None:
+    """Control periods per kept trace sample from ``--trace-rate`` (None: no trace is needed,
+    ``--trace none`` with ``--no-plot``).
+
+    Raises
+    ------
+    UserError
+        The rate is above the control rate or does not divide it.
+    """
+    from ebraille_sim.commands import UserError
+    if args.trace == "none" and args.no_plot:
+        return None
+    if args.trace_rate is None:
+        return 1
+    control_hz = float(spec.device.rates.control_rate_hz)
+    ratio = control_hz / args.trace_rate
+    k = round(ratio)
+    if k < 1 or abs(ratio - k) > 1e-9 * ratio:
+        raise UserError(f"--trace-rate {args.trace_rate:g} Hz must divide the scenario's control rate "
+                        f"{control_hz:g} Hz (e.g. {control_hz:g}, {control_hz / 10:g} or {control_hz / 100:g} Hz)")
+    return int(k)
 
 
 def _targets(args, spec):
@@ -124,6 +150,7 @@ def main(args) -> int:
         raise UserError("--trace parquet needs pyarrow, which is not installed; use --trace csv or none")
     spec = load_scenario(args.scenario)
     check_duration(spec, args.duration)
+    every = trace_every(spec, args)
     out, anim = _targets(args, spec)
     try:
         ctrl = make_controller(spec, args.controller)
@@ -140,7 +167,7 @@ def main(args) -> int:
 
     def simulate():
         return run_scenario(spec, controller=ctrl, seed=args.seed, duration_s=args.duration,
-                            backend=args.backend, supervised=not args.no_supervisor)
+                            backend=args.backend, supervised=not args.no_supervisor, trace_every=every)
 
     frames = None
     if anim is not None:

@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import math
 
+from ebraille_sim.base.compiled import njit
 from ebraille_sim.physics.drivetrain import reflected_force_n, reflected_inertia_kg, shaft_to_rack_per_m
 from ebraille_sim.physics.fingertip import compression_at_force_m, elastic_force
 from ebraille_sim.physics.motor import rack_force_n
@@ -54,6 +55,7 @@ __all__ = ["push_force_bound_n", "current_for_push_force_a", "rack_speed_from_em
            "drive_bounds"]
 
 
+@njit(cache=True, inline="always")
 def push_force_bound_n(current_a, kt_nm_per_a, shaft_to_rack, gear_efficiency, friction_torque_nm, weight_n):
     """Largest steady force (N) the drive pushes the finger with at motor current ``current_a``: eq. (1)."""
     return gear_efficiency * (rack_force_n(current_a, kt_nm_per_a, shaft_to_rack)
@@ -65,6 +67,7 @@ def current_for_push_force_a(force_n, kt_nm_per_a, shaft_to_rack, gear_efficienc
     return ((force_n - weight_n) / gear_efficiency / shaft_to_rack + friction_torque_nm) / kt_nm_per_a
 
 
+@njit(cache=True, inline="always")
 def rack_speed_from_emf_m_per_s(voltage_v, current_a, resistance_ohm, back_emf_v_s_per_rad, shaft_to_rack):
     """Rack speed (m/s) read from the back-EMF: ``(u - R i) / kE / (N/r)``."""
     return (voltage_v - resistance_ohm * current_a) / back_emf_v_s_per_rad / shaft_to_rack

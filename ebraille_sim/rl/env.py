@@ -574,7 +574,7 @@ class ContactForceEnv(gym.Env):
                                 disturbances=disturbances, effort_weight=effort_weight,
                                 violation_weight=violation_weight, backend=backend, base_device=base_device,
                                 safety=safety)
-        from ebraille_sim.plant.loop import PLANT_BACKENDS
+        from ebraille_sim.plant.backends import PLANT_BACKENDS
         if backend not in PLANT_BACKENDS:
             raise ValueError(f"unknown backend {backend!r}; available: {', '.join(sorted(PLANT_BACKENDS))}")
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)

@@ -7,37 +7,91 @@ electrotactile display shows them for a dwell time like any other cell.
 
 Rules implemented
 -----------------
+The cell patterns below are those of EBAE (Braille Authority of North
+America, *English Braille, American Edition*, 1994 revision) as encoded in
+the liblouis table ``en-us-g1.ctb`` (with ``en-chardefs.cti``, which it
+includes); the liblouis rule behind each pattern is named in brackets.
+``tests/test_braille_liblouis.py`` compares the transcription with liblouis
+cell by cell when liblouis is installed.
+
 Letters
     ``a``-``z`` use the standard EBAE letter patterns.
 Capitals
     The capital sign (dot 6) precedes an uppercase letter. A run of two or
     more consecutive ASCII letters that are all uppercase (for example
     ``"USA"``) is preceded by the double capital sign (two dot-6 cells) and
-    its letters are written without further capital signs. Pass
-    ``double_capital=False`` to :func:`text_to_cells` to mark every capital
-    letter individually instead.
+    its letters are written without further capital signs
+    [``capsletter 6``, ``begcapsword 6-6``]. Pass ``double_capital=False`` to
+    :func:`text_to_cells` to mark every capital letter individually instead.
 Numbers
     The number sign (dots 3-4-5-6) precedes a run of digits; the digits
-    ``1``-``9`` and ``0`` use the patterns of ``a``-``j``. Inside a number
-    (a digit on both sides) a comma keeps its comma form (dot 2) and a
-    period is written as the EBAE decimal point (dots 4-6); neither repeats
-    the number sign. Any other character ends the number.
+    ``1``-``9`` and ``0`` use the patterns of ``a``-``j`` [``numsign 3456``].
+    Between two digits these signs keep the number going, so the number sign
+    is not repeated after them [``midnum``, ``decpoint``]: comma 2, decimal
+    point 4-6, colon 2-5 (``7:15``), hyphen 3-6 (``555-1212``) and the
+    fraction line 3-4 (``3/4``). A hyphen directly after a digit and before a
+    letter also keeps the number going, so a following ``a``-``j`` gets the
+    letter sign (``1-a``). Any other character, the dash included, ends the
+    number.
 Letter sign
-    A lowercase letter ``a``-``j`` written directly after a digit would read
-    as a digit, so the letter sign (dots 5-6) is inserted before it. An
-    uppercase letter after a digit needs no letter sign because its capital
+    A lowercase letter ``a``-``j`` written directly after a number would
+    read as a digit, so the letter sign (dots 5-6) is inserted before it
+    [``letsign 56``]. An uppercase letter needs none because its capital
     sign already ends the number.
-Punctuation (EBAE single-cell forms)
+Punctuation (single-cell forms)
     ``,`` 2; ``;`` 2-3; ``:`` 2-5; ``.`` 2-5-6; ``!`` 2-3-5; ``?`` 2-3-6;
-    ``'`` 3; ``-`` 3-6; ``(`` and ``)`` 2-3-5-6; opening double quote 2-3-6;
-    closing double quote 3-5-6. A plain ``"`` alternates between opening and
-    closing, starting with opening; typographic ``“`` and ``”`` set the form
-    explicitly and ``’`` is read as an apostrophe. In EBAE the opening quote
-    and the question mark share the pattern 2-3-6.
+    ``-`` (hyphen) 3-6; ``(`` and ``)`` 2-3-5-6; opening double quote 2-3-6;
+    closing double quote 3-5-6; apostrophe 3 [``postpunc``, ``prepunc``,
+    ``hyphen``, ``punctuation`` rules]. A plain ``"`` alternates between
+    opening and closing, starting with opening; ``“`` and ``”`` set the form
+    explicitly. In EBAE the opening double quote and the question mark share
+    the pattern 2-3-6.
+Single quotes and apostrophe
+    Opening single quote 6, 2-3-6 (two cells); closing single quote 3-5-6, 3
+    (two cells); apostrophe 3 [``prepunc ' 6-236``, ``postpunc ' 356-3``,
+    ``punctuation ' 3``]. A plain ``'`` opens a quotation when it begins a
+    word (at the start of the text or after white space or an opening
+    bracket or quote) and is followed by a non-space character, except in
+    ``'em``, ``'tis`` and ``'twas`` [``word 'em``, ``word 'tis``,
+    ``word 'twas``]; it closes an open quotation when it ends a word (the
+    next character is not a letter or digit); otherwise it is an apostrophe
+    (``it's``, ``o'clock``, ``dogs'`` outside a quotation). ``‘`` always
+    opens; ``’`` closes an open quotation at the end of a word and is an
+    apostrophe otherwise.
+Dash
+    A dash is two unspaced hyphen cells, 3-6, 3-6 [``always \\s-\\s 36-36``,
+    ``always \\s--\\s 36-36``, ``punctuation \\x2014 36-36``]. It is written
+    for ``--``, for an em dash ``—`` or en dash ``–``, and for a single
+    hyphen with one space on each side (``word - word``). When the print
+    dash has exactly one space on each side, both spaces are dropped
+    (``word - word`` and ``word -- word`` give ``word``, dash, ``word``). A
+    run of three hyphens is a dash followed by a hyphen.
+Ellipsis
+    Three periods ``...``, or ``. . .`` with single spaces, give three dot-3
+    cells, 3-3-3 [``always ... 3-3-3``, ``always .\\s.\\s. 3-3-3``]; the
+    spaces inside ``. . .`` are dropped, spaces around the ellipsis are kept.
+Percent and slash
+    ``%`` is the three cells 4, 2-5, 1-2-3-4 [``always % 4-25-1234``] and
+    ends a number (a number after it takes a new number sign). ``/`` is the
+    oblique stroke 4-5-6, 3-4 (two cells) [``always / 456-34``] except
+    between two digits, where it is the fraction line 3-4 (see Numbers).
 White space
     A space gives an empty cell. A newline (``\\n``, ``\\r\\n`` or ``\\r``)
     gives an empty cell with ``line_end=True`` so that a reading schedule
-    can add a line pause. Other characters (tabs included) are rejected.
+    can add a line pause.
+Rejected characters
+    Every other character (tabs, ``@``, ``&``, ``€``, ``…`` and so on) raises
+    a ``ValueError`` naming the character, its position and the accepted
+    set (:data:`ACCEPTED_CHARACTERS`).
+
+Differences from liblouis ``en-us-g1.ctb``
+    liblouis writes the letter sign before every single letter standing
+    alone (``a``, ``I``); this transcription does not. liblouis keeps the
+    spaces around a spaced em or en dash (`` — ``), writes ``’`` always as an
+    apostrophe, turns a word-final ``s'`` into an apostrophe even inside a
+    single-quoted passage, and maps ``…`` to one dot-3 cell; here the dash
+    is unspaced, ``’`` and ``s'`` close an open quotation, and ``…`` is
+    rejected.
 
 Dot numbering and bit masks follow the Unicode Braille Patterns block:
 dots 1-2-3 run down the left column, dots 4-5-6 down the right column, and
@@ -62,6 +116,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 __all__ = [
+    "ACCEPTED_CHARACTERS",
     "CELL_KINDS",
     "Cell",
     "cells_to_unicode",
@@ -131,21 +186,54 @@ _PUNCTUATION_DOTS: dict[str, tuple[int, ...]] = {
     ".": (2, 5, 6),
     "!": (2, 3, 5),
     "?": (2, 3, 6),
-    "'": (3,),
-    "\u2019": (3,),
     "-": (3, 6),
     "(": (2, 3, 5, 6),
     ")": (2, 3, 5, 6),
 }
 
+_APOSTROPHE_DOTS: tuple[int, ...] = (3,)
 _OPEN_QUOTE_DOTS: tuple[int, ...] = (2, 3, 6)
 _CLOSE_QUOTE_DOTS: tuple[int, ...] = (3, 5, 6)
+_OPEN_SINGLE_QUOTE_DOTS: tuple[tuple[int, ...], ...] = ((6,), (2, 3, 6))
+_CLOSE_SINGLE_QUOTE_DOTS: tuple[tuple[int, ...], ...] = ((3, 5, 6), (3,))
+_DASH_DOTS: tuple[tuple[int, ...], ...] = ((3, 6), (3, 6))
+_ELLIPSIS_DOTS: tuple[tuple[int, ...], ...] = ((3,), (3,), (3,))
+_PERCENT_DOTS: tuple[tuple[int, ...], ...] = ((4,), (2, 5), (1, 2, 3, 4))
+_SLASH_DOTS: tuple[tuple[int, ...], ...] = ((4, 5, 6), (3, 4))
 _DECIMAL_POINT_DOTS: tuple[int, ...] = (4, 6)
+_FRACTION_LINE_DOTS: tuple[int, ...] = (3, 4)
 _CAPITAL_SIGN_DOTS: tuple[int, ...] = (6,)
 _NUMBER_SIGN_DOTS: tuple[int, ...] = (3, 4, 5, 6)
 _LETTER_SIGN_DOTS: tuple[int, ...] = (5, 6)
 
 _LETTER_SIGN_TRIGGERS: frozenset[str] = frozenset("abcdefghij")
+# signs between two digits that keep the number going (no new number sign)
+_MIDNUM_DOTS: dict[str, tuple[int, ...]] = {
+    ",": (2,),
+    ".": _DECIMAL_POINT_DOTS,
+    ":": (2, 5),
+    "-": (3, 6),
+    "/": _FRACTION_LINE_DOTS,
+}
+_TYPOGRAPHIC_DASHES: frozenset[str] = frozenset("\u2013\u2014")
+# characters after which a plain ' begins a quotation
+_QUOTE_OPENERS: frozenset[str] = frozenset('("\u201c\u2018')
+# words whose leading ' is an apostrophe, not an opening quote
+_APOSTROPHE_WORDS: tuple[str, ...] = ("twas", "tis", "em")
+
+ACCEPTED_CHARACTERS: str = (
+    "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789"
+    " \n\r" + "".join(sorted(set(_PUNCTUATION_DOTS) | set("\"'%/"))) + "\u201c\u201d\u2018\u2019\u2013\u2014"
+)
+"""Every character :func:`text_to_cells` accepts: ASCII letters and digits,
+space, newline (``\\n``, ``\\r``), ``! " % ' ( ) , - . / : ; ?`` and the
+typographic quotes and dashes ``“ ” ‘ ’ – —``."""
+
+_ACCEPTED_DESCRIPTION: str = (
+    "letters A-Z a-z, digits 0-9, space, newline and "
+    + " ".join(sorted(set(_PUNCTUATION_DOTS) | set("\"'%/")))
+    + " \u201c \u201d \u2018 \u2019 \u2013 \u2014"
+)
 
 
 def dots_to_mask(dots: Iterable[int]) -> int:
@@ -247,19 +335,78 @@ def _letter_run_end(text: str, start: int) -> int:
     return end
 
 
-def text_to_cells(text: str, *, double_capital: bool = True) -> list[Cell]:
+def _is_digit(text: str, i: int) -> bool:
+    return 0 <= i < len(text) and text[i].isascii() and text[i].isdigit()
+
+
+def _is_alnum(text: str, i: int) -> bool:
+    return 0 <= i < len(text) and text[i].isascii() and text[i].isalnum()
+
+
+def _dash_length(text: str, i: int) -> int:
+    """Characters of the print dash starting at `i` (0 if none), spaces not counted."""
+    if text[i] in _TYPOGRAPHIC_DASHES:
+        return 1
+    if text.startswith("--", i):
+        return 2
+    return 0
+
+
+def _spaced_dash_length(text: str, i: int) -> int:
+    """Length of a print dash after the space at `i` that has one space on each side.
+
+    The dash is ``-``, ``--``, ``–`` or ``—``; 0 when there is none or the
+    spacing differs (no space after it, or two spaces on a side).
+    """
+    start = i + 1
+    if start >= len(text) or (i >= 1 and text[i - 1] == " "):
+        return 0
+    length = _dash_length(text, start) or (1 if text[start] == "-" else 0)
+    end = start + length
+    if length == 0 or end >= len(text) or text[end] != " ":
+        return 0
+    if end + 1 < len(text) and text[end + 1] == " ":
+        return 0
+    return length
+
+
+def _ellipsis_length(text: str, i: int) -> int:
+    """Characters of the ellipsis ``...`` or ``. . .`` starting at `i` (0 if none)."""
+    if text.startswith("...", i):
+        return 3
+    if text.startswith(". . .", i):
+        return 5
+    return 0
+
+
+def _opens_single_quote(text: str, i: int) -> bool:
+    """Whether the plain ``'`` at `i` begins a quotation (see the module rules)."""
+    if i + 1 >= len(text) or text[i + 1].isspace():
+        return False
+    if i > 0 and not (text[i - 1].isspace() or text[i - 1] in _QUOTE_OPENERS):
+        return False
+    for word in _APOSTROPHE_WORDS:
+        end = i + 1 + len(word)
+        if text[i + 1:end].lower() == word and not _is_alnum(text, end):
+            return False
+    return True
+
+
+def text_to_cells(
+    text: str, *, double_capital: bool = True
+) -> list[Cell]:
     """Transcribe text into English Grade 1 (EBAE, uncontracted) Braille cells.
 
     Parameters
     ----------
     text : str
-        Text made of ASCII letters, digits, spaces, newlines and the
-        punctuation ``, ; : . ! ? ' - ( ) "`` (plus ``“ ” ’``).
+        Text made of the characters in :data:`ACCEPTED_CHARACTERS`: ASCII
+        letters, digits, spaces, newlines, the punctuation
+        ``! " % ' ( ) , - . / : ; ?`` and ``“ ” ‘ ’ – —``.
     double_capital : bool, optional
         If True (default), a run of two or more consecutive uppercase ASCII
         letters gets the double capital sign (two dot-6 cells) instead of a
         capital sign before each letter.
-
     Returns
     -------
     list of Cell
@@ -269,7 +416,7 @@ def text_to_cells(text: str, *, double_capital: bool = True) -> list[Cell]:
     ------
     ValueError
         If a character cannot be transcribed; the message names the
-        character and its 0-based position in `text`.
+        character, its 0-based position in `text` and the accepted set.
 
     Examples
     --------
@@ -277,6 +424,8 @@ def text_to_cells(text: str, *, double_capital: bool = True) -> list[Cell]:
     [(6,), (1, 2, 5), (2, 4)]
     >>> cells_to_unicode(text_to_cells("10a"))
     '⠼⠁⠚⠰⠁'
+    >>> cells_to_unicode(text_to_cells("at 7:15 - wait..."))
+    '⠁⠞⠀⠼⠛⠒⠁⠑⠤⠤⠺⠁⠊⠞⠄⠄⠄'
     """
     if not isinstance(text, str):
         raise ValueError(f"text must be a str, got {type(text).__name__}")
@@ -284,9 +433,15 @@ def text_to_cells(text: str, *, double_capital: bool = True) -> list[Cell]:
     cells: list[Cell] = []
     in_number = False
     quote_open = False
+    single_quote_open = False
     caps_run_end = -1
     n = len(text)
     i = 0
+
+    def signs(char: str, patterns: tuple[tuple[int, ...], ...]) -> None:
+        for dots in patterns:
+            cells.append(_cell(char, dots, "punctuation"))
+
     while i < n:
         ch = text[i]
         lower = ch.lower()
@@ -301,13 +456,10 @@ def text_to_cells(text: str, *, double_capital: bool = True) -> list[Cell]:
 
         if (
             in_number
-            and ch in ",."
-            and i + 1 < n
-            and text[i + 1].isascii()
-            and text[i + 1].isdigit()
+            and ch in _MIDNUM_DOTS
+            and _is_digit(text, i + 1)
         ):
-            dots = _PUNCTUATION_DOTS[","] if ch == "," else _DECIMAL_POINT_DOTS
-            cells.append(_cell(ch, dots, "punctuation"))
+            cells.append(_cell(ch, _MIDNUM_DOTS[ch], "punctuation"))
             i += 1
             continue
 
@@ -329,9 +481,27 @@ def text_to_cells(text: str, *, double_capital: bool = True) -> list[Cell]:
             i += 1
             continue
 
+        if (
+            in_number
+            and ch == "-"
+            and i + 1 < n
+            and text[i + 1].isascii()
+            and text[i + 1].isalpha()
+        ):
+            # "1-a": the number goes on through the hyphen (letter sign before a-j)
+            cells.append(_cell(ch, _PUNCTUATION_DOTS["-"], "punctuation"))
+            i += 1
+            continue
+
         in_number = False
 
         if ch == " ":
+            dash = _spaced_dash_length(text, i)
+            if dash:
+                # EBAE writes the dash unspaced: both print spaces are dropped
+                signs(text[i + 1], _DASH_DOTS)
+                i += dash + 2
+                continue
             cells.append(_cell(" ", (), "space"))
             i += 1
             continue
@@ -339,6 +509,18 @@ def text_to_cells(text: str, *, double_capital: bool = True) -> list[Cell]:
         if ch in "\r\n":
             cells.append(_cell("\n", (), "space", line_end=True))
             i += 2 if text.startswith("\r\n", i) else 1
+            continue
+
+        dash = _dash_length(text, i)
+        if dash:
+            signs(ch, _DASH_DOTS)
+            i += dash
+            continue
+
+        ellipsis = _ellipsis_length(text, i)
+        if ellipsis:
+            signs(".", _ELLIPSIS_DOTS)
+            i += ellipsis
             continue
 
         if ch == '"':
@@ -360,12 +542,40 @@ def text_to_cells(text: str, *, double_capital: bool = True) -> list[Cell]:
             i += 1
             continue
 
+        if ch == "\u2018" or (ch == "'" and _opens_single_quote(text, i)):
+            single_quote_open = True
+            signs(ch, _OPEN_SINGLE_QUOTE_DOTS)
+            i += 1
+            continue
+
+        if ch in "'\u2019":
+            if single_quote_open and i > 0 and not text[i - 1].isspace() and not _is_alnum(text, i + 1):
+                single_quote_open = False
+                signs(ch, _CLOSE_SINGLE_QUOTE_DOTS)
+            else:
+                cells.append(_cell(ch, _APOSTROPHE_DOTS, "punctuation"))
+            i += 1
+            continue
+
+        if ch == "%":
+            signs(ch, _PERCENT_DOTS)
+            i += 1
+            continue
+
+        if ch == "/":
+            signs(ch, _SLASH_DOTS)
+            i += 1
+            continue
+
         if ch in _PUNCTUATION_DOTS:
             cells.append(_cell(ch, _PUNCTUATION_DOTS[ch], "punctuation"))
             i += 1
             continue
 
-        raise ValueError(f"cannot transcribe {ch!r} at position {i} to Grade 1 Braille")
+        raise ValueError(
+            f"cannot transcribe {ch!r} at position {i} to Grade 1 Braille; "
+            f"accepted: {_ACCEPTED_DESCRIPTION}"
+        )
 
     return cells
 

@@ -151,6 +151,8 @@ def reading_text(spec: ScenarioSpec) -> str:
 @functools.lru_cache(maxsize=64)
 def _cells_of(text: str) -> tuple:
     from ebraille_sim.scenarios.braille import text_to_cells
+    # the transcription the scenario baselines were recorded with (spaced hyphen, number
+    # sign repeated after ':' and '-'); see ebraille_sim.scenarios.braille
     return tuple(text_to_cells(text))
 
 

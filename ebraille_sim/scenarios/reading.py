@@ -3,15 +3,20 @@
 Rate convention
 ---------------
 Reading rate is given in words per minute (wpm) using the standard-word
-convention of typing-rate measurement: one "word" is five displayed Braille
-cells, counting spaces and composition signs (capital, number and letter
-signs) as cells. The mean dwell per cell is therefore::
+convention of typing-rate measurement: one "word" is five characters, counted
+as displayed Braille cells. Every cell counts once: a letter, a digit, a
+punctuation cell, a composition sign (capital, number or letter sign) and the
+empty cell of a space or a newline. Signs of several cells (the dash, the
+ellipsis, ``%``) count as that many cells. The mean dwell per cell is
+therefore::
 
     mean_dwell_s = 60 / (5 * wpm)
 
-which gives 0.2 s per cell at 60 wpm and 0.1 s per cell at 120 wpm. Typical
-fluent electrotactile reading lies around 60-120 wpm; that range is
-documented here but not enforced (any finite rate in (0, 1000] is accepted).
+which gives 0.2 s per cell at 60 wpm, 0.1 s at 120 wpm, 75 ms at 160 wpm and
+60 ms at 200 wpm (1000 cells per minute). The median braille reader reads
+about 124 wpm and fast readers reach about 200 wpm (Legge et al. 1999, 44
+readers); the shipped scenarios read at 60, 90, 120, 160 and 200 wpm. Any
+finite rate in (0, 1000] (:data:`MAX_WPM`) is accepted.
 
 A schedule shows cell ``k`` during the half-open interval
 ``[start_s[k], start_s[k] + dwell_s[k])``. Cells follow one another without
@@ -96,6 +101,8 @@ def mean_dwell_s(wpm: float) -> float:
     --------
     >>> mean_dwell_s(120)
     0.1
+    >>> round(mean_dwell_s(200), 9)
+    0.06
     """
     return 60.0 / (CELLS_PER_WORD * _check_wpm(wpm))
 
@@ -225,7 +232,7 @@ def build_schedule(
     wpm : float
         Nominal reading rate in words per minute, one word being 5 cells
         (spaces and signs included). Must be finite and in (0, 1000];
-        60-120 wpm is typical.
+        about 124 wpm is the median braille reader, 200 wpm a fast one.
     start_s : float, optional
         Time in seconds at which the first cell appears. Default 0.
     jitter_fraction : float, optional

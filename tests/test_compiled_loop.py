@@ -1,0 +1,263 @@
+"""The compiled controller steps and the one-call scenario loop give the per-period loop's
+numbers to the last bit."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import controllers
+import ebraille_sim
+from controllers.compiled import KIND_LQG, KIND_PID, MAP_POINTS, PP, PS, controller_reset, controller_step, map_reference
+from ebraille_sim.scenarios import compiled_loop, runner
+
+CONTROLLERS = ["pid", "pid_scheduled", "pid_feedforward", "pid_friction", "lqg", "actuator_bound"]
+SCENARIOS = [("steady_90wpm", 2.0), ("setpoint_steps", 6.0), ("battery_sag", 3.0), ("pressing_90wpm", 3.0),
+             ("refresh_120wpm", 2.0)]
+
+
+class PythonProxy:
+    """A plain Python controller around another one (no compiled form: the per-period loop)."""
+
+    def __init__(self, inner):
+        self.inner = inner
+        self.name = inner.name
+        feedback = getattr(inner, "feedback", None)
+        if feedback is not None:
+            self.feedback = feedback
+
+    def reset(self, **kw):
+        self.inner.reset(**kw)
+
+    def update(self, force_est_n, setpoint_n, dt_s, motor_current_a=None):
+        return self.inner.update(force_est_n, setpoint_n, dt_s, motor_current_a)
+
+
+@pytest.fixture
+def loop_calls(monkeypatch):
+    """Count the calls of the compiled loop."""
+    calls = []
+    real = compiled_loop.run_loop
+
+    def counted(*args):
+        calls.append(1)
+        return real(*args)
+
+    monkeypatch.setattr(compiled_loop, "run_loop", counted)
+    return calls
+
+
+def _metrics(res):
+    return {k: v for k, v in res.metrics.items() if k != "real_time_factor"}
+
+
+def _assert_same_runs(a, b):
+    assert a.trace.keys() == b.trace.keys()
+    for col in a.trace:
+        assert np.array_equal(a.trace[col], b.trace[col]), col
+    assert _metrics(a) == _metrics(b)
+
+
+@pytest.mark.parametrize("scenario,duration_s", SCENARIOS)
+@pytest.mark.parametrize("name", CONTROLLERS)
+def test_compiled_loop_equals_the_per_period_loop(name, scenario, duration_s, loop_calls, monkeypatch):
+    ctrl_c = controllers.make(name)
+    ctrl_p = controllers.make(name)
+    res_c = ebraille_sim.run_scenario(scenario, controller=ctrl_c, duration_s=duration_s, supervised=False)
+    assert len(loop_calls) == 1
+    monkeypatch.setattr(runner, "_USE_COMPILED_LOOP", False)
+    res_p = ebraille_sim.run_scenario(scenario, controller=ctrl_p, duration_s=duration_s, supervised=False)
+    assert len(loop_calls) == 1
+    _assert_same_runs(res_c, res_p)
+    # the compiled run left its final state in the Python object
+    _, s_c, _ = ctrl_c.compiled()
+    _, s_p, _ = ctrl_p.compiled()
+    assert np.array_equal(s_c, s_p)
+
+
+def test_default_pid_schedules_its_gains_above_one_newton_in_the_compiled_loop():
+    """setpoint_steps goes above 1 N, where the default PID scales its gains: the same run
+    with the schedule off gives another trace (so the scaling is exercised in the loop)."""
+    a = ebraille_sim.run_scenario("setpoint_steps", controller="pid", duration_s=6.0, supervised=False)
+    b = ebraille_sim.run_scenario("setpoint_steps", controller=controllers.make("pid", schedule_above_n=None),
+                                  duration_s=6.0, supervised=False)
+    assert a.trace["setpoint_n"].max() > 1.0
+    assert not np.array_equal(a.trace["command_v"], b.trace["command_v"])
+
+
+@pytest.mark.parametrize("every", [None, 7])
+def test_thin_traces_are_the_same_in_both_loops(every, monkeypatch):
+    a = ebraille_sim.run_scenario("pressing_90wpm", controller="pid_friction", duration_s=2.0, supervised=False,
+                                  trace_every=every)
+    monkeypatch.setattr(runner, "_USE_COMPILED_LOOP", False)
+    b = ebraille_sim.run_scenario("pressing_90wpm", controller="pid_friction", duration_s=2.0, supervised=False,
+                                  trace_every=every)
+    _assert_same_runs(a, b)
+    assert (len(a.trace["t_s"]) == 2000 // 7) if every else a.trace == {}
+
+
+def test_a_python_controller_runs_the_per_period_loop(loop_calls):
+    proxy = ebraille_sim.run_scenario("steady_90wpm", controller=PythonProxy(controllers.make("pid_scheduled")),
+                                      duration_s=1.0, supervised=False)
+    assert loop_calls == []
+    direct = ebraille_sim.run_scenario("steady_90wpm", controller="pid_scheduled", duration_s=1.0, supervised=False)
+    assert len(loop_calls) == 1
+    _assert_same_runs(proxy, direct)
+    f, sp = direct.trace["force_true_n"][-1], direct.trace["setpoint_n"][-1]
+    assert sp > 0.5 and abs(f - sp) < 0.25 * sp                   # the loop holds the force
+
+
+def test_true_force_feedback_in_the_compiled_loop():
+    """actuator_bound is fed the true force: its loop differs from the same PID fed the estimate."""
+    from controllers.bounds import TrueForce
+    bound = ebraille_sim.run_scenario("pressing_90wpm", controller="actuator_bound", duration_s=2.0, supervised=False)
+    inner = controllers.make("actuator_bound").inner
+    est = ebraille_sim.run_scenario("pressing_90wpm", controller=inner, duration_s=2.0, supervised=False)
+    assert not np.array_equal(bound.trace["command_v"], est.trace["command_v"])
+    again = ebraille_sim.run_scenario("pressing_90wpm", controller=TrueForce(controllers.make("actuator_bound").inner),
+                                      duration_s=2.0, supervised=False)
+    assert np.array_equal(bound.trace["command_v"], again.trace["command_v"])
+
+
+SUPERVISED_CASES = [("steady_90wpm", "pid", 3.0), ("setpoint_steps", "pid", 6.0), ("contact_onset", "pid", 3.0),
+                    ("pressing_90wpm", "pid_feedforward", 4.0), ("refresh_120wpm", "lqg", 3.0),
+                    ("battery_sag", "pid_friction", 4.0), ("fault_fsr_stuck", "pid", 6.0),
+                    ("fault_motor_stall", "pid", 6.0), ("fault_finger_withdrawn", "pid_scheduled", 8.0),
+                    ("fault_fsr_open", "pid", 6.0), ("fault_fsr_short", "actuator_bound", 6.0)]
+
+
+@pytest.mark.parametrize("scenario, controller, duration", SUPERVISED_CASES)
+def test_supervised_runs_use_the_compiled_loop_and_equal_the_per_period_loop(scenario, controller, duration,
+                                                                             loop_calls, monkeypatch):
+    """With the safety supervisor on (the default) the compiled loop steps the supervisor's
+    compiled period around the compiled controller: every trace column, the metrics and the
+    supervisor's record (fault, events) equal the per-period loop's, where the Python
+    Supervisor calls the Python controller, faults and mid-run inner resets included."""
+    fast = ebraille_sim.run_scenario(scenario, controller=controller, duration_s=duration)
+    assert fast.supervisor["enabled"] and len(loop_calls) == 1
+    monkeypatch.setattr(runner, "_USE_COMPILED_LOOP", False)
+    slow = ebraille_sim.run_scenario(scenario, controller=controller, duration_s=duration)
+    assert len(loop_calls) == 1
+    _assert_same_runs(fast, slow)
+    assert fast.supervisor == slow.supervisor
+    if scenario in ("fault_fsr_stuck", "fault_motor_stall"):
+        assert fast.supervisor["fault"] is not None and fast.supervisor["events"]
+
+
+def test_a_bad_setpoint_raises_the_controllers_error_in_the_compiled_loop():
+    spec, _, run, ctrl = runner.prepare_run("steady_90wpm", "pid", duration_s=0.05)
+    sp = run.setpoint_n[:run.n_steps].copy()
+    sp[3] = math.nan
+    plant = runner._plant_for(spec, run, "lumped")
+    ctrl.reset(force_est_n=0.0, setpoint_n=1.0, command_v=0.0)
+    form = runner._loop_form(ctrl, ctrl, plant, "lumped")
+    n = run.n_steps
+    with pytest.raises(ValueError, match="setpoint_n must be finite"):
+        runner._run_compiled(form, plant, run, ctrl, sp, runner.S.force_est_n, 1, np.zeros(n), np.zeros(n),
+                             np.zeros((len(compiled_loop.KEPT), n)))
+
+
+def test_other_backends_and_wrapped_controllers_have_no_compiled_loop():
+    spec, _, run, ctrl = runner.prepare_run("steady_90wpm", "pid", duration_s=0.05)
+    plant = runner._plant_for(spec, run, "lumped")
+    assert runner._loop_form(ctrl, ctrl, plant, "lumped") is not None
+    assert runner._loop_form(ctrl, PythonProxy(ctrl), plant, "lumped") is None
+    assert runner._loop_form(PythonProxy(ctrl), PythonProxy(ctrl), plant, "lumped") is None
+
+
+# --- the compiled steps against the classes, on random inputs -------------------------------
+
+def _random_walk(name, seed, n=400):
+    rng = np.random.default_rng(seed)
+    a, b = controllers.make(name), controllers.make(name)
+    kind, s, p = b.compiled()
+    out_a, out_b = [], []
+    for k in range(n):
+        y = float(rng.uniform(-0.5, 3.5))
+        r = float(rng.choice([0.3, 1.0, 2.0, 2.9, rng.uniform(0.0, 3.2)]))
+        h = float(rng.choice([1e-3, 1e-3, 2e-3, rng.uniform(1e-4, 0.03)]))
+        cur = float(rng.normal(0.0, 0.2))
+        if k % 97 == 0:
+            u0 = float(rng.uniform(-8.0, 8.0))
+            a.reset(force_est_n=y, setpoint_n=r, command_v=u0)
+            controller_reset(kind, s, p, y, r, u0)
+        out_a.append(a.update(y, r, h, cur))
+        out_b.append(controller_step(kind, s, p, y, r, h, cur))
+    return np.array(out_a), np.array(out_b), kind
+
+
+@pytest.mark.parametrize("name", CONTROLLERS)
+def test_the_class_and_the_compiled_step_give_the_same_commands(name):
+    ua, ub, kind = _random_walk(name, seed=len(name))
+    assert kind == (KIND_LQG if name == "lqg" else KIND_PID)
+    assert np.array_equal(ua, ub)
+    assert np.all(np.isfinite(ua)) and np.ptp(ua) > 0.1          # the inputs moved the command
+
+
+def test_pid_state_round_trip_after_compiled_steps():
+    pid = controllers.make("pid")
+    pid.reset(force_est_n=0.5, setpoint_n=1.5, command_v=0.3)
+    kind, s, p = pid.compiled()
+    for _ in range(5):
+        controller_step(kind, s, p, 0.7, 1.5, 1e-3, 0.0)
+    st = pid.state()
+    assert st["integrator_v"] == s[PS.integrator_v] and st["prev_error_n"] == pytest.approx(0.8)
+    other = controllers.make("pid")
+    other.set_state(st)
+    assert other.update(0.9, 1.5, 1e-3) == pid.update(0.9, 1.5, 1e-3)
+
+
+def test_the_reference_map_interpolates_as_numpy():
+    c = controllers.make("pid_scheduled")
+    f = c._p[PP.map_force_n0:PP.map_force_n0 + MAP_POINTS]
+    e = c._p[PP.map_estimate_n0:PP.map_estimate_n0 + MAP_POINTS]
+    rng = np.random.default_rng(0)
+    xs = np.concatenate([rng.uniform(0.2, 3.3, 3000), f, [0.2000000001, 2.9999999, 3.0, 3.5]])
+    for x in xs:
+        assert map_reference(c._p, float(x)) == float(np.interp(x, f, e)), x
+    assert map_reference(c._p, 0.1) == 0.1 * e[0] / f[0]
+    assert c.reference(1.0) != 1.0                                # the map moves the setpoint
+
+
+def test_the_compiled_pid_follows_the_recursion_of_the_pid_docstring():
+    """An independent Python transcription of controllers/pid.py's recursion (forward-Euler
+    integral with capped back-calculation, backward-difference filtered derivative, gains
+    scaled by PIDConfig.gain_scale) gives the compiled PID's commands exactly."""
+    cfg = controllers.pid.PIDConfig(kp_v_per_n=2.0, ki_v_per_ns=8.0, kd_vs_per_n=0.01, derivative_filter_s=0.005,
+                                    setpoint_weight_p=0.8, setpoint_weight_d=0.5, u_min_v=-2.0, u_max_v=2.5,
+                                    schedule_above_n=1.0)
+    pid = controllers.PID(cfg)
+    inv_tt = 1.0 / cfg.effective_tracking_time_s
+    rng = np.random.default_rng(5)
+    y0, r0 = 0.4, 1.5
+    pid.reset(force_est_n=y0, setpoint_n=r0, command_v=0.7)
+    a0 = cfg.gain_scale(r0)
+    i = 0.7 - cfg.kp_v_per_n * a0 * (cfg.setpoint_weight_p * r0 - y0)
+    d, w_prev, e_prev, res_prev = 0.0, cfg.setpoint_weight_d * r0 - y0, 0.0, 0.0
+    for _ in range(500):
+        y, r, h = float(rng.uniform(0.0, 3.0)), float(rng.choice([0.5, 1.0, 2.5])), float(rng.uniform(5e-4, 5e-3))
+        a = cfg.gain_scale(r)
+        kp, ki, kd = cfg.kp_v_per_n * a, cfg.ki_v_per_ns * a, cfg.kd_vs_per_n * a
+        i = i + ki * h * e_prev + min(h * inv_tt, 1.0) * res_prev
+        w = cfg.setpoint_weight_d * r - y
+        d = (cfg.derivative_filter_s * d + kd * (w - w_prev)) / (cfg.derivative_filter_s + h)
+        v = kp * (cfg.setpoint_weight_p * r - y) + i + d
+        u = min(max(v, cfg.u_min_v), cfg.u_max_v)
+        w_prev, e_prev, res_prev = w, r - y, u - v
+        assert pid.update(y, r, h) == u
+
+
+def test_a_batch_of_unsupervised_rows_runs_each_row_in_one_compiled_call(loop_calls):
+    import dataclasses
+    from ebraille_sim.scenarios.spec import load_scenario
+    spec = load_scenario("pressing_90wpm")
+    spec = dataclasses.replace(spec, sections={**spec.sections, "supervisor": {"enabled": False}})
+    runs = [{"scenario": spec, "controller": name, "seed": seed, "duration_s": 1.5}
+            for name, seed in (("pid", 1), ("lqg", 2), ("pid_friction", 3))]
+    batch = runner.run_batch(runs)
+    assert len(loop_calls) == 3
+    for kw, res in zip(runs, batch):
+        single = ebraille_sim.run_scenario(**kw)
+        assert not single.supervisor["enabled"]
+        _assert_same_runs(res, single)
