@@ -52,8 +52,9 @@ fsr_implausible    moving forward, the force the current implies (lower edge of 
                    ``implausible_s``; or the travel since contact exceeds the soft reader's
                    compression for the estimate
 fsr_no_contact     no contact within ``first_contact_travel_m`` of travel from the start
-motor_stalled      pushing without moving for ``stall_time_s``, with no contact shown or at
-                   ``stall_fraction`` of the current limit
+motor_stalled      pushing without moving for ``stall_time_s``, with no contact shown, or at
+                   ``stall_fraction`` of the current limit while the push at the lower edge
+                   of the friction band exceeds the recent estimate by ``implausible_n``
 ================== =====================================================================
 
 A fall of the setpoint within ``release_window_s`` (refresh release, a step down) widens the
@@ -303,8 +304,10 @@ class SupervisorConfig:
     stall_time_s: float = 0.5
     """A motor pushing with current but not moving while no contact shows is stopped after this [E]."""
     stall_fraction: float = 0.95
-    """Fraction of the current limit at rest above which a motor that does not move is stalled [E]
-    (holding the 2.7 N top setpoint takes about 85 % of it)."""
+    """Fraction of the current limit at rest above which a motor that does not move, and whose push
+    at the lower edge of the friction band exceeds the estimate by ``implausible_n``, is stalled [E]
+    (creeping a 2.8 N hold forward against the break-away friction takes about 97 % of the limit,
+    so the current alone does not tell a jam from a hold at the top of the range)."""
     implausible_n: float = 0.5
     """Margin by which the force the current implies may exceed the estimate [E]."""
     implausible_s: float = 0.2
@@ -758,6 +761,15 @@ def _envelope_cap(sv, cfg, u, cur):
 
 
 @njit(cache=True)
+def _rest_push_lower_edge_n(cfg, cur):
+    """Least force (N) that the drive at current ``cur`` applies to the finger when nothing else
+    takes it: the steady push bound with break-away friction, the weight against the push and the
+    guide rods' break-away friction (the lower edge of the friction band)."""
+    return (limits.push_force_bound_n(cur, cfg[CF.push_force_per_a_n], 1.0, 1.0, cfg[CF.breakaway_friction_n],
+                                      cfg[CF.push_weight_n]) - cfg[CF.guide_static_n])
+
+
+@njit(cache=True)
 def _detect(sv, cfg, f, cur, dt):
     """The detectors that need the motor current; the fault code, or 0."""
     v = sv[SV.speed]
@@ -799,9 +811,14 @@ def _detect(sv, cfg, f, cur, dt):
     # no contact within the travel the gap allows
     if not in_contact and sv[SV.travel_m] > cfg[CF.first_contact_travel_m]:
         return FAULT.fsr_no_contact
-    # pushing and not moving: with no contact seen, or at the current limit
+    # pushing and not moving: with no contact seen, or at the current limit with a push that does
+    # not reach the finger (the lower edge of the friction band at rest above the estimate): a
+    # motor creeping a held force forward against the full break-away friction also sits at the
+    # limit, and its estimate accounts for the push
     if not moving and ((f < cfg[CF.contact_on_n] and cur > cfg[CF.contact_current_a])
-                       or cur > cfg[CF.stall_fraction] * cfg[CF.current_limit_a]):
+                       or (cur > cfg[CF.stall_fraction] * cfg[CF.current_limit_a]
+                           and _rest_push_lower_edge_n(cfg, cur) - _win_hi(sv, cfg, SV.est_win_t0, CF.est_win_span)
+                           > cfg[CF.implausible_n])):
         sv[SV.stall_s] += dt
         if sv[SV.stall_s] > cfg[CF.stall_time_s]:
             return FAULT.motor_stalled
@@ -812,9 +829,7 @@ def _detect(sv, cfg, f, cur, dt):
         a = _pymax(sv[SV.accel], 0.0)
         # lower edge of the friction band: break-away friction, guide friction, weight against
         # the push, and the force that accelerates the rotor and the board
-        f_lo = (limits.push_force_bound_n(cur, cfg[CF.push_force_per_a_n], 1.0, 1.0, cfg[CF.breakaway_friction_n],
-                                          cfg[CF.push_weight_n]) - cfg[CF.guide_static_n]
-                - cfg[CF.impact_mass_kg] * a)
+        f_lo = _rest_push_lower_edge_n(cfg, cur) - cfg[CF.impact_mass_kg] * a
         if f_lo - _win_hi(sv, cfg, SV.est_win_t0, CF.est_win_span) > cfg[CF.implausible_n]:
             sv[SV.implausible_s] += dt
             if sv[SV.implausible_s] > cfg[CF.implausible_s]:

@@ -193,9 +193,12 @@ class Supervisor:
         # no contact within the travel the gap allows
         if not self.in_contact and self.travel_m > c.first_contact_travel_m:
             return "fsr_no_contact"
-        # pushing and not moving: with no contact seen, or at the current limit
+        # pushing and not moving: with no contact seen, or at the current limit with a push that
+        # does not reach the finger (the lower edge of the friction band at rest above the estimate)
+        f_rest = c.push_force_n(cur, c.friction_breakaway_ratio, -c.weight_n) - c.guide_static_n
         if not moving and ((f < c.contact_on_n and cur > c.current_for_force_a(c.contact_on_n))
-                           or cur > c.stall_fraction * c.current_limit_a):
+                           or (cur > c.stall_fraction * c.current_limit_a
+                               and f_rest - self.est_win.hi[0][1] > c.implausible_n)):
             self.stall_s += dt_s
             if self.stall_s > c.stall_time_s:
                 return "motor_stalled"
