@@ -215,18 +215,25 @@ def test_offcentre_press_tilts_the_board_and_shifts_load_and_friction_to_the_nea
 
 def test_press_over_the_board_edge_reads_low_and_the_loop_overloads_the_finger():
     """A strip beyond the board edge carries nothing; the two loaded strips conduct in
-    parallel, which reads less than the same force spread evenly (n < 1)."""
-    plant = PymunkPlant.from_devices([DeviceParams()], seeds=[1])
-    plant.set_finger(1e-3)
-    plant.set_pose(press_offset_m=9e-3)
-    _closed_loop(plant, 1.0, 3000)
+    parallel, which reads less than the same force spread evenly (n < 1).  The loop holds
+    the same estimate (1.001 N) as on a centred press, so the finger carries more: 0.988 N
+    against 0.965 N centred after 3 s (the centred press sits under 1 N: the estimator,
+    calibrated on longer holds, reads the crept sensor high)."""
+    true_n = {}
+    for offset_m in (0.0, 9e-3):
+        plant = PymunkPlant.from_devices([DeviceParams()], seeds=[1])
+        plant.set_finger(1e-3)
+        plant.set_pose(press_offset_m=offset_m)
+        _closed_loop(plant, 1.0, 3000)
+        assert float(plant.force_est_n[0]) == pytest.approx(1.0, abs=0.01)
+        true_n[offset_m] = float(plant.contact_force_n[0])
     fc = plant.mechanisms[0].fc
     assert fc[2] == 0.0 and fc[0] > 0.0 and fc[1] > 0.0
     n = DeviceParams().fsr.exponent
     share = 1.0 / len(fc)
     f_eq = (share ** (1 - n) * sum(f ** n for f in fc if f > 0)) ** (1 / n)
     assert f_eq < 0.97 * sum(fc)
-    assert plant.contact_force_n[0] > 1.02        # the loop holds the estimate near 1 N
+    assert true_n[9e-3] > 1.02 * true_n[0.0]      # same estimate, more force on the finger
 
 
 def test_offcentre_scenario_runs_on_both_backends_and_shows_tilt():
