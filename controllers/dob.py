@@ -112,9 +112,9 @@ class NominalPlant:
 
 
 @dataclass(frozen=True)
-class DOBConfig:
-    """Settings of the disturbance observer; the PID's gains are :data:`controllers.pid.DEFAULT_PID`'s
-    unless given (any :class:`controllers.pid.PIDConfig` field through :func:`make_dob`).
+class DOBConfig(PIDConfig):
+    """The wrapped PID's gains and limits (:class:`controllers.pid.PIDConfig`, defaults those of
+    :data:`controllers.pid.DEFAULT_PID`) plus the observer's settings.
 
     Parameters
     ----------
@@ -124,35 +124,35 @@ class DOBConfig:
         ``f``: share of the estimated disturbance added to the command; in [0, 1).
     max_compensation_v : float
         Clamp on ``|f d_hat|``, V; > 0.
-    pid : PIDConfig
-        The wrapped PID.
 
     Raises
     ------
     ValueError
-        One line naming the offending field.
+        One line naming the offending field (also every :class:`~controllers.pid.PIDConfig` check).
     """
+    kp_v_per_n: float = DEFAULT_PID.kp_v_per_n
+    ki_v_per_ns: float = DEFAULT_PID.ki_v_per_ns
+    kd_vs_per_n: float = DEFAULT_PID.kd_vs_per_n
+    derivative_filter_s: float = DEFAULT_PID.derivative_filter_s
+    schedule_above_n: float | None = DEFAULT_PID.schedule_above_n
     q_time_constant_s: float = 0.003
     compensation_fraction: float = 0.9
     max_compensation_v: float = 3.0
-    pid: PIDConfig = DEFAULT_PID
 
     def __post_init__(self) -> None:
+        super().__post_init__()
         object.__setattr__(self, "q_time_constant_s",
                            check_number("q_time_constant_s", self.q_time_constant_s, 0.0, 1.0, lo_open=True))
         object.__setattr__(self, "compensation_fraction",
                            check_number("compensation_fraction", self.compensation_fraction, 0.0, 1.0, hi_open=True))
         object.__setattr__(self, "max_compensation_v",
                            check_number("max_compensation_v", self.max_compensation_v, 0.0, 12.0, lo_open=True))
-        if not isinstance(self.pid, PIDConfig):
-            raise ValueError(f"pid must be a PIDConfig, got {type(self.pid).__name__}")
 
 
 DEFAULT_DOB = DOBConfig()
 """The shipped design (docs/benchmark.md)."""
 
-_DOB_FIELDS = tuple(f.name for f in dataclasses.fields(DOBConfig) if f.name != "pid")
-_PID_FIELDS = tuple(f.name for f in dataclasses.fields(PIDConfig))
+_FIELDS = tuple(f.name for f in dataclasses.fields(DOBConfig))
 
 
 class DOBPID:
@@ -180,8 +180,7 @@ class DOBPID:
             raise TypeError(f"config must be a DOBConfig, got {type(config).__name__}")
         self._cfg = config
         self._r_ohm = device.motor.resistance_ohm
-        pid = config.pid
-        self._inv_tt = tracking_gain_per_s(pid.effective_tracking_time_s)
+        self._inv_tt = tracking_gain_per_s(config.effective_tracking_time_s)
         self._core = PIDCore()
         self.disturbance_v = 0.0
 
@@ -211,7 +210,7 @@ class DOBPID:
             If an argument is not finite.
         """
         y, r, u0 = check_reset_args(force_est_n, setpoint_n, command_v)
-        pid = self._cfg.pid
+        pid = self._cfg
         u0 = min(max(u0, pid.u_min_v), pid.u_max_v)
         self.disturbance_v = u0
         self._core.reset(y, r, u0, pid.kp_v_per_n * pid.gain_scale(r), pid.setpoint_weight_p,
@@ -236,7 +235,7 @@ class DOBPID:
             If ``dt_s`` is not finite and > 0, or a force or the current is not finite.
         """
         y, r, h = check_update_args(force_est_n, setpoint_n, dt_s)
-        cfg, pid = self._cfg, self._cfg.pid
+        cfg = pid = self._cfg
         if motor_current_a is not None:
             i_a = check_finite("motor_current_a", motor_current_a)
             self.disturbance_v += -math.expm1(-h / cfg.q_time_constant_s) * (self._r_ohm * i_a - self.disturbance_v)
@@ -247,8 +246,7 @@ class DOBPID:
 
 
 def make_dob(**gains: Any) -> DOBPID:
-    """Registry factory ``"pid_dob"``: :class:`DOBConfig` fields and :class:`controllers.pid.PIDConfig`
-    fields (the wrapped PID's, over :data:`controllers.pid.DEFAULT_PID`).
+    """Registry factory ``"pid_dob"``: :class:`DOBConfig` fields over :data:`DEFAULT_DOB`.
 
     Raises
     ------
@@ -257,15 +255,12 @@ def make_dob(**gains: Any) -> DOBPID:
 
     Examples
     --------
-    >>> make_dob(kp_v_per_n=3.0).config.pid.kp_v_per_n
+    >>> make_dob(kp_v_per_n=3.0).config.kp_v_per_n
     3.0
     >>> make_dob(compensation_fraction=1.0)
     Traceback (most recent call last):
     ...
     ValueError: compensation_fraction = 1 is out of range [0, 1)
     """
-    check_keys("the gains of pid_dob", gains, _DOB_FIELDS + _PID_FIELDS)
-    pid_gains = {k: v for k, v in gains.items() if k in _PID_FIELDS}
-    dob = {k: v for k, v in gains.items() if k in _DOB_FIELDS}
-    pid = PIDConfig.from_dict(pid_gains, base=DEFAULT_PID)
-    return DOBPID(replace_checked(DEFAULT_DOB, pid=pid, **dob))
+    check_keys("the gains of pid_dob", gains, _FIELDS)
+    return DOBPID(replace_checked(DEFAULT_DOB, **gains))
