@@ -45,8 +45,11 @@ TARGET_VECTOR = 1_000_000
 def single_steps_per_s(env, seconds: float, seed: int = 0) -> float:
     """Steps per second of one env over about ``seconds`` (resets included)."""
     rng = np.random.default_rng(seed)
-    lo, hi = env.action_space.low, env.action_space.high
-    actions = rng.uniform(lo, hi, size=(4096,) + env.action_space.shape).astype(np.float32)
+    space = env.action_space
+    if hasattr(space, "low"):
+        actions = rng.uniform(space.low, space.high, size=(4096,) + space.shape).astype(np.float32)
+    else:                                                 # a discrete space (CartPole)
+        actions = rng.integers(0, space.n, size=4096)
     env.reset(seed=seed)
     for k in range(200):                                  # warm-up (compilation, caches)
         _, _, term, trunc, _ = env.step(actions[k])
