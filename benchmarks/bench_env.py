@@ -11,6 +11,10 @@
   on one thread; each also as a ratio to Pendulum-v1's single-env steps/s and to the
   1,000,000 env-steps/s target.
 
+* kernel alone: physics substeps per second of ``advance_batch`` on ``--envs`` rows (one
+  thread, no controller, no observation): the vector env's substep rate with autoresets is
+  reported as a fraction of it (target 0.8).
+* CartPole-v1: the single env's steps/s also against CartPole-v1 (with wrappers).
 * reset cost: the mean wall time of one ``reset()`` of the scalar env (a new device, its R2
   calibration, episode inputs and packing) in units of one env step (a control period at
   200 Hz) measured in the same run; the target is at most 20 steps.
@@ -41,8 +45,11 @@ TARGET_VECTOR = 1_000_000
 def single_steps_per_s(env, seconds: float, seed: int = 0) -> float:
     """Steps per second of one env over about ``seconds`` (resets included)."""
     rng = np.random.default_rng(seed)
-    lo, hi = env.action_space.low, env.action_space.high
-    actions = rng.uniform(lo, hi, size=(4096,) + env.action_space.shape).astype(np.float32)
+    space = env.action_space
+    if hasattr(space, "low"):
+        actions = rng.uniform(space.low, space.high, size=(4096,) + space.shape).astype(np.float32)
+    else:                                                 # a discrete space (CartPole)
+        actions = rng.integers(0, space.n, size=4096)
     env.reset(seed=seed)
     for k in range(200):                                  # warm-up (compilation, caches)
         _, _, term, trunc, _ = env.step(actions[k])
@@ -157,6 +164,27 @@ def vector_steps_per_s(seconds: float, n_envs: int, resets: bool, **kwargs) -> t
             return steps * n_envs / dt, ends, venv.config.substeps
 
 
+def kernel_substeps_per_s(n_envs: int, seconds: float) -> float:
+    """Physics substeps per second of the plant kernel alone (``advance_batch`` on the rows of
+    a freshly reset vector env, command held, one thread): the bound a vector env's physics
+    substep rate is compared with."""
+    from ebraille_sim.plant import kernel
+    venv = ContactForceVectorEnv(num_envs=n_envs, parallel=False)
+    venv.reset(seed=0, options={"wpm": 60.0})
+    s, p, u = venv.state.copy(), venv.params.copy(), venv.inputs.copy()
+    sub = venv.config.substeps
+    venv.close()
+    kernel.advance_batch(s, p, u, sub)
+    calls = 0
+    t0 = time.perf_counter()
+    while True:
+        kernel.advance_batch(s, p, u, sub)
+        calls += 1
+        dt = time.perf_counter() - t0
+        if dt >= seconds:
+            return calls * n_envs * sub / dt
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=3.0, help="measuring time per figure, s")
@@ -169,13 +197,17 @@ def main(argv=None):
            "seconds_per_figure": a.seconds}
     pend = single_steps_per_s(gym.make("Pendulum-v1"), a.seconds)
     pend_raw = single_steps_per_s(gym.make("Pendulum-v1").unwrapped, a.seconds)
+    cart = single_steps_per_s(gym.make("CartPole-v1"), a.seconds)
     ours = single_steps_per_s(gym.make(ENV_ID), a.seconds)
     ours_raw = single_steps_per_s(gym.make(ENV_ID).unwrapped, a.seconds)
     res["single"] = {"pendulum_steps_per_s": pend, "ours_steps_per_s": ours, "ratio": ours / pend,
                      "pendulum_unwrapped_steps_per_s": pend_raw, "ours_unwrapped_steps_per_s": ours_raw,
-                     "ratio_unwrapped": ours_raw / pend_raw}
+                     "ratio_unwrapped": ours_raw / pend_raw, "cartpole_steps_per_s": cart,
+                     "ratio_cartpole": ours / cart}
     print(f"single env (gym.make, wrappers): ours {ours:10.0f} steps/s   Pendulum-v1 {pend:10.0f} steps/s   "
           f"ratio {ours / pend:5.2f}")
+    print(f"single env (gym.make, wrappers): ours {ours:10.0f} steps/s   CartPole-v1 {cart:10.0f} steps/s   "
+          f"ratio {ours / cart:5.2f}")
     print(f"single env (unwrapped):          ours {ours_raw:10.0f} steps/s   Pendulum-v1 {pend_raw:10.0f} steps/s   "
           f"ratio {ours_raw / pend_raw:5.2f}")
 
@@ -207,6 +239,12 @@ def main(argv=None):
               f"{rate * sub / 1e6:6.1f} M substeps/s  episode ends {ends:5d}  x{rate / pend:6.1f} Pendulum  "
               f"{rate / TARGET_VECTOR:5.2f} of 1M target")
     res["vector"] = rows
+    bound = kernel_substeps_per_s(a.envs, a.seconds)
+    default = rows[0]
+    res["kernel_alone_substeps_per_s"] = bound
+    res["vector_default_to_kernel"] = default["physics_substeps_per_s"] / bound
+    print(f"kernel alone, {a.envs} rows, one thread: {bound / 1e6:.1f} M substeps/s; vector env default "
+          f"(autoresets) = {res['vector_default_to_kernel']:.2f} of it (target >= 0.8)")
     res["machine"]["load_average_1min_at_end"] = os.getloadavg()[0]
     print(f"load average (1 min) at start {res['machine']['load_average_1min_at_start']:.2f}, "
           f"at end {res['machine']['load_average_1min_at_end']:.2f} on {os.cpu_count()} cores")

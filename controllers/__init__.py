@@ -23,7 +23,7 @@ Examples
 --------
 >>> import controllers
 >>> controllers.available()
-['actuator_bound', 'lqg', 'pid', 'pid_feedforward', 'pid_friction', 'pid_scheduled']
+['actuator_bound', 'lqg', 'pid', 'pid_dob', 'pid_feedforward', 'pid_friction', 'pid_scheduled']
 >>> ctrl = controllers.make("pid", kp_v_per_n=1.0)
 >>> ctrl.config.kp_v_per_n
 1.0
@@ -147,7 +147,7 @@ def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
     >>> make("lqr")
     Traceback (most recent call last):
     ...
-    ValueError: unknown controller 'lqr'; available: actuator_bound, lqg, pid, pid_feedforward, pid_friction, pid_scheduled (or give a path to a .toml/.json config file)
+    ValueError: unknown controller 'lqr'; available: actuator_bound, lqg, pid, pid_dob, pid_feedforward, pid_friction, pid_scheduled (or give a path to a .toml/.json config file)
     """
     spec = os.fspath(name_or_path)
     if spec.startswith(_POLICY_PREFIX):
@@ -223,3 +223,12 @@ def _make_friction(**gains: Any) -> Controller:
 
 
 register("pid_friction", _make_friction)
+
+
+def _make_dob(**gains: Any) -> Controller:
+    """Factory for ``"pid_dob"``: the default PID with a disturbance observer (:mod:`controllers.dob`)."""
+    from controllers.dob import make_dob
+    return make_dob(**gains)
+
+
+register("pid_dob", _make_dob)

@@ -124,6 +124,7 @@ from controllers.base import check_dt
 
 __all__ = ["SupervisorConfig", "Supervisor", "RATED_CURRENT_A", "RATED_TO_STALL", "rated_current_a",
            "FORCE_CAP_LIMIT_N", "SAFE_FORCE_N", "device_limits", "supervise_begin", "supervise_end",
+           "supervise_commands",
            "MIN_CONTROL_PERIOD_S", "MAX_WINDOW_SAMPLES", "EVENT_CAPACITY", "MODES", "FAULTS", "SV", "CF"]
 
 _NOMINAL = DeviceParams()
@@ -1068,6 +1069,23 @@ class Supervisor:
             return None
         return self._sv, self._cfg
 
+    def bind(self, state_out: np.ndarray, config_out: np.ndarray) -> None:
+        """Move the live arrays into ``state_out`` and ``config_out`` (e.g. one row each of a
+        batch's 2-D arrays, stepped by :func:`supervise_commands`); this object then reads and
+        resets those.
+
+        Raises
+        ------
+        ValueError
+            The arrays do not have the lengths of :meth:`compiled`'s.
+        """
+        if np.shape(state_out) != self._sv.shape or np.shape(config_out) != self._cfg.shape:
+            raise ValueError(f"bind needs arrays of lengths {self._sv.size} and {self._cfg.size}, got "
+                             f"{np.shape(state_out)} and {np.shape(config_out)}")
+        state_out[:] = self._sv
+        config_out[:] = self._cfg
+        self._sv, self._cfg = state_out, config_out
+
     def _clear(self):
         self._sv[:_N_HEADER] = self._sv0
 
@@ -1182,3 +1200,23 @@ def _envelope(c: SupervisorConfig) -> tuple[list[float], list[float]]:
     speeds.append(1.05 * v_max)
     currents.append(-c.friction_current_a)
     return speeds, currents
+
+
+@njit(cache=True)
+def supervise_commands(sv2, cfg2, rows, commands_v, force_est_n, setpoint_n, dt_s, current_a, out_v):
+    """One period of several supervisors whose inner controller returns a given command.
+
+    Row ``r`` of ``sv2``/``cfg2`` is a supervisor's state and configuration
+    (:meth:`Supervisor.bind`); its inner controller (an agent's action, which ignores resets)
+    commands ``commands_v[r]``.  For every ``r`` in ``rows`` this is
+    :meth:`Supervisor.update` (:func:`supervise_begin`, the inner command,
+    :func:`supervise_end`) and writes the shaped command to ``out_v[r]``; a non-finite
+    ``current_a[r]`` means no measurement.
+    """
+    for r in rows:
+        cur = current_a[r] if math.isfinite(current_a[r]) else math.nan
+        code, u, sp_inner = supervise_begin(sv2[r], cfg2[r], force_est_n[r], setpoint_n[r], dt_s, cur)
+        if code == 1:
+            code, u, reset_cmd = supervise_end(sv2[r], cfg2[r], commands_v[r], force_est_n[r], setpoint_n[r],
+                                               dt_s, cur)
+        out_v[r] = u

@@ -185,6 +185,26 @@ def test_the_command_line_help_loads_no_simulator():
 
 
 def test_a_scenario_run_loads_no_plotting_or_analysis_library():
-    mods = _modules_after("import ebraille_sim.scenarios.runner")
+    """Importing the runner and running a scenario (plant packing, the anti-alias design, the
+    estimator's initial state, the supervisor, metrics) loads no SciPy signal package."""
+    mods = _modules_after("import ebraille_sim.scenarios.runner as r\nr.run_scenario('steady_90wpm', duration_s=0.1)")
     assert not {"scipy.signal", "matplotlib", "pymunk", "control"} & mods, \
         {"scipy.signal", "matplotlib", "pymunk", "control"} & mods
+
+
+def test_the_filter_designs_without_scipy_signal_are_scipys_to_the_last_bit():
+    """The anti-alias Butterworth and the filters' steady-state initial states are computed
+    without importing ``scipy.signal`` and equal its ``butter`` and ``lfilter_zi`` exactly."""
+    import numpy as np
+    import scipy.signal
+
+    from ebraille_sim.estimation.models import load_estimator
+    from ebraille_sim.plant.loop import _antialias_filter, _unit_step_state
+    for fc, fs in ((20.0, 1000.0), (40.0, 1000.0), (5.0, 100.0), (200.0, 1000.0), (1.0, 10000.0), (33.3, 777.0)):
+        b, a = scipy.signal.butter(2, fc, fs=fs)
+        mb, ma = _antialias_filter(fc, fs)
+        assert np.array_equal(b, mb) and np.array_equal(a, ma), (fc, fs)
+    arr = load_estimator("paper:wiener:5").kernel_arrays()
+    for num, den in ((arr["num"], arr["den"]), scipy.signal.butter(2, 20, fs=1000), ([1.0, 0.5], [2.0, -0.9, 0.2]),
+                     ([0.3], [1.0, -0.5])):
+        assert np.array_equal(scipy.signal.lfilter_zi(num, den), _unit_step_state(tuple(num), tuple(den)))

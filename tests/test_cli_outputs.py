@@ -571,3 +571,24 @@ def test_trace_rate_keeps_every_kth_period_and_the_full_rate_metrics(tmp_path):
     m_thin = json.loads((thin / "metrics.json").read_text())["metrics"]
     drop = {"wall_time_s", "real_time_factor"}
     assert {k: v for k, v in m_full.items() if k not in drop} == {k: v for k, v in m_thin.items() if k not in drop}
+
+
+def test_trace_csv_is_the_bytes_of_the_row_by_row_csv_writer(tmp_path):
+    """trace.csv is written column by column; the file equals what ``csv.writer`` writes row
+    by row (9 significant digits, integer char_index, the braille character, CRLF)."""
+    import csv
+
+    import numpy as np
+
+    from ebraille_sim.scenarios.runner import TRACE_COLUMNS, run_scenario
+    from ebraille_sim.tools.report import write_trace_csv
+    tr = dict(run_scenario("steady_90wpm", duration_s=2.0).trace)
+    tr["character"] = np.array([*tr["character"][:-3], 'a,b', 'say "hi"', "x\ny"], dtype=object)
+    write_trace_csv(tmp_path / "fast.csv", tr)
+    with open(tmp_path / "slow.csv", "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(TRACE_COLUMNS)
+        for k in range(len(tr["t_s"])):
+            w.writerow([int(tr[c][k]) if c == "char_index" else str(tr[c][k]) if c == "character"
+                        else f"{float(tr[c][k]):.9g}" for c in TRACE_COLUMNS])
+    assert (tmp_path / "fast.csv").read_bytes() == (tmp_path / "slow.csv").read_bytes()

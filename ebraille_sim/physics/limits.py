@@ -83,6 +83,7 @@ def speed_for_energy_m_per_s(energy_j, pinion_mass_kg, board_mass_kg, gear_effic
     return math.sqrt(2.0 * max(energy_j, 0.0) / (gear_efficiency * pinion_mass_kg + board_mass_kg))
 
 
+@njit(cache=True)
 def elastic_energy_j(d_m, b_n_per_m, m_per_m):
     """Energy (J) stored in the pulp's instantaneous elastic law at compression ``d_m``: ``U(d)`` of eq. (3)."""
     if d_m <= 0.0:
@@ -90,6 +91,7 @@ def elastic_energy_j(d_m, b_n_per_m, m_per_m):
     return (elastic_force(d_m, b_n_per_m, m_per_m) - b_n_per_m * d_m) / m_per_m
 
 
+@njit(cache=True)
 def absorbed_energy_j(drive_force_n, peak_force_n, b_n_per_m, m_per_m):
     """Energy (J) the pulp absorbs above a constant drive ``F_d`` from ``d(F_d)`` to ``d(F_pk)``: eq. (3)."""
     d0 = compression_at_force_m(drive_force_n, b_n_per_m, m_per_m)
@@ -98,6 +100,7 @@ def absorbed_energy_j(drive_force_n, peak_force_n, b_n_per_m, m_per_m):
             - drive_force_n * (d1 - d0))
 
 
+@njit(cache=True)
 def drive_force_for_impact_n(energy_j, peak_force_n, b_n_per_m, m_per_m):
     """Largest constant drive force (N) with which an impact of ``energy_j`` peaks at most at ``peak_force_n``.
 

@@ -169,18 +169,40 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
 
 @functools.lru_cache(maxsize=64)
 def _antialias_filter(cutoff_hz: float, sensor_rate_hz: float) -> tuple:
-    """Second-order Butterworth anti-alias coefficients ``(b, a)`` (designed once per pair)."""
-    import scipy.signal
-    bb, aa = scipy.signal.butter(2, cutoff_hz, fs=sensor_rate_hz)
+    """Second-order Butterworth anti-alias coefficients ``(b, a)`` (designed once per pair).
+
+    The analogue prototype's poles ``-exp(+-j pi/4)`` scaled to the pre-warped cutoff
+    ``4 tan(pi Wn / 2)`` (``Wn`` = cutoff / Nyquist), mapped by the bilinear transform with
+    two zeros at ``z = -1``, expanded into polynomials: the steps of
+    ``scipy.signal.butter(2, cutoff_hz, fs=sensor_rate_hz)`` in its order, so the
+    coefficients are SciPy's to the last bit (tested) without importing its signal package.
+    """
+    wn = np.float64(cutoff_hz) / (sensor_rate_hz / 2)
+    warped = 4.0 * np.tan(np.pi * wn / 2.0)
+    poles = warped * -np.exp(1j * np.pi * np.array([-1.0, 1.0]) / 4.0)
+    gain = warped ** 2 * np.real(1.0 / np.prod(4.0 - poles))
+    bb = gain * np.poly(-np.ones(2))
+    aa = np.real(np.poly((4.0 + poles) / (4.0 - poles)))
     return tuple(float(x) for x in bb), tuple(float(x) for x in aa)
 
 
 @functools.lru_cache(maxsize=256)
 def _unit_step_state(num: tuple, den: tuple) -> np.ndarray:
-    """``scipy.signal.lfilter_zi(num, den)``: the filter state of a unit step's steady state
-    (computed once per filter; read-only)."""
-    import scipy.signal
-    zi = scipy.signal.lfilter_zi(np.array(num), np.array(den))
+    """The direct-form-II-transposed filter state of a unit step's steady state (read-only;
+    the computation of ``scipy.signal.lfilter_zi``: ``zi = A zi + B`` solved with
+    ``numpy.linalg.solve``, ``A`` the companion matrix of ``den``)."""
+    b, a = np.asarray(num, dtype=float), np.asarray(den, dtype=float)
+    while len(a) > 1 and a[0] == 0.0:
+        a = a[1:]
+    if a[0] != 1.0:
+        b, a = b / a[0], a / a[0]
+    n = max(len(a), len(b))
+    a = np.concatenate((a, np.zeros(n - len(a))))
+    b = np.concatenate((b, np.zeros(n - len(b))))
+    companion = np.zeros((n - 1, n - 1))
+    companion[0] = -a[1:] / a[0]
+    companion[np.arange(1, n - 1), np.arange(n - 2)] = 1.0
+    zi = np.linalg.solve(np.eye(n - 1) - companion.T, b[1:] - a[1:] * b[0])
     zi.setflags(write=False)
     return zi
 

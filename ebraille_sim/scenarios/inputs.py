@@ -287,7 +287,8 @@ def input_profiles(spec: ScenarioSpec, t_s: np.ndarray, rng: np.random.Generator
         when a plant is given.
     """
     row = base_inputs.inputs[0] if hasattr(base_inputs, "inputs") else np.asarray(base_inputs, dtype=float)
-    base = {name: np.full(len(t_s), row[j]) for name, j in U.items() if name != "command_v"}
+    # constants stay scalars: only the inputs a section drives become arrays
+    base = {name: float(row[j]) for name, j in U.items() if name != "command_v"}
     touched = set()
     for key, section in spec.sections.items():
         mod = importlib.import_module(DELEGATES[key])
@@ -306,7 +307,8 @@ def input_profiles(spec: ScenarioSpec, t_s: np.ndarray, rng: np.random.Generator
                 raise ScenarioError(f"{spec.source}: [{key}] drives unknown input {name!r}")
             base[name] = base[name] + arr if mode == "add" else np.broadcast_to(arr, t_s.shape).astype(float)
             touched.add(name)
-    return {name: base[name] for name in sorted(touched)}
+    return {name: base[name] if np.shape(base[name]) == t_s.shape else np.broadcast_to(base[name], t_s.shape).astype(float)
+            for name in sorted(touched)}
 
 
 def check_run_size(spec: ScenarioSpec, t_end_s: float, why: str | None = None) -> int:

@@ -1,0 +1,129 @@
+"""The disturbance-observer controller ``pid_dob`` (controllers/dob.py)."""
+import math
+
+import numpy as np
+import pytest
+
+import controllers
+import ebraille_sim
+from controllers.dob import DEFAULT_DOB, DOBPID, NominalPlant
+from ebraille_sim.physics.params import DeviceParams
+
+R_OHM = DeviceParams().motor.resistance_ohm
+
+
+def _linear_plant_run(d_v: float, n: int, dt_s: float = 1e-3, setpoint_n: float = 1.0):
+    """Closed loop on the linear nominal plant ``dF/dt = b (u - d)`` with a constant input
+    disturbance ``d``; the motor current is the one the disturbance draws, ``d / R``."""
+    ctrl = controllers.make("pid_dob")
+    model = NominalPlant.at(setpoint_n)
+    f = setpoint_n
+    ctrl.reset(force_est_n=f, setpoint_n=setpoint_n, command_v=0.0)
+    d_hat, force = [], []
+    for _ in range(n):
+        u = ctrl.update(f, setpoint_n, dt_s, motor_current_a=d_v / R_OHM)
+        f += dt_s * model.force_rate_n_per_s(u, d_v)
+        d_hat.append(ctrl.disturbance_v)
+        force.append(f)
+    return np.array(d_hat), np.array(force)
+
+
+def test_estimate_converges_to_a_constant_input_disturbance_within_tau():
+    d_v = 0.5
+    tau = DEFAULT_DOB.q_time_constant_s
+    d_hat, force = _linear_plant_run(d_v, 2000)
+    k_tau = round(tau / 1e-3) - 1                        # the sample ending at t = tau
+    assert abs(d_hat[k_tau] - d_v) <= math.exp(-1.0) * d_v * 1.02
+    assert abs(d_hat[5 * (k_tau + 1) - 1] - d_v) < 0.01 * d_v
+    # the loop rejects it: the force is back on the setpoint, the PID's integral carries only
+    # the uncompensated 10 %
+    assert abs(force[-1] - 1.0) < 1e-3
+    assert 0.02 < abs(force - 1.0).max() < 0.05                # measured 0.035 N
+
+
+def test_without_the_observer_the_same_disturbance_takes_the_pid_longer():
+    slow = controllers.make("pid_dob", compensation_fraction=0.0)
+    fast = controllers.make("pid_dob")
+    model = NominalPlant.at(1.0)
+    peaks = []
+    for ctrl in (slow, fast):
+        f = 1.0
+        ctrl.reset(force_est_n=f, setpoint_n=1.0, command_v=0.0)
+        worst = 0.0
+        for _ in range(1000):
+            u = ctrl.update(f, 1.0, 1e-3, motor_current_a=0.5 / R_OHM)
+            f += 1e-3 * model.force_rate_n_per_s(u, 0.5)
+            worst = max(worst, abs(f - 1.0))
+        peaks.append(worst)
+    assert peaks[1] < 0.5 * peaks[0]
+
+
+def _error_rms(controller: str, duration_s: float = 8.0) -> float:
+    res = ebraille_sim.run_scenario("pressing_90wpm", controller=controller, duration_s=duration_s)
+    t, f, r = res.trace["t_s"], res.trace["force_true_n"], res.trace["setpoint_n"]
+    keep = t > 2.0
+    return float(np.sqrt(np.mean((f[keep] - r[keep]) ** 2)))
+
+
+def test_pressing_force_error_lower_than_pid():
+    # measured (supervised, nominal reader, 8 s, seed 12, after 2 s): pid 0.136 N, pid_dob 0.081 N RMS
+    e_pid, e_dob = _error_rms("pid"), _error_rms("pid_dob")
+    assert e_dob < 0.75 * e_pid
+    assert e_dob < 0.1
+
+
+def test_reset_is_bumpless():
+    c = controllers.make("pid_dob")
+    c.reset(force_est_n=0.8, setpoint_n=1.0, command_v=0.7)
+    assert c.update(0.8, 1.0, 1e-3, motor_current_a=0.7 / R_OHM) == pytest.approx(0.7, abs=1e-12)
+    c.reset(force_est_n=1.2, setpoint_n=1.0, command_v=-0.3)
+    assert c.update(1.2, 1.0, 1e-3) == pytest.approx(-0.3, abs=1e-12)
+    c.reset(force_est_n=1.0, setpoint_n=1.0, command_v=9.0)          # clamped to u_max_v
+    assert c.update(1.0, 1.0, 1e-3) == pytest.approx(6.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("args, kwargs, match", [
+    ((math.nan, 1.0, 1e-3), {}, "force_est_n must be finite"),
+    ((1.0, math.inf, 1e-3), {}, "setpoint_n must be finite"),
+    ((1.0, 1.0, 0.0), {}, "dt_s must be > 0"),
+    ((1.0, 1.0, 1e-3), {"motor_current_a": math.nan}, "motor_current_a must be finite"),
+])
+def test_bad_update_input_one_line(args, kwargs, match):
+    c = controllers.make("pid_dob")
+    with pytest.raises(ValueError, match=match) as exc:
+        c.update(*args, **kwargs)
+    assert "\n" not in str(exc.value)
+
+
+@pytest.mark.parametrize("gains, match", [
+    ({"q_time_constant_s": 0.0}, "q_time_constant_s"),
+    ({"compensation_fraction": 1.0}, "compensation_fraction"),
+    ({"max_compensation_v": -1.0}, "max_compensation_v"),
+    ({"kp_v_per_n": -1.0}, "kp_v_per_n"),
+    ({"gain": 1.0}, "unknown key 'gain' in the gains of pid_dob"),
+])
+def test_bad_config_one_line(gains, match):
+    with pytest.raises(ValueError, match=match) as exc:
+        controllers.make("pid_dob", **gains)
+    assert "\n" not in str(exc.value)
+
+
+def test_bad_reset_one_line():
+    with pytest.raises(ValueError, match="command_v must be finite"):
+        controllers.make("pid_dob").reset(force_est_n=1.0, setpoint_n=1.0, command_v=math.nan)
+
+
+def test_registered_and_a_controller():
+    assert "pid_dob" in controllers.available()
+    c = controllers.make("pid_dob", kp_v_per_n=1.5)
+    assert isinstance(c, DOBPID) and isinstance(c, controllers.Controller)
+    assert c.config.kp_v_per_n == 1.5 and c.config.ki_v_per_ns == 8.0
+
+
+def test_deterministic():
+    a = ebraille_sim.run_scenario("pressing_90wpm", controller="pid_dob", duration_s=3.0, seed=5)
+    b = ebraille_sim.run_scenario("pressing_90wpm", controller="pid_dob", duration_s=3.0, seed=5)
+    for key in ("force_true_n", "force_est_n", "command_v", "motor_current_a"):
+        np.testing.assert_array_equal(a.trace[key], b.trace[key])
+    assert {k: v for k, v in a.metrics.items() if k != "real_time_factor"} == \
+        {k: v for k, v in b.metrics.items() if k != "real_time_factor"}
