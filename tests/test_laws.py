@@ -15,7 +15,7 @@ import scipy.signal
 
 from ebraille_sim.estimation import blockmodels
 from ebraille_sim.estimation.blockmodels import (BlockModel, LinearBF, PiecewiseLinear, biquad_step, df2t_step,
-                                                 estimator_step, pwl_eval, tared_v)
+                                                 creep_compensated_v, estimator_step, pwl_eval, tared_v)
 from ebraille_sim.estimation.calibration import loading_branch_factor, loading_voltage
 from ebraille_sim.estimation.paper_models import paper_model
 from ebraille_sim.physics import drivetrain, fingertip, fsr, motor, noise
@@ -275,6 +275,44 @@ def test_divider_is_paper_eq_1():
     assert CircuitParams(r2_ohm=10e3).divider_v(10e3) == pytest.approx(2.5, rel=1e-12)
 
 
+def test_divider_conductance_inverts_the_divider():
+    for g, r2, vs in ((1e-4, 1150.0, 5.0), (1.0 / 30e3, 10e3, 5.0), (1e-7, 1310.0, 3.3)):
+        v = divider_voltage(g, r2, vs)
+        assert fsr.divider_conductance_s(v, r2, vs) == pytest.approx(g, rel=1e-12)
+    # 1 V on 1150 ohm from 5 V: the film carries 1/1150 A... at 4 V across it
+    assert fsr.divider_conductance_s(1.0, 1150.0, 5.0) == pytest.approx(1.0 / (1150.0 * 4.0), rel=1e-15)
+    assert fsr.divider_conductance_s(0.0, 1150.0, 5.0) == 0.0
+
+
+def test_creep_compensation_scales_the_conduction_path_by_the_gain_ratio():
+    """The firmware's creep prediction is the plant's law on its estimate; the power-law part of
+    the conductance is scaled by (c_ref / c)^n, the stand-off path kept; no load: c = 1."""
+    r2, vs, n, gso, w, thr, c_ref = 1150.0, 5.0, 0.9, 1e-7, 0.1, 0.02, 1.12
+    pp = np.array([0.5, 0.25, 0.0])
+    st = np.array([0.0, 1.0, 2.0, 3.0])
+    st_law = st.copy()
+    g = 1.0 / 9000.0
+    v = divider_voltage(g, r2, vs)
+    f_c = creep_force(1.0, 1.0, st_law, 1, pp, 0, w, thr, 3)
+    out = creep_compensated_v(v, 1.0, st, 1, pp, 0, w, thr, 3, n, gso, c_ref, r2, vs)
+    np.testing.assert_array_equal(st, st_law)                    # same states as the law advances
+    g_u = gso + (g - gso) * (c_ref / f_c) ** n
+    assert out == pytest.approx(divider_voltage(g_u, r2, vs), rel=1e-13)
+    assert f_c == pytest.approx(1.0 + w * (1.0 + 1.25 + 1.0), rel=1e-15)
+    # below the load threshold the predicted gain is 1; only the calibration's gain is applied
+    st2 = np.array([0.0, 1.0, 2.0, 3.0])
+    out_low = creep_compensated_v(v, 0.01, st2, 1, pp, 0, w, thr, 3, n, gso, c_ref, r2, vs)
+    assert out_low == pytest.approx(divider_voltage(gso + (g - gso) * c_ref ** n, r2, vs), rel=1e-13)
+    # a railed or faulted divider passes unchanged (the states still advance)
+    st3 = np.array([0.0, 1.0, 2.0, 3.0])
+    assert creep_compensated_v(vs, 1.0, st3, 1, pp, 0, w, thr, 3, n, gso, c_ref, r2, vs) == vs
+    assert creep_compensated_v(0.0, 1.0, st3, 1, pp, 0, w, thr, 3, n, gso, c_ref, r2, vs) == 0.0
+    # the predicted gain equal to the reference leaves the voltage alone
+    st4 = np.zeros(4)
+    assert creep_compensated_v(v, 1.0, st4, 1, np.ones(3), 0, w, thr, 3, n, gso, 1.0, r2, vs) == pytest.approx(
+        v, rel=1e-13)
+
+
 def test_adc_rounds_down_and_clips_at_the_rails():
     c = CircuitParams()
     lsb, top = c.adc_lsb_v, c.adc_max_code
@@ -451,7 +489,13 @@ def _substep_by_hand(s, p, u):
     s[S.sensor_count] += 1.0
     s[S.fsr_code] = adc_sample(s[S.fsr_code], v, p[P.adc_lsb_v], p[P.adc_max_code], fault)
     s[S.fsr_voltage_v] = adc_voltage(s[S.fsr_code], p[P.adc_lsb_v])
-    y = biquad_step(tared_v(s[S.fsr_voltage_v], s[S.tare_v]), s, S.aa_z1, S.aa_z2,
+    vq = s[S.fsr_voltage_v]
+    if p[P.est_creep_comp] > 0.0:
+        vq = creep_compensated_v(vq, s[S.force_est_n], s, S.comp_creep_0_n, p, P.comp_creep_a0,
+                                 p[P.comp_creep_weight], p[P.comp_load_threshold_n], fsr.N_CREEP, p[P.comp_fsr_n],
+                                 p[P.comp_g_standoff_s], p[P.comp_reference_gain], p[P.r2_ohm],
+                                 p[P.divider_supply_v])
+    y = biquad_step(tared_v(vq, s[S.tare_v]), s, S.aa_z1, S.aa_z2,
                     p[P.aa_b0], p[P.aa_b1], p[P.aa_b2], p[P.aa_a1], p[P.aa_a2])
     s[S.estimator_phase] = 0.0
     s[S.force_est_n] = estimator_step(y, s, S.est_z0, S.est_raw_prev_n, p, P.est_in_x0, P.est_in_y0,

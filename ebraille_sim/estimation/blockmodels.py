@@ -44,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from ebraille_sim.base.compiled import njit
+from ebraille_sim.physics.fsr import N_CREEP, creep_force, divider_conductance_s, divider_voltage
 
 __all__ = [
     "PiecewiseLinear",
@@ -57,6 +58,7 @@ __all__ = [
     "df2t_step",
     "biquad_step",
     "estimator_step",
+    "creep_compensated_v",
 ]
 
 MAX_TF_LEN = 10
@@ -77,7 +79,11 @@ TARE_SLOTS = ("tare_v",)
 FILTER_SLOTS = tuple(f"est_z{j}" for j in range(MAX_TF_LEN - 1))
 """State slots of the linear block (direct form II transposed)."""
 
-OWNED_STATE_SLOTS = ANTIALIAS_SLOTS + OUTPUT_SLOTS + TARE_SLOTS + FILTER_SLOTS
+CREEP_COMP_SLOTS = tuple(f"comp_creep_{j}_n" for j in range(N_CREEP))
+"""State slots of the firmware's creep prediction: the hereditary terms of its own force
+estimate (N), advanced by :func:`ebraille_sim.physics.fsr.creep_force`."""
+
+OWNED_STATE_SLOTS = ANTIALIAS_SLOTS + OUTPUT_SLOTS + TARE_SLOTS + FILTER_SLOTS + CREEP_COMP_SLOTS
 """Every state slot the in-loop estimator declares (see :mod:`ebraille_sim.plant.layout`)."""
 
 #: Default absolute tolerance on the remainders ``B(1)`` and ``F(1)`` of a
@@ -966,6 +972,32 @@ def biquad_step(x, s, z1, z2, b0, b1, b2, a1, a2):
 def tared_v(v, tare_v):
     """Estimator input: the voltage less the no-load voltage (V)."""
     return v - tare_v
+
+
+@njit(cache=True, inline="always")
+def creep_compensated_v(v, f_est_n, s, z0, p, a0, weight, threshold_n, n_terms, exponent, g_standoff_s,
+                        reference_gain, r2_ohm, supply_v):
+    """The divider voltage with the predicted creep of the film replaced by the calibration's (V).
+
+    The firmware runs the FSR's hereditary creep law (:func:`ebraille_sim.physics.fsr.creep_force`,
+    states ``s[z0:z0+n_terms]``, decays ``p[a0:...]``, term weight ``weight``) on its own
+    force estimate ``f_est_n``, which predicts the crept force ``F_c`` and the creep gain
+    ``c = F_c / F`` (1 at or below ``threshold_n``).  The measured voltage is turned back
+    into the film's conductance (:func:`~ebraille_sim.physics.fsr.divider_conductance_s`),
+    its power-law path is scaled by ``(c_ref / c)^n`` (``n`` the conduction exponent,
+    ``c_ref = reference_gain`` the creep gain of the hold the divider was calibrated at),
+    and the divider law gives the voltage again.  With the sensor's own creep parameters and
+    an exact estimate, the result is the voltage the sensor gives after the calibration hold
+    at the same force, whatever its load history.  Voltages outside ``(0, supply_v)`` (a
+    railed divider or a fault) pass unchanged.
+    """
+    f_c = creep_force(f_est_n, f_est_n, s, z0, p, a0, weight, threshold_n, n_terms)
+    if not 0.0 < v < supply_v:
+        return v
+    gain = f_c / f_est_n if f_est_n > threshold_n else 1.0
+    g = divider_conductance_s(v, r2_ohm, supply_v)
+    g_u = g_standoff_s + (g - g_standoff_s) * (reference_gain / gain) ** exponent
+    return divider_voltage(g_u, r2_ohm, supply_v)
 
 
 @njit(cache=True, inline="always")

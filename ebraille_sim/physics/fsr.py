@@ -190,6 +190,13 @@ def divider_voltage(g_s, r2_ohm, supply_v):
 
 
 @njit(cache=True, inline="always")
+def divider_conductance_s(v, r2_ohm, supply_v):
+    """Inverse of :func:`divider_voltage`: the film conductance that gives ``v`` (S),
+    ``G = V / (R2 (Vs - V))``, for ``0 <= v < supply_v``."""
+    return v / (r2_ohm * (supply_v - v))
+
+
+@njit(cache=True, inline="always")
 def sensor_voltage(fault, g_s, r2_ohm, supply_v, forced_v):
     """Divider output, or what a fault puts in its place (V); see the ``FAULT_*`` codes."""
     if fault == FAULT_OPEN:

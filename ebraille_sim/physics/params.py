@@ -444,6 +444,12 @@ class EstimatorParams(_Checked):
     clamp_nonnegative: bool = _p(True, "-", "[E] a contact force estimate is never negative")
     nyquist_average: bool = _p(True, "-", "[E] two-sample mean of the estimate: cancels the 50 Hz "
                                "ringing of the paper model's pole at z = -0.967")
+    creep_compensation: bool = _p(True, "-", "[E] firmware runs the nominal FSR's hereditary creep law "
+                                  "on its own estimate and divides the predicted creep gain out of the "
+                                  "film conductance before the model (docs/model.md)")
+    creep_reference_hold_s: float = _pos(20.0, "s", "[D] hold of the divider's calibration "
+                                         "(estimation.calibration.calibrate_device; centre of calibrate_r2's "
+                                         "5-60 s holds): the compensated voltage is the one read after it")
 
 
 @dataclass(frozen=True)

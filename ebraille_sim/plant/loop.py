@@ -11,7 +11,7 @@ state is ``(n, N_STATE)``, the parameters ``(n, N_PARAM)``, the inputs ``(n, N_I
 
 Examples
 --------
->>> from ebraille_sim.physics.params import DeviceParams
+>>> from ebraille_sim.physics.params import FSRS, DeviceParams
 >>> plant = Plant.from_devices([DeviceParams()], seeds=[1])
 >>> plant.set_finger(1.0e-3)
 >>> for _ in range(200):
@@ -32,10 +32,10 @@ from ebraille_sim.estimation.models import load_estimator
 from ebraille_sim.physics.drivetrain import (mesh_damping_n_s_per_m, reflected_force_n, reflected_inertia_kg,
                                              shaft_to_rack_per_m)
 from ebraille_sim.physics.fingertip import prony_coefficients, tangent_stiffness_n_per_m
-from ebraille_sim.physics.fsr import (adc_code, adc_voltage, creep_decay, creep_taus_s, creep_term_weight, lag_alpha,
-                                      log_force, play_widths, static_voltage)
+from ebraille_sim.physics.fsr import (adc_code, adc_voltage, creep_decay, creep_gain, creep_taus_s, creep_term_weight,
+                                      lag_alpha, log_force, play_widths, static_voltage)
 from ebraille_sim.physics.motor import current_decay
-from ebraille_sim.physics.params import DeviceParams
+from ebraille_sim.physics.params import FSRS, DeviceParams
 from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import (MAX_BREAKPOINTS, MAX_TF_LEN, N_INPUT, N_PARAM, N_PLAYS, N_STATE, P, S, U)
 
@@ -163,8 +163,25 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     _pack_model(p, model)
     p[P.est_clamp] = 1.0 if e.clamp_nonnegative else 0.0
     p[P.est_nyquist_average] = 1.0 if e.nyquist_average else 0.0
+    _pack_creep_compensation(p, e, dt_sensor)
     p[P.seed] = float(seed)
     return p
+
+
+def _pack_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
+    """The estimator's creep compensation: on/off, and the creep law of the nominal FSR
+    (``FSRS["nominal"]``: the firmware does not know the individual sensor's parameters)
+    at the sensor rate, with the creep gain of the calibration hold as its reference."""
+    nominal = FSRS["nominal"]
+    p[P.est_creep_comp] = 1.0 if e.creep_compensation else 0.0
+    p[P.comp_creep_weight] = creep_term_weight(nominal.creep_per_decade, nominal.creep_tau_min_s,
+                                               nominal.creep_tau_max_s)
+    for j, tau in enumerate(creep_taus_s(nominal.creep_tau_min_s, nominal.creep_tau_max_s)):
+        p[P[f"comp_creep_a{j}"]] = creep_decay(dt_sensor_s, tau)
+    p[P.comp_fsr_n] = nominal.exponent
+    p[P.comp_g_standoff_s] = 1.0 / nominal.standoff_resistance_ohm
+    p[P.comp_load_threshold_n] = nominal.load_threshold_n
+    p[P.comp_reference_gain] = creep_gain(e.creep_reference_hold_s, nominal)
 
 
 @functools.lru_cache(maxsize=64)

@@ -199,6 +199,8 @@ class EstimatorSpec:
     tare_at_start: bool | None = _key(None, "-", "bool")
     clamp_nonnegative: bool | None = _key(None, "-", "bool")
     nyquist_average: bool | None = _key(None, "-", "bool")
+    creep_compensation: bool | None = _key(None, "-", "bool")
+    creep_reference_hold_s: float | None = _key(None, "s", "float", lo=0, hi=1e5, lo_open=True)
 
 
 @dataclass(frozen=True)
@@ -368,7 +370,9 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
             k2: est[k1] for k1, k2 in (("model", "model"), ("antialias_cutoff_hz", "antialias_cutoff_hz"),
                                        ("tare_at_start", "tare_at_start"),
                                        ("clamp_nonnegative", "clamp_nonnegative"),
-                                       ("nyquist_average", "nyquist_average")) if k1 in est})
+                                       ("nyquist_average", "nyquist_average"),
+                                       ("creep_compensation", "creep_compensation"),
+                                       ("creep_reference_hold_s", "creep_reference_hold_s")) if k1 in est})
         if "model" in est and not est["model"].startswith("paper:"):
             mp = pathlib.Path(est["model"])
             if not mp.is_absolute():
