@@ -39,6 +39,11 @@ least :data:`LEGIBLE_REQUIRED` of its stimulation window (the whole dwell in con
 contact, the hold part in refresh mode).  Cells without raised dots (spaces) are not
 counted.
 
+**Computation.** Each law of the chain is one compiled scalar function (contact radius,
+lens area, impedance, stimulator current, relative intensity of a sample); the array
+functions below loop over them, and :func:`legibility_metrics` is one compiled pass over
+the samples that keeps only per-character counts.
+
 Parameters and sources
 ----------------------
 ======================  ==========  =====================================================
