@@ -43,8 +43,11 @@ Bodies and constraints
   correction) whose ``max_force`` is the friction level: it holds a body at rest below the
   break-away force, like the velocity-level friction of the lumped kernel.  Viscous
   friction is an explicit force.
-* **end stops**: a SlideJoint from the frame to each rack limits its travel to
-  ``[travel_min_m, travel_max_m]`` (inelastic).
+* **end stops**: after every step the lumped law :func:`~ebraille_sim.physics.drivetrain.end_stop`
+  clips each rack and the board to ``[travel_min_m, travel_max_m]`` and removes their
+  velocity into the stop (inelastic).  A SlideJoint in the solver instead lets a rack
+  driven at the stall current rattle at the stop (its position correction and
+  warm-started impulse against the explicit mesh force: 64 um past the stop at 5 kHz).
 * **pulp**: ``n_contacts`` DampedSprings between the board and the finger body, each on an
   equal strip of the contact width; its ``force_func`` applies the exponential law and the
   Prony (QLV) relaxation of :mod:`ebraille_sim.physics.fingertip`, scaled by the strip's share of
@@ -100,7 +103,7 @@ import numpy as np
 import pymunk
 from ebraille_sim.base.compiled import njit
 from ebraille_sim.base.fields import sourced
-from ebraille_sim.physics.drivetrain import mesh_force, stribeck
+from ebraille_sim.physics.drivetrain import end_stop, mesh_force, stribeck
 from ebraille_sim.physics.fingertip import (contact_force, elastic_force, prony_coefficients, prony_step,
                                             tangent_stiffness_n_per_m)
 from ebraille_sim.physics.motor import current_decay, current_step
@@ -121,6 +124,7 @@ _prony_step = prony_step.py_func
 _contact_force = contact_force.py_func
 _current_step = current_step.py_func
 _mesh_force = mesh_force.py_func
+_end_stop = end_stop.py_func
 
 V_MAX = 10.0
 """Speed (m/s) of the pinion beyond which a run is reported as diverged (no-load speed: 0.06 m/s)."""
@@ -270,7 +274,7 @@ def _sensor_sequence(s, p, u, forces_n, n_sub):
 class _Mechanism:
     """The pymunk space of one device and the per-step physics outside Chipmunk."""
 
-    L_REF = 10e-3       # anchor separation of the mesh, stop and contact constraints, m
+    L_REF = 10e-3       # anchor separation of the mesh and contact constraints, m
     L_FAR = 1.0         # distance to the frame anchor of the friction constraints, m
 
     def __init__(self, device: DeviceParams, mech: MechanismParams, p: np.ndarray, board_pos_m: float):
@@ -354,8 +358,6 @@ class _Mechanism:
             if p[P.guide_viscous_n_s_per_m] > 0.0:
                 space.add(pymunk.DampedSpring(frame, rack, (x, xb - self.L_FAR), (0.0, 0.0), self.L_FAR, 0.0,
                                               0.5 * p[P.guide_viscous_n_s_per_m]))
-            space.add(pymunk.SlideJoint(frame, rack, (x, d.travel_min_m - self.L_REF), (0.0, 0.0),
-                                        self.L_REF, self.L_REF + d.travel_max_m - d.travel_min_m))
             tooth_x = inward * mech.mesh_offset_m
             damper = pymunk.DampedSpring(pin, rack, (x + tooth_x, -self.L_REF), (tooth_x, 0.0), self.L_REF, 0.0, 0.0)
             space.add(damper)
@@ -420,6 +422,7 @@ class _Mechanism:
             self.bushings[1][0]._constraint, self.bushings[1][1]._constraint,
             self.dampers[0]._constraint, self.dampers[1]._constraint, space._space,
             mech.fsr_area_model, device.fsr.exponent, self.share ** (1.0 - device.fsr.exponent),
+            (self.racks[0]._body, self.racks[1]._body, board._body), d.travel_min_m, d.travel_max_m,
         )
 
     # --- force functions --------------------------------------------------------------
@@ -506,9 +509,10 @@ class _Mechanism:
         (h, inv_h, n_steps, n_sens, mp, g, r_ohm, ke, kt, decay, pf_c, pf_s, gear_mu, vs,
          half_gap, k_mesh, rf_c0, rf_ratio, rod_mu,
          pin, pin_fric, ra, rb, fr_a, fr_b, ba1, ba2, bb1, bb2, dmp_a, dmp_b, c_space,
-         area_model, fsr_n, share_w) = self._const
+         area_model, fsr_n, share_w, stopped, x_min, x_max) = self._const
         cp = _cp
         get_p, get_v, set_f = cp.cpBodyGetPosition, cp.cpBodyGetVelocity, cp.cpBodySetForce
+        set_p, set_v = cp.cpBodySetPosition, cp.cpBodySetVelocity
         get_j, set_max, c_step = cp.cpConstraintGetImpulse, cp.cpConstraintSetMaxForce, cp.cpSpaceStep
         strib, cur = _stribeck, _current_step
         mesh_state, flank = self._mesh_state, mesh_flank
@@ -558,6 +562,13 @@ class _Mechanism:
             set_max(fr_a, lim_a)
             set_max(fr_b, lim_b)
             c_step(c_space, h)
+            # end stops: the lumped law on the racks and the board
+            for body in stopped:
+                y = get_p(body).y
+                if y < x_min or y > x_max:
+                    y, vy = _end_stop(y, get_v(body).y, x_min, x_max)
+                    set_p(body, (get_p(body).x, y))
+                    set_v(body, (get_v(body).x, vy))
             # pulp forces of this step (set by the force functions) -> sensor
             if area_model:
                 acc = 0.0
