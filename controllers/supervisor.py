@@ -1069,6 +1069,11 @@ class Supervisor:
             return None
         return self._sv, self._cfg
 
+    @property
+    def min_control_period_s(self) -> float:
+        """Shortest control period (s) the supervisor's window buffers are sized for."""
+        return self._min_dt
+
     def bind(self, state_out: np.ndarray, config_out: np.ndarray) -> None:
         """Move the live arrays into ``state_out`` and ``config_out`` (e.g. one row each of a
         batch's 2-D arrays, stepped by :func:`supervise_commands`); this object then reads and

@@ -1,13 +1,13 @@
 """Leaderboard, results file and figure of docs/benchmark.md.
 
-Run from the repository root (about 8 minutes of wall time with ``-j 2`` on the shared
+Run from the repository root (about 2 minutes of wall time with ``-j 2`` on the shared
 2-core development machine)::
 
     python docs/make_benchmark_figures.py            # run the standard suite, then the figure
     python docs/make_benchmark_figures.py --reuse    # redraw the figure from benchmark.json
 
 The run is the command ``ebraille-sim benchmark pid pid_scheduled pid_feedforward
-pid_friction lqg -j 2 --out docs/figures/benchmark``; it writes ``benchmark.json`` (the
+pid_friction pid_dob lqg -j 2 --out docs/figures/benchmark``; it writes ``benchmark.json`` (the
 results file ``--compare`` reads) and ``leaderboard.md`` there, and ``fast_estimator.json``
 (the paper Wiener model's linear block re-discretised at 1 kHz against the 100 Hz one).
 Every number quoted in docs/benchmark.md comes from those files.
@@ -30,7 +30,7 @@ sys.path.insert(0, str(ROOT))
 from ebraille_sim.cli import main as cli  # noqa: E402
 
 OUT = ROOT / "docs" / "figures" / "benchmark"
-CONTROLLERS = ["pid", "pid_scheduled", "pid_feedforward", "pid_friction", "lqg"]
+CONTROLLERS = ["pid", "pid_scheduled", "pid_feedforward", "pid_friction", "pid_dob", "lqg"]
 
 
 def figure(doc: dict, path: pathlib.Path) -> None:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from ebraille_sim.scenarios import legibility as L
-from ebraille_sim.scenarios.braille import text_to_cells
+from ebraille_sim.scenarios.braille import Cell, text_to_cells
 from ebraille_sim.scenarios.runner import run_scenario
 from ebraille_sim.scenarios.spec import parse_scenario
 
@@ -110,3 +110,187 @@ def test_params_reject_nonsense():
         L.LegibilityParams(dynamic_range=1.0)
     with pytest.raises(ValueError, match="current_a must be finite and > 0"):
         L.LegibilityParams(current_a=-1.0)
+
+
+# --- the compiled laws and pass against the numpy implementation they replaced ---
+
+def _ref_contact_radius_m(force_n, params):
+    e_star = params.pulp_modulus_pa / (1.0 - params.poisson_ratio ** 2)
+    f = np.maximum(np.asarray(force_n, dtype=float), 0.0)
+    return np.cbrt(3.0 * f * params.pulp_radius_m / (4.0 * e_star))
+
+
+def _ref_overlap_area(d, r, a):
+    d, a = np.broadcast_arrays(np.asarray(d, float), np.asarray(a, float))
+    out = np.zeros(d.shape)
+    small = np.minimum(r, a)
+    inside = d <= np.abs(a - r)
+    out[inside] = np.pi * small[inside] ** 2
+    part = (~inside) & (d < a + r) & (a > 0)
+    if np.any(part):
+        dd, aa = d[part], a[part]
+        c1 = np.clip((dd ** 2 + r ** 2 - aa ** 2) / (2 * dd * r), -1.0, 1.0)
+        c2 = np.clip((dd ** 2 + aa ** 2 - r ** 2) / (2 * dd * aa), -1.0, 1.0)
+        k = (-dd + r + aa) * (dd + r - aa) * (dd - r + aa) * (dd + r + aa)
+        out[part] = r ** 2 * np.arccos(c1) + aa ** 2 * np.arccos(c2) - 0.5 * np.sqrt(np.maximum(k, 0.0))
+    return out
+
+
+def _ref_coverage(force_n, params):
+    a = _ref_contact_radius_m(force_n, params)[..., None]
+    d = np.hypot(*L.electrode_centres_m(params).T)
+    r = 0.5 * params.electrode_diameter_m
+    return _ref_overlap_area(np.broadcast_to(d, a.shape[:-1] + (6,)), r, np.broadcast_to(a, a.shape[:-1] + (6,))) \
+        / (math.pi * r * r)
+
+
+def _ref_impedance_ohm(force_n, params):
+    f = np.maximum(np.asarray(force_n, dtype=float), 0.0)
+    return params.impedance_pressed_ohm + (params.impedance_touch_ohm - params.impedance_pressed_ohm) \
+        * np.exp(-f / params.impedance_force_scale_n)
+
+
+def _ref_current_a(force_n, phi, params, setpoint_n):
+    z = _ref_impedance_ohm(force_n, params)[..., None]
+    if params.mode == "constant_current":
+        return np.minimum(params.current_a, params.compliance_v * phi / z)
+    v0 = params.current_a * _ref_impedance_ohm(setpoint_n, params)[..., None]
+    return v0 * phi / z
+
+
+def _ref_relative_intensity(force_n, setpoint_n, params):
+    force_n = np.asarray(force_n, dtype=float)
+    setpoint_n = np.broadcast_to(np.asarray(setpoint_n, dtype=float), force_n.shape)
+    phi = _ref_coverage(force_n, params)
+    area = math.pi * (0.5 * params.electrode_diameter_m) ** 2
+    i = _ref_current_a(force_n, phi, params, setpoint_n)
+    j = np.divide(i, phi * area, out=np.zeros_like(i), where=phi > 1e-12)
+    ones = np.ones(setpoint_n.shape + (1,))
+    j_nom = _ref_current_a(setpoint_n, ones, params, setpoint_n) / area
+    return j / j_nom
+
+
+def _ref_legible_fraction(force_n, setpoint_n, char_index, cells, params):
+    ci = np.asarray(char_index)
+    sel = ci >= 0
+    if not sel.any():
+        return None
+    masks = np.array([c.mask for c in cells], dtype=np.int64)
+    idx = ci[sel]
+    dots = ((masks[idx][:, None] >> np.arange(6)) & 1).astype(bool)
+    ratio = _ref_relative_intensity(np.asarray(force_n)[sel], np.asarray(setpoint_n)[sel], params)
+    lo, hi = params.band
+    ok = np.all(((ratio >= lo) & (ratio <= hi)) | ~dots, axis=1)
+    n_ok = np.bincount(idx, weights=ok.astype(float), minlength=len(cells))
+    n_all = np.bincount(idx, minlength=len(cells))
+    shown = np.unique(idx[dots.any(axis=1)])
+    if shown.size == 0:
+        return None
+    return float(np.mean(n_ok[shown] / n_all[shown] >= LEGIBLE_REQUIRED))
+
+
+LEGIBLE_REQUIRED = L.LEGIBLE_REQUIRED
+OFFSET = dataclasses.replace(P, array_offset_x_m=1.5e-3, electrode_diameter_m=1.4e-3)    # another geometry
+TIGHT_CV = dataclasses.replace(L.CONSTANT_VOLTAGE, dynamic_range=1.3, impedance_force_scale_n=0.8)
+
+
+def _edge_forces(params):
+    """Forces where the contact circle passes through an electrode centre or touches an
+    electrode's edge from outside or inside, and zero/negative forces."""
+    e_star = params.pulp_modulus_pa / (1 - params.poisson_ratio ** 2)
+    r = 0.5 * params.electrode_diameter_m
+    radii = [a for d in np.unique(np.round(np.hypot(*L.electrode_centres_m(params).T), 15))
+             for a in (d, d - r, d + r) if a > 0]
+    return np.array([4 * e_star * a ** 3 / (3 * params.pulp_radius_m) for a in radii] + [0.0, -0.5, 1e-12])
+
+
+def _random_reading(rng, n_cells, n):
+    """Random cells (masks 0..63, some without raised dots) shown in runs of 40 samples with
+    -1 gaps; forces near setpoints of 0.1-2 N (the corner electrodes leave the contact below
+    0.3 N) except for a share of each character's samples (0-20 %, around the 10 % a
+    character may lose) at random, zero, negative and edge forces."""
+    masks = rng.integers(0, 64, n_cells)
+    masks[rng.random(n_cells) < 0.2] = 0
+    cells = [Cell(char="x", dots=tuple(k + 1 for k in range(6) if m >> k & 1), mask=int(m),
+                  kind="letter" if m else "space") for m in masks]
+    runs = n // 40 + 1
+    ci = np.repeat(rng.integers(-1, n_cells, runs), 40)[:n]
+    sp = np.repeat(rng.uniform(0.1, 2.0, runs), 40)[:n]
+    f = sp * rng.normal(1.0, 0.04, n)
+    bad = rng.random(n) < rng.uniform(0.0, 0.2, n_cells)[ci]
+    f[bad] = rng.uniform(-0.2, 3.5, bad.sum())
+    edge = bad & (rng.random(n) < 0.5)
+    f[edge] = rng.choice(_edge_forces(P), edge.sum())
+    return f, sp, ci, cells
+
+
+def test_compiled_laws_equal_the_numpy_reference_on_random_and_edge_forces():
+    rng = np.random.default_rng(7)
+    for params in (P, L.CONSTANT_VOLTAGE, OFFSET, TIGHT_CV):
+        f = np.concatenate([rng.uniform(-0.5, 4.0, 5000), _edge_forces(params)])
+        sp = rng.uniform(0.2, 3.0, f.size)
+        # the same libm transcendentals and operation order give the same bits on this build;
+        # the tolerance only admits a SIMD arccos/exp in another numpy build
+        np.testing.assert_allclose(L.contact_radius_m(f, params), _ref_contact_radius_m(f, params),
+                                   rtol=1e-14, atol=0)
+        np.testing.assert_allclose(L.impedance_ohm(f, params), _ref_impedance_ohm(f, params), rtol=1e-14, atol=0)
+        np.testing.assert_allclose(L.coverage(f, params), _ref_coverage(f, params), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(L.relative_intensity(f, sp, params), _ref_relative_intensity(f, sp, params),
+                                   rtol=1e-12, atol=1e-12)
+        assert L.relative_intensity(f.reshape(-1, 1), 1.0, params).shape == (f.size, 1, 6)
+    d = rng.uniform(0, 5e-3, 2000)
+    a = np.concatenate([rng.uniform(0, 5e-3, 1990), [0.0, 0.6e-3, 1e-3, 1e-3, 2e-3, 0.0, 0.6e-3, 1.6e-3, 0.4e-3, 3e-3]])
+    d[-10:] = [0.0, 0.0, 0.4e-3, 1.6e-3, 1.4e-3, 0.6e-3, 1.2e-3, 1.0e-3, 1.0e-3, 2.4e-3]   # inside / tangent cases
+    np.testing.assert_allclose(L._overlap_area(d, 0.6e-3, a), _ref_overlap_area(d, 0.6e-3, a), rtol=1e-12, atol=1e-18)
+    assert float(L.contact_radius_m(0.0)) == 0.0 and np.all(L.coverage(np.array([0.0, -1.0])) == 0.0)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_compiled_legibility_pass_equals_the_numpy_reference(seed):
+    rng = np.random.default_rng(seed)
+    f, sp, ci, cells = _random_reading(rng, int(rng.integers(1, 40)), int(rng.integers(1, 6000)))
+    got = L.legibility_metrics(f, sp, ci, cells)
+    assert got == {"legible_char_fraction": _ref_legible_fraction(f, sp, ci, cells, L.DEFAULT),
+                   "legible_char_fraction_cv": _ref_legible_fraction(f, sp, ci, cells, L.CONSTANT_VOLTAGE)}
+    # stimulators with another geometry are counted in their own pass; order kept
+    params = [OFFSET, L.DEFAULT, TIGHT_CV, OFFSET, L.CONSTANT_VOLTAGE]
+    assert L._legible_fractions(f, sp, ci, cells, params) == \
+        [_ref_legible_fraction(f, sp, ci, cells, p) for p in params]
+    assert L._legible_fractions(f, sp, ci, cells, [TIGHT_CV]) == [_ref_legible_fraction(f, sp, ci, cells, TIGHT_CV)]
+    for p in (L.DEFAULT, TIGHT_CV):
+        assert L.character_legibility(f, sp, ci, cells, p)["legible_char_fraction"] == \
+            _ref_legible_fraction(f, sp, ci, cells, p)
+
+
+def test_legibility_pass_covers_the_threshold_and_the_edge_cases():
+    cells = text_to_cells("ab c")                         # a, b, space, c
+    n = 100
+    ci = np.repeat(np.arange(4), n)
+    sp = np.ones(4 * n)
+    for bad, expected in ((10, 1.0), (11, 2 / 3)):         # 90 % of the window legible is enough, 89 % is not
+        f = np.ones(4 * n)
+        f[n:n + bad] = 0.6
+        got = L.legibility_metrics(f, sp, ci, cells)
+        assert got["legible_char_fraction_cv"] == pytest.approx(expected) == \
+            _ref_legible_fraction(f, sp, ci, cells, L.CONSTANT_VOLTAGE)
+        assert got["legible_char_fraction"] == 1.0
+    none = {"legible_char_fraction": None, "legible_char_fraction_cv": None}
+    assert L.legibility_metrics(np.ones(4 * n), sp, np.full(4 * n, -1), cells) == none      # nothing shown
+    assert L.legibility_metrics(np.ones(n), sp[:n], np.full(n, 2), cells) == none           # only the space
+    assert L.legibility_metrics(np.zeros(0), np.zeros(0), np.zeros(0, int), cells) == none  # empty run
+    zero = L.legibility_metrics(np.zeros(4 * n), sp, ci, cells)                             # no contact at all
+    assert zero == {"legible_char_fraction": 0.0, "legible_char_fraction_cv": 0.0}
+    with pytest.raises(ValueError, match="refers to cell 4 but there are 4 cells"):
+        L.legibility_metrics(np.ones(3), np.ones(3), np.array([0, 4, -1]), cells)
+    with pytest.raises(ValueError, match="force_n has 3 samples but char_index has 2"):
+        L.legibility_metrics(np.ones(3), np.ones(3), np.array([0, 1]), cells)
+
+
+def test_legibility_pass_is_deterministic():
+    rng = np.random.default_rng(11)
+    f, sp, ci, cells = _random_reading(rng, 25, 20000)
+    first = L.legibility_metrics(f, sp, ci, cells)
+    assert all(L.legibility_metrics(f.copy(), sp.copy(), ci.copy(), cells) == first for _ in range(3))
+    r = L.relative_intensity(f, sp, L.CONSTANT_VOLTAGE)
+    assert np.array_equal(r, L.relative_intensity(f, sp, L.CONSTANT_VOLTAGE))
+    assert np.array_equal(L.relative_intensity(f[::-1], sp[::-1], L.CONSTANT_VOLTAGE), r[::-1])  # per sample only

@@ -141,12 +141,18 @@ def test_open_loop_travel_matches_the_lumped_drive_train():
 
 
 def test_end_stop_holds_the_board_at_full_travel():
+    """Driven at 6 V into the stop, the board never passes full travel, on arrival (period
+    117) or during the hold (the end stop is the lumped ``end_stop`` law applied after each
+    pymunk step; pymunk's slide joints let it overshoot 0.17 mm past the stop on arrival)."""
     dev = DeviceParams()
     plant = PymunkPlant.from_devices([dev], seeds=[1])
     plant.set_finger(0.02)
+    xs = []
     for _ in range(400):
         plant.advance(6.0)
-    assert plant.board_pos_m[0] == pytest.approx(dev.drivetrain.travel_max_m, abs=5e-6)
+        xs.append(plant.board_pos_m[0])
+    assert max(xs) <= dev.drivetrain.travel_max_m + 5e-6
+    assert min(xs[200:]) == pytest.approx(dev.drivetrain.travel_max_m, abs=5e-6)
 
 
 def test_jammed_motor_locks_the_pinion():

@@ -64,9 +64,8 @@ def test_synthetic_traces_cover_every_branch():
 
 
 @pytest.mark.parametrize("name, duration", [("steady_90wpm", 8.0), ("refresh_60wpm", 6.0), ("everyday_session", 20.0)])
-def test_blockwise_legibility_equals_the_whole_run_evaluation(name, duration, monkeypatch):
+def test_compiled_legibility_pass_equals_the_whole_run_evaluation(name, duration):
     from ebraille_sim.scenarios import legibility as L
-    monkeypatch.setattr(L, "LEGIBILITY_CHUNK", 997)                 # many blocks, cut mid-character
     res = run_scenario(name, duration_s=duration, seed=4)
     tr = res.trace
     ci = tr["char_index"]

@@ -258,8 +258,8 @@ class ContactForceVectorEnv(VectorEnv):
             sup = make_supervisor(dev)
             sup.reset(force_est_n=fe, setpoint_n=float(ep.setpoint_n[0]), command_v=0.0)
             sv, cfg = sup.compiled()
-            if self.config.dt_s < sup._min_dt:
-                raise ValueError(f"control period {self.config.dt_s:g} s is below the {sup._min_dt:g} s the "
+            if self.config.dt_s < sup.min_control_period_s:
+                raise ValueError(f"control period {self.config.dt_s:g} s is below the {sup.min_control_period_s:g} s the "
                                  "safety supervisor is sized for")
             if self._sv2 is None or sv.size > self._sv2.shape[1] or cfg.size > self._svcfg2.shape[1]:
                 # the window buffers' lengths depend on the device: rows are padded to the widest

@@ -39,6 +39,11 @@ least :data:`LEGIBLE_REQUIRED` of its stimulation window (the whole dwell in con
 contact, the hold part in refresh mode).  Cells without raised dots (spaces) are not
 counted.
 
+**Computation.** Each law of the chain is one compiled scalar function (contact radius,
+lens area, impedance, stimulator current, relative intensity of a sample); the array
+functions below loop over them, and :func:`legibility_metrics` is one compiled pass over
+the samples that keeps only per-character counts.
+
 Parameters and sources
 ----------------------
 The Hertz patch at 1 N is 3.56 mm in radius, 40 mm² in area; measured fingertip contact
@@ -83,9 +88,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
+from ebraille_sim.base.compiled import njit
 from ebraille_sim.base.fields import sourced
 
 __all__ = ["LegibilityParams", "LEGIBLE_REQUIRED", "METRIC_NAMES", "contact_radius_m", "electrode_centres_m",
@@ -148,11 +155,158 @@ DEFAULT = LegibilityParams()
 CONSTANT_VOLTAGE = LegibilityParams(mode="constant_voltage")
 
 
+class _Contact(NamedTuple):
+    """The contact geometry of :class:`LegibilityParams` as the compiled laws read it."""
+    pulp_radius_m: float
+    pulp_modulus_pa: float
+    poisson_ratio: float
+    electrode_radius_m: float
+
+
+class _Stimulator(NamedTuple):
+    """Skin impedance, stimulator and legible band of :class:`LegibilityParams` for the compiled laws."""
+    impedance_touch_ohm: float
+    impedance_pressed_ohm: float
+    impedance_force_scale_n: float
+    constant_voltage: bool
+    current_a: float
+    compliance_v: float
+    electrode_area_m2: float
+    band_low: float
+    band_high: float
+
+
+def _contact(params: LegibilityParams) -> _Contact:
+    return _Contact(params.pulp_radius_m, params.pulp_modulus_pa, params.poisson_ratio,
+                    0.5 * params.electrode_diameter_m)
+
+
+def _stimulator(params: LegibilityParams) -> _Stimulator:
+    lo, hi = params.band
+    return _Stimulator(params.impedance_touch_ohm, params.impedance_pressed_ohm, params.impedance_force_scale_n,
+                       params.mode == "constant_voltage", params.current_a, params.compliance_v,
+                       math.pi * (0.5 * params.electrode_diameter_m) ** 2, lo, hi)
+
+
+def _electrode_distances_m(params: LegibilityParams) -> np.ndarray:
+    """Distance (m) of each electrode centre from the centre of the contact patch, shape (6,)."""
+    return np.hypot(*electrode_centres_m(params).T)
+
+
+# --- the laws, one sample at a time (every array function below loops over these) ---
+
+@njit
+def _contact_radius(force_n, contact):
+    """Hertz contact radius (m) at one force (N): ``(3 F R / (4 E*))^(1/3)``, ``E* = E / (1 - nu^2)``."""
+    e_star = contact.pulp_modulus_pa / (1.0 - contact.poisson_ratio ** 2)
+    f = max(force_n, 0.0)
+    return np.cbrt(3.0 * f * contact.pulp_radius_m / (4.0 * e_star))
+
+
+@njit
+def _lens_area(d, r, a):
+    """Area of the intersection of discs of radii ``r`` and ``a`` whose centres are ``d`` apart."""
+    if d <= abs(a - r):
+        return np.pi * min(r, a) ** 2
+    if d < a + r and a > 0.0:
+        c1 = min(max((d ** 2 + r ** 2 - a ** 2) / (2 * d * r), -1.0), 1.0)
+        c2 = min(max((d ** 2 + a ** 2 - r ** 2) / (2 * d * a), -1.0), 1.0)
+        k = (-d + r + a) * (d + r - a) * (d - r + a) * (d + r + a)
+        return r ** 2 * math.acos(c1) + a ** 2 * math.acos(c2) - 0.5 * math.sqrt(max(k, 0.0))
+    return 0.0
+
+
+@njit
+def _impedance(force_n, stim):
+    """Impedance (ohm) of a fully covered electrode at one force (N): ``Z_inf + (Z_0 - Z_inf) exp(-F / F_z)``."""
+    f = max(force_n, 0.0)
+    return stim.impedance_pressed_ohm + (stim.impedance_touch_ohm - stim.impedance_pressed_ohm) \
+        * math.exp(-f / stim.impedance_force_scale_n)
+
+
+@njit
+def _current_a(phi, z_ohm, z_setpoint_ohm, stim):
+    """Stimulator current (A) into an electrode of coverage ``phi`` and full-coverage impedance ``z_ohm``."""
+    if stim.constant_voltage:
+        return stim.current_a * z_setpoint_ohm * phi / z_ohm
+    return min(stim.current_a, stim.compliance_v * phi / z_ohm)
+
+
+@njit
+def _sample_coverage(force_n, contact, distance_m, phi):
+    """Covered fraction of each electrode at one force, into ``phi``."""
+    a = _contact_radius(force_n, contact)
+    r = contact.electrode_radius_m
+    for e in range(distance_m.size):
+        phi[e] = _lens_area(distance_m[e], r, a) / (np.pi * r * r)
+
+
+@njit
+def _sample_intensity(force_n, setpoint_n, phi, stim, ratio):
+    """Relative intensity of each electrode at one sample, into ``ratio`` (0 where ``phi`` is 0)."""
+    z = _impedance(force_n, stim)
+    z_sp = _impedance(setpoint_n, stim)
+    area = stim.electrode_area_m2
+    j_nom = _current_a(1.0, z_sp, z_sp, stim) / area
+    for e in range(phi.size):
+        j = _current_a(phi[e], z, z_sp, stim) / (phi[e] * area) if phi[e] > 1e-12 else 0.0
+        ratio[e] = j / j_nom
+
+
+# --- array loops behind the public functions ---
+
+@njit
+def _contact_radii(force_n, contact):
+    out = np.empty(force_n.size)
+    for k in range(force_n.size):
+        out[k] = _contact_radius(force_n[k], contact)
+    return out
+
+
+@njit
+def _lens_areas(d, r, a):
+    out = np.empty(d.size)
+    for k in range(d.size):
+        out[k] = _lens_area(d[k], r, a[k])
+    return out
+
+
+@njit
+def _impedances(force_n, stim):
+    out = np.empty(force_n.size)
+    for k in range(force_n.size):
+        out[k] = _impedance(force_n[k], stim)
+    return out
+
+
+@njit
+def _coverages(force_n, contact, distance_m):
+    out = np.empty((force_n.size, distance_m.size))
+    for k in range(force_n.size):
+        _sample_coverage(force_n[k], contact, distance_m, out[k])
+    return out
+
+
+@njit
+def _intensities(force_n, setpoint_n, contact, distance_m, stim):
+    out = np.empty((force_n.size, distance_m.size))
+    phi = np.empty(distance_m.size)
+    for k in range(force_n.size):
+        _sample_coverage(force_n[k], contact, distance_m, phi)
+        _sample_intensity(force_n[k], setpoint_n[k], phi, stim, out[k])
+    return out
+
+
+def _flat(x) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=float).ravel()
+
+
+# --- public array functions ---
+
 def contact_radius_m(force_n, params: LegibilityParams = DEFAULT):
     """Hertz contact radius (m) of the pulp sphere on the flat board at ``force_n`` (N)."""
-    e_star = params.pulp_modulus_pa / (1.0 - params.poisson_ratio ** 2)
-    f = np.maximum(np.asarray(force_n, dtype=float), 0.0)
-    return np.cbrt(3.0 * f * params.pulp_radius_m / (4.0 * e_star))
+    f = np.asarray(force_n, dtype=float)
+    return _contact_radii(_flat(f), _contact(params)).reshape(f.shape)[()]
 
 
 def electrode_centres_m(params: LegibilityParams = DEFAULT) -> np.ndarray:
@@ -169,44 +323,21 @@ def electrode_centres_m(params: LegibilityParams = DEFAULT) -> np.ndarray:
 
 
 def _overlap_area(d, r, a):
-    """Area of the intersection of discs of radii ``r`` and ``a`` whose centres are ``d`` apart."""
+    """Area of the intersection of discs of radii ``r`` and ``a`` whose centres are ``d`` apart (arrays)."""
     d, a = np.broadcast_arrays(np.asarray(d, float), np.asarray(a, float))
-    out = np.zeros(d.shape)
-    small = np.minimum(r, a)
-    inside = d <= np.abs(a - r)
-    out[inside] = np.pi * small[inside] ** 2
-    part = (~inside) & (d < a + r) & (a > 0)
-    if np.any(part):
-        dd, aa = d[part], a[part]
-        c1 = np.clip((dd ** 2 + r ** 2 - aa ** 2) / (2 * dd * r), -1.0, 1.0)
-        c2 = np.clip((dd ** 2 + aa ** 2 - r ** 2) / (2 * dd * aa), -1.0, 1.0)
-        k = (-dd + r + aa) * (dd + r - aa) * (dd - r + aa) * (dd + r + aa)
-        out[part] = r ** 2 * np.arccos(c1) + aa ** 2 * np.arccos(c2) - 0.5 * np.sqrt(np.maximum(k, 0.0))
-    return out
+    return _lens_areas(_flat(d), float(r), _flat(a)).reshape(d.shape)
 
 
 def coverage(force_n, params: LegibilityParams = DEFAULT) -> np.ndarray:
     """Covered fraction ``phi_e`` of each electrode, shape ``force_n.shape + (6,)``."""
-    a = contact_radius_m(force_n, params)[..., None]
-    d = np.hypot(*electrode_centres_m(params).T)
-    r = 0.5 * params.electrode_diameter_m
-    return _overlap_area(np.broadcast_to(d, a.shape[:-1] + (6,)), r, np.broadcast_to(a, a.shape[:-1] + (6,))) \
-        / (math.pi * r * r)
+    f = np.asarray(force_n, dtype=float)
+    return _coverages(_flat(f), _contact(params), _electrode_distances_m(params)).reshape(f.shape + (6,))
 
 
 def impedance_ohm(force_n, params: LegibilityParams = DEFAULT):
     """Impedance (ohm) of a fully covered electrode at contact force ``force_n`` (N)."""
-    f = np.maximum(np.asarray(force_n, dtype=float), 0.0)
-    return params.impedance_pressed_ohm + (params.impedance_touch_ohm - params.impedance_pressed_ohm) \
-        * np.exp(-f / params.impedance_force_scale_n)
-
-
-def _current_a(force_n, phi, params, setpoint_n):
-    z = impedance_ohm(force_n, params)[..., None]
-    if params.mode == "constant_current":
-        return np.minimum(params.current_a, params.compliance_v * phi / z)
-    v0 = params.current_a * impedance_ohm(setpoint_n, params)[..., None]
-    return v0 * phi / z
+    f = np.asarray(force_n, dtype=float)
+    return _impedances(_flat(f), _stimulator(params)).reshape(f.shape)[()]
 
 
 def relative_intensity(force_n, setpoint_n, params: LegibilityParams = DEFAULT) -> np.ndarray:
@@ -217,13 +348,8 @@ def relative_intensity(force_n, setpoint_n, params: LegibilityParams = DEFAULT) 
     """
     force_n = np.asarray(force_n, dtype=float)
     setpoint_n = np.broadcast_to(np.asarray(setpoint_n, dtype=float), force_n.shape)
-    phi = coverage(force_n, params)
-    area = math.pi * (0.5 * params.electrode_diameter_m) ** 2
-    i = _current_a(force_n, phi, params, setpoint_n)
-    j = np.divide(i, phi * area, out=np.zeros_like(i), where=phi > 1e-12)
-    ones = np.ones(setpoint_n.shape + (1,))
-    j_nom = _current_a(setpoint_n, ones, params, setpoint_n) / area
-    return j / j_nom
+    return _intensities(_flat(force_n), _flat(setpoint_n), _contact(params), _electrode_distances_m(params),
+                        _stimulator(params)).reshape(force_n.shape + (6,))
 
 
 def character_legibility(force_n, setpoint_n, char_index, cells, params: LegibilityParams = DEFAULT) -> dict:
@@ -278,47 +404,75 @@ def character_legibility(force_n, setpoint_n, char_index, cells, params: Legibil
     return out
 
 
-LEGIBILITY_CHUNK = 1 << 16
-"""Samples per block of :func:`legibility_metrics` (its temporaries stay a few MB however
-long the run)."""
+@njit
+def _legibility_counts(force_n, setpoint_n, char_index, masks, contact, distance_m, stims):
+    """One pass over the samples: per cell, the samples in which each stimulator in
+    ``stims`` kept all raised dots legible, the samples shown, and whether the cell has
+    raised dots.  The coverage is computed once per sample for all stimulators."""
+    n_cells = masks.size
+    n_ok = np.zeros((len(stims), n_cells), np.int64)
+    n_all = np.zeros(n_cells, np.int64)
+    shown = np.zeros(n_cells, np.bool_)
+    phi = np.empty(distance_m.size)
+    ratio = np.empty(distance_m.size)
+    for k in range(char_index.size):
+        c = char_index[k]
+        if c < 0:
+            continue
+        n_all[c] += 1
+        dots = masks[c] & 0b111111
+        if dots == 0:                                       # nothing to stimulate: vacuously legible
+            for m in range(len(stims)):
+                n_ok[m, c] += 1
+            continue
+        shown[c] = True
+        _sample_coverage(force_n[k], contact, distance_m, phi)
+        for m in range(len(stims)):
+            stim = stims[m]
+            _sample_intensity(force_n[k], setpoint_n[k], phi, stim, ratio)
+            ok = True
+            for e in range(distance_m.size):
+                if (dots >> e) & 1 and not (ratio[e] >= stim.band_low and ratio[e] <= stim.band_high):
+                    ok = False
+                    break
+            if ok:
+                n_ok[m, c] += 1
+    return n_ok, n_all, shown
 
 
 def legibility_metrics(force_n, setpoint_n, char_index, cells) -> dict:
     """The run metrics :data:`METRIC_NAMES`: legible fraction with both stimulator types.
 
     Arguments as :func:`character_legibility`, whose ``legible_char_fraction`` this is:
-    evaluated over blocks of :data:`LEGIBILITY_CHUNK` samples (the intensity is computed
-    per sample and the per-character counts add up exactly), so an hour-long run needs no
-    per-electrode array of the whole run.
+    evaluated in one compiled pass over the samples that keeps only per-character counts
+    (no per-electrode array of the run) and computes each sample's electrode coverage once
+    for both stimulators.
     """
-    return {"legible_char_fraction": _legible_fraction(force_n, setpoint_n, char_index, cells, DEFAULT),
-            "legible_char_fraction_cv": _legible_fraction(force_n, setpoint_n, char_index, cells,
-                                                          CONSTANT_VOLTAGE)}
+    cc, cv = _legible_fractions(force_n, setpoint_n, char_index, cells, (DEFAULT, CONSTANT_VOLTAGE))
+    return {"legible_char_fraction": cc, "legible_char_fraction_cv": cv}
 
 
-def _legible_fraction(force_n, setpoint_n, char_index, cells, params: LegibilityParams):
-    ci = np.asarray(char_index)
-    f = np.asarray(force_n)
-    sp = np.asarray(setpoint_n)
-    n_cells = len(cells)
+def _legible_fractions(force_n, setpoint_n, char_index, cells, params_list) -> list:
+    """``legible_char_fraction`` of :func:`character_legibility` for each of ``params_list``."""
+    ci = np.ascontiguousarray(char_index, dtype=np.int64).ravel()
+    f = _flat(force_n)
+    sp = _flat(np.broadcast_to(np.asarray(setpoint_n, dtype=float), f.shape))
+    if f.size != ci.size:
+        raise ValueError(f"force_n has {f.size} samples but char_index has {ci.size}")
+    if ci.size and ci.max() >= len(cells):
+        raise ValueError(f"char_index refers to cell {int(ci.max())} but there are {len(cells)} cells")
     masks = np.array([c.mask for c in cells], dtype=np.int64)
-    n_ok = np.zeros(n_cells)
-    n_all = np.zeros(n_cells, dtype=np.int64)
-    shown = np.zeros(n_cells, dtype=bool)
-    lo, hi = params.band
-    for a in range(0, len(ci), LEGIBILITY_CHUNK):
-        part = ci[a:a + LEGIBILITY_CHUNK]
-        sel = part >= 0
-        if not sel.any():
+    by_geometry: dict = {}                                  # stimulators sharing a contact geometry
+    for i, params in enumerate(params_list):
+        geometry = (_contact(params), tuple(_electrode_distances_m(params)))
+        by_geometry.setdefault(geometry, []).append(i)
+    out: list = [None] * len(params_list)
+    for (contact, distances), members in by_geometry.items():
+        stims = tuple(_stimulator(params_list[i]) for i in members)
+        n_ok, n_all, shown = _legibility_counts(f, sp, ci, masks, contact, np.array(distances), stims)
+        keep = np.nonzero(shown)[0]
+        if keep.size == 0:
             continue
-        idx = part[sel]
-        dots = ((masks[idx][:, None] >> np.arange(6)) & 1).astype(bool)
-        ratio = relative_intensity(f[a:a + LEGIBILITY_CHUNK][sel], sp[a:a + LEGIBILITY_CHUNK][sel], params)
-        ok = np.all(((ratio >= lo) & (ratio <= hi)) | ~dots, axis=1)
-        n_ok += np.bincount(idx, weights=ok.astype(float), minlength=n_cells)
-        n_all += np.bincount(idx, minlength=n_cells)
-        shown[idx[dots.any(axis=1)]] = True
-    keep = np.nonzero(shown)[0]
-    if keep.size == 0:
-        return None
-    return float(np.mean(n_ok[keep] / n_all[keep] >= LEGIBLE_REQUIRED))
+        for row, i in enumerate(members):
+            out[i] = float(np.mean(n_ok[row, keep] / n_all[keep] >= LEGIBLE_REQUIRED))
+    return out
