@@ -38,7 +38,9 @@ def test_estimate_converges_to_a_constant_input_disturbance_within_tau():
     # the loop rejects it: the force is back on the setpoint, the PID's integral carries only
     # the uncompensated 10 %
     assert abs(force[-1] - 1.0) < 1e-3
-    assert 0.02 < abs(force - 1.0).max() < 0.05                # measured 0.035 N
+    # measured 0.063 N: the nominal plant's gain follows the pulp's tangent stiffness at 1 N
+    # (8571 N/m with the tap-dissipation weights, c0 = 0.15)
+    assert 0.04 < abs(force - 1.0).max() < 0.08
 
 
 def test_without_the_observer_the_same_disturbance_takes_the_pid_longer():

@@ -222,9 +222,11 @@ def test_offcentre_press_tilts_the_board_and_shifts_load_and_friction_to_the_nea
 def test_press_over_the_board_edge_reads_low_and_the_loop_overloads_the_finger():
     """A strip beyond the board edge carries nothing; the two loaded strips conduct in
     parallel, which reads less than the same force spread evenly (n < 1).  The loop holds
-    the same estimate (1.001 N) as on a centred press, so the finger carries more: 0.988 N
-    against 0.965 N centred after 3 s (the centred press sits under 1 N: the estimator,
-    calibrated on longer holds, reads the crept sensor high)."""
+    the same estimate (1.001 N) as on a centred press, so the finger carries more: 0.992 N
+    against 0.972 N centred after 3 s (ratio 1.020).  The static strip law alone predicts
+    1.046 (the sum over the equivalent force); the sensor's hysteresis and creep states,
+    which follow the equivalent force's history, take part of it back.  Without the strip
+    law the ratio would be 1."""
     true_n = {}
     for offset_m in (0.0, 9e-3):
         plant = PymunkPlant.from_devices([DeviceParams()], seeds=[1])
@@ -239,7 +241,10 @@ def test_press_over_the_board_edge_reads_low_and_the_loop_overloads_the_finger()
     share = 1.0 / len(fc)
     f_eq = (share ** (1 - n) * sum(f ** n for f in fc if f > 0)) ** (1 / n)
     assert f_eq < 0.97 * sum(fc)
-    assert true_n[9e-3] > 1.02 * true_n[0.0]      # same estimate, more force on the finger
+    static_ratio = sum(fc) / f_eq
+    assert static_ratio > 1.03
+    # same estimate, more force on the finger (measured 1.020), never more than the static law
+    assert 1.015 * true_n[0.0] < true_n[9e-3] < static_ratio * true_n[0.0]
 
 
 def test_offcentre_scenario_runs_on_both_backends_and_shows_tilt():
