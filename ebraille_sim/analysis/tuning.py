@@ -60,10 +60,14 @@ equivalent:
 1. the continuous part above is discretised exactly at the control period (zero-order
    hold, which is what the kernel does: the command is held over the period);
 2. it is put in series with the creep terms (:func:`creep_model`, at the sensor rate, as the
-   kernel advances them) and the anti-alias biquad at the same rate;
+   kernel advances them), the estimator's creep compensation (:func:`compensation_model`:
+   the partial derivatives of the kernel's own compensation, its creep terms driven by the
+   estimate the firmware holds) and the anti-alias biquad at the same rate;
 3. for the open-loop plant, the command is held over ``N`` control periods and the
    sampled model is lifted to the estimator rate (``A^N``, ``sum A^j B``) and put in series
-   with the estimator: :func:`linearize` returns this model with ``dt`` = 0.01 s;
+   with the estimator: :func:`linearize` returns this model with ``dt`` = 0.01 s.  With the
+   compensation the estimate is fed back into the front: the sample the estimator reads
+   still holds the previous estimate, the ``N - 1`` after it the new one (:func:`_lift`);
 4. for a loop with a controller that runs at the control rate (:func:`pid_statespace`),
    the controller and the plant are lifted together over ``N`` periods with the estimate
    held, which gives the exact loop transfer at the estimator rate (the only rate at which
@@ -85,7 +89,7 @@ Examples
 0.01
 >>> a = analyse_loop(DEFAULT_PID, force_n=0.6)
 >>> a.stable, round(a.ms, 2)
-(True, 1.96)
+(True, 1.7)
 """
 from __future__ import annotations
 
@@ -107,6 +111,7 @@ from ebraille_sim.physics.params import DeviceParams
 __all__ = [
     "OperatingPoint", "LoopAnalysis", "FRICTION_RULES", "CONTINUOUS_STATES",
     "operating_point", "contact_plant_system", "continuous_model", "sensor_models", "creep_model", "CREEP_STATES",
+    "compensation_model", "COMP_STATES", "ESTIMATE_HELD_STATE",
     "linearize", "pid_statespace", "lift", "loop_models", "analyse_loop", "sensitivity_peak",
     "LoopMargins", "loop_margins",
     "simc_pid", "foptd_fit", "plot_bode", "plot_nyquist",
@@ -274,7 +279,10 @@ def _sensor_point(device: DeviceParams, force_n: float, load_time_s: float, mode
     h = 1e-4 * max(f_c, 1e-2)
     slope = c_h * (v_of_crept(f_c + h) - v_of_crept(f_c - h)) / (2 * h)
     tare = _tare(fsr, circ) if device.estimator.tare_at_start else 0.0
-    u0 = v0 - tare
+    # the estimator reads the compensated voltage (the same whatever the estimate: the
+    # firmware's creep gain does not depend on the force it has followed)
+    u0 = (_compensation_point(device, v0, force_n, load_time_s)[0] if device.estimator.creep_compensation
+          else v0) - tare
     w0 = model._in(u0)
     side = 1.0 if direction >= 0 else -1.0
     du = side * 1e-9 * max(1.0, abs(u0))
@@ -315,6 +323,75 @@ def creep_model(device: DeviceParams = DeviceParams()) -> control.StateSpace:
     return control.ss(np.diag(a), b.reshape(-1, 1), (w * a).reshape(1, -1), [[1.0 + w * float(np.sum(b))]],
                       dt=dt, inputs=["fsr_voltage_inst_v"], outputs=["fsr_voltage_v"], states=list(CREEP_STATES),
                       name="creep")
+
+
+COMP_STATES = [f"comp_creep_{j}_n" for j in range(_fsr.N_CREEP)]
+"""States of :func:`compensation_model`: the firmware's creep terms (deviations, N)."""
+
+ESTIMATE_HELD_STATE = "est_held_n"
+"""State of the lifted model with compensation: the estimate the compensation holds."""
+
+
+def _compensation_point(device: DeviceParams, raw_v: float, estimate_n: float, load_time_s: float):
+    """The kernel's creep compensation at an operating point, and its partial derivatives.
+
+    Evaluates :func:`ebraille_sim.estimation.blockmodels.creep_compensated_v` itself with the
+    parameters :func:`ebraille_sim.plant.loop.pack_params` packs, its creep terms having
+    followed ``estimate_n`` for ``load_time_s`` (``z_i = F (1 - a_i^k)``).  Returns
+    ``(v_out, d/dv, d/dF_est, d/dz_i, a_i)``; the derivatives are central differences of
+    that function (it is smooth away from the load threshold and the rails).
+    """
+    from ebraille_sim.estimation.blockmodels import creep_compensated_v
+    from ebraille_sim.plant.layout import N_CREEP, P
+    from ebraille_sim.plant.loop import pack_params
+    p = pack_params(device, 0.0)
+    a = np.array([p[P[f"comp_creep_a{j}"]] for j in range(N_CREEP)])
+    k = int(round(load_time_s * device.rates.sensor_rate_hz))
+    z = estimate_n * (1.0 - a ** k)
+    fn = creep_compensated_v.py_func
+
+    def out(v, f, zz):
+        st = np.zeros(N_CREEP)
+        st[:] = zz
+        return fn(v, f, st, 0, p, P.comp_creep_a0, p[P.comp_creep_weight], p[P.comp_load_threshold_n], N_CREEP,
+                  p[P.comp_fsr_n], p[P.comp_g_standoff_s], p[P.comp_reference_gain], p[P.r2_ohm],
+                  p[P.divider_supply_v])
+    v0 = out(raw_v, estimate_n, z)
+    hv = 1e-6 * max(abs(raw_v), 1e-3)
+    hf = 1e-6 * max(abs(estimate_n), 1e-3)
+    d_v = (out(raw_v + hv, estimate_n, z) - out(raw_v - hv, estimate_n, z)) / (2 * hv)
+    d_f = (out(raw_v, estimate_n + hf, z) - out(raw_v, estimate_n - hf, z)) / (2 * hf)
+    d_z = np.empty(N_CREEP)
+    for j in range(N_CREEP):
+        e = np.zeros(N_CREEP)
+        e[j] = hf
+        d_z[j] = (out(raw_v, estimate_n, z + e) - out(raw_v, estimate_n, z - e)) / (2 * hf)
+    return v0, d_v, d_f, d_z, a
+
+
+def compensation_model(device: DeviceParams, op: OperatingPoint) -> control.StateSpace:
+    """Small-signal creep compensation at the sensor rate.
+
+    Inputs: the divider voltage (V) and the estimate the firmware holds (N); output: the
+    voltage the anti-alias filter receives (V); states :data:`COMP_STATES`, the firmware's
+    creep terms, advanced by :func:`ebraille_sim.physics.fsr.creep_state_step` on the held
+    estimate (``zeta+ = a zeta + (1 - a) dF_est``).  The output is
+    ``dv_out = d_v dv + d_F dF_est + sum_i d_zi zeta_i`` with the partial derivatives of
+    the kernel's own compensation (:func:`_compensation_point`, old states as arguments).
+    Without compensation the model passes the voltage through.
+    """
+    dt = 1.0 / device.rates.sensor_rate_hz
+    if not device.estimator.creep_compensation:
+        return control.ss(np.zeros((0, 0)), np.zeros((0, 2)), np.zeros((1, 0)), [[1.0, 0.0]], dt=dt,
+                          inputs=["fsr_voltage_v", "force_est_held_n"], outputs=["fsr_voltage_comp_v"],
+                          name="compensation")
+    _, d_v, d_f, d_z, a = _compensation_point(device, op.fsr_voltage_v, op.estimate_n, op.load_time_s)
+    n = len(a)
+    B = np.zeros((n, 2))
+    B[:, 1] = 1.0 - a
+    return control.ss(np.diag(a), B, d_z.reshape(1, -1), [[d_v, d_f]], dt=dt,
+                      inputs=["fsr_voltage_v", "force_est_held_n"], outputs=["fsr_voltage_comp_v"],
+                      states=list(COMP_STATES), name="compensation")
 
 
 def operating_point(device: DeviceParams = DeviceParams(), force_n: float = 1.0, *,
@@ -507,17 +584,80 @@ def _ratio(device: DeviceParams, est_dt: float) -> int:
 
 
 def _sampled_front(device: DeviceParams, op: OperatingPoint) -> tuple[control.StateSpace, control.StateSpace]:
-    """Control-rate model from the command to the anti-alias output, and the estimator."""
+    """Control-rate model from the command to the anti-alias output, and the estimator.
+
+    With the estimator's creep compensation the front has a second input, the estimate the
+    firmware holds (:func:`compensation_model`); :func:`_lift` closes that path."""
     ct = continuous_model(device, op)
     h = 1.0 / device.rates.control_rate_hz
     dt_sys = control.c2d(ct[1, 0], h, method="zoh")
     dt_sys = control.ss(dt_sys.A, dt_sys.B, dt_sys.C, dt_sys.D, dt=h, inputs=["command_v"],
                         outputs=["fsr_voltage_inst_v"], states=list(CONTINUOUS_STATES))
     aa, est = sensor_models(device, op)
-    front = control.series(control.series(dt_sys, creep_model(device)), aa)
-    front = control.ss(front.A, front.B, front.C, front.D, dt=h, inputs=["command_v"], outputs=["aa_out_v"],
-                       states=list(CONTINUOUS_STATES) + CREEP_STATES + ["aa_z1", "aa_z2"], name="front")
+    if not device.estimator.creep_compensation:
+        front = control.series(control.series(dt_sys, creep_model(device)), aa)
+        front = control.ss(front.A, front.B, front.C, front.D, dt=h, inputs=["command_v"], outputs=["aa_out_v"],
+                           states=list(CONTINUOUS_STATES) + CREEP_STATES + ["aa_z1", "aa_z2"], name="front")
+        return front, est
+    g1 = control.series(dt_sys, creep_model(device))
+    comp = compensation_model(device, op)
+    A1, B1, C1, D1 = (np.atleast_2d(np.asarray(m, float)) for m in (g1.A, g1.B, g1.C, g1.D))
+    Ac, Bc, Cc, Dc = (np.atleast_2d(np.asarray(m, float)) for m in (comp.A, comp.B, comp.C, comp.D))
+    Aa, Ba, Ca, Da = (np.atleast_2d(np.asarray(m, float)) for m in (aa.A, aa.B, aa.C, aa.D))
+    n1, nc, na = A1.shape[0], Ac.shape[0], Aa.shape[0]
+    bcv, bce, dcv, dce = Bc[:, [0]], Bc[:, [1]], Dc[0, 0], Dc[0, 1]
+    A = np.block([[A1, np.zeros((n1, nc)), np.zeros((n1, na))],
+                  [bcv @ C1, Ac, np.zeros((nc, na))],
+                  [dcv * (Ba @ C1), Ba @ Cc, Aa]])
+    B = np.block([[B1, np.zeros((n1, 1))],
+                  [bcv @ D1, bce],
+                  [dcv * (Ba @ D1), dce * Ba]])
+    C = np.hstack([dcv * (Da @ C1), Da @ Cc, Ca])
+    D = np.hstack([dcv * (Da @ D1), dce * Da])
+    front = control.ss(A, B, C, D, dt=h, inputs=["command_v", "force_est_held_n"], outputs=["aa_out_v"],
+                       states=list(CONTINUOUS_STATES) + CREEP_STATES + COMP_STATES + ["aa_z1", "aa_z2"],
+                       name="front")
     return front, est
+
+
+def _compensated(front: control.StateSpace) -> bool:
+    return front.ninputs == 2
+
+
+def _lift(A, Bu, Be, C, De, est: control.StateSpace, n: int):
+    """Lift a sensor-rate model with the compensation's held-estimate input to the estimator rate.
+
+    ``x+ = A x + Bu u + Be e``, ``y = C x + De e`` (``u`` held over the ``n`` samples, ``e``
+    the estimate the compensation holds).  The sample that feeds the estimator still holds
+    the previous estimate; the ``n - 1`` samples after it hold the new one.  Returns
+    ``(A_L, B_L, C_L)``: states ``[x, estimator states, est_held]``, inputs ``u``, output the
+    new estimate (no direct term).
+    """
+    Ae, Bes, Ce, Des = (np.atleast_2d(np.asarray(m, float)) for m in (est.A, est.B, est.C, est.D))
+    nx, ne = A.shape[0], Ae.shape[0]
+    An, Bn = lift(A, Bu, n)
+    An1 = np.linalg.matrix_power(A, n - 1)
+    S = np.zeros_like(A)
+    Ak = np.eye(nx)
+    for _ in range(n - 1):
+        S += Ak
+        Ak = A @ Ak
+    # est_k = Des C x + Ce xe + Des De e_prev
+    ex = Des @ C
+    ee = Des @ De
+    AL = np.zeros((nx + ne + 1, nx + ne + 1))
+    AL[:nx, :nx] = An + S @ Be @ ex
+    AL[:nx, nx:nx + ne] = S @ Be @ Ce
+    AL[:nx, [-1]] = An1 @ Be + S @ Be @ ee
+    AL[nx:nx + ne, :nx] = Bes @ C
+    AL[nx:nx + ne, nx:nx + ne] = Ae
+    AL[nx:nx + ne, [-1]] = Bes @ De
+    AL[[-1], :nx] = ex
+    AL[[-1], nx:nx + ne] = Ce
+    AL[-1, -1] = ee[0, 0]
+    BL = np.vstack([Bn, np.zeros((ne + 1, Bu.shape[1]))])
+    CL = np.hstack([ex, Ce, ee])
+    return AL, BL, CL
 
 
 def lift(A: np.ndarray, B: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -564,6 +704,12 @@ def linearize(device: DeviceParams = DeviceParams(), force_n: float = 1.0, *, fr
                          load_time_s=load_time_s)
     front, est = _sampled_front(device, op)
     n = _ratio(device, est.dt)
+    if _compensated(front):
+        A, B, C, D = (np.atleast_2d(np.asarray(m, float)) for m in (front.A, front.B, front.C, front.D))
+        AL, BL, CL = _lift(A, B[:, [0]], B[:, [1]], C, D[:, [1]], est, n)
+        plant = control.ss(AL, BL, CL, np.zeros((1, 1)), dt=est.dt, inputs=["command_v"], outputs=["force_est_n"],
+                           states=front.state_labels + est.state_labels + [ESTIMATE_HELD_STATE], name="plant")
+        return (plant, op) if return_point else plant
     An, Bn = lift(front.A, front.B, n)
     lifted = control.ss(An, Bn, front.C, np.zeros((1, 1)), dt=est.dt, inputs=["command_v"],
                         outputs=["aa_out_v"], states=front.state_labels)
@@ -637,6 +783,28 @@ def loop_models(device: DeviceParams, force_n: float, controller, *, friction: s
     Ac, Bc, Cc, Dc = (np.atleast_2d(np.asarray(m, float)) for m in
                       (controller.A, controller.B, controller.C, controller.D))
     nx, nc = fr.A.shape[0], Ac.shape[0]
+    if _compensated(fr):
+        Af, Bf, Cf, Df = (np.atleast_2d(np.asarray(m, float)) for m in (fr.A, fr.B, fr.C, fr.D))
+        bu, be = Bf[:, [0]], Bf[:, [1]]
+        if math.isclose(controller.dt, h):
+            AJ = np.block([[Af, bu @ Cc], [np.zeros((nc, nx)), Ac]])
+            BJ = np.vstack([bu @ Dc, Bc])
+            BE = np.vstack([be, np.zeros((nc, 1))])
+            CJ = np.hstack([Cf, np.zeros((1, nc))])
+            A, B, C = _lift(AJ, BJ, BE, CJ, Df[:, [1]], est, n)
+        elif math.isclose(controller.dt, est.dt):
+            AL, BL, CL = _lift(Af, bu, be, Cf, Df[:, [1]], est, n)
+            q = control.series(control.ss(Ac, Bc, Cc, Dc, dt=est.dt), control.ss(AL, BL, CL, [[0.0]], dt=est.dt))
+            A, B, C = q.A, q.B, q.C
+            if np.any(np.abs(q.D) > 0):
+                raise ValueError("the sampled loop must be strictly proper")
+        else:
+            raise ValueError(f"controller dt {controller.dt} must equal the control period {h} or the "
+                             f"estimator period {est.dt}")
+        loop = control.ss(A, -B[:, [1]], C, np.zeros((1, 1)), dt=est.dt, inputs=["e"], outputs=["force_est_n"])
+        closed = control.ss(A + B[:, [1]] @ C, B[:, [0]], C, np.zeros((1, 1)), dt=est.dt,
+                            inputs=["setpoint_n"], outputs=["force_est_n"])
+        return loop, closed
     if math.isclose(controller.dt, h):
         # controller and plant lifted together over n control periods
         AJ = np.block([[fr.A, fr.B @ Cc], [np.zeros((nc, nx)), Ac]])
