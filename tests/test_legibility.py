@@ -321,3 +321,44 @@ def test_legibility_pass_is_deterministic():
     r = L.relative_intensity(f, sp, L.CONSTANT_VOLTAGE)
     assert np.array_equal(r, L.relative_intensity(f, sp, L.CONSTANT_VOLTAGE))
     assert np.array_equal(L.relative_intensity(f[::-1], sp[::-1], L.CONSTANT_VOLTAGE), r[::-1])  # per sample only
+
+
+def test_laws_are_monotone_in_force():
+    f = np.linspace(0.0, 5.0, 2001)
+    area = L.contact_area_m2(f)
+    assert area[0] == 0.0 and np.all(np.diff(area) > 0)
+    cov = L.coverage(f)
+    assert np.all(np.diff(cov, axis=0) >= 0) and np.all((cov >= 0) & (cov <= 1))
+    cv = L.relative_intensity(f, 1.0, L.CONSTANT_VOLTAGE)[:, 1]      # centre dot, always covered above 0
+    assert np.all(np.diff(cv[1:]) > 0)
+    cc = L.relative_intensity(f, 1.0)
+    assert np.all(np.diff(cc[1:, 1]) >= 0) and np.all(cc[f > 0.3] == 1.0)
+
+
+def test_legible_force_ranges_at_a_1_n_setpoint():
+    """Where the laws put the band edges: constant current from 0.144 N up (Z(F) = 212 kOhm),
+    constant voltage 0.466-2.58 N (Z(F) = Z(1 N) DR^+-1/2)."""
+    lo, hi = P.band
+    for f, inside in ((0.143, False), (0.145, True), (4.0, True)):
+        assert bool(np.all((L.relative_intensity(np.array([f]), 1.0) >= lo))) is inside
+    cv = L.CONSTANT_VOLTAGE
+    for f, inside in ((0.465, False), (0.468, True), (2.57, True), (2.59, False)):
+        r = float(L.relative_intensity(np.array([f]), 1.0, cv)[0, 1])
+        assert (lo <= r <= hi) is inside, f
+    assert P.current_a / math.sqrt(P.dynamic_range) == pytest.approx(1.414e-3, rel=1e-3)   # implied threshold
+
+
+def test_setpoint_and_forces_at_or_below_zero_stay_finite():
+    r = L.relative_intensity(np.array([0.0, -1.0, 1.0, 1e-4]), np.array([1.0, 1.0, 0.0, 0.0]))
+    assert np.all(np.isfinite(r)) and np.all(r[:2] == 0.0)
+    r = L.relative_intensity(np.array([1.0, 1e-4]), 0.0, L.CONSTANT_VOLTAGE)
+    assert np.all(np.isfinite(r))
+
+
+def test_new_params_reject_nonsense():
+    with pytest.raises(ValueError, match="contact_area_exponent must be < 1"):
+        L.LegibilityParams(contact_area_exponent=1.0)
+    with pytest.raises(ValueError, match="pressure_exponent must be finite and > 0"):
+        L.LegibilityParams(pressure_exponent=0.0)
+    with pytest.raises(ValueError, match="contact_area_1n_m2 must be finite and > 0"):
+        L.LegibilityParams(contact_area_1n_m2=float("nan"))
