@@ -142,7 +142,7 @@ def fig_legibility(summary):
     a = L.contact_radius_m(f) * 1e3
     cov = L.coverage(f)
     axes[0].plot(f, a, "k", label="contact radius")
-    axes[0].set_ylabel("Hertz contact radius (mm)")
+    axes[0].set_ylabel("contact radius (mm)")
     axes[0].set_xlabel("contact force (N)")
     axes[0].set_title("contact patch and electrode coverage", fontsize=9)
     cov_ax = axes[0].twinx()
@@ -154,7 +154,7 @@ def fig_legibility(summary):
     axes[1].plot(f, L.impedance_ohm(f) / 1e3)
     axes[1].set_xlabel("contact force (N)")
     axes[1].set_ylabel("Z per electrode (kOhm)")
-    axes[1].set_title("Z(F) = Z_inf + (Z_0 - Z_inf) exp(-F/F_z)", fontsize=9)
+    axes[1].set_title("Z(F) = Z_inf + Z_sc (p_ref / p(F))^k", fontsize=9)
     lo, hi = cc.band
     for p, name in ((cc, "constant current"), (cv, "constant voltage")):
         r = L.relative_intensity(f, 1.0, p)

@@ -76,6 +76,16 @@ LAWS = [
      ["test_pulp_energy_is_the_integral_of_the_elastic_law"]),
     ("drive force for an impact", "ebraille_sim/physics/limits.py", "drive_force_for_impact_n",
      ["test_pulp_energy_is_the_integral_of_the_elastic_law"]),
+    ("finger-pad contact area", "ebraille_sim/scenarios/legibility.py", "_contact_area_m2",
+     ["test_legibility_contact_area_law_against_the_measured_finger_pad"]),
+    ("contact radius", "ebraille_sim/scenarios/legibility.py", "_contact_radius",
+     ["test_legibility_contact_area_law_against_the_measured_finger_pad"]),
+    ("electrode coverage", "ebraille_sim/scenarios/legibility.py", "_lens_area",
+     ["test_legibility_lens_area_of_two_discs"]),
+    ("electrode-skin impedance", "ebraille_sim/scenarios/legibility.py", "_impedance",
+     ["test_legibility_impedance_falls_with_the_patch_pressure"]),
+    ("stimulator current", "ebraille_sim/scenarios/legibility.py", "_current_a",
+     ["test_legibility_stimulator_current_constant_current_and_voltage"]),
 ]
 
 _RETURN = re.compile(r"^(\s*)return (.+)$")

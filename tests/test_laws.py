@@ -405,6 +405,56 @@ def test_antialias_biquad_and_pwl_and_df2t_pieces():
     assert tared_v(1.25, 0.25) == 1.0
 
 
+# ---------------------------------------------------------------------------- legibility
+def test_legibility_contact_area_law_against_the_measured_finger_pad():
+    from ebraille_sim.scenarios import legibility as L
+    c = L._contact(L.DEFAULT)
+    area = L._contact_area_m2
+    assert area(1.0, c.contact_area_1n_m2, c.contact_area_exponent) == pytest.approx(100e-6, rel=1e-12)
+    assert area(4.0, c.contact_area_1n_m2, c.contact_area_exponent) == pytest.approx(100e-6 * 4 ** (1 / 3), rel=1e-12)
+    assert area(0.0, 1e-4, 0.5) == 0.0 and area(-1.0, 1e-4, 0.5) == 0.0
+    # the measured ranges [M]: 60-150 mm2 near 1 N, 100-250 mm2 near 4 N; over twice the
+    # 40 mm2 of the Hertz sphere (R = 8 mm, E = 0.1 MPa) at 1 N
+    a1, a4 = area(1.0, c.contact_area_1n_m2, c.contact_area_exponent), area(4.0, c.contact_area_1n_m2,
+                                                                          c.contact_area_exponent)
+    assert 60e-6 <= a1 <= 150e-6 and 100e-6 <= a4 <= 250e-6
+    hertz_1n = math.pi * (3 * 1.0 * 8e-3 / (4 * 0.1e6 / 0.75)) ** (2 / 3)
+    assert hertz_1n == pytest.approx(39.7e-6, rel=0.01) and a1 > 2 * hertz_1n
+    # the radius is that of the disc of the same area
+    assert L._contact_radius(1.0, c) == pytest.approx(math.sqrt(100e-6 / math.pi), rel=1e-12)
+    assert L._contact_radius(0.0, c) == 0.0
+
+
+def test_legibility_lens_area_of_two_discs():
+    from ebraille_sim.scenarios.legibility import _lens_area
+    r = 0.6e-3
+    assert _lens_area(0.0, r, 2e-3) == pytest.approx(math.pi * r * r, rel=1e-12)      # electrode inside
+    assert _lens_area(0.2e-3, r, 0.3e-3) == pytest.approx(math.pi * 0.09e-6, rel=1e-12)   # patch inside
+    assert _lens_area(1.3e-3, r, 0.6e-3) == 0.0                                        # apart
+    for d in (0.3e-3, 0.6e-3, 1.0e-3):                                                 # equal discs
+        exact = 2 * r * r * math.acos(d / (2 * r)) - 0.5 * d * math.sqrt(4 * r * r - d * d)
+        assert _lens_area(d, r, r) == pytest.approx(exact, rel=1e-12)
+
+
+def test_legibility_impedance_falls_with_the_patch_pressure():
+    from ebraille_sim.scenarios import legibility as L
+    s = L._stimulator(L.DEFAULT)
+    assert L._impedance(1.0, s) == pytest.approx(80e3, rel=1e-12)                     # p(1 N) = p_ref = 10 kPa
+    assert L._impedance(0.2, s) == pytest.approx(30e3 + 50e3 * 0.2 ** (-2 / 3), rel=1e-12)
+    assert L._impedance(3.0, s) == pytest.approx(30e3 + 50e3 * 3.0 ** (-2 / 3), rel=1e-12)
+    assert L._impedance(0.0, s) == L._impedance(1e-3, s) == pytest.approx(5.03e6, rel=1e-12)
+
+
+def test_legibility_stimulator_current_constant_current_and_voltage():
+    from ebraille_sim.scenarios import legibility as L
+    cc, cv = L._stimulator(L.DEFAULT), L._stimulator(L.CONSTANT_VOLTAGE)
+    assert L._current_a(1.0, 80e3, 80e3, cc) == 2e-3                                   # 160 V < 300 V compliance
+    assert L._current_a(1.0, 200e3, 80e3, cc) == pytest.approx(1.5e-3, rel=1e-12)      # 300 V / 200 kOhm
+    assert L._current_a(0.5, 100e3, 80e3, cc) == pytest.approx(1.5e-3, rel=1e-12)      # 300 V * 0.5 / 100 kOhm
+    assert L._current_a(1.0, 100e3, 80e3, cv) == pytest.approx(1.6e-3, rel=1e-12)      # 160 V / 100 kOhm
+    assert L._current_a(0.5, 80e3, 80e3, cv) == pytest.approx(1e-3, rel=1e-12)
+
+
 # ---------------------------------------------------------------------------- composition
 def test_state_layout_is_composed_from_the_module_declarations():
     declared = [n for names in layout.STATE_OWNERS.values() for n in names]

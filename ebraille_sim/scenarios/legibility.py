@@ -5,83 +5,106 @@ the raised dots are stimulated.  What the reader feels depends on the current de
 each electrode, and that depends on how the pulp meets the board, which is what the force
 loop controls.  The chain, per control sample and per electrode:
 
-1. **Contact patch** (Hertz, sphere on a flat): the pulp is a sphere of radius ``R``
-   pressed onto the board with force ``F``; the contact radius is
-   ``a(F) = (3 F R / (4 E*))^(1/3)``, ``E* = E / (1 - nu^2)``.  With ``R = 8 mm`` and
-   ``E = 0.1 MPa`` this is the same pulp as the exponential law of
-   :mod:`ebraille_sim.physics.fingertip` (0.83 N at 1.4 mm by Hertz against 1 N by the
-   exponential law, parameters table 1.5).
+1. **Contact patch** (measured finger-pad law, not a Hertz sphere): the gross contact
+   area of the pulp on the flat board grows as a power of the normal force,
+   ``A(F) = A_1 (F / 1 N)^n``, with ``A_1 = 100 mm2`` and ``n = 1/3``.  Measured finger
+   pads flatten much faster than a Hertz sphere at low force and much slower above it
+   (the pad stiffens as it is compressed, so the Hertz exponent 2/3 over-predicts the
+   growth).  The patch is taken as the disc of the same area, radius
+   ``a(F) = (A(F) / pi)^(1/2)`` (5.64 mm at 1 N; the Hertz sphere of R = 8 mm,
+   E = 0.1 MPa gave 3.56 mm, 40 mm2).
 2. **Electrode coverage**: electrode ``e`` (a disc of diameter ``D_e`` centred at
    ``c_e``, the Braille dot positions at pitch ``p``) touches the skin over the
    intersection of its disc with the contact disc; ``phi_e = A_overlap / A_e`` in [0, 1].
-3. **Electrode-skin impedance** (law [E], unsourced: parameters table 4.2 suggests the form)::
+3. **Electrode-skin impedance**: current crosses the stratum corneum only where the
+   fingerprint ridges really touch the electrode, and the real contact area of a rough
+   elastic contact grows in proportion to the local pressure.  With the mean patch
+   pressure ``p(F) = F / A(F)`` the impedance of a fully covered electrode is::
 
-       Z(F) = Z_inf + (Z_0 - Z_inf) exp(-F / F_z)
+       Z(F) = Z_inf + Z_sc (p_ref / p(F))^k
 
-   per fully covered electrode; a partly covered electrode has ``Z(F) / phi_e`` (the
-   interface conducts through its wetted area).
+   (``Z_inf`` the tissue and spreading resistance beneath the interface, ``Z_sc`` the
+   interface at the reference pressure ``p_ref``, ``k = 1`` for real contact area
+   proportional to pressure).  Below the touch force ``F_t`` the impedance stays at
+   ``Z(F_t)`` (an open contact is not evaluated).  A partly covered electrode has
+   ``Z(F) / phi_e`` (the interface conducts through its covered area).
 4. **Stimulator**: constant current ``I_0`` up to a compliance voltage ``V_c``
    (``I_e = min(I_0, V_c phi_e / Z(F))``), or constant voltage ``V_0 = I_0 Z(F_sp)``
    calibrated to give ``I_0`` at the setpoint force ``F_sp`` (``I_e = V_0 phi_e / Z(F)``).
-5. **Intensity** is proportional to the current density ``J_e = I_e / (phi_e A_e)``
-   (parameters table 4.2 [E]); its ratio to the nominal ``J_nom`` (full coverage at the
-   setpoint force) is the electrode's relative intensity.  A peeling electrode
-   (``phi_e`` falling) under constant current therefore feels *stronger*, as reported
-   for electrodes peeling off the skin ([R] Akhtar et al. 2018, PMC6656406), until the
-   compliance voltage limits the current.
+5. **Intensity** is proportional to the current density ``J_e = I_e / (phi_e A_e)``;
+   its ratio to the nominal ``J_nom`` (full coverage at the setpoint force) is the
+   electrode's relative intensity.  A peeling electrode (``phi_e`` falling) under
+   constant current therefore feels *stronger*, as reported for electrodes peeling off
+   the skin ([R] Akhtar et al. 2018, PMC6656406), until the compliance voltage limits
+   the current.
 
 **Legibility.** The stimulation level is set at the geometric centre of the reader's
-usable range, between the sensation threshold and the discomfort level, whose ratio is
-the dynamic range ``DR``.  An electrode is *legible* while its relative intensity lies in
+usable range, between the sensation threshold and the maximal current without
+discomfort, whose ratio is the dynamic range ``DR`` ([R] definition, Kaczmarek, Webster
+& Radwin 1992).  An electrode is *legible* while its relative intensity lies in
 ``[DR^-1/2, DR^1/2]``: below it the dot fades under threshold, above it the dot hurts and
-masks its neighbours.  A character is legible when all its raised dots are legible for at
-least :data:`LEGIBLE_REQUIRED` of its stimulation window (the whole dwell in continuous
-contact, the hold part in refresh mode).  Cells without raised dots (spaces) are not
-counted.
+masks its neighbours.  With ``I_0 = 2 mA`` and ``DR = 2`` the implied sensation threshold
+is 1.41 mA and the discomfort level 2.83 mA.  A character is legible when all its raised
+dots are legible for at least :data:`LEGIBLE_REQUIRED` of its stimulation window (the
+whole dwell in continuous contact, the hold part in refresh mode).  Cells without raised
+dots (spaces) are not counted.
 
-**Computation.** Each law of the chain is one compiled scalar function (contact radius,
-lens area, impedance, stimulator current, relative intensity of a sample); the array
-functions below loop over them, and :func:`legibility_metrics` is one compiled pass over
-the samples that keeps only per-character counts.
+**Computation.** Each law of the chain is one compiled scalar function (contact area,
+contact radius, lens area, impedance, stimulator current, relative intensity of a
+sample); the array functions below loop over them, and :func:`legibility_metrics` is one
+compiled pass over the samples that keeps only per-character counts.
 
 Parameters and sources
 ----------------------
-The Hertz patch at 1 N is 3.56 mm in radius, 40 mm² in area; measured fingertip contact
-areas at that force are larger (roughly twice), so the coverage is an estimate [E].  The
-impedance law and its three constants are [E]/[M], and the 2 mA current is a design choice
-[E] that copies the example stimulus of Akhtar et al. 2018 [R]; the legibility metrics
-compare controllers on one chain, they do not predict absolute percepts.
+The contact area follows measured finger-pad areas (a power law of force), not a Hertz
+sphere: the Hertz patch of an 8 mm, 0.1 MPa pulp is 40 mm² at 1 N, about half of what is
+measured.  The impedance law's form comes from the contact physics [D]; its scale and
+exponent are [E]/[M], and the 2 mA current is a design choice [E] that copies the example
+stimulus of Akhtar et al. 2018 [R]; the legibility metrics compare controllers on one
+chain, they do not predict absolute percepts.
 
 ======================  ==========  =====================================================
 parameter               default     source
 ======================  ==========  =====================================================
-pulp radius R           8 mm        [E] parameters table 1.5 (Hertz cross-check)
-pulp modulus E          0.1 MPa     [R] 0.07-0.2 MPa Hertzian fit (parameters 1.5)
-Poisson ratio nu        0.5         [E] nearly incompressible soft tissue
+area at 1 N A_1         100 mm2     [M] 60-150 mm2 gross finger-pad area near 1 N on a
+                                    flat plate (Serina et al. 1997/1998, measured at
+                                    0.25-7 N [R] PMID 9796686; Warman & Ennos 2009;
+                                    Dzidek et al. 2017)
+area exponent n         1/3         [M] 0.2-0.5 measured (Soneda & Nakano 2010; Dzidek
+                                    et al. 2017, whose Hertz fit needs a secant modulus
+                                    rising with force [R] PMC5332579); Hertz gives 2/3
 electrode pitch p       2.4 mm      [E] 2.3-2.5 mm to mimic the 2.34 mm dot spacing [R]
 electrode diameter D_e  1.2 mm      [E] 1-1.5 mm (parameters table 4.1)
-Z(F) law                exp. fall   [E] unsourced form
-Z_0 (touching)          400 kOhm    [M] 10 kOhm-1 MOhm dry fingertip (Kaczmarek 1991)
-Z_inf (pressed)         30 kOhm     [M] same range, moist/pressed end
-F_z                     0.5 N       [E] 0.3-1 N (parameters table 4.2)
-I_0                     2 mA        [E] choice; [R] Akhtar et al. 2018 used 2 mA, 200 us, 20 Hz
+Z_inf (tissue)          30 kOhm     [M] low end of 10 kOhm-1 MOhm per fingertip
+                                    electrode (Kaczmarek et al. 1991)
+Z_sc at p_ref           50 kOhm     [E] makes Z(1 N) = 80 kOhm, inside the same range
+p_ref                   10 kPa      [D] mean patch pressure at 1 N: 1 N / A_1
+pressure exponent k     1           [E] real contact area proportional to pressure
+                                    (rough elastic contact); 0.5-1 plausible
+touch force F_t         1 mN        [E] lightest touch evaluated (Z = 5 MOhm)
+I_0                     2 mA        [E] design choice; [R] Akhtar et al. 2018 used 2 mA,
+                                    200 us, 20 Hz
 compliance V_c          300 V       [M] 50-300 V fingertip stimulators (Kaczmarek 1991)
-dynamic range DR        2.0         [M] fingertip discomfort/threshold current ratio,
-                                    small on the fingertip (Kaczmarek 1991); with the
-                                    [R] Stevens exponent 1.51 of electrotactile
-                                    magnitude, +/-41 % current is about x0.6-x1.7 felt
+dynamic range DR        2.0         [M] fingertip ratio, small (Kaczmarek et al. 1991);
+                                    the threshold it implies, 1.41 mA, lies in the [M]
+                                    1-3 mA fingertip range.  [R] 3.9 on the upper arm
+                                    (median 3.5 mA perception, 13.8 mA intolerance,
+                                    81 subjects, Sci Rep 2022, PMID 35513410) is the
+                                    upper end to sweep
 ======================  ==========  =====================================================
 
 Examples
 --------
 >>> import numpy as np
 
+>>> round(float(contact_area_m2(1.0)) * 1e6, 1)          # mm2 at 1 N
+100.0
 >>> round(float(contact_radius_m(1.0)) * 1e3, 2)          # mm at 1 N
-3.56
->>> ratio = relative_intensity(np.array([1.0, 0.3]), np.array([1.0, 1.0]))
+5.64
+>>> ratio = relative_intensity(np.array([1.0, 0.1]), np.array([1.0, 1.0]))
 >>> ratio.shape
 (2, 6)
->>> bool(np.all(ratio[0] == 1.0)), bool(ratio[1].min() < 0.7)
+>>> bool(np.all(ratio[0] == 1.0)), bool(ratio[1].max() < 0.7)
 (True, True)
 """
 from __future__ import annotations
@@ -95,7 +118,7 @@ import numpy as np
 from ebraille_sim.base.compiled import njit
 from ebraille_sim.base.fields import sourced
 
-__all__ = ["LegibilityParams", "LEGIBLE_REQUIRED", "METRIC_NAMES", "contact_radius_m", "electrode_centres_m",
+__all__ = ["LegibilityParams", "LEGIBLE_REQUIRED", "METRIC_NAMES", "contact_area_m2", "contact_radius_m", "electrode_centres_m",
            "coverage", "impedance_ohm", "relative_intensity", "character_legibility", "legibility_metrics"]
 
 LEGIBLE_REQUIRED = 0.9
@@ -110,39 +133,39 @@ constant-voltage one (:data:`CONSTANT_VOLTAGE`)."""
 @dataclass(frozen=True)
 class LegibilityParams:
     """Electrode array, skin contact and stimulator (sources in the module table)."""
-    pulp_radius_m: float = sourced(8e-3, "m", "[E] parameters table 1.5; the Hertz patch (40 mm2 at 1 N) is "
-                                   "smaller than measured fingertip contact areas")
-    pulp_modulus_pa: float = sourced(0.1e6, "Pa", "[R] 0.07-0.2 MPa Hertzian fit")
-    poisson_ratio: float = sourced(0.5, "-", "[E] nearly incompressible tissue")
+    contact_area_1n_m2: float = sourced(100e-6, "m2", "[M] 60-150 mm2 gross finger-pad area near 1 N "
+                                        "(Serina 1997, Warman & Ennos 2009, Dzidek 2017)")
+    contact_area_exponent: float = sourced(1.0 / 3.0, "-", "[M] 0.2-0.5 measured (Soneda & Nakano 2010, "
+                                           "Dzidek 2017); Hertz 2/3")
     pitch_m: float = sourced(2.4e-3, "m", "[E] 2.3-2.5 mm; Braille dot spacing 2.34 mm [R]")
     electrode_diameter_m: float = sourced(1.2e-3, "m", "[E] 1-1.5 mm")
     array_offset_x_m: float = sourced(0.0, "m", "[E] array centred on the contact patch")
     array_offset_y_m: float = sourced(0.0, "m", "[E] array centred on the contact patch")
-    impedance_touch_ohm: float = sourced(400e3, "ohm", "[M] Kaczmarek 1991, 10 k-1 M dry fingertip")
-    impedance_pressed_ohm: float = sourced(30e3, "ohm", "[M] same range, pressed end")
-    impedance_force_scale_n: float = sourced(0.5, "N", "[E] F_z 0.3-1 N of the unsourced exponential "
-                                             "impedance law, parameters table 4.2")
+    impedance_pressed_ohm: float = sourced(30e3, "ohm", "[M] Kaczmarek 1991, 10 k-1 M per fingertip electrode")
+    impedance_interface_ohm: float = sourced(50e3, "ohm", "[E] stratum corneum at p_ref; Z(1 N) = 80 k")
+    reference_pressure_pa: float = sourced(10e3, "Pa", "[D] 1 N / 100 mm2")
+    pressure_exponent: float = sourced(1.0, "-", "[E] real contact area proportional to pressure; 0.5-1")
+    touch_force_n: float = sourced(1e-3, "N", "[E] lightest touch evaluated")
     mode: str = sourced("constant_current", "-", "constant_current | constant_voltage")
     current_a: float = sourced(2e-3, "A", "[E] design choice, the example stimulus of [R] Akhtar et al. 2018")
     compliance_v: float = sourced(300.0, "V", "[M] 50-300 V")
-    dynamic_range: float = sourced(2.0, "-", "[M] discomfort/threshold ratio on the fingertip")
+    dynamic_range: float = sourced(2.0, "-", "[M] fingertip discomfort/threshold current ratio; [R] 3.9 upper arm")
 
     def __post_init__(self):
         if self.mode not in ("constant_current", "constant_voltage"):
             raise ValueError(f"LegibilityParams.mode must be 'constant_current' or 'constant_voltage', "
                              f"got {self.mode!r}")
-        for name in ("pulp_radius_m", "pulp_modulus_pa", "pitch_m", "electrode_diameter_m",
-                     "impedance_touch_ohm", "impedance_pressed_ohm", "impedance_force_scale_n",
-                     "current_a", "compliance_v"):
+        for name in ("contact_area_1n_m2", "contact_area_exponent", "pitch_m", "electrode_diameter_m",
+                     "impedance_pressed_ohm", "impedance_interface_ohm", "reference_pressure_pa",
+                     "pressure_exponent", "touch_force_n", "current_a", "compliance_v"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"LegibilityParams.{name} must be finite and > 0, got {v}")
-        if not 0.0 <= self.poisson_ratio < 1.0:
-            raise ValueError(f"LegibilityParams.poisson_ratio must lie in [0, 1), got {self.poisson_ratio}")
+        if not self.contact_area_exponent < 1.0:
+            raise ValueError(f"LegibilityParams.contact_area_exponent must be < 1 (the patch pressure must "
+                             f"rise with force), got {self.contact_area_exponent}")
         if not self.dynamic_range > 1.0:
             raise ValueError(f"LegibilityParams.dynamic_range must be > 1, got {self.dynamic_range}")
-        if self.impedance_pressed_ohm > self.impedance_touch_ohm:
-            raise ValueError("LegibilityParams.impedance_pressed_ohm must not exceed impedance_touch_ohm")
 
     @property
     def band(self) -> tuple[float, float]:
@@ -157,17 +180,20 @@ CONSTANT_VOLTAGE = LegibilityParams(mode="constant_voltage")
 
 class _Contact(NamedTuple):
     """The contact geometry of :class:`LegibilityParams` as the compiled laws read it."""
-    pulp_radius_m: float
-    pulp_modulus_pa: float
-    poisson_ratio: float
+    contact_area_1n_m2: float
+    contact_area_exponent: float
     electrode_radius_m: float
 
 
 class _Stimulator(NamedTuple):
     """Skin impedance, stimulator and legible band of :class:`LegibilityParams` for the compiled laws."""
-    impedance_touch_ohm: float
+    contact_area_1n_m2: float
+    contact_area_exponent: float
     impedance_pressed_ohm: float
-    impedance_force_scale_n: float
+    impedance_interface_ohm: float
+    reference_pressure_pa: float
+    pressure_exponent: float
+    touch_force_n: float
     constant_voltage: bool
     current_a: float
     compliance_v: float
@@ -177,15 +203,15 @@ class _Stimulator(NamedTuple):
 
 
 def _contact(params: LegibilityParams) -> _Contact:
-    return _Contact(params.pulp_radius_m, params.pulp_modulus_pa, params.poisson_ratio,
-                    0.5 * params.electrode_diameter_m)
+    return _Contact(params.contact_area_1n_m2, params.contact_area_exponent, 0.5 * params.electrode_diameter_m)
 
 
 def _stimulator(params: LegibilityParams) -> _Stimulator:
     lo, hi = params.band
-    return _Stimulator(params.impedance_touch_ohm, params.impedance_pressed_ohm, params.impedance_force_scale_n,
-                       params.mode == "constant_voltage", params.current_a, params.compliance_v,
-                       math.pi * (0.5 * params.electrode_diameter_m) ** 2, lo, hi)
+    return _Stimulator(params.contact_area_1n_m2, params.contact_area_exponent, params.impedance_pressed_ohm,
+                       params.impedance_interface_ohm, params.reference_pressure_pa, params.pressure_exponent,
+                       params.touch_force_n, params.mode == "constant_voltage", params.current_a,
+                       params.compliance_v, math.pi * (0.5 * params.electrode_diameter_m) ** 2, lo, hi)
 
 
 def _electrode_distances_m(params: LegibilityParams) -> np.ndarray:
@@ -196,11 +222,17 @@ def _electrode_distances_m(params: LegibilityParams) -> np.ndarray:
 # --- the laws, one sample at a time (every array function below loops over these) ---
 
 @njit
+def _contact_area_m2(force_n, area_1n_m2, exponent):
+    """Gross contact area (m2) of the pulp on the board at one force (N): ``A_1 F^n``, 0 without force."""
+    if force_n <= 0.0:
+        return 0.0
+    return area_1n_m2 * force_n ** exponent
+
+
+@njit
 def _contact_radius(force_n, contact):
-    """Hertz contact radius (m) at one force (N): ``(3 F R / (4 E*))^(1/3)``, ``E* = E / (1 - nu^2)``."""
-    e_star = contact.pulp_modulus_pa / (1.0 - contact.poisson_ratio ** 2)
-    f = max(force_n, 0.0)
-    return np.cbrt(3.0 * f * contact.pulp_radius_m / (4.0 * e_star))
+    """Radius (m) of the disc with the contact area at one force (N): ``(A(F) / pi)^(1/2)``."""
+    return math.sqrt(_contact_area_m2(force_n, contact.contact_area_1n_m2, contact.contact_area_exponent) / np.pi)
 
 
 @njit
@@ -218,10 +250,15 @@ def _lens_area(d, r, a):
 
 @njit
 def _impedance(force_n, stim):
-    """Impedance (ohm) of a fully covered electrode at one force (N): ``Z_inf + (Z_0 - Z_inf) exp(-F / F_z)``."""
-    f = max(force_n, 0.0)
-    return stim.impedance_pressed_ohm + (stim.impedance_touch_ohm - stim.impedance_pressed_ohm) \
-        * math.exp(-f / stim.impedance_force_scale_n)
+    """Impedance (ohm) of a fully covered electrode at one force (N): ``Z_inf + Z_sc (p_ref / p(F))^k``.
+
+    ``p(F) = F / A(F)`` is the mean pressure of the contact patch; forces below the touch
+    force are evaluated at the touch force.
+    """
+    f = max(force_n, stim.touch_force_n)
+    p = f / _contact_area_m2(f, stim.contact_area_1n_m2, stim.contact_area_exponent)
+    return stim.impedance_pressed_ohm + stim.impedance_interface_ohm \
+        * (stim.reference_pressure_pa / p) ** stim.pressure_exponent
 
 
 @njit
@@ -254,6 +291,14 @@ def _sample_intensity(force_n, setpoint_n, phi, stim, ratio):
 
 
 # --- array loops behind the public functions ---
+
+@njit
+def _contact_areas(force_n, contact):
+    out = np.empty(force_n.size)
+    for k in range(force_n.size):
+        out[k] = _contact_area_m2(force_n[k], contact.contact_area_1n_m2, contact.contact_area_exponent)
+    return out
+
 
 @njit
 def _contact_radii(force_n, contact):
@@ -303,8 +348,14 @@ def _flat(x) -> np.ndarray:
 
 # --- public array functions ---
 
+def contact_area_m2(force_n, params: LegibilityParams = DEFAULT):
+    """Gross contact area (m2) of the pulp on the flat board at ``force_n`` (N): ``A_1 F^n``."""
+    f = np.asarray(force_n, dtype=float)
+    return _contact_areas(_flat(f), _contact(params)).reshape(f.shape)[()]
+
+
 def contact_radius_m(force_n, params: LegibilityParams = DEFAULT):
-    """Hertz contact radius (m) of the pulp sphere on the flat board at ``force_n`` (N)."""
+    """Radius (m) of the disc with the pulp's contact area at ``force_n`` (N)."""
     f = np.asarray(force_n, dtype=float)
     return _contact_radii(_flat(f), _contact(params)).reshape(f.shape)[()]
 
