@@ -81,7 +81,7 @@ def wheel(tmp_path_factory) -> pathlib.Path:
     cmd = [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(base / "dist"), str(src)]
     if _can_build_without_isolation():
         cmd.insert(4, "--no-build-isolation")
-    r = subprocess.run(cmd, capture_output=True, text=True, env=_clean_env(), timeout=150)
+    r = subprocess.run(cmd, capture_output=True, text=True, env=_clean_env(), timeout=600)
     assert r.returncode == 0, r.stdout + r.stderr
     [whl] = (base / "dist").glob("ebraille_sim-*.whl")
     return whl
@@ -137,7 +137,7 @@ def test_installed_wheel_runs_the_shipped_library_from_any_folder(wheel, tmp_pat
     env = _clean_env(NUMBA_CACHE_DIR=str(tmp_path / "numba"))
 
     def cli(*args, cwd=work):
-        return subprocess.run([str(exe), *args], cwd=cwd, capture_output=True, text=True, env=env, timeout=150)
+        return subprocess.run([str(exe), *args], cwd=cwd, capture_output=True, text=True, env=env, timeout=600)
 
     where = subprocess.run([str(venv / "bin" / "python"), "-c", "import ebraille_sim; print(ebraille_sim.__file__)"],
                            cwd=work, capture_output=True, text=True, env=env)
