@@ -155,8 +155,8 @@ def test_vector_episode_bound_follows_the_control_rate():
 
 
 def test_the_batched_safety_layer_equals_each_rows_python_supervisor():
-    """The vector env steps every sub-env's supervisor in one compiled call; the same env with
-    each row's supervisor stepped through ``supervised_action`` (the scalar env's path) gives
+    """The vector env steps every sub-env's supervisor inside its compiled row step; the same env
+    with each row's supervisor stepped through ``supervised_action`` (the Python path) gives
     identical observations, rewards and episode ends, with the limits acting and through
     autoresets."""
     from ebraille_sim.rl.env import C_CMD_SCALE, Z_STEP, supervised_action
@@ -172,6 +172,7 @@ def test_the_batched_safety_layer_equals_each_rows_python_supervisor():
 
     fast = ContactForceVectorEnv(num_envs=6, parallel=False)
     slow = ContactForceVectorEnv(num_envs=6, parallel=False)
+    slow._fused = False                                   # the safety layer outside the compiled rows
     slow._supervised = row_by_row.__get__(slow)
     o1, _ = fast.reset(seed=3)
     o2, _ = slow.reset(seed=3)

@@ -184,10 +184,12 @@ from ebraille_sim.base.compiled import njit
 from ebraille_sim.base.validation import check_bool, check_choice, check_number, check_pair, check_range
 
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
+from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import S, U
 from ebraille_sim.plant.loop import loop_step
 from ebraille_sim.rl.registration import ENV_ID, register_envs
 from controllers import features
+from controllers.supervisor import supervise_begin, supervise_end
 from controllers.features import (C_CMD_SCALE, C_DT, C_SAFE, C_WARN, C_WU, C_WV, ERROR_SCALE_N, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, Z_STEP, _clip,
                                   observe, reset_features, write_observation)
 
@@ -238,6 +240,44 @@ def post_step(z, c, force_est_n, force_true_n, current_a, setpoint_shown_n, setp
     z[Z_STEP] += 1.0
     observe(z, c, force_est_n, setpoint_next_n, current_a, c[C_DT], obs)
     return r, v, force_true_n > c[C_SAFE]
+
+
+@njit(cache=True)
+def scalar_step(state, params, inputs, prof_rows, prof, k, action, safety, sv, cfg, z, c, setpoint, dt_s, n_sub,
+                obs):
+    """One step of the scalar env on a lumped plant, in one compiled call.
+
+    Writes period ``k``'s varying inputs (``inputs[prof_rows[j]] = prof[j, k]``), passes the
+    clipped ``action`` through the safety layer when ``safety`` (:func:`controllers.supervisor.supervise_begin`
+    and :func:`~controllers.supervisor.supervise_end` with the agent's command as the inner
+    controller's, what :func:`supervised_action` does through :class:`~controllers.supervisor.Supervisor`),
+    advances the plant (:func:`ebraille_sim.plant.kernel.advance`, as :meth:`ebraille_sim.plant.loop.Plant.advance`)
+    and computes reward, termination and the next observation (:func:`post_step`).
+
+    Returns
+    -------
+    (reward, violation, terminated, applied)
+        ``applied`` is the command as a fraction of the supply, in [-1, 1].
+    """
+    for j in range(prof_rows.shape[0]):
+        inputs[prof_rows[j]] = prof[j, k]
+    a = _clip(action, -1.0, 1.0)
+    scale = c[C_CMD_SCALE]
+    if safety:
+        f = state[S.force_est_n]
+        sp = setpoint[k]
+        cur = state[S.current_a]
+        if not math.isfinite(cur):
+            cur = math.nan
+        code, u, sp_inner = supervise_begin(sv, cfg, f, sp, dt_s, cur)
+        if code == 1:
+            code, u, reset_cmd = supervise_end(sv, cfg, a * scale, f, sp, dt_s, cur)
+        a = _clip(u / scale, -1.0, 1.0)
+    inputs[U.command_v] = a * scale
+    kernel.advance(state, params, inputs, n_sub)
+    r, v, term = post_step(z, c, state[S.force_est_n], state[S.contact_force_n], state[S.current_a],
+                           setpoint[k], setpoint[k + 1], a, obs)
+    return r, v, term, a
 
 
 class ActionCommand:
@@ -553,6 +593,9 @@ def check_action(action, n: int | None = None):
 # the environment
 # ---------------------------------------------------------------------------------------------
 
+_NO_ARRAY = np.zeros(0)
+
+
 class ContactForceEnv(gym.Env):
     __doc__ = __doc__
 
@@ -590,6 +633,10 @@ class ContactForceEnv(gym.Env):
         self._renderer = None
         self._history = None
         self._sup = None
+        self._compiled = False
+        self._dt = self.config.dt_s
+        self._substeps = self.config.substeps
+        self._sv = self._svcfg = _NO_ARRAY
 
     # -- episode ---------------------------------------------------------------------------
     def next_episode_seed(self, seed=None) -> np.random.SeedSequence:
@@ -603,7 +650,7 @@ class ContactForceEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         opt = validate_options(options, self.config.safe_force_n)
-        from ebraille_sim.plant.loop import make_plant
+        from ebraille_sim.plant.loop import Plant, make_plant
         ep = draw_episode(self.next_episode_seed(seed), self.config, opt)
         dev = ep.device
         self.plant = make_plant([dev], [ep.sensor_seed], backend=self.config.backend,
@@ -612,6 +659,13 @@ class ContactForceEnv(gym.Env):
         self._st = self.plant.state[0]
         self._inp = self.plant.inputs[0]
         self._varying = [(U[name], arr) for name, arr in ep.run.profiles.items()]
+        self._compiled = isinstance(self.plant, Plant)
+        if self._compiled:
+            self._substeps = self.plant.substeps
+            self._prof_rows = np.array([j for j, _ in self._varying], dtype=np.int64)
+            self._prof = (np.stack([arr for _, arr in self._varying]) if self._varying
+                          else np.zeros((0, ep.n_steps)))
+            self._params0 = self.plant.params[0]
         self.episode = ep
         self._k = 0
         fe = float(self._st[S.force_est_n])
@@ -619,6 +673,12 @@ class ContactForceEnv(gym.Env):
         if self.config.safety:
             self._sup = make_supervisor(dev)
             self._sup.reset(force_est_n=fe, setpoint_n=float(ep.setpoint_n[0]), command_v=0.0)
+            if self.config.dt_s < self._sup.min_control_period_s:
+                raise ValueError(f"control period {self.config.dt_s:g} s is below the "
+                                 f"{self._sup.min_control_period_s:g} s the safety supervisor is sized for")
+            self._sv, self._svcfg = self._sup.compiled()
+        else:
+            self._sv = self._svcfg = _NO_ARRAY
         reset_features(self._z, fe)
         write_observation(self._z, self._c, fe, ep.setpoint_n[0], float(self._st[S.current_a]), self._obs)
         if self.render_mode is not None:
@@ -630,13 +690,15 @@ class ContactForceEnv(gym.Env):
         st = self._st
         k = self._k
         ep = self.episode
-        info = {"force_true_n": float(st[S.contact_force_n]), "force_est_n": float(st[S.force_est_n]),
+        sup = self._sup
+        if sup is None:
+            return {"force_true_n": float(st[S.contact_force_n]), "force_est_n": float(st[S.force_est_n]),
+                    "setpoint_n": float(ep.setpoint_n[k]), "command_v": float(self._inp[U.command_v]),
+                    "violation": float(violation), "time_s": k * self._dt, "char_index": int(ep.char_index[k])}
+        return {"force_true_n": float(st[S.contact_force_n]), "force_est_n": float(st[S.force_est_n]),
                 "setpoint_n": float(ep.setpoint_n[k]), "command_v": float(self._inp[U.command_v]),
-                "violation": violation, "time_s": k * self.config.dt_s, "char_index": int(ep.char_index[k])}
-        if self._sup is not None:
-            info.update(action_v=self._sup.inner.command_v, supervisor_mode=self._sup.mode,
-                        supervisor_fault=self._sup.fault)
-        return info
+                "violation": float(violation), "time_s": k * self._dt, "char_index": int(ep.char_index[k]),
+                "action_v": sup.inner.command_v, "supervisor_mode": sup.mode, "supervisor_fault": sup.fault}
 
     def step(self, action):
         if self.episode is None:
@@ -648,19 +710,31 @@ class ContactForceEnv(gym.Env):
         if k >= ep.n_steps:
             raise RuntimeError("the episode has ended; call reset()")
         st = self._st
-        inp = self._inp
-        for j, arr in self._varying:
-            inp[j] = arr[k]
-        if self._sup is not None:
-            a = supervised_action(self._sup, a, self._c[C_CMD_SCALE], float(st[S.force_est_n]),
-                                  float(ep.setpoint_n[k]), self.config.dt_s, float(st[S.current_a]))
-        loop_step(self.plant, a * self._c[C_CMD_SCALE])
-        self._k = k + 1
-        ft = float(st[S.contact_force_n])
-        if not math.isfinite(ft):
-            raise FloatingPointError("the simulation diverged (non-finite contact force)")
-        r, v, term = post_step(self._z, self._c, float(st[S.force_est_n]), ft, float(st[S.current_a]),
-                               ep.setpoint_n[k], ep.setpoint_n[k + 1], a, self._obs)
+        if self._compiled:
+            sup = self._sup
+            r, v, term, a_applied = scalar_step(st, self._params0, self._inp, self._prof_rows, self._prof, k, a,
+                                                sup is not None, self._sv, self._svcfg, self._z, self._c,
+                                                ep.setpoint_n, self._dt, self._substeps, self._obs)
+            self._k = k + 1
+            ft = st[S.contact_force_n]
+            if not math.isfinite(ft):
+                raise FloatingPointError("the simulation diverged (non-finite contact force)")
+            if sup is not None:
+                sup.inner.command_v = a * self._c[C_CMD_SCALE]
+        else:
+            inp = self._inp
+            for j, arr in self._varying:
+                inp[j] = arr[k]
+            if self._sup is not None:
+                a = supervised_action(self._sup, a, self._c[C_CMD_SCALE], float(st[S.force_est_n]),
+                                      float(ep.setpoint_n[k]), self.config.dt_s, float(st[S.current_a]))
+            loop_step(self.plant, a * self._c[C_CMD_SCALE])
+            self._k = k + 1
+            ft = float(st[S.contact_force_n])
+            if not math.isfinite(ft):
+                raise FloatingPointError("the simulation diverged (non-finite contact force)")
+            r, v, term = post_step(self._z, self._c, float(st[S.force_est_n]), ft, float(st[S.current_a]),
+                                   ep.setpoint_n[k], ep.setpoint_n[k + 1], a, self._obs)
         info = self._info(v)
         if self._history is not None:
             h = self._history

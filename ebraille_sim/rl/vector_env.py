@@ -43,6 +43,7 @@ Examples
 """
 from __future__ import annotations
 
+import math
 import os
 
 import numpy as np
@@ -52,6 +53,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from ebraille_sim.base.compiled import njit, prange
 
+from controllers.supervisor import supervise_begin, supervise_end
 from ebraille_sim.plant import kernel
 from ebraille_sim.rl.env import (
     C_CMD_SCALE,
@@ -105,10 +107,16 @@ def use_threads(num_envs: int, cpus: int | None = None) -> bool:
 
 @njit(cache=True)
 def step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_sub,
-             obs, reward, violation, terminated, truncated):
-    """One control period of row ``i``: command and period inputs, physics, reward, observation.
+             obs, reward, violation, terminated, truncated, safety, sv2, cfg2, dt_s):
+    """One control period of row ``i``: safety layer, command and period inputs, physics,
+    reward, observation.
 
     ``seq[i, k]`` is row ``i``'s plant input row for period ``k`` (the command slot unused).
+    With ``safety`` the clipped action passes through row ``i``'s supervisor (state
+    ``sv2[i]``, configuration ``cfg2[i]``, :meth:`controllers.supervisor.Supervisor.bind`) as
+    :func:`controllers.supervisor.supervise_commands` steps it: the agent's command
+    ``a * driver_supply_v`` is the inner controller's, and the applied command is the
+    supervisor's output over the supply, clipped to [-1, 1].
     """
     a = actions[i]
     if a < -1.0:
@@ -116,6 +124,21 @@ def step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_
     elif a > 1.0:
         a = 1.0
     k = int(z[i, Z_STEP])
+    if safety:
+        scale = c[i, C_CMD_SCALE]
+        f = state[i, S.force_est_n]
+        sp = setpoint[i, min(k, setpoint.shape[1] - 1)]
+        cur = state[i, S.current_a]
+        if not math.isfinite(cur):
+            cur = math.nan
+        code, u, sp_inner = supervise_begin(sv2[i], cfg2[i], f, sp, dt_s, cur)
+        if code == 1:
+            code, u, reset_cmd = supervise_end(sv2[i], cfg2[i], a * scale, f, sp, dt_s, cur)
+        a = u / scale
+        if a < -1.0:
+            a = -1.0
+        elif a > 1.0:
+            a = 1.0
     for j in range(inputs.shape[1]):
         if j != U.command_v:
             inputs[i, j] = seq[i, k, j]
@@ -131,22 +154,22 @@ def step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_
 
 @njit(parallel=True, cache=True)
 def step_rows(state, params, inputs, z, c, seq, setpoint, n_steps, actions, active, n_sub,
-              obs, reward, violation, terminated, truncated):
+              obs, reward, violation, terminated, truncated, safety, sv2, cfg2, dt_s):
     """:func:`step_row` for every active row, rows spread over threads (``numba.prange``)."""
     for i in prange(state.shape[0]):
         if active[i]:
             step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_sub,
-                     obs, reward, violation, terminated, truncated)
+                     obs, reward, violation, terminated, truncated, safety, sv2, cfg2, dt_s)
 
 
 @njit(cache=True)
 def step_rows_serial(state, params, inputs, z, c, seq, setpoint, n_steps, actions, active, n_sub,
-                     obs, reward, violation, terminated, truncated):
+                     obs, reward, violation, terminated, truncated, safety, sv2, cfg2, dt_s):
     """:func:`step_row` for every active row on one thread."""
     for i in range(state.shape[0]):
         if active[i]:
             step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_sub,
-                     obs, reward, violation, terminated, truncated)
+                     obs, reward, violation, terminated, truncated, safety, sv2, cfg2, dt_s)
 
 
 class ContactForceVectorEnv(VectorEnv):
@@ -226,51 +249,75 @@ class ContactForceVectorEnv(VectorEnv):
         self._sv2 = self._svcfg2 = None          # the supervisors' live arrays, one row per sub-env
         self._renderer = None
         self._ready = False
+        self._fused = True                        # the safety layer inside the compiled row step
+        self._no_sv = np.zeros((n, 1))
+        self._dt = float(self.config.dt_s)
+        self._substeps = self.config.substeps
 
     # -- episodes ------------------------------------------------------------------------------
     def _load_row(self, i: int, options: dict) -> None:
         """Draw sub-env ``i``'s next episode and write its rows (as the scalar env's reset)."""
-        from ebraille_sim.plant.loop import Plant
-        if self._masters[i] is None:
-            self._masters[i] = np.random.SeedSequence(int(self._rngs[i].integers(0, 2**63)))
-        ep = draw_episode(self._masters[i].spawn(1)[0], self.config, options)
-        dev = ep.device
-        run = ep.run
-        plant = Plant.from_devices([dev], [ep.sensor_seed], models=[estimator_model(dev.estimator.model)])
-        self.state[i] = plant.state[0]
-        self.params[i] = plant.params[0]
-        self.inputs[i] = run.initial_inputs()
-        n = ep.n_steps
-        if n + 1 > self._setpoint.shape[1]:
-            width = n + 2
+        self._load_rows([i], options)
+
+    def _load_rows(self, rows, options: dict) -> None:
+        """Draw the next episode of every sub-env in ``rows`` and write their rows, each as the
+        scalar env's reset; the supervisors' buffers are widened at most once per call."""
+        from ebraille_sim.plant.loop import initial_state, pack_params
+        rows = [int(i) for i in rows]
+        eps = []
+        for i in rows:
+            if self._masters[i] is None:
+                self._masters[i] = np.random.SeedSequence(int(self._rngs[i].integers(0, 2**63)))
+            eps.append(draw_episode(self._masters[i].spawn(1)[0], self.config, options))
+        longest = max(ep.n_steps for ep in eps)
+        if longest + 1 > self._setpoint.shape[1]:
+            width = longest + 2
             self._seq = np.pad(self._seq, ((0, 0), (0, width - self._seq.shape[1]), (0, 0)))
             self._setpoint = np.pad(self._setpoint, ((0, 0), (0, width - self._setpoint.shape[1])))
-        self._seq[i, :n] = run.base_inputs
-        for name, arr in run.profiles.items():
-            self._seq[i, :n, U[name]] = arr
-        self._setpoint[i, :n + 1] = ep.setpoint_n
-        self._n_steps[i] = min(n, self.max_episode_steps)
-        fe = float(self.state[i, S.force_est_n])
-        reset_features(self._z[i], fe)
-        write_observation(self._z[i], self._c[i], fe, ep.setpoint_n[0], float(self.state[i, S.current_a]), self._obs[i])
-        self.episodes[i] = ep
-        if self.config.safety:
-            sup = make_supervisor(dev)
-            sup.reset(force_est_n=fe, setpoint_n=float(ep.setpoint_n[0]), command_v=0.0)
+        sups = []
+        for i, ep in zip(rows, eps):
+            dev = ep.device
+            run = ep.run
+            p = pack_params(dev, ep.sensor_seed, estimator_model(dev.estimator.model))
+            self.params[i] = p
+            self.state[i] = initial_state(dev, p, None)
+            self.inputs[i] = run.initial_inputs()
+            n = ep.n_steps
+            seq = self._seq[i]
+            seq[:n] = run.base_inputs
+            for name, arr in run.profiles.items():
+                seq[:n, U[name]] = arr
+            self._setpoint[i, :n + 1] = ep.setpoint_n
+            self._n_steps[i] = min(n, self.max_episode_steps)
+            fe = float(self.state[i, S.force_est_n])
+            reset_features(self._z[i], fe)
+            write_observation(self._z[i], self._c[i], fe, ep.setpoint_n[0], float(self.state[i, S.current_a]),
+                              self._obs[i])
+            self.episodes[i] = ep
+            if self.config.safety:
+                sup = make_supervisor(dev)
+                sup.reset(force_est_n=fe, setpoint_n=float(ep.setpoint_n[0]), command_v=0.0)
+                if self._dt < sup.min_control_period_s:
+                    raise ValueError(f"control period {self._dt:g} s is below the {sup.min_control_period_s:g} s "
+                                     "the safety supervisor is sized for")
+                sups.append((i, sup))
+        if not sups:
+            return
+        width = max(sup.compiled()[0].size for _, sup in sups)
+        cwidth = max(sup.compiled()[1].size for _, sup in sups)
+        if self._sv2 is None or width > self._sv2.shape[1] or cwidth > self._svcfg2.shape[1]:
+            # the window buffers' lengths depend on the device: rows are padded to the widest
+            new = {i for i, _ in sups}
+            old = [(k, s_) for k, s_ in enumerate(self._sups) if s_ is not None and k not in new]
+            width = max([width] + [s_.compiled()[0].size for _, s_ in old]) + 64
+            cwidth = max([cwidth] + [s_.compiled()[1].size for _, s_ in old])
+            sv2, cfg2 = np.zeros((self.num_envs, width)), np.zeros((self.num_envs, cwidth))
+            for k, s_ in old:
+                a_, c_ = s_.compiled()
+                s_.bind(sv2[k, :a_.size], cfg2[k, :c_.size])
+            self._sv2, self._svcfg2 = sv2, cfg2
+        for i, sup in sups:
             sv, cfg = sup.compiled()
-            if self.config.dt_s < sup.min_control_period_s:
-                raise ValueError(f"control period {self.config.dt_s:g} s is below the {sup.min_control_period_s:g} s the "
-                                 "safety supervisor is sized for")
-            if self._sv2 is None or sv.size > self._sv2.shape[1] or cfg.size > self._svcfg2.shape[1]:
-                # the window buffers' lengths depend on the device: rows are padded to the widest
-                old = [(k, s_) for k, s_ in enumerate(self._sups) if s_ is not None and k != i]
-                width = max([sv.size] + [s_.compiled()[0].size for _, s_ in old]) + 64
-                cwidth = max([cfg.size] + [s_.compiled()[1].size for _, s_ in old])
-                sv2, cfg2 = np.zeros((self.num_envs, width)), np.zeros((self.num_envs, cwidth))
-                for k, s_ in old:
-                    a_, c_ = s_.compiled()
-                    s_.bind(sv2[k, :a_.size], cfg2[k, :c_.size])
-                self._sv2, self._svcfg2 = sv2, cfg2
             sup.bind(self._sv2[i, :sv.size], self._svcfg2[i, :cfg.size])
             self._sups[i] = sup
 
@@ -303,7 +350,7 @@ class ContactForceVectorEnv(VectorEnv):
                 self._masters[i] = np.random.SeedSequence(int(s))
             elif self._rngs[i] is None:
                 self._rngs[i], _ = seeding.np_random(None)
-            self._load_row(i, opt)
+        self._load_rows(range(n), opt)
         self._prev_done[:] = False
         self._ready = True
         return self._obs.copy(), {}
@@ -332,8 +379,9 @@ class ContactForceVectorEnv(VectorEnv):
         for i in rows:
             if not 0 <= i < self.num_envs:
                 raise ValueError(f"sub-env index {i} is out of range for {self.num_envs} envs")
-            self._load_row(i, {})
-            self._prev_done[i] = False
+        if rows:
+            self._load_rows(rows, {})
+            self._prev_done[rows] = False
         return self._obs[rows].copy()
 
     def step(self, actions):
@@ -343,20 +391,21 @@ class ContactForceVectorEnv(VectorEnv):
         a = check_action(actions, self.num_envs)[:, 0]
         done = self._prev_done
         np.logical_not(done, out=self._active)
-        if self.config.safety:
+        fused = self.config.safety and self._fused
+        if self.config.safety and not fused:
             a = self._supervised(a)
+        sv2, cfg2 = (self._sv2, self._svcfg2) if fused else (self._no_sv, self._no_sv)
         self._step_fn(self.state, self.params, self.inputs, self._z, self._c, self._seq, self._setpoint,
-                      self._n_steps, a, self._active, self.config.substeps, self._obs, self._reward,
-                      self._violation, self._terminated, self._truncated)
+                      self._n_steps, a, self._active, self._substeps, self._obs, self._reward,
+                      self._violation, self._terminated, self._truncated, fused, sv2, cfg2, self._dt)
         if done.any():
-            for i in np.nonzero(done)[0]:
-                self._load_row(int(i), {})
+            self._load_rows(np.flatnonzero(done), {})
             self._reward[done] = 0.0
             self._violation[done] = 0.0
             self._terminated[done] = False
             self._truncated[done] = False
         fc = self.state[:, S.contact_force_n]
-        if not np.all(np.isfinite(fc)):
+        if not np.isfinite(fc).all():
             raise FloatingPointError("the simulation diverged (non-finite contact force)")
         self._prev_done = self._terminated | self._truncated
         every = np.ones(self.num_envs, dtype=np.bool_)
