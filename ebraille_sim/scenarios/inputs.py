@@ -141,11 +141,17 @@ def reading_text(spec: ScenarioSpec) -> str:
             return p.read_text(encoding="utf-8")
         except OSError as exc:
             raise ScenarioError(f"{spec.source}: cannot read [reading] file {str(p)!r}: {exc.strerror}") from None
-    from ebraille_sim.scenarios.passages import load_passage
     try:
-        return load_passage(r.passage)
+        return _passage(r.passage)
     except ValueError as exc:
         raise ScenarioError(f"{spec.source}: {exc}") from None
+
+
+@functools.lru_cache(maxsize=64)
+def _passage(name: str) -> str:
+    """A shipped passage's text, read once per process (a sweep builds thousands of runs)."""
+    from ebraille_sim.scenarios.passages import load_passage
+    return load_passage(name)
 
 
 @functools.lru_cache(maxsize=64)
