@@ -16,7 +16,8 @@ scenarios' ``start_s`` replaced); ``--readers 417`` gives 10,008 episodes.  Rows
 
 Every executor must give the same rows (wall-clock metric aside); the script checks it and
 prints each time as a ratio to the one-at-a-time run measured in the same process (last
-line: the batched speed-up).  ``--single-limit K`` times one at a time on the first K
+line: the batched speed-up), and the CPU time per episode (this process and its workers),
+which depends much less on the load of a shared machine than the wall time.  ``--single-limit K`` times one at a time on the first K
 episodes only and compares those rows (for large sweeps).
 
 Usage::
@@ -33,6 +34,7 @@ import argparse
 import os
 import pathlib
 import platform
+import resource
 import tempfile
 import time
 
@@ -72,17 +74,29 @@ def main(argv=None) -> int:
               f"{t_plan:.2f} s")
         S.run_sweep(S.plan_sweep(["steady_90wpm"], controllers=["pid"], duration_s=1.6), jobs=1,
                     progress=False)                                    # compile and warm the caches
+        cpu: dict = {}
+
+        def cpu_now() -> float:
+            child = resource.getrusage(resource.RUSAGE_CHILDREN)
+            return time.process_time() + child.ru_utime + child.ru_stime
+
         results = {}
         k = n if args.single_limit is None else min(n, args.single_limit)
+        c0 = cpu_now()
         t0 = time.perf_counter()
         rows = [S.run_episode(plan, ep) for ep in plan.episodes[:k]]
+        cpu["one at a time"] = (cpu_now() - c0) / k
         t_single = (time.perf_counter() - t0) * n / k
         results["one at a time"] = S.SweepResult(rows, S._columns(rows), t_single, "single", plan)
         if k < n:
             print(f"one at a time: {k} of {n} episodes timed, the time below scaled to all {n}")
+        c0 = cpu_now()
         results["batched (jobs=1)"] = S.run_sweep(plan, jobs=1, progress=False)
+        cpu["batched (jobs=1)"] = (cpu_now() - c0) / n
         if args.jobs > 1:
+            c0 = cpu_now()
             results[f"local x{args.jobs}"] = S.run_sweep(plan, jobs=args.jobs, progress=False)
+            cpu[f"local x{args.jobs}"] = (cpu_now() - c0) / n     # workers' start-up included
         if not args.no_dask:
             try:
                 from dask.distributed import Client, LocalCluster
@@ -104,7 +118,8 @@ def main(argv=None) -> int:
             same = S.identical_results(ref, S.SweepResult(res.rows[:k], res.columns, res.wall_s))
             print(f"{name:<24} {res.wall_s:7.1f} s   {n / res.wall_s:7.1f} episodes/s   "
                   f"{res.wall_s / (n * args.duration) * 1e3:6.2f} ms per episode-second   "
-                  f"x{ref.wall_s / res.wall_s:5.2f} of one at a time   rows identical: {same}")
+                  f"x{ref.wall_s / res.wall_s:5.2f} of one at a time   rows identical: {same}"
+                  + (f"   CPU {cpu[name] * 1e3:.2f} ms per episode" if name in cpu else ""))
         print(f"load average at end: {os.getloadavg()[0]:.1f}")
         batched = results["batched (jobs=1)"]
         best = min(results.values(), key=lambda r: r.wall_s)

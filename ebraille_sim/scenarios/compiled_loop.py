@@ -190,9 +190,14 @@ def run_rows(states, params, inputs, n_sub, kinds, cstates, cparams, supervised,
 
 
 def profile_arrays(profiles: dict, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(slots, table)`` for :func:`run_loop` from a run's ``{input name: per-period array}``."""
+    """``(slots, table)`` for :func:`run_loop` from a run's ``{input name: per-period array}``
+    (the array whose rows they are when they are one's, as a run's inputs are: no copy)."""
+    from ebraille_sim.scenarios.inputs import profile_table
     names = list(profiles)
     slots = np.array([U[name] for name in names], dtype=np.int64)
+    table = profile_table(profiles, n)
+    if table is not None:
+        return slots, table
     table = np.zeros((len(names), n))
     for j, name in enumerate(names):
         table[j] = np.asarray(profiles[name], dtype=float)[:n]

@@ -173,7 +173,7 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     supervisor_choice(spec, supervised)
     if trace_every == 1:
         return _simulate(spec, seed, run, ctrl, backend, supervised)
-    return _simulate_lean(spec, seed, run, ctrl, backend, trace_every, supervised)
+    return _simulate_lean(spec, seed, run, ctrl, backend, trace_every, supervised, release_inputs=True)
 
 
 def _simulate(spec, seed, run, ctrl, backend: str, supervised: bool = True) -> RunResult:
@@ -200,7 +200,7 @@ def _closed_loop(spec, run, ctrl, backend: str, every: int | None, supervised: b
     controller name, the wrapped controller)``.
     """
     dt, n = run.dt_s, run.n_steps
-    sp = run.setpoint_n[:n].copy()
+    sp = run.setpoint_n[:n]                       # read only: a view, not a copy
     plant = _plant_for(spec, run, backend)
     # a reference controller that declares ``feedback = "true_force"`` (controllers.bounds) is fed
     # the true contact force instead of the estimate; every other controller sees the estimate
@@ -337,12 +337,18 @@ def _run_periods(plant, run, ctrl, sp, i_fb: int, every, f_true, f_est, kept) ->
             due += every
 
 
-def _simulate_lean(spec, seed, run, ctrl, backend: str, every: int | None, supervised: bool = True) -> RunResult:
+def _simulate_lean(spec, seed, run, ctrl, backend: str, every: int | None, supervised: bool = True,
+                   release_inputs: bool = False) -> RunResult:
     """:func:`_simulate` keeping the true and estimated force at every period and the other
-    trace columns at every ``every``-th period (None: not at all); the same metrics."""
+    trace columns at every ``every``-th period (None: not at all); the same metrics.
+
+    ``release_inputs`` empties ``run.profiles`` once the loop has run (for a run whose inputs
+    nobody else holds: a long session's metrics then run without them in memory)."""
     sp, f_true, f_est, kept, energy_end, wall, name, wrapped = _closed_loop(spec, run, ctrl, backend, every,
                                                                             supervised)
     dt, n = run.dt_s, run.n_steps
+    if release_inputs:
+        run.profiles.clear()                      # the metrics do not read them: free them first
     tr = {"force_true_n": f_true, "force_est_n": f_est, "energy_j": np.array([energy_end])}
     res = _with_supervisor(_finish(spec, seed, run, tr, sp, wall, name, keep_trace=False), spec,
                            supervised, wrapped)
@@ -366,7 +372,8 @@ def _finish(spec, seed, run, tr: dict, sp: np.ndarray, wall: float, controller_n
         raise FloatingPointError(f"{spec.source}: the simulation diverged (non-finite force)")
     schedule = run.schedule
     n = run.n_steps
-    t = (np.arange(n) + 1) * run.dt_s             # sample k: the end of period k
+    t = np.arange(1, n + 1, dtype=float)          # sample k: the end of period k, (k + 1) dt
+    t *= run.dt_s
     tr["t_s"] = t
     tr["setpoint_n"] = sp
     ci = schedule.index_at(t)
