@@ -33,7 +33,7 @@ from ebraille_sim.plant.layout import S, U
 
 from controllers.supervisor import supervise_begin, supervise_end
 
-__all__ = ["KEPT", "ROW", "OK", "BAD_CONTROLLER_INPUT", "BAD_COMMAND", "run_loop", "profile_arrays"]
+__all__ = ["KEPT", "ROW", "OK", "BAD_CONTROLLER_INPUT", "BAD_COMMAND", "run_loop", "run_rows", "profile_arrays"]
 
 KEPT = ("command_v", "fsr_voltage_v", "motor_current_a", "board_pos_m", "energy_j")
 """Rows of the ``kept`` array of :func:`run_loop`, in order (trace column names)."""
@@ -132,10 +132,72 @@ def run_loop(state, params, inputs, n_sub, kind, cstate, cparams, supervised, sv
     return OK, n, 0.0
 
 
+@njit(cache=True)
+def run_rows(states, params, inputs, n_sub, kinds, cstates, cparams, supervised, sv_states, sv_cfgs,
+             setpoints, dt_s, i_feedback, profile_slots, profile_counts, profiles, every, f_true, f_est, kept,
+             status, periods, values):
+    """:func:`run_loop` of several independent runs (rows) in one compiled call.
+
+    Row ``r`` is the run of :func:`run_loop` with the ``r``-th row of every per-row array;
+    the rows share the number of periods, the control period, the substeps and the fed-back
+    slot.  Each row is the very same computation as a call of :func:`run_loop` of its own,
+    so its trace is that call's to the last bit.
+
+    Parameters
+    ----------
+    states, params, inputs : ndarray, shape (m, ...)
+        The plants' state, parameter and input rows (modified in place).
+    n_sub : int
+        Physics steps per control period.
+    kinds : ndarray of int64, shape (m,)
+        Controller kind per row.
+    cstates, cparams : ndarray, shape (m, k)
+        Controller state and parameter vectors, zero-padded to a common length.
+    supervised : ndarray of bool, shape (m,)
+        Whether each row goes through the supervisor hooks.
+    sv_states, sv_cfgs : ndarray, shape (m, k)
+        The supervisors' state and configuration vectors, zero-padded (unused rows: zeros).
+    setpoints : ndarray, shape (m, n)
+        Setpoint per row and period, N.
+    dt_s : float
+        Control period, s.
+    i_feedback : int
+        State slot fed back as the force.
+    profile_slots : ndarray of int64, shape (m, p)
+        Varying input slots per row (the first ``profile_counts[r]`` are used).
+    profile_counts : ndarray of int64, shape (m,)
+    profiles : ndarray, shape (m, p, n)
+        Their values per period.
+    every : int
+        As :func:`run_loop` (0 keeps no trace column).
+    f_true, f_est : ndarray, shape (m, n)
+        Filled with the true and estimated force of every period, N.
+    kept : ndarray, shape (m, len(KEPT), n // every)
+        Filled with the kept columns.
+    status, periods : ndarray of int64, shape (m,)
+        Filled with each row's status and period (:func:`run_loop`'s first two returns).
+    values : ndarray, shape (m,)
+        Filled with each row's offending command.
+    """
+    for r in range(states.shape[0]):
+        c = profile_counts[r]
+        st, k, v = run_loop(states[r], params[r], inputs[r], n_sub, kinds[r], cstates[r], cparams[r],
+                            supervised[r], sv_states[r], sv_cfgs[r], setpoints[r], dt_s, i_feedback,
+                            profile_slots[r, :c], profiles[r, :c], every, f_true[r], f_est[r], kept[r])
+        status[r] = st
+        periods[r] = k
+        values[r] = v
+
+
 def profile_arrays(profiles: dict, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(slots, table)`` for :func:`run_loop` from a run's ``{input name: per-period array}``."""
+    """``(slots, table)`` for :func:`run_loop` from a run's ``{input name: per-period array}``
+    (the array whose rows they are when they are one's, as a run's inputs are: no copy)."""
+    from ebraille_sim.scenarios.inputs import profile_table
     names = list(profiles)
     slots = np.array([U[name] for name in names], dtype=np.int64)
+    table = profile_table(profiles, n)
+    if table is not None:
+        return slots, table
     table = np.zeros((len(names), n))
     for j, name in enumerate(names):
         table[j] = np.asarray(profiles[name], dtype=float)[:n]

@@ -145,8 +145,12 @@ def band_limited_noise(t_s: np.ndarray, f_lo_hz: float, f_hi_hz: float, rms: flo
     k = int(np.count_nonzero(band))
     spec[band] = rng.standard_normal(k) + 1j * rng.standard_normal(k)
     x = np.fft.irfft(spec, n_rec)
+    del spec                                   # a long run's spectrum is as large as its record
     s = float(np.std(x))
-    return (x * (rms / s))[:n] if s > 0 else np.zeros(n)
+    if not s > 0:
+        return np.zeros(n)
+    x *= rms / s
+    return x[:n]
 
 
 def minimum_jerk(u) -> np.ndarray:
@@ -280,7 +284,12 @@ class StrapSlip:
         for ti in sorted(times):
             step = d if abs(offset + d) <= x_max else min(max(offset + d, -x_max), x_max) - offset
             if step != 0.0:
-                x += step * minimum_jerk((t_s - ti) / self.duration_s)
+                # the ramp is 0 up to t_i and exactly 1 from t_i + T on: it is evaluated only
+                # in between (from t_i + 2 T on every sample is past the end, whatever the rounding)
+                lo = int(np.searchsorted(t_s, ti, side="right"))
+                hi = int(np.searchsorted(t_s, ti + 2.0 * self.duration_s, side="left"))
+                x[lo:hi] += step * minimum_jerk((t_s[lo:hi] - ti) / self.duration_s)
+                x[hi:] += step
             offset += step
         return {"finger_pos_m": ("add", x)}
 
@@ -401,6 +410,9 @@ class Battery:
         return {"driver_supply_v": ("set", self.supply_v(t_s))}
 
 
+PROFILE_CHUNK = 1 << 16
+"""Samples per chunk of the profiles computed sample by sample (:func:`build_inputs`)."""
+
 KINDS: dict[str, type] = {
     "tremor": Tremor, "pressing": Pressing, "strap_slip": StrapSlip, "orientation": Orientation,
     "fsr_temperature": FSRTemperature, "fsr_drift": FSRDrift, "battery": Battery,
@@ -502,16 +514,21 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
                 out[inp] = (mode, arr)
     temp, drift = section.get("fsr_temperature"), section.get("fsr_drift")
     if temp is not None or drift is not None:
-        dtemp = temp.offset_k(t_s) if temp is not None else np.zeros(len(t_s))
-        if drift is None:
-            out["fsr_temp_offset_k"] = ("set", dtemp)
-        else:
-            alpha = device.fsr.temperature_coeff_per_k
-            if alpha == 0.0:
-                raise ScenarioError("[disturbances.fsr_drift] needs an FSR with a nonzero temperature_coeff_per_k "
-                                    "(the creep offset is applied through the temperature input)")
-            scale = (1.0 + alpha * dtemp) * drift.factor(t_s, device.fsr)
-            out["fsr_temp_offset_k"] = ("set", (scale - 1.0) / alpha)
+        alpha = device.fsr.temperature_coeff_per_k
+        if drift is not None and alpha == 0.0:
+            raise ScenarioError("[disturbances.fsr_drift] needs an FSR with a nonzero temperature_coeff_per_k "
+                                "(the creep offset is applied through the temperature input)")
+        offset = np.empty(len(t_s))
+        # sample by sample, so in chunks: a long run's temporaries stay at the chunk's size
+        for a in range(0, len(t_s), PROFILE_CHUNK):
+            tc = t_s[a:a + PROFILE_CHUNK]
+            dtemp = temp.offset_k(tc) if temp is not None else np.zeros(len(tc))
+            if drift is None:
+                offset[a:a + PROFILE_CHUNK] = dtemp
+            else:
+                scale = (1.0 + alpha * dtemp) * drift.factor(tc, device.fsr)
+                offset[a:a + PROFILE_CHUNK] = (scale - 1.0) / alpha
+        out["fsr_temp_offset_k"] = ("set", offset)
     return out
 
 

@@ -41,7 +41,7 @@ from ebraille_sim.scenarios.spec import DELEGATES, ScenarioError, ScenarioSpec
 
 __all__ = ["RunInputs", "SCHEDULE_CELL_MARGIN", "MAX_RUN_BYTES", "BYTES_PER_CONTROL_SAMPLE", "MAX_CONTROL_SAMPLES",
            "MAX_SCHEDULE_CELLS", "base_input_row", "build_run_inputs", "build_schedule_for", "check_run_size",
-           "input_profiles", "reading_text", "refresh_phases", "run_length", "setpoint_profile"]
+           "input_profiles", "period_starts", "profile_table", "reading_text", "refresh_phases", "run_length", "setpoint_profile"]
 
 MAX_RUN_BYTES = 2e9
 """Memory bound of one run's per-sample arrays, bytes (2 GB: a tenth of a 16-32 GB
@@ -94,7 +94,8 @@ class RunInputs:
     n_steps : int
         Control periods of the run (``duration_s``, or the end of the schedule).
     t_s : ndarray, shape (n_steps + 1,)
-        Start time of period ``k`` at index ``k``; the last entry is the end of the run, s.
+        Start time of period ``k`` at index ``k``; the last entry is the end of the run, s
+        (computed when read: a run does not hold it).
     setpoint_n : ndarray, shape (n_steps + 1,)
         Force setpoint at ``t_s``, N.
     base_inputs : ndarray, shape (N_INPUT,)
@@ -102,7 +103,8 @@ class RunInputs:
         gravity along the travel and driver supply, the finger at ``gap_m``, zero command.
     profiles : dict of str to ndarray
         Inputs that vary, each of shape ``(n_steps,)`` (value held over period ``k``),
-        already combined with ``base_inputs`` (absolute values).
+        already combined with ``base_inputs`` (absolute values); the rows, in order, of one
+        array of shape ``(len(profiles), n_steps)`` (:func:`profile_table`).
     """
     spec: ScenarioSpec
     seed: int
@@ -110,10 +112,13 @@ class RunInputs:
     schedule: object
     dt_s: float
     n_steps: int
-    t_s: np.ndarray
     setpoint_n: np.ndarray
     base_inputs: np.ndarray
     profiles: dict
+
+    @property
+    def t_s(self) -> np.ndarray:
+        return period_starts(self.n_steps + 1, self.dt_s)
 
     def input_at(self, name: str, k: int) -> float:
         """Plant input ``name`` during period ``k``."""
@@ -126,6 +131,29 @@ class RunInputs:
         for name, arr in self.profiles.items():
             row[U[name]] = arr[0]
         return row
+
+
+def period_starts(n: int, dt_s: float) -> np.ndarray:
+    """Start times ``(k + 1) dt - dt`` of periods ``k = 0 .. n - 1`` (s), computed in place in one array."""
+    t = np.arange(1, n + 1, dtype=float)
+    t *= dt_s
+    t -= dt_s
+    return t
+
+
+def profile_table(profiles: dict, n: int) -> np.ndarray | None:
+    """The array whose rows are the values of ``profiles`` in order (shape ``(len(profiles), n)``),
+    when they are such rows (as :func:`build_run_inputs` packs them), else None."""
+    arrs = list(profiles.values())
+    base = arrs[0].base if arrs else None
+    if not (isinstance(base, np.ndarray) and base.shape == (len(arrs), n) and base.dtype == np.float64
+            and base.flags.c_contiguous):
+        return None
+    step = base.strides[0]
+    start = base.ctypes.data
+    if all(a.base is base and a.shape == (n,) and a.ctypes.data == start + j * step for j, a in enumerate(arrs)):
+        return base
+    return None
 
 
 def reading_text(spec: ScenarioSpec) -> str:
@@ -141,11 +169,17 @@ def reading_text(spec: ScenarioSpec) -> str:
             return p.read_text(encoding="utf-8")
         except OSError as exc:
             raise ScenarioError(f"{spec.source}: cannot read [reading] file {str(p)!r}: {exc.strerror}") from None
-    from ebraille_sim.scenarios.passages import load_passage
     try:
-        return load_passage(r.passage)
+        return _passage(r.passage)
     except ValueError as exc:
         raise ScenarioError(f"{spec.source}: {exc}") from None
+
+
+@functools.lru_cache(maxsize=64)
+def _passage(name: str) -> str:
+    """A shipped passage's text, read once per process (a sweep builds thousands of runs)."""
+    from ebraille_sim.scenarios.passages import load_passage
+    return load_passage(name)
 
 
 @functools.lru_cache(maxsize=64)
@@ -383,9 +417,16 @@ def build_run_inputs(spec: ScenarioSpec, seed: int | None = None) -> RunInputs:
     ss_sensor, ss_reading, ss_inputs = np.random.SeedSequence(seed).spawn(3)
     schedule = build_schedule_for(spec, np.random.default_rng(ss_reading))
     dt, n = run_length(spec, schedule)
-    t_start = (np.arange(n + 1) + 1) * dt - dt
+    # the period starts (k + 1) dt - dt, in one array: a one-hour run holds 3.6 million periods
+    t_start = period_starts(n + 1, dt)
     sp = setpoint_profile(spec, t_start, schedule)
     base = base_input_row(spec.device, spec.finger.gap_m)
     profiles = input_profiles(spec, t_start[:n], np.random.default_rng(ss_inputs), base)
+    del t_start
+    # one array holds every profile (its rows): the compiled loop reads it without a copy
+    table = np.empty((len(profiles), n))
+    for j, name in enumerate(list(profiles)):
+        table[j] = profiles[name]
+        profiles[name] = table[j]
     return RunInputs(spec=spec, seed=seed, sensor_seed=seed_from(ss_sensor), schedule=schedule, dt_s=dt,
-                     n_steps=n, t_s=t_start, setpoint_n=sp, base_inputs=base, profiles=profiles)
+                     n_steps=n, setpoint_n=sp, base_inputs=base, profiles=profiles)

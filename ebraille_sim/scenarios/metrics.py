@@ -43,7 +43,9 @@ METRIC_NAMES = [
 
 def in_band(force_n, setpoint_n, band_fraction):
     """Boolean array: |force - setpoint| <= band_fraction * setpoint."""
-    return np.abs(np.asarray(force_n) - setpoint_n) <= band_fraction * np.asarray(setpoint_n)
+    d = np.asarray(np.asarray(force_n) - setpoint_n)
+    d = np.abs(d, out=d) if d.ndim else np.abs(d)            # in place: one temporary per long run
+    return d <= band_fraction * np.asarray(setpoint_n)
 
 
 def settling_time(t_s, force_n, setpoint_n, band_fraction, hold_s=SETTLE_HOLD_S):
@@ -52,22 +54,27 @@ def settling_time(t_s, force_n, setpoint_n, band_fraction, hold_s=SETTLE_HOLD_S)
     Returns None when there is no contact or the force never stays in band for ``hold_s``.
     """
     t_s = np.asarray(t_s)
-    touch = np.nonzero(np.asarray(force_n) > CONTACT_THRESHOLD_N)[0]
-    if touch.size == 0:
+    touch = np.asarray(force_n) > CONTACT_THRESHOLD_N
+    if not touch.any():
         return None
+    start = int(np.argmax(touch))                  # the first contact
+    del touch
     ok = in_band(force_n, setpoint_n, band_fraction)
     dt = t_s[1] - t_s[0] if len(t_s) > 1 else 0.0
     need = max(1, int(round(hold_s / dt))) if dt > 0 else 1
-    start = int(touch[0])
     # the first window of ``need`` samples entirely in band, from the first contact on:
     # in-band counts over every window by a cumulative sum (linear in the samples)
-    counts = np.concatenate(([0], np.cumsum(ok[start:], dtype=np.int64)))
+    # 32-bit counts (exact below 2**31 samples) halve the memory of a long run's pass
+    wide = np.int64 if len(ok) >= 2**31 else np.int32
+    counts = np.zeros(len(ok) - start + 1, dtype=wide)
+    np.cumsum(ok[start:], dtype=wide, out=counts[1:])
     if counts.size <= need:
         return None
-    full = np.nonzero(counts[need:] - counts[:-need] == need)[0]
-    if full.size == 0:
+    full = counts[need:] - counts[:-need] == need
+    del counts
+    if not full.any():
         return None
-    return float(t_s[start + int(full[0])] - t_s[start])
+    return float(t_s[start + int(np.argmax(full))] - t_s[start])       # the first full window
 
 
 def compute_metrics(trace: dict, reading_start_s: float, band_fraction: float, schedule=None,
@@ -97,10 +104,15 @@ def compute_metrics(trace: dict, reading_start_s: float, band_fraction: float, s
     onset = ~read
     ok = in_band(f, sp, band_fraction)
     m: dict = {}
-    if read.any():
+    # the reading window of a run's trace (times in order) is its tail: a slice, not a copy
+    i0 = read.size - int(np.count_nonzero(read))
+    if read[i0:].all():
+        read = slice(i0, None)
+    if f[read].size:
         err = f[read] - sp[read]
         m["force_rmse_n"] = float(np.sqrt(np.mean(err ** 2)))
         m["force_mae_n"] = float(np.mean(np.abs(err)))
+        del err
         m["in_band_fraction"] = float(np.mean(ok[read]))
         m["estimate_rmse_n"] = float(np.sqrt(np.mean((fe[read] - f[read]) ** 2)))
         touching = f[read] > CONTACT_THRESHOLD_N
@@ -110,10 +122,13 @@ def compute_metrics(trace: dict, reading_start_s: float, band_fraction: float, s
                  contact_loss_count=0)
     # per displayed character: in-band samples / samples, one pass over the trace
     shown = ci >= 0
-    n_all = np.bincount(ci[shown]) if shown.any() else np.zeros(0, dtype=np.int64)
+    ci_shown = ci[shown]
+    n_all = np.bincount(ci_shown) if ci_shown.size else np.zeros(0, dtype=np.int64)
     chars = np.nonzero(n_all)[0]
     if chars.size:
-        n_ok = np.bincount(ci[shown], weights=ok[shown], minlength=n_all.size)
+        n_ok = np.bincount(ci_shown, weights=ok[shown], minlength=n_all.size)
+    del ci_shown
+    if chars.size:
         good = int(np.count_nonzero(n_ok[chars] / n_all[chars] >= CHAR_IN_BAND_REQUIRED))
         m["char_in_band_fraction"] = good / chars.size
     else:

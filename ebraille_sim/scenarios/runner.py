@@ -173,7 +173,7 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     supervisor_choice(spec, supervised)
     if trace_every == 1:
         return _simulate(spec, seed, run, ctrl, backend, supervised)
-    return _simulate_lean(spec, seed, run, ctrl, backend, trace_every, supervised)
+    return _simulate_lean(spec, seed, run, ctrl, backend, trace_every, supervised, release_inputs=True)
 
 
 def _simulate(spec, seed, run, ctrl, backend: str, supervised: bool = True) -> RunResult:
@@ -200,7 +200,7 @@ def _closed_loop(spec, run, ctrl, backend: str, every: int | None, supervised: b
     controller name, the wrapped controller)``.
     """
     dt, n = run.dt_s, run.n_steps
-    sp = run.setpoint_n[:n].copy()
+    sp = run.setpoint_n[:n]                       # read only: a view, not a copy
     plant = _plant_for(spec, run, backend)
     # a reference controller that declares ``feedback = "true_force"`` (controllers.bounds) is fed
     # the true contact force instead of the estimate; every other controller sees the estimate
@@ -276,7 +276,7 @@ def _compiled_controller(ctrl, wrapped):
 def _run_compiled(form, plant, run, ctrl, sp, i_fb: int, every, f_true, f_est, kept) -> None:
     """The loop of :func:`_closed_loop` in one call of
     :func:`ebraille_sim.scenarios.compiled_loop.run_loop`; raises what the per-period loop raises."""
-    from ebraille_sim.scenarios.compiled_loop import BAD_COMMAND, BAD_CONTROLLER_INPUT, profile_arrays, run_loop
+    from ebraille_sim.scenarios.compiled_loop import profile_arrays, run_loop
     kind, cstate, cparams, sv_state, sv_cfg = form
     supervised = sv_state is not None
     if not supervised:
@@ -287,9 +287,15 @@ def _run_compiled(form, plant, run, ctrl, sp, i_fb: int, every, f_true, f_est, k
     status, k, value = run_loop(st, plant.params[0], plant.inputs[0], plant.substeps, kind, cstate, cparams,
                                 supervised, sv_state, sv_cfg, sp, run.dt_s, i_fb, slots, table,
                                 0 if every is None else every, f_true, f_est, kept)
+    _raise_status(status, k, value, ctrl, st, sp, run.dt_s, i_fb)
+
+
+def _raise_status(status: int, k: int, value: float, ctrl, st, sp, dt_s: float, i_fb: int) -> None:
+    """Raise what the per-period loop raises for a compiled loop's error ``status`` (none for OK)."""
+    from ebraille_sim.scenarios.compiled_loop import BAD_COMMAND, BAD_CONTROLLER_INPUT
     if status == BAD_CONTROLLER_INPUT:
         # the controller's own check names the bad argument
-        ctrl.update(float(st[i_fb]), sp[k], run.dt_s, float(st[S.current_a]) if k else 0.0)
+        ctrl.update(float(st[i_fb]), sp[k], dt_s, float(st[S.current_a]) if k else 0.0)
         raise ValueError(f"non-finite controller input at control period {k}")
     if status == BAD_COMMAND:
         raise ValueError(f"command_v must be finite, got {value}")
@@ -331,12 +337,18 @@ def _run_periods(plant, run, ctrl, sp, i_fb: int, every, f_true, f_est, kept) ->
             due += every
 
 
-def _simulate_lean(spec, seed, run, ctrl, backend: str, every: int | None, supervised: bool = True) -> RunResult:
+def _simulate_lean(spec, seed, run, ctrl, backend: str, every: int | None, supervised: bool = True,
+                   release_inputs: bool = False) -> RunResult:
     """:func:`_simulate` keeping the true and estimated force at every period and the other
-    trace columns at every ``every``-th period (None: not at all); the same metrics."""
+    trace columns at every ``every``-th period (None: not at all); the same metrics.
+
+    ``release_inputs`` empties ``run.profiles`` once the loop has run (for a run whose inputs
+    nobody else holds: a long session's metrics then run without them in memory)."""
     sp, f_true, f_est, kept, energy_end, wall, name, wrapped = _closed_loop(spec, run, ctrl, backend, every,
                                                                             supervised)
     dt, n = run.dt_s, run.n_steps
+    if release_inputs:
+        run.profiles.clear()                      # the metrics do not read them: free them first
     tr = {"force_true_n": f_true, "force_est_n": f_est, "energy_j": np.array([energy_end])}
     res = _with_supervisor(_finish(spec, seed, run, tr, sp, wall, name, keep_trace=False), spec,
                            supervised, wrapped)
@@ -360,7 +372,8 @@ def _finish(spec, seed, run, tr: dict, sp: np.ndarray, wall: float, controller_n
         raise FloatingPointError(f"{spec.source}: the simulation diverged (non-finite force)")
     schedule = run.schedule
     n = run.n_steps
-    t = (np.arange(n) + 1) * run.dt_s             # sample k: the end of period k
+    t = np.arange(1, n + 1, dtype=float)          # sample k: the end of period k, (k + 1) dt
+    t *= run.dt_s
     tr["t_s"] = t
     tr["setpoint_n"] = sp
     ci = schedule.index_at(t)
@@ -391,6 +404,10 @@ def character_column(char_index: np.ndarray, cells) -> np.ndarray:
 BATCH_TRACE_BYTES = 256 * 2**20
 """Most trace memory one batched plant of :func:`run_batch` holds (its rows are split to
 stay below it), bytes."""
+
+COMPILED_BATCH_ROWS = 128
+"""Most runs of one call of :func:`ebraille_sim.scenarios.compiled_loop.run_rows` (each row
+holds its supervisor's state, about 140 kB, besides its trace and inputs)."""
 
 _BATCH_SLOTS = ("contact_force_n", "force_est_n", "fsr_voltage_v", "current_a", "board_pos_m", "energy_j")
 _BATCH_COLUMNS = ("force_true_n", "force_est_n", "fsr_voltage_v", "motor_current_a", "board_pos_m", "energy_j")
@@ -425,9 +442,10 @@ def run_batch(runs: list, keep_traces: bool = True) -> list:
     """
     out: list = [None] * len(runs)
     groups: dict = {}
+    made: dict = {}
     for i, kw in enumerate(runs):
         try:
-            prepared = prepare_run(**kw)
+            prepared = prepare_run(**_with_controller_copy(kw, made))
         except _RUN_ERRORS as exc:
             out[i] = exc
             continue
@@ -443,16 +461,188 @@ def run_batch(runs: list, keep_traces: bool = True) -> list:
     return out
 
 
+def _with_controller_copy(kw: dict, made: dict) -> dict:
+    """``kw`` with a controller named by a string replaced by a fresh copy (unpickled) of one
+    object made for that name (:func:`make_controller` once per name and batch; a
+    controller's design, e.g. the LQG's Riccati solutions, does not depend on the run)."""
+    import copy
+    import pickle
+    name = kw.get("controller")
+    if not isinstance(name, str):
+        return kw
+    if name not in made:
+        try:
+            proto = make_controller(None, name)
+        except _RUN_ERRORS:
+            return kw                                # prepare_run raises it for this run
+        try:
+            made[name] = (pickle.dumps(proto, pickle.HIGHEST_PROTOCOL), None)
+        except (pickle.PicklingError, TypeError, AttributeError):
+            made[name] = (None, proto)
+    blob, proto = made[name]
+    return {**kw, "controller": pickle.loads(blob) if blob is not None else copy.deepcopy(proto)}
+
+
 def _simulate_batch(prepared: list, keep_traces: bool = True) -> list:
-    """:func:`_simulate` of several prepared runs with equal length and rates, one plant."""
-    from ebraille_sim.plant import kernel
+    """:func:`_simulate` of several prepared runs with equal length and rates.
+
+    Runs whose controller has a compiled form go through :func:`_simulate_compiled_rows`
+    (all of them in one compiled call); the others share one plant stepped from Python
+    (:func:`_simulate_python_rows`).
+    """
     if len(prepared) > 1 and any(getattr(p[3], "feedback", "estimate") == "true_force" for p in prepared):
         # a controller fed the true force runs on its own (:func:`_simulate` reads it from the state)
         return [r for p in prepared for r in _simulate_batch([p], keep_traces)]
-    if len(prepared) > 1 and _all_rows_compiled(prepared):
-        # every row runs in one compiled call of its own (faster than a shared plant stepped
-        # from Python, and the same numbers)
-        return [r for p in prepared for r in _simulate_batch([p], keep_traces)]
+    if len(prepared) > 1 and _USE_COMPILED_LOOP:
+        out = [res for j in range(0, len(prepared), COMPILED_BATCH_ROWS)
+               for res in _simulate_compiled_rows(prepared[j:j + COMPILED_BATCH_ROWS], keep_traces)]
+        rest = [r for r in range(len(prepared)) if out[r] is None]
+        if rest:
+            for r, res in zip(rest, _simulate_python_rows([prepared[r] for r in rest], keep_traces)):
+                out[r] = res
+        return out
+    return _simulate_python_rows(prepared, keep_traces)
+
+
+def _wrap_shared(spec, ctrl, dt_s: float, cache: dict):
+    """:func:`wrap_controller` (supervised), the supervisor's configuration shared by the runs
+    of one device and scenario sections (built once: :meth:`SupervisorConfig.for_device`)."""
+    from controllers.supervisor import Supervisor
+    key = (id(spec.sections), id(spec.device), dt_s)
+    hit = cache.get(key)
+    if hit is not None:
+        return Supervisor(ctrl, hit[0].config)
+    wrapped = wrap_controller(spec, ctrl, dt_s)
+    if type(wrapped) is Supervisor and wrapped.inner is ctrl:
+        cache[key] = (wrapped, spec)                   # the spec keeps the ids of the key alive
+    return wrapped
+
+
+def _plant_rows(spec, run, cache: dict) -> tuple:
+    """Initial ``(state, params, inputs)`` rows of the lumped plant of one run, packed once per
+    device (:func:`_plant_for`) and copied with the run's sensor seed."""
+    from ebraille_sim.plant.layout import P
+    key = id(spec.device)
+    hit = cache.get(key)
+    if hit is None:
+        plant = _plant_for(spec, run, "lumped")
+        hit = cache[key] = (plant.state[0].copy(), plant.params[0].copy(), plant.inputs[0].copy(), plant.substeps,
+                            spec.device)
+    state, params, inputs = hit[0].copy(), hit[1].copy(), hit[2].copy()
+    params[P.seed] = float(run.sensor_seed)
+    inputs[U.finger_pos_m] = spec.finger.gap_m
+    return state, params, inputs, hit[3]
+
+
+def _padded(rows: list, dtype=float) -> np.ndarray:
+    """Rows of different lengths as one zero-padded 2-D array."""
+    out = np.zeros((len(rows), max((len(r) for r in rows), default=0)), dtype=dtype)
+    for i, r in enumerate(rows):
+        out[i, :len(r)] = r
+    return out
+
+
+def _simulate_compiled_rows(prepared: list, keep_traces: bool = True) -> list:
+    """The runs of ``prepared`` that can run compiled (:func:`_compiled_controller`), all in one
+    call of :func:`ebraille_sim.scenarios.compiled_loop.run_rows`; None for the others.
+
+    Each row is the computation of :func:`_simulate` (or :func:`_simulate_lean` without a
+    trace) of the same run: the same plant rows, controller and supervisor vectors and
+    inputs, stepped by the same compiled loop, so traces and metrics are equal to the last
+    bit (``real_time_factor`` aside: the call's time is shared equally among its rows).
+    """
+    from ebraille_sim.scenarios.compiled_loop import run_rows
+    m = len(prepared)
+    out: list = [None] * m
+    run0 = prepared[0][2]
+    dt, n = run0.dt_s, run0.n_steps
+    i_fb = S.force_est_n
+    wraps: dict = {}
+    plants: dict = {}
+    rows = []                        # (index, wrapped, name, form, plant rows)
+    for r, (spec, _, run, ctrl) in enumerate(prepared):
+        try:
+            wrapped = _wrap_shared(spec, ctrl, dt, wraps)
+            form = _compiled_controller(ctrl, wrapped)
+            if form is None:
+                continue
+            prow = _plant_rows(spec, run, plants)
+            wrapped.reset(force_est_n=float(prow[0][i_fb]), setpoint_n=float(run.setpoint_n[0]), command_v=0.0)
+        except _RUN_ERRORS as exc:
+            out[r] = exc
+            continue
+        rows.append((r, wrapped, _name(ctrl), form, prow))
+    if not rows:
+        return out
+    k = len(rows)
+    runs = [prepared[row[0]][2] for row in rows]
+    states = np.array([row[4][0] for row in rows])
+    params = np.array([row[4][1] for row in rows])
+    inputs = np.array([row[4][2] for row in rows])
+    n_sub = rows[0][4][3]
+    kinds = np.array([row[3][0] for row in rows], dtype=np.int64)
+    cstates = _padded([row[3][1] for row in rows])
+    cparams = _padded([row[3][2] for row in rows])
+    supervised = np.array([row[3][3] is not None for row in rows])
+    sizes = [(0, 0) if row[3][3] is None else (row[3][3].size, row[3][4].size) for row in rows]
+    sv_states = np.zeros((k, max(z[0] for z in sizes)))
+    sv_cfgs = np.zeros((k, max(z[1] for z in sizes)))
+    for i, row in enumerate(rows):
+        if row[3][3] is not None and sizes[i] == sv_states.shape[1:] + sv_cfgs.shape[1:]:
+            # the supervisor reads and writes its row from now on (nothing to copy back)
+            row[1].bind(sv_states[i], sv_cfgs[i])
+            rows[i] = row[:3] + (row[3][:3] + (None, None), row[4])
+        elif row[3][3] is not None:
+            sv_states[i, :sizes[i][0]] = row[3][3]
+            sv_cfgs[i, :sizes[i][1]] = row[3][4]
+    setpoints = np.empty((k, n))
+    for i, run in enumerate(runs):
+        setpoints[i] = run.setpoint_n[:n]
+    names = [list(run.profiles) for run in runs]
+    counts = np.array([len(x) for x in names], dtype=np.int64)
+    slots = np.zeros((k, max(counts)), dtype=np.int64)
+    table = np.zeros((k, max(counts), n))
+    for i, run in enumerate(runs):
+        for j, name in enumerate(names[i]):
+            slots[i, j] = U[name]
+            table[i, j] = run.profiles[name][:n]
+    every = 1 if keep_traces else 0
+    f_true, f_est = np.zeros((k, n)), np.zeros((k, n))
+    kept = np.zeros((k, len(KEPT), n * every))
+    status, periods, values = np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64), np.zeros(k)
+    args = [states, params, inputs, n_sub, kinds, cstates, cparams, supervised, sv_states, sv_cfgs, setpoints,
+            dt, i_fb, slots, counts, table, every, f_true, f_est, kept, status, periods, values]
+    if not getattr(run_rows, "signatures", True):
+        # compile (or load from the cache) before the timed call: zero rows change nothing
+        run_rows(*[a[:0] if isinstance(a, np.ndarray) else a for a in args])
+    wall0 = time.perf_counter()
+    run_rows(*args)
+    wall = (time.perf_counter() - wall0) / k
+    for i, (r, wrapped, name, form, _) in enumerate(rows):
+        # the controller and supervisor objects read their vectors: copy the rows back
+        form[1][:] = cstates[i, :len(form[1])]
+        if form[3] is not None:
+            form[3][:] = sv_states[i, :len(form[3])]
+        spec, seed, run, _ = prepared[r]
+        try:
+            _raise_status(int(status[i]), int(periods[i]), float(values[i]), wrapped, states[i], setpoints[i], dt,
+                          i_fb)
+            if keep_traces:
+                tr = {"force_true_n": f_true[i], "force_est_n": f_est[i], **dict(zip(KEPT, kept[i]))}
+            else:
+                tr = {"force_true_n": f_true[i], "force_est_n": f_est[i],
+                      "energy_j": np.array([float(states[i, S.energy_j]) if n else 0.0])}
+            res = _finish(spec, seed, run, tr, setpoints[i], wall, name, keep_trace=keep_traces)
+            out[r] = _with_supervisor(res, spec, True, wrapped)
+        except _RUN_ERRORS as exc:
+            out[r] = exc
+    return out
+
+
+def _simulate_python_rows(prepared: list, keep_traces: bool = True) -> list:
+    """:func:`_simulate` of several prepared runs with equal length and rates, one plant
+    stepped by one compiled call per control period, each controller called from Python."""
+    from ebraille_sim.plant import kernel
     if len(prepared) == 1:
         spec, seed, run, ctrl = prepared[0]
         try:
@@ -467,7 +657,7 @@ def _simulate_batch(prepared: list, keep_traces: bool = True) -> list:
         plant = make_plant([s.device for s in specs], seeds=[r.sensor_seed for r in runs], backend="lumped")
     except (ValueError, FileNotFoundError):
         # one row cannot be packed: run each on its own, for the error of that row alone
-        return [r for p in prepared for r in _simulate_batch([p], keep_traces)]
+        return [r for p in prepared for r in _simulate_python_rows([p], keep_traces)]
     m = len(prepared)
     run0 = runs[0]
     dt, n = run0.dt_s, run0.n_steps
@@ -558,15 +748,6 @@ def _simulate_batch(prepared: list, keep_traces: bool = True) -> list:
         except _RUN_ERRORS as exc:
             out[r] = exc
     return out
-
-
-def _all_rows_compiled(prepared: list) -> bool:
-    """Whether every prepared run of a batch would run its loop in one compiled call."""
-    try:
-        return all(_compiled_controller(ctrl, wrap_controller(spec, ctrl, run.dt_s)) is not None
-                   for spec, _, run, ctrl in prepared)
-    except _RUN_ERRORS:
-        return False
 
 
 def _with_supervisor(res: RunResult, spec, supervised: bool, wrapped) -> RunResult:

@@ -228,9 +228,13 @@ def _run_batch(plan: SweepPlan, batch: list) -> list:
     """Rows of several episodes, their plants advanced together
     (:func:`ebraille_sim.scenarios.runner.run_batch`; the same rows as :func:`run_episode`)."""
     from ebraille_sim.scenarios.runner import run_batch
-    pairs = [_episode_run(plan, ep) for ep in batch]
-    results = run_batch([kw for _, kw in pairs], keep_traces=False)
-    return [_complete(row, res) for (row, _), res in zip(pairs, results)]
+    rows = []
+    for j in range(0, len(batch), SERIAL_BATCH):
+        # a worker's task runs as batches of SERIAL_BATCH: the inputs of one batch are held at a time
+        pairs = [_episode_run(plan, ep) for ep in batch[j:j + SERIAL_BATCH]]
+        results = run_batch([kw for _, kw in pairs], keep_traces=False)
+        rows += [_complete(row, res) for (row, _), res in zip(pairs, results)]
+    return rows
 
 
 _WORKER_PLAN: SweepPlan | None = None
