@@ -153,6 +153,25 @@ def test_small_step_matches_nonlinear_plant(force, dv):
     assert np.max(np.abs(ft - f0 - y_ct)) <= 0.05 * abs(y_ct[-1])
 
 
+def _sensor_chain_after_a_hold(dev, force_n: float, hold: int, after: int, slot: str) -> np.ndarray:
+    """The compiled sensor chain alone: 1 N held for ``hold`` sensor samples on a recovered
+    film, then ``force_n`` for ``after`` samples; the state ``slot`` at each of those."""
+    from ebraille_sim.plant import kernel
+    from ebraille_sim.plant.layout import N_INPUT, S
+    from ebraille_sim.plant.loop import initial_state
+    n_sub = int(round(dev.rates.physics_rate_hz / dev.rates.sensor_rate_hz))
+    p = pack_params(dev, 0.0)
+    s = initial_state(dev, p)
+    u = np.zeros(N_INPUT)
+    for _ in range(hold):
+        kernel.advance_sensor_only(s, p, u, 1.0, n_sub)
+    out = np.zeros(after)
+    for k in range(after):
+        kernel.advance_sensor_only(s, p, u, force_n, n_sub)
+        out[k] = s[S[slot]]
+    return out
+
+
 def _sensor_chain_to_estimate(dev, op):
     """Linear model from the contact force to the estimate at the estimator rate: the FSR's
     mechanical lag over a sensor period, slope and creep terms, the compensation, the
@@ -189,9 +208,6 @@ def test_linear_estimate_with_creep_compensation_is_the_finite_difference_of_the
     From 80 ms on, the linear estimate agrees within 1 % with and without the compensation
     (measured 0.57 % and 0.54 %), and it reproduces what the compensation changes: after
     3 s the compensated estimate has risen 2.2 % more (kernel 0.0205, model 0.0201)."""
-    from ebraille_sim.plant import kernel
-    from ebraille_sim.plant.layout import N_INPUT, S
-    from ebraille_sim.plant.loop import initial_state
     base = DeviceParams()
     hold, after, df = 20000, 3000, 1e-3
     last = {}
@@ -200,20 +216,8 @@ def test_linear_estimate_with_creep_compensation_is_the_finite_difference_of_the
                                   circuit=dataclasses.replace(base.circuit, adc_bits=24),
                                   estimator=dataclasses.replace(base.estimator, creep_compensation=comp))
         op = operating_point(dev, 1.0, check=False)
-        n_sub = int(round(dev.rates.physics_rate_hz / dev.rates.sensor_rate_hz))
-
-        def run(f1):
-            p = pack_params(dev, 0.0)
-            s = initial_state(dev, p)
-            u = np.zeros(N_INPUT)
-            for _ in range(hold):
-                kernel.advance_sensor_only(s, p, u, 1.0, n_sub)
-            e = np.zeros(after)
-            for k in range(after):
-                kernel.advance_sensor_only(s, p, u, f1, n_sub)
-                e[k] = s[S.force_est_n]
-            return e
-        e0, e1, e2 = run(1.0), run(1.0 + df), run(1.0 + 2 * df)
+        e0, e1, e2 = (_sensor_chain_after_a_hold(dev, f1, hold, after, "force_est_n")
+                      for f1 in (1.0, 1.0 + df, 1.0 + 2 * df))
         sim = (2 * (e1 - e0) / df - (e2 - e0) / (2 * df))[::10]
         lin = np.asarray(control.step_response(_sensor_chain_to_estimate(dev, op),
                                                T=np.arange(len(sim)) * 0.01).outputs).ravel()
@@ -235,28 +239,13 @@ def test_linear_sensor_creep_is_the_finite_difference_of_the_kernel():
     mechanical lag has settled."""
     from ebraille_sim.analysis.tuning import creep_model
     from ebraille_sim.estimation.calibration import loading_voltage
-    from ebraille_sim.plant import kernel
-    from ebraille_sim.plant.layout import N_INPUT, S
-    from ebraille_sim.plant.loop import initial_state
     base = DeviceParams()
     dev = dataclasses.replace(base, fsr=dataclasses.replace(base.fsr, noise_v_rms=0.0),
                               circuit=dataclasses.replace(base.circuit, adc_bits=24))
     op = operating_point(dev, 1.0, check=False)
-    n_sub = int(round(dev.rates.physics_rate_hz / dev.rates.sensor_rate_hz))
     hold, after, df = 20000, 5000, 1e-3
-
-    def run(f1):
-        p = pack_params(dev, 0.0)
-        s = initial_state(dev, p)
-        u = np.zeros(N_INPUT)
-        for _ in range(hold):
-            kernel.advance_sensor_only(s, p, u, 1.0, n_sub)
-        v = np.zeros(after)
-        for k in range(after):
-            kernel.advance_sensor_only(s, p, u, f1, n_sub)
-            v[k] = s[S.fsr_voltage_v]
-        return v, s
-    (v0, _), (v1, _), (v2, _) = run(1.0), run(1.0 + df), run(1.0 + 2 * df)
+    v0, v1, v2 = (_sensor_chain_after_a_hold(dev, f1, hold, after, "fsr_voltage_v")
+                  for f1 in (1.0, 1.0 + df, 1.0 + 2 * df))
     sim = 2 * (v1 - v0) / df - (v2 - v0) / (2 * df)
     lin = op.fsr_slope_v_per_n * np.asarray(control.step_response(creep_model(dev), T=np.arange(after) * 1e-3)
                                             .outputs).ravel()
