@@ -283,7 +283,8 @@ class Supervisor:
             released = self.sp_win.range()
             fell = t - self.fall_t <= c.release_window_s
             lost = ((f < c.contact_lost_n and sp_in > c.contact_on_n and not fell)
-                    or (f_then - f > c.drop_n + max(released, 0.0) and self.u_prev > 0.0
+                    or (f_then - f > c.drop_n + max(released, 0.0) and f < c.drop_keep_fraction * f_then
+                        and self.u_prev > 0.0
                         and t - self.cut_t > c.drop_window_s))
             if self.in_contact and lost:
                 self.mode = "freeze"

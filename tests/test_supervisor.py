@@ -286,6 +286,19 @@ def test_setpoint_release_is_not_a_contact_loss_but_a_real_drop_is():
     assert sup.mode == "freeze"
 
 
+
+def test_a_partial_unloading_is_not_a_contact_loss_but_a_fall_toward_no_load_is():
+    """A strap slip drops the estimate by more than drop_n within drop_window_s but leaves the
+    finger loaded (1.0 -> 0.65 N); a lost contact takes it toward the no-load reading."""
+    for end_n, lost in ((0.65, False), (0.55, False), (0.45, True), (0.2, True)):
+        sup = Supervisor(Const(0.5), SupervisorConfig(slew_v_per_s=1e6))
+        sup.reset(force_est_n=1.0, setpoint_n=1.0)
+        run(sup, 1.0, n=100)
+        run(sup, end_n, n=5)
+        assert (sup.mode == "freeze") is lost, end_n
+    with pytest.raises(ValueError, match="drop_keep_fraction = 1.5 must be at most 1"):
+        SupervisorConfig(drop_keep_fraction=1.5)
+
 def test_stuck_estimate_while_the_board_travels_latches():
     sup = Supervisor(Const(0.7), SupervisorConfig(slew_v_per_s=1e6))
     sup.reset(force_est_n=1.0, setpoint_n=1.0)
