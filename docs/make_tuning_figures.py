@@ -190,6 +190,33 @@ def ms_maps(results, pop, designs):
     return maps
 
 
+def _linear_estimate(front, est, u, n=10):
+    """The sampled-data linear model's estimate for a command ``u`` given at the control rate.
+
+    ``front`` runs at the control rate; the estimator reads every ``n``-th of its outputs
+    (samples ``n - 1, 2 n - 1, ...``).  With the estimator's creep compensation ``front`` has
+    a second input, the estimate the firmware holds: the sample the estimator reads still
+    holds the previous estimate, the ones after it the new one (as ``analysis.tuning._lift``).
+    """
+    A, B, C, D = (np.atleast_2d(np.asarray(m, float)) for m in (front.A, front.B, front.C, front.D))
+    Ae, Be, Ce, De = (np.atleast_2d(np.asarray(m, float)) for m in (est.A, est.B, est.C, est.D))
+    comp = front.ninputs == 2
+    x, xe, held = np.zeros(A.shape[0]), np.zeros(Ae.shape[0]), 0.0
+    out = []
+    for k, uk in enumerate(u):
+        v = np.array([uk, held]) if comp else np.array([uk])
+        if k % n == n - 1:
+            y = C @ x + D @ v
+            e = float((Ce @ xe + De @ y)[0])
+            xe = Ae @ xe + Be @ y
+            out.append(e)
+            x = A @ x + B @ v
+            held = e
+        else:
+            x = A @ x + B @ v
+    return np.array(out)
+
+
 def describing_function(results):
     """Measured describing function of the drive around the pressing equilibrium at 1 N.
 
@@ -231,8 +258,7 @@ def describing_function(results):
                 for k in range(n):
                     pl.advance(op.command_v + u[k])
                     fe[k] = pl.force_est_n[0]
-                aa = np.asarray(control.forced_response(front, T=t, U=u).outputs).ravel()
-                y_lin = np.asarray(control.forced_response(est, U=aa[9::10]).outputs).ravel()
+                y_lin = _linear_estimate(front, est, u)
                 te = t[9::10]
                 N = fund(fe[9::10] - e0, te, f, T) / fund(y_lin, te, f, T)
                 vals.append([abs(N), float(np.degrees(np.angle(N)))])
@@ -395,9 +421,9 @@ def fault_figure(results):
     for ax, name in zip(axes, names):
         spec = load_scenario(name)
         tr = run_scenario(spec).trace
-        bare = dataclasses.replace(spec, sections={k: v for k, v in spec.sections.items() if k != "supervisor"})
+        # the supervisor runs by default in every scenario: the comparison run turns it off
         try:
-            tb = run_scenario(bare).trace
+            tb = run_scenario(spec, supervised=False).trace
             peak_bare = float(tb["force_true_n"].max())
         except ValueError:
             tb, peak_bare = None, None
@@ -465,7 +491,8 @@ def main():
     for label, key in DESIGN_KEYS.items():
         (OUT / f"gains_{key}.toml").write_text(_toml(tuned[key]["gains_file"]))
     (OUT / "gains_hand.toml").write_text(_toml({"controller": "pid_scheduled",
-                                                "gains": dataclasses.asdict(HAND)}))
+                                                "gains": {k: v for k, v in dataclasses.asdict(HAND).items()
+                                                          if v is not None}}))
     makers = {
         "default PID": lambda: PID(DEFAULT_PID),
         "SIMC": lambda: PID(simc),
