@@ -104,6 +104,17 @@ def fig_fsr(summary):
     plt.close(fig)
     summary["static_error_pct"] = {f"{r['force_n']:.1f}": round(100 * r["rel_error_at_60s"], 1)
                                    for r in rows if r["force_n"] in (0.2, 0.5, 1.0, 1.5, 2.0, 3.0)}
+    wiener = paper_model("wiener", 5)
+    hyst = {}
+    for f in (0.5, 1.0, 2.0):
+        k_up, k_down = int(np.argmin(np.abs(up - f))), int(np.argmin(np.abs(down - f)))
+        e_up = float(wiener.steady_state(v_up[k_up] - v_up[0]))
+        e_down = float(wiener.steady_state(v_down[k_down] - v_up[0]))
+        hyst[f"{f:.1f}"] = round(100 * (e_down - e_up) / f, 1)
+    summary["hysteresis_loop_estimate_gap_pct"] = hyst
+    for key in ("rel_error_at_1s", "rel_error_at_1800s"):
+        summary[f"static_error_pct_{key[13:]}"] = {f"{r['force_n']:.1f}": round(100 * r[key], 1)
+                                                   for r in rows if r["force_n"] in (0.5, 1.0, 2.0)}
 
 
 def fig_drive(summary):

@@ -1,6 +1,7 @@
 """Figures and numbers of docs/scenarios.md: python docs/make_scenario_figures.py
 
-Writes docs/figures/scenarios/*.png, summary.json (every number quoted on the page),
+Writes docs/figures/scenarios/*.png, summary.json (every number quoted on the page; the prose's
+own measurements under "numbers"),
 metrics_table.md (the library table of the page) and disturbance_parameters.md (the
 disturbance parameter table, from ebraille_sim.scenarios.disturbances.parameter_table).
 """
@@ -254,6 +255,92 @@ def write_parameter_table():
     (OUT / "disturbance_parameters.md").write_text("\n".join(lines) + "\n")
 
 
+def _dwell_extremes(res):
+    """Per-character highest and lowest true force over each dwell of the reading, N."""
+    tr, sch = res.trace, res.schedule
+    t, f = tr["t_s"], tr["force_true_n"]
+    hi, lo = [], []
+    for s, d in zip(sch.start_s, sch.dwell_s):
+        sel = (t >= s) & (t < s + d)
+        if sel.any():
+            hi.append(float(f[sel].max()))
+            lo.append(float(f[sel].min()))
+    return np.array(hi), np.array(lo)
+
+
+def page_numbers(summary):
+    """The numbers the prose of docs/scenarios.md quotes beyond the metrics (summary["numbers"])."""
+    import controllers
+    out = {}
+    refresh = {}
+    for name in ("refresh_60wpm", "refresh_120wpm", "refresh_160wpm", "refresh_200wpm"):
+        res = run_scenario(name)
+        spec, tr, sch = res.spec, res.trace, res.schedule
+        hi, lo = _dwell_extremes(res)
+        r = spec.reading
+        edge = spec.setpoint.force_n * (1.0 - spec.setpoint.band_fraction)
+        t, f = tr["t_s"], tr["force_true_n"]
+        climb = []
+        for s, d in zip(sch.start_s, sch.dwell_s):
+            tp = s + r.refresh_lift_fraction * d
+            sel = (t >= tp) & (t < s + d) & (f >= edge)
+            if sel.any():
+                climb.append(float(t[sel][0] - tp))
+        refresh[name] = {"median_dwell_max_n": float(np.median(hi)), "median_dwell_min_n": float(np.median(lo)),
+                         "fraction_reaching_0.9N": float(np.mean(hi >= 0.9)),
+                         "median_climb_to_band_s": float(np.median(climb)) if climb else None,
+                         "climbs_reached": len(climb), "dwells": len(hi)}
+    out["refresh"] = refresh
+    high_gain = {}
+    for kp in (4.0, 6.0):
+        res = run_scenario("refresh_120wpm", controller=controllers.make("pid", kp_v_per_n=kp))
+        high_gain[f"kp_{kp:g}"] = {k: res.metrics[k] for k in ("peak_force_n", "contact_loss_count",
+                                                               "char_in_band_fraction", "force_rmse_n")}
+    out["refresh_120wpm_high_kp"] = high_gain
+    res = run_scenario("strap_slip")
+    tr, t = res.trace, res.trace["t_s"]
+    f = tr["force_true_n"]
+    slips = res.spec.sections["disturbances"]["strap_slip"].at_s
+    t0 = float(slips[0])
+    before = float(np.mean(f[(t >= t0 - 0.2) & (t < t0)]))
+    during = float(f[(t >= t0) & (t < t0 + 0.03 + 1e-9)].min())
+    win = (t >= t0) & (t < t0 + 1.5)
+    tw, fw = t[win], f[win]
+    k_min = int(np.argmin(fw))
+    k_pk = k_min + int(np.argmax(fw[k_min:]))
+    peak = float(fw[k_pk])
+    later = np.nonzero(np.abs(fw[k_pk:] - 1.0) <= 0.05)[0]
+    back = [float(tw[k_pk + later[0]] - t0)] if len(later) else []
+    out["strap_slip"] = {"force_before_n": before, "drop_within_slip_n": before - during,
+                         "overshoot_peak_n": peak, "overshoot_peak_after_s": float(tw[k_pk] - t0),
+                         "back_within_5pct_after_s": back[0] if back else None,
+                         "mean_true_between_slips_n": float(np.mean(f[(t >= float(slips[1]) - 3.0) &
+                                                                      (t < float(slips[1]))]))}
+    for name in ("orientation_change", "warm_fsr", "long_session_drift"):
+        res = run_scenario(name)
+        tr, t = res.trace, res.trace["t_s"]
+        read = t >= res.spec.reading.start_s + 1.0
+        ft, fe = tr["force_true_n"][read], tr["force_est_n"][read]
+        out[name] = {"mean_true_n": float(np.mean(ft)), "mean_estimate_n": float(np.mean(fe)),
+                     "estimate_over_true": float(np.mean(fe) / np.mean(ft)),
+                     "min_true_n": float(ft.min()), "max_true_n": float(ft.max()),
+                     "force_rmse_n": res.metrics["force_rmse_n"]}
+    cmd = {}
+    for name in ("tremor_90wpm", "pressing_90wpm", "strap_slip", "orientation_change", "warm_fsr",
+                 "long_session_drift", "battery_sag", "steady_90wpm"):
+        res = run_scenario(name)
+        tr, t = res.trace, res.trace["t_s"]
+        read = t >= res.spec.reading.start_s
+        if "battery" in res.spec.sections.get("disturbances", {}):   # before the protection cut-off
+            read &= disturbance_inputs(res.spec, t - 1e-3)["driver_supply_v"][1] > 0.5
+        cmd[name] = float(tr["command_v"][read].max())
+    res = run_scenario("contact_onset")
+    tr, t = res.trace, res.trace["t_s"]
+    cmd["contact_onset_approach"] = float(tr["command_v"][t < res.spec.reading.start_s].max())
+    out["max_command_v"] = cmd
+    summary["numbers"] = out
+
+
 def main():
     OUT.mkdir(parents=True, exist_ok=True)
     summary = {"scenarios": {}}
@@ -264,6 +351,7 @@ def main():
     fig_jitter(summary)
     fig_sweep(summary)
     fig_library(summary)
+    page_numbers(summary)
     for m in summary["scenarios"].values():
         m.pop("real_time_factor", None)
     (OUT / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
