@@ -49,3 +49,28 @@ def test_importing_the_package_deletes_no_cache_file(tmp_path):
         assert marker.exists()
     finally:
         marker.unlink(missing_ok=True)
+
+
+def _load(path: pathlib.Path, name: str):
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_code_outside_the_package_that_uses_its_njit_is_keyed_on_the_package_too(tmp_path):
+    """A test, benchmark or user module compiled with the package's njit inlines package
+    functions (the supervisor, the laws): its cache must go stale when they change, not only
+    when its own file does (a stale test loop once disagreed with the supervisor it called)."""
+    ours = tmp_path / "user_loop.py"
+    ours.write_text("from ebraille_sim.base.compiled import njit\n\n\n@njit\ndef f(x):\n    return x + 1.0\n")
+    other = tmp_path / "plain_loop.py"
+    other.write_text("import numba\n\n\n@numba.njit(cache=True)\ndef g(x):\n    return x + 2.0\n")
+    mod, plain = _load(ours, "user_loop"), _load(other, "plain_loop")
+    assert mod.f(1.0) == 2.0 and plain.g(1.0) == 3.0
+    locator = mod.f._cache._impl.locator
+    assert type(locator).__name__ == "_PackageCacheLocator"
+    stamp = locator.get_source_stamp()
+    assert stamp[0] == compiled.source_key() and stamp[2] == ours.stat().st_size
+    assert type(plain.g._cache._impl.locator).__name__ != "_PackageCacheLocator"

@@ -58,16 +58,43 @@ def source_key(roots: tuple | None = None) -> bytes:
     return h.digest()
 
 
+@functools.lru_cache(maxsize=None)
+def _uses_package_njit(path: str) -> bool:
+    """Whether the source at ``path`` compiles with this module's :func:`njit` (read once)."""
+    try:
+        return _MARKER in pathlib.Path(path).read_bytes()
+    except OSError:
+        return False
+
+
+def _inside_package(path: pathlib.Path) -> bool:
+    return path.is_relative_to(_PACKAGE_ROOT) or path.is_relative_to(_CONTROLLERS_ROOT)
+
+
 class _PackageCacheLocator(caching.InTreeCacheLocator):
-    """Cache beside the source (or below ``NUMBA_CACHE_DIR``), stamped with the package key."""
+    """Cache beside the source (or below ``NUMBA_CACHE_DIR``), stamped with the package key.
+
+    Code outside the package that compiles with this module's :func:`njit` (tests,
+    benchmarks, a user's own compiled controller) inlines the package's functions too: its
+    stamp is the package key together with its own file's modification time and size, so a
+    changed law or supervisor recompiles it as well.
+    """
 
     def __init__(self, py_func, py_file):
         super().__init__(py_func, py_file)
+        path = pathlib.Path(py_file).resolve()
+        self._outside = not _inside_package(path)
         if config.CACHE_DIR:
-            rel = pathlib.Path(py_file).resolve().parent.relative_to(_PACKAGE_ROOT.parent)
+            if self._outside:
+                rel = pathlib.Path("external", hashlib.sha256(str(path.parent).encode()).hexdigest()[:16])
+            else:
+                rel = path.parent.relative_to(_PACKAGE_ROOT.parent)
             self._cache_path = os.path.join(config.CACHE_DIR, "ebraille_sim_cache", str(rel))
 
     def get_source_stamp(self):
+        if self._outside:
+            st = os.stat(self._py_file)
+            return source_key(), st.st_mtime, st.st_size
         return source_key()
 
     @classmethod
@@ -76,7 +103,7 @@ class _PackageCacheLocator(caching.InTreeCacheLocator):
             path = pathlib.Path(py_file).resolve()
         except (OSError, TypeError):
             return None
-        if not (path.is_relative_to(_PACKAGE_ROOT) or path.is_relative_to(_CONTROLLERS_ROOT)):
+        if not (_inside_package(path) or _uses_package_njit(str(path))):
             return None
         return super().from_function(py_func, py_file)
 
