@@ -1,0 +1,122 @@
+"""The numbers of docs/estimators.md: the 100 Hz Wiener estimator against its 1 kHz version.
+
+Run from the repository root (about a minute)::
+
+    python docs/make_estimator_numbers.py
+
+Writes ``docs/figures/estimators/fast_estimator.json`` and prints its tables:
+
+* ``bench``: every profile of the virtual FSR bench (``PAPER_PROFILES``, seed 7) recorded
+  at 100 Hz and at 1 kHz from the same seed (the 1 kHz record's every tenth sample is the
+  100 Hz one's), conditioned as the paper did (baseline removed, zero-phase 40 Hz
+  low-pass); each model simulated at its own rate on its record and compared on the 100 Hz
+  instants with the conditioned load cell and with the noise-free force (``fitness`` and
+  RMSE);
+* ``closed_loop``: four scenarios, the default ``pid`` and ``pid_friction``, the 100 Hz
+  estimator and the 1 kHz one with anti-alias cutoffs of 20, 50 and 100 Hz: estimate RMSE,
+  in_band and char_in_band for the scenario's seed and the mean over it and seeds 1-4;
+* ``loop``: the default PID's margins at 1 N from :func:`ebraille_sim.analysis.tuning.analyse_loop`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import pathlib
+import sys
+
+import numpy as np
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from ebraille_sim.estimation.blockmodels import fitness  # noqa: E402
+from ebraille_sim.estimation.models import load_estimator  # noqa: E402
+
+OUT = ROOT / "docs" / "figures" / "estimators" / "fast_estimator.json"
+SLOW, FAST = "paper:wiener:5", "paper:wiener:5@1000"
+SCENARIOS = ["steady_90wpm", "refresh_60wpm", "refresh_120wpm", "pressing_90wpm"]
+CONTROLLERS = ["pid", "pid_friction"]
+ESTIMATORS = [(SLOW, 20.0), (FAST, 20.0), (FAST, 50.0), (FAST, 100.0)]
+METRICS = ("estimate_rmse_n", "in_band_fraction", "char_in_band_fraction")
+
+
+def bench() -> dict:
+    from ebraille_sim.identification.bench import PAPER_PROFILES, BenchParams, run_profile
+    slow, fast = load_estimator(SLOW), load_estimator(FAST)
+    rows = {}
+    for name, profile in PAPER_PROFILES.items():
+        r100 = run_profile(profile, BenchParams(), seed=7)
+        r1k = run_profile(profile, BenchParams(sample_rate_hz=1000.0), seed=7)
+        assert np.array_equal(r1k.true_force_n[::10], r100.true_force_n)
+        cell = r100.force_n
+        true = r100.true_force_n - np.mean(r100.true_force_n[:r100.baseline_samples])
+        row = {}
+        for label, y in (("100hz", slow.simulate(r100.voltage_v)[0]), ("1khz", fast.simulate(r1k.voltage_v)[0][::10])):
+            row[label] = {"fitness_load_cell_pct": fitness(cell, y),
+                          "rmse_load_cell_n": float(np.sqrt(np.mean((y - cell) ** 2))),
+                          "fitness_true_pct": fitness(true, y),
+                          "rmse_true_n": float(np.sqrt(np.mean((y - true) ** 2)))}
+        rows[name] = row
+    return rows
+
+
+def closed_loop() -> dict:
+    from ebraille_sim.scenarios.runner import run_scenario
+    from ebraille_sim.scenarios.spec import load_scenario
+    out = {}
+    for scn in SCENARIOS:
+        spec = load_scenario(scn)
+        for ctrl in CONTROLLERS:
+            for model, cutoff in ESTIMATORS:
+                est = dataclasses.replace(spec.device.estimator, model=model, antialias_cutoff_hz=cutoff)
+                dev = dataclasses.replace(spec.device, estimator=est)
+                runs = [run_scenario(spec, controller=ctrl, device=dev, seed=s, trace_every=None).metrics
+                        for s in (spec.seed, 1, 2, 3, 4)]
+                mean = {}
+                for k in METRICS:
+                    vals = [r[k] for r in runs if r[k] is not None]
+                    mean[k] = float(np.mean(vals)) if vals else None
+                out[f"{scn} {ctrl} {model} aa{cutoff:g}"] = {
+                    "scenario": scn, "controller": ctrl, "model": model, "antialias_cutoff_hz": cutoff,
+                    "scenario_seed": {k: runs[0][k] for k in METRICS}, "mean_5_seeds": mean}
+    return out
+
+
+def loop() -> dict:
+    import controllers
+    from ebraille_sim.analysis.tuning import analyse_loop
+    from ebraille_sim.physics.params import DeviceParams, EstimatorParams
+    out = {}
+    for model, cutoff in ESTIMATORS:
+        dev = DeviceParams(estimator=EstimatorParams(model=model, antialias_cutoff_hz=cutoff))
+        s = analyse_loop(controllers.make("pid"), dev, 1.0).summary()
+        out[f"{model} aa{cutoff:g}"] = {k: float(s[k]) for k in ("gain_margin", "phase_margin_deg", "ms",
+                                                                  "gain_crossover_hz", "step_Overshoot")}
+    return out
+
+
+def _fmt(v) -> str:
+    return "-" if v is None else f"{v:.3f}"
+
+
+def main() -> int:
+    doc = {"bench": bench(), "closed_loop": closed_loop(), "loop": loop()}
+    OUT.parent.mkdir(parents=True, exist_ok=True)
+    OUT.write_text(json.dumps(doc, indent=1) + "\n")
+    print("profile | fit 100 Hz | fit 1 kHz | RMSE 100 Hz | RMSE 1 kHz  (load cell; N)")
+    for name, row in doc["bench"].items():
+        a, b = row["100hz"], row["1khz"]
+        print(f"{name} | {a['fitness_load_cell_pct']:.1f} | {b['fitness_load_cell_pct']:.1f} | "
+              f"{a['rmse_load_cell_n']:.3f} | {b['rmse_load_cell_n']:.3f}")
+    print("scenario controller model aa | est RMSE | in_band | char_in_band (scenario seed; mean of 5)")
+    for key, row in doc["closed_loop"].items():
+        s, m = row["scenario_seed"], row["mean_5_seeds"]
+        print(key, "|", " | ".join(f"{_fmt(s[k])} ({_fmt(m[k])})" for k in METRICS))
+    for key, row in doc["loop"].items():
+        print(key, {k: round(v, 3) for k, v in row.items()})
+    print(f"wrote {OUT}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
