@@ -444,32 +444,53 @@ def _forward(st: _Structure, theta: np.ndarray, u: np.ndarray, jac: bool, margin
     return y, jx, in_x, out_x
 
 
+ANCHOR_REL = 1e-16
+"""Weight of the anchoring rows in the joint refinement, relative to the largest squared
+Jacobian column norm at the start (see :func:`_refine`)."""
+
+
 def _refine(st: _Structure, theta0: np.ndarray, u: np.ndarray, y: np.ndarray, max_nfev: int, margin: float):
-    """Joint least-squares refinement of the simulation error; returns (theta, cost)."""
+    """Joint least-squares refinement of the simulation error; returns (theta, cost).
+
+    The residual carries ``theta.size`` anchoring rows ``lam * (theta - theta0)``, ``lam`` being
+    ``ANCHOR_REL ** 0.5`` times the largest Jacobian column norm at the start.  A block model's
+    Jacobian is often rank-deficient (a breakpoint segment no sample reaches: singular values
+    1e-13 of the largest); Levenberg-Marquardt then steps along the null directions by
+    amplified rounding, and MINPACK's rounding there depended on where the process's heap put
+    its work arrays, so the same seed gave different models from run to run (fitness moving
+    in the 2nd-4th decimal, 0.2 points on another record).  The anchor holds those directions
+    at the start and adds ``ANCHOR_REL`` of the curvature elsewhere, far below what the data
+    resolve.  The returned cost is the data's alone.
+    """
     big = 1e6 * (float(np.std(y)) + 1e-12)
     cache: dict = {}
+    out0 = _forward(st, theta0, u, True, margin)
+    if out0 is None:
+        return theta0, math.inf
+    r0 = out0[0] - y
+    lam = math.sqrt(ANCHOR_REL) * max(float(np.max(np.linalg.norm(out0[1], axis=0))), 1e-300)
+    anchor_jac = lam * np.eye(theta0.size)
 
     def fun(th):
         out = _forward(st, th, u, True, margin)
         cache["x"], cache["out"] = th.copy(), out
         if out is None:
-            return np.full(y.size, big)
-        return out[0] - y
+            return np.full(y.size + th.size, big)
+        return np.concatenate([out[0] - y, lam * (th - theta0)])
 
     def jac(th):
         out = cache["out"] if np.array_equal(cache.get("x"), th) else _forward(st, th, u, True, margin)
         if out is None:          # not reached at accepted points; keeps the solver safe
-            return np.zeros((y.size, th.size))
-        return out[1]
+            return np.vstack([np.zeros((y.size, th.size)), anchor_jac])
+        return np.vstack([out[1], anchor_jac])
 
-    r0 = fun(theta0)
-    if np.all(r0 == big):
-        return theta0, math.inf
     res = scipy.optimize.least_squares(fun, theta0, jac=jac, method="lm", x_scale="jac",
                                        max_nfev=max_nfev, xtol=1e-9, ftol=1e-9, gtol=1e-9)
-    if not math.isfinite(res.cost) or _forward(st, res.x, u, False, margin) is None:
+    out = _forward(st, res.x, u, False, margin) if np.all(np.isfinite(res.x)) else None
+    if out is None:
         return theta0, 0.5 * float(r0 @ r0)
-    return res.x, float(res.cost)
+    r = out[0] - y
+    return res.x, 0.5 * float(r @ r)
 
 
 # ---------------------------------------------------------------------------
