@@ -372,3 +372,65 @@ def test_identify_command_on_the_virtual_bench(tmp_path):
     creep = json.loads((out / "creep.json").read_text())
     assert 0.03 < creep["creep_fraction"] < 0.07
 
+
+
+def test_nyquist_clearance_keeps_poles_off_z_minus_one():
+    """A system with a pole at z = -0.99 is fitted exactly when the fitter may go there (the
+    paper's MATLAB fits put poles within 0.04 of -1) and held 0.2 away with a clearance of
+    0.2, at the cost of fitness; the default is the unconstrained fit."""
+    from scipy.signal import lfilter
+
+    from ebraille_sim.identification.sysid import fit_report
+
+    u = np.random.default_rng(1).standard_normal(3000)
+    y = lfilter([1.0, 0.5], np.poly([0.9, -0.99]), u)
+    opts = dict(nk=0, n_starts=1, n_delay_candidates=1, max_nfev=100)
+    free = fit_report("linear", u, y, 2, **opts)
+    held = fit_report("linear", u, y, 2, nyquist_clearance=0.2, **opts)
+    p_free = np.roots(np.concatenate([[1.0], free.model.linear.f]))
+    p_held = np.roots(np.concatenate([[1.0], held.model.linear.f]))
+    assert np.min(np.abs(p_free + 1.0)) == pytest.approx(0.01, abs=1e-4)
+    assert free.fitness_pct > 99.9
+    assert np.min(np.abs(p_held + 1.0)) >= 0.2 - 1e-9
+    assert held.fitness_pct < 60.0
+    assert np.max(np.abs(p_held)) < 1.0
+    with pytest.raises(ValueError, match="nyquist_clearance"):
+        fit_report("linear", u, y, 2, nyquist_clearance=1.0, **opts)
+
+
+def test_chirp_dwell_holds_whole_cycles_and_the_default_is_unchanged():
+    from ebraille_sim.identification import bench
+
+    f0, d0 = bench.chirp_schedule()
+    np.testing.assert_array_equal(d0, np.maximum(2.0 / f0, 1.0))
+    f, d = bench.chirp_schedule(5.0)
+    np.testing.assert_array_equal(f, f0)
+    cycles = d * f
+    np.testing.assert_allclose(cycles, np.round(cycles), atol=1e-9)
+    assert np.all(d >= 5.0 - 1e-9) and np.all(d - 1.0 / f < 5.0 - 1e-9)   # the first whole count past 5 s
+    assert bench.chirp_schedule(0.01)[1] == pytest.approx(1.0 / f0)          # at least one cycle
+    p = bench.Profile("chirp", "chirp", chirp_dwell_s=5.0)
+    assert p.duration_s == pytest.approx(float(np.sum(d)))
+    force, exc = bench.profile_signal(p, np.arange(0.0, p.duration_s, 0.001), bench.BenchParams())
+    assert exc[0] == pytest.approx(0.2) and exc[-1] == pytest.approx(20.0)
+    with pytest.raises(ValueError, match="chirp_dwell_s applies to a chirp profile only"):
+        bench.Profile("sq", "square", 0.2, 6, chirp_dwell_s=5.0)
+    with pytest.raises(ValueError, match="chirp_dwell_s"):
+        bench.Profile("chirp", "chirp", chirp_dwell_s=-1.0)
+
+
+def test_identify_conditions_are_selectable_and_recorded(tmp_path, csv_records, capsys):
+    import json
+
+    from ebraille_sim.cli import main
+
+    out = tmp_path / "nk1"
+    assert main(["identify", "--csv", str(csv_records[0]), "--csv", str(csv_records[1]), "--kinds", "linear",
+                 "--orders", "2", "--quick", "--no-plots", "--nk", "1", "--nyquist-clearance", "0.1",
+                 "--out", str(out), "--quiet"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["fit_options"]["nk"] == 1 and summary["fit_options"]["nyquist_clearance"] == 0.1
+    assert summary["models"]["linear-2"]["nk"] == 1
+    rc = main(["identify", "--csv", str(csv_records[0]), "--chirp-dwell", "5", "--out", str(tmp_path / "x")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "--chirp-dwell sets the virtual bench's chirp" in err[0]

@@ -27,6 +27,7 @@ when complete):
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import pathlib
@@ -64,6 +65,14 @@ def add_arguments(p):
                    help="CSV: zero-phase low-pass cut-off, in [0, 1e6] Hz (0: none; default 40)")
     p.add_argument("--no-load-voltage", type=number(0, 100), default=None, metavar="V",
                    help="CSV: divider voltage with the FSR unloaded, for the device versions of the models")
+    p.add_argument("--nk", type=whole(0, 10), default=None, metavar="K",
+                   help="input delay of every model, samples (default: searched over 0-3; the paper likely used 1)")
+    p.add_argument("--nyquist-clearance", type=number(0, 0.99), default=0.0, metavar="D",
+                   help="keep every pole at least D from z = -1, in [0, 0.99] (default 0: anywhere inside "
+                        "the unit circle, as MATLAB placed most of the paper's)")
+    p.add_argument("--chirp-dwell", type=number(0.05, 600), default=None, metavar="S",
+                   help="virtual bench: seconds on each chirp frequency, rounded up to whole cycles, in "
+                        "[0.05, 600] (default: two cycles or 1 s, whichever is longer)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("-j", "--jobs", type=whole(1, 256), default=1, metavar="N",
                    help="worker processes fitting the models side by side (default 1; same results for any N)")
@@ -342,8 +351,14 @@ def main(args) -> int:
             raise ValueError(f"--csv {str(path)!r}: CSV file not found")
         if not pathlib.Path(path).is_file():
             raise ValueError(f"--csv {str(path)!r} is not a file")
+    if args.csv and args.chirp_dwell is not None:
+        raise ValueError("--chirp-dwell sets the virtual bench's chirp; a recorded CSV has its own")
     fit_options = {"seed": args.seed, "n_starts": args.starts or (1 if args.quick else 4),
                    "n_delay_candidates": 1 if args.quick else 2, "max_nfev": 100 if args.quick else 200}
+    if args.nk is not None:
+        fit_options["nk"] = args.nk
+    if args.nyquist_clearance:
+        fit_options["nyquist_clearance"] = args.nyquist_clearance
 
     out = check_out_dir(args.out)
     log = con.say
@@ -368,9 +383,14 @@ def main(args) -> int:
         ss_bench, ss_hold, ss_dma = np.random.SeedSequence(args.seed).spawn(3)
         bench = B.BenchParams()
         log("virtual bench: recording the paper's profiles ...")
-        records = B.run_profiles(B.PAPER_PROFILES.values(), bench, ss_bench)
+        profiles = dict(B.PAPER_PROFILES)
+        if args.chirp_dwell is not None:
+            profiles["chirp"] = dataclasses.replace(profiles["chirp"], chirp_dwell_s=args.chirp_dwell)
+        records = B.run_profiles(profiles.values(), bench, ss_bench)
         estimation = "chirp"
         source = f"virtual bench, seed {args.seed}"
+        if args.chirp_dwell is not None:
+            source += f", chirp dwell {args.chirp_dwell:g} s"
         from ebraille_sim.physics.fsr import static_voltage
         no_load_v = static_voltage(0.0, bench.device.fsr, bench.device.circuit)
         hold = B.run_profile(B.HOLD_PROFILE, bench, ss_hold)

@@ -325,6 +325,9 @@ class Profile:
         Hold force as a fraction of the span above the preload (hold only).
     settle_s : float or None
         Overrides the bench's ``settle_s`` (the hold starts on a fresh sensor: 0).
+    chirp_dwell_s : float or None
+        Chirp only: time spent on each frequency step, s, rounded up to whole cycles (None:
+        two cycles or one second, whichever is longer; see :func:`chirp_schedule`).
     """
     name: str
     shape: str
@@ -333,6 +336,7 @@ class Profile:
     hold_s: float = 0.0
     hold_fraction: float = 0.5
     settle_s: float | None = None
+    chirp_dwell_s: float | None = None
 
     def __post_init__(self):
         if self.shape not in _SHAPES:
@@ -343,27 +347,36 @@ class Profile:
             raise ValueError(f"a {self.shape} profile needs frequency_hz > 0 and periods > 0")
         if self.shape == "hold" and not self.hold_s > 0:
             raise ValueError("a hold profile needs hold_s > 0")
+        if self.chirp_dwell_s is not None:
+            if self.shape != "chirp":
+                raise ValueError(f"chirp_dwell_s applies to a chirp profile only, not a {self.shape}")
+            check_number("Profile.chirp_dwell_s", self.chirp_dwell_s, lo=0.0, hi=600.0, lo_open=True)
 
     @property
     def duration_s(self) -> float:
         """Duration of the excitation (without baseline and tail), s."""
         if self.shape == "chirp":
-            return float(np.sum(chirp_schedule()[1]))
+            return float(np.sum(chirp_schedule(self.chirp_dwell_s)[1]))
         if self.shape == "hold":
             return self.hold_s
         return self.periods / self.frequency_hz
 
 
-def chirp_schedule() -> tuple[np.ndarray, np.ndarray]:
+def chirp_schedule(dwell_s: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Frequencies (Hz) and dwell times (s) of the stepped up-chirp.
 
-    0.2-0.9 Hz in 0.1 Hz steps, then 1-20 Hz in 1 Hz steps ([R] seed paper); each step lasts
-    two cycles or one second, whichever is longer ([E] the paper does not give the dwell),
-    so every step holds a whole number of cycles and the phase is continuous.
+    0.2-0.9 Hz in 0.1 Hz steps, then 1-20 Hz in 1 Hz steps ([R] seed paper).  By default
+    each step lasts two cycles or one second, whichever is longer ([E] the paper does not
+    give the dwell); with ``dwell_s`` each lasts the whole number of cycles that first
+    reaches ``dwell_s`` (at least one cycle).  Every step holds whole cycles, so the phase
+    is continuous.
     """
     freqs = np.concatenate([np.round(np.arange(2, 10) * 0.1, 10), np.arange(1.0, 21.0)])
-    dwell = np.maximum(2.0 / freqs, 1.0)
-    return freqs, dwell
+    if dwell_s is None:
+        return freqs, np.maximum(2.0 / freqs, 1.0)
+    dwell_s = check_number("dwell_s", dwell_s, lo=0.0, hi=600.0, lo_open=True)
+    cycles = np.maximum(np.ceil(dwell_s * freqs - 1e-9), 1.0)
+    return freqs, cycles / freqs
 
 
 PAPER_PROFILES: dict[str, Profile] = {
@@ -415,7 +428,7 @@ def profile_signal(profile: Profile, t_s: np.ndarray, bench: BenchParams) -> tup
     span = hi - lo
     f0 = profile.frequency_hz
     if profile.shape == "chirp":
-        freqs, dwell = chirp_schedule()
+        freqs, dwell = chirp_schedule(profile.chirp_dwell_s)
         edges = np.concatenate([[0.0], np.cumsum(dwell)])
         idx = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, freqs.size - 1)
         # phase from the start of each step: whole cycles per step keep it continuous

@@ -25,8 +25,9 @@ seed paper used, with SciPy doing the optimisation:
 4. **Multi-start.**  Further starts perturb the poles of the initial linear block (radius
    and angle, ``B`` re-solved) and the interior breakpoints, and, for Hammerstein-Wiener,
    start once from the Wiener side; the start with the best estimation fit wins.
-5. **Stability guard.**  A trial step whose ``F`` has a root at ``|z| >= 1 - margin`` or
-   whose breakpoints collapse is rejected (the residual is returned huge, so the trust
+5. **Stability guard.**  A trial step whose ``F`` has a root at ``|z| >= 1 - margin`` (or,
+   with ``nyquist_clearance``, a root nearer than that to ``z = -1``) or whose breakpoints
+   collapse is rejected (the residual is returned huge, so the trust
    region shrinks); initial linear blocks are stabilised by reflecting poles into the unit
    circle.
 
@@ -280,25 +281,42 @@ def _hat_basis(x: np.ndarray, xb: np.ndarray) -> np.ndarray:
     return _pwl_grad(x, xb, np.zeros_like(xb))[3]
 
 
-def _stabilise(f: np.ndarray, margin: float) -> np.ndarray:
-    """Reflect roots of ``1 + f1 z^-1 + ...`` into ``|z| <= 1 - 2 margin``."""
+@dataclass(frozen=True)
+class _Poles:
+    """Where the fitter may place the poles of ``F``: inside ``|z| < 1 - margin`` and, when
+    ``clearance > 0``, at least ``clearance`` away from ``z = -1`` (the Nyquist frequency)."""
+    margin: float
+    clearance: float = 0.0
+
+    def admissible(self, f: np.ndarray) -> bool:
+        if f.size == 0:
+            return True
+        r = np.roots(np.concatenate([[1.0], f]))
+        if float(np.max(np.abs(r))) >= 1.0 - self.margin:
+            return False
+        return not (self.clearance > 0.0 and float(np.min(np.abs(r + 1.0))) < self.clearance)
+
+
+def _stabilise(f: np.ndarray, poles: _Poles) -> np.ndarray:
+    """Move the roots of ``1 + f1 z^-1 + ...`` into the admissible region: reflected into
+    ``|z| <= 1 - 2 margin``, and pushed out to ``2 clearance`` from ``z = -1``."""
     if f.size == 0:
         return f
     r = np.roots(np.concatenate([[1.0], f]))
     mag = np.abs(r)
-    limit = 1.0 - 2.0 * margin
-    if np.all(mag < limit):
+    limit = 1.0 - 2.0 * poles.margin
+    near = poles.clearance > 0.0 and bool(np.any(np.abs(r + 1.0) < 2.0 * poles.clearance))
+    if np.all(mag < limit) and not near:
         return f
     r = np.where(mag > 1.0, r / mag ** 2, r)
     mag = np.abs(r)
     r = np.where(mag > limit, r * (limit / np.maximum(mag, 1e-300)), r)
+    if poles.clearance > 0.0:
+        d = r + 1.0
+        dist = np.abs(d)
+        away = np.where(dist > 1e-12, d / np.maximum(dist, 1e-300), 1.0 + 0.0j)
+        r = np.where(dist < 2.0 * poles.clearance, -1.0 + 2.0 * poles.clearance * away, r)
     return np.real(np.poly(r))[1:]
-
-
-def _max_pole(f: np.ndarray) -> float:
-    if f.size == 0:
-        return 0.0
-    return float(np.max(np.abs(np.roots(np.concatenate([[1.0], f])))))
 
 
 # ---------------------------------------------------------------------------
@@ -390,13 +408,13 @@ class _Structure:
         return b, f, eta_in, in_y, eta_out, out_y
 
 
-def _forward(st: _Structure, theta: np.ndarray, u: np.ndarray, jac: bool, margin: float):
+def _forward(st: _Structure, theta: np.ndarray, u: np.ndarray, jac: bool, poles: _Poles):
     """Simulated output, Jacobian and breakpoints of ``theta``; None if not admissible.
 
     Returns ``(y, J, in_x, out_x)`` (``J`` is None unless ``jac``).
     """
     b, f, eta_in, in_y, eta_out, out_y = st.unpack(theta)
-    if _max_pole(f) >= 1.0 - margin:
+    if not poles.admissible(f):
         return None
     den = np.concatenate([[1.0], f])
     num = np.concatenate([np.zeros(st.nk), b])
@@ -449,7 +467,7 @@ ANCHOR_REL = 1e-16
 Jacobian column norm at the start (see :func:`_refine`)."""
 
 
-def _refine(st: _Structure, theta0: np.ndarray, u: np.ndarray, y: np.ndarray, max_nfev: int, margin: float):
+def _refine(st: _Structure, theta0: np.ndarray, u: np.ndarray, y: np.ndarray, max_nfev: int, poles: _Poles):
     """Joint least-squares refinement of the simulation error; returns (theta, cost).
 
     The residual carries ``theta.size`` anchoring rows ``lam * (theta - theta0)``, ``lam`` being
@@ -464,7 +482,7 @@ def _refine(st: _Structure, theta0: np.ndarray, u: np.ndarray, y: np.ndarray, ma
     """
     big = 1e6 * (float(np.std(y)) + 1e-12)
     cache: dict = {}
-    out0 = _forward(st, theta0, u, True, margin)
+    out0 = _forward(st, theta0, u, True, poles)
     if out0 is None:
         return theta0, math.inf
     r0 = out0[0] - y
@@ -472,21 +490,21 @@ def _refine(st: _Structure, theta0: np.ndarray, u: np.ndarray, y: np.ndarray, ma
     anchor_jac = lam * np.eye(theta0.size)
 
     def fun(th):
-        out = _forward(st, th, u, True, margin)
+        out = _forward(st, th, u, True, poles)
         cache["x"], cache["out"] = th.copy(), out
         if out is None:
             return np.full(y.size + th.size, big)
         return np.concatenate([out[0] - y, lam * (th - theta0)])
 
     def jac(th):
-        out = cache["out"] if np.array_equal(cache.get("x"), th) else _forward(st, th, u, True, margin)
+        out = cache["out"] if np.array_equal(cache.get("x"), th) else _forward(st, th, u, True, poles)
         if out is None:          # not reached at accepted points; keeps the solver safe
             return np.vstack([np.zeros((y.size, th.size)), anchor_jac])
         return np.vstack([out[1], anchor_jac])
 
     res = scipy.optimize.least_squares(fun, theta0, jac=jac, method="lm", x_scale="jac",
                                        max_nfev=max_nfev, xtol=1e-9, ftol=1e-9, gtol=1e-9)
-    out = _forward(st, res.x, u, False, margin) if np.all(np.isfinite(res.x)) else None
+    out = _forward(st, res.x, u, False, poles) if np.all(np.isfinite(res.x)) else None
     if out is None:
         return theta0, 0.5 * float(r0 @ r0)
     r = out[0] - y
@@ -513,14 +531,14 @@ def _b_given_f(u: np.ndarray, y: np.ndarray, f: np.ndarray, nb: int, nk: int) ->
     return b
 
 
-def _oe_refine(u, y, b, f, nk, max_nfev, margin):
+def _oe_refine(u, y, b, f, nk, max_nfev, poles):
     st = _Structure("linear", b.size, f.size, nk, 2, None)
-    theta, cost = _refine(st, st.pack(b, f), u, y, max_nfev, margin)
+    theta, cost = _refine(st, st.pack(b, f), u, y, max_nfev, poles)
     b, f, *_ = st.unpack(theta)
     return b.copy(), f.copy(), cost
 
 
-def _linear_oe(u, y, nb, nf, nk, max_nfev, margin):
+def _linear_oe(u, y, nb, nf, nk, max_nfev, poles):
     """Linear output-error fit; returns (b, f, cost).
 
     Candidates: the ARX estimate and its Steiglitz-McBride iterates, each stabilised and
@@ -528,11 +546,11 @@ def _linear_oe(u, y, nb, nf, nk, max_nfev, margin):
     refined and the better kept.
     """
     b, f = _arx(u, y, nb, nf, nk)
-    cands = [_stabilise(f, margin)]
+    cands = [_stabilise(f, poles)]
     for _ in range(6):   # Steiglitz-McBride
         den = np.concatenate([[1.0], cands[-1]])
         _, f_new = _arx(lfilter([1.0], den, u), lfilter([1.0], den, y), nb, nf, nk)
-        cands.append(_stabilise(f_new, margin))
+        cands.append(_stabilise(f_new, poles))
     scored = []
     for f_c in cands:
         b_c = _b_given_f(u, y, f_c, nb, nk)
@@ -541,13 +559,13 @@ def _linear_oe(u, y, nb, nf, nk, max_nfev, margin):
     scored.sort(key=lambda t: t[0])
     best = None
     for _, b_c, f_c in scored[:2]:
-        out = _oe_refine(u, y, b_c, f_c, nk, max_nfev, margin)
+        out = _oe_refine(u, y, b_c, f_c, nk, max_nfev, poles)
         if best is None or out[2] < best[2]:
             best = out
     return best
 
 
-def _perturb_f(f: np.ndarray, rng: np.random.Generator, margin: float, scale: float = 0.15) -> np.ndarray:
+def _perturb_f(f: np.ndarray, rng: np.random.Generator, poles: _Poles, scale: float = 0.15) -> np.ndarray:
     """Random perturbation of the poles (radius and angle), conjugate pairs kept."""
     if f.size == 0:
         return f
@@ -558,7 +576,7 @@ def _perturb_f(f: np.ndarray, rng: np.random.Generator, margin: float, scale: fl
         if done[i]:
             continue
         done[i] = True
-        rad = min(abs(p) * math.exp(scale * rng.standard_normal()), 1.0 - 2.0 * margin)
+        rad = min(abs(p) * math.exp(scale * rng.standard_normal()), 1.0 - 2.0 * poles.margin)
         if abs(p.imag) > 1e-9:
             ang = min(abs(np.angle(p)) * math.exp(scale * rng.standard_normal()), math.pi - 1e-3)
             q = rad * np.exp(1j * ang)
@@ -567,7 +585,8 @@ def _perturb_f(f: np.ndarray, rng: np.random.Generator, margin: float, scale: fl
             done[j] = True
         else:
             out.append(math.copysign(rad, p.real))
-    return np.real(np.poly(out))[1:]
+    f_new = np.real(np.poly(out))[1:]
+    return _stabilise(f_new, poles) if poles.clearance > 0.0 else f_new
 
 
 # ---------------------------------------------------------------------------
@@ -584,7 +603,7 @@ def _normalise_index(b: np.ndarray, fix_b) -> int:
     return int(np.argmax(np.abs(b))) if fix_b == "largest" else int(fix_b)
 
 
-def _hammerstein_regression(u, y, nb, nf, nk, nbp, margin, iterations=6):
+def _hammerstein_regression(u, y, nb, nf, nk, nbp, poles, iterations=6):
     """Linear block and input-map values of a Hammerstein model by linear regression.
 
     With the input map written on the piecewise-linear basis, ``y = B/F q^-nk sum_k v_k
@@ -612,11 +631,11 @@ def _hammerstein_regression(u, y, nb, nf, nk, nbp, margin, iterations=6):
 
     ones = np.ones_like(u)
     th = regress(phi, y, ones, True)
-    f = _stabilise(th[:nf], margin)
+    f = _stabilise(th[:nf], poles)
     for _ in range(iterations):
         den = np.concatenate([[1.0], f])
         th = regress(lfilter([1.0], den, phi, axis=0), lfilter([1.0], den, y), ones, True)
-        f = _stabilise(th[:nf], margin)
+        f = _stabilise(th[:nf], poles)
     # output-error products for the final F, then the rank-one split
     den = np.concatenate([[1.0], f])
     th = regress(lfilter([1.0], den, phi, axis=0), y, lfilter([1.0], den, ones), False)
@@ -682,7 +701,7 @@ def _init_theta(kind, u, y, b, f, nk, nbp, fix_b, rng=None, side="hammerstein", 
 
 def _to_model(st: _Structure, theta: np.ndarray, u: np.ndarray, dt_s: float, fix_b, name: str) -> BlockModel:
     """Block model from a parameter vector, renormalised to the ``fix_b`` convention."""
-    out = _forward(st, theta, u, False, 0.0)
+    out = _forward(st, theta, u, False, _Poles(0.0))
     b, f, _, in_y, _, out_y = st.unpack(theta)
     in_x, out_x = out[2], out[3]
     b = b.copy()
@@ -751,7 +770,7 @@ def _check_int(v: Any, name: str, lo: int, hi: int | None = None) -> int:
 def fit_report(kind: str, u: Any, y: Any, order: int, nk: int | None = None, *, dt_s: float = SAMPLE_TIME_S,
                n_breakpoints: int = 4, n_starts: int = 4, max_nk: int = 3, n_delay_candidates: int = 2,
                seed: int = 0, max_nfev: int = 200, fix_b: Any = "largest", margin: float = DEFAULT_MARGIN,
-               name: str | None = None) -> FitResult:
+               nyquist_clearance: float = 0.0, name: str | None = None) -> FitResult:
     """Identify a block-oriented model and report how the search went.
 
     Parameters
@@ -782,6 +801,12 @@ def fit_report(kind: str, u: Any, y: Any, order: int, nk: int | None = None, *, 
         B coefficient held at +1: the largest in magnitude (MATLAB ``idnlhw``) or an index.
     margin : float
         Poles are kept within ``|z| < 1 - margin``.
+    nyquist_clearance : float
+        Poles are kept at least this far from ``z = -1``, in ``[0, 1)``.  0 (default) lets
+        the fit place them anywhere inside the stability margin, as MATLAB's ``idnlhw`` did
+        for most of the paper's models (poles within 0.04 of ``z = -1``); a positive value
+        keeps the linear block from resonating at the Nyquist frequency, where a record
+        band-limited well below it carries no information.
     name : str, optional
         Model name (default ``"<kind> order <order>, identified"``).
 
@@ -814,6 +839,8 @@ def fit_report(kind: str, u: Any, y: Any, order: int, nk: int | None = None, *, 
                                    and 0 <= fix_b < order)):
         raise ValueError(f"fix_b must be 'largest' or an index 0..{order - 1}, got {fix_b!r}")
     margin = check_number("margin", margin, 0.0, 0.5, lo_open=True, hi_open=True)
+    clearance = check_number("nyquist_clearance", nyquist_clearance, 0.0, 1.0, hi_open=True)
+    poles = _Poles(margin, clearance)
     dt_s = check_number("dt_s", dt_s, lo=0.0, lo_open=True)
     nks = list(range(max_nk + 1)) if nk is None else [_check_int(nk, "nk", 0, 50)]
     n_par = 2 * order + (2 * nbp if kind != "linear" else 0) * (2 if kind == "hammerstein-wiener" else 1)
@@ -829,10 +856,10 @@ def fit_report(kind: str, u: Any, y: Any, order: int, nk: int | None = None, *, 
         # the best linear approximation from mean-free data initialises the nonlinear
         # kinds (an offset would otherwise be fitted by slow poles); the linear kind is
         # refined on the data as they are
-        b, f, cost = _linear_oe(u0, y0, order, order, d, max_nfev, margin)
+        b, f, cost = _linear_oe(u0, y0, order, order, d, max_nfev, poles)
         if kind == "linear":
-            b_r, f_r, cost_r = _linear_oe(u, y, order, order, d, max_nfev, margin)
-            b2, f2, cost2 = _oe_refine(u, y, b, f, d, max_nfev, margin)
+            b_r, f_r, cost_r = _linear_oe(u, y, order, order, d, max_nfev, poles)
+            b2, f2, cost2 = _oe_refine(u, y, b, f, d, max_nfev, poles)
             b, f, cost = (b_r, f_r, cost_r) if cost_r <= cost2 else (b2, f2, cost2)
         y_lin = lfilter(np.concatenate([np.zeros(d), b]), np.concatenate([[1.0], f]), u if kind == "linear" else u0)
         linear[d] = (b, f, cost, fitness(y if kind == "linear" else y0, y_lin))
@@ -846,19 +873,19 @@ def fit_report(kind: str, u: Any, y: Any, order: int, nk: int | None = None, *, 
         b0, f0, _, _ = linear[d]
         starts = []
         if kind in ("hammerstein", "hammerstein-wiener"):
-            b_h, f_h, v_h = _hammerstein_regression(u, y, order, order, d, nbp, margin)
+            b_h, f_h, v_h = _hammerstein_regression(u, y, order, order, d, nbp, poles)
             starts.append((b_h, f_h, None, "hammerstein", v_h))
         starts.append((b0, f0, None, "hammerstein", None))
         if kind == "hammerstein-wiener":
             starts.append((b0, f0, None, "wiener", None))
         starts = starts[:n_starts]
         while len(starts) < n_starts:
-            f_p = _perturb_f(f0, rng, margin)
+            f_p = _perturb_f(f0, rng, poles)
             b_p = _b_given_f(u0, y0, f_p, order, d)
             starts.append((b_p, f_p, rng, "hammerstein" if len(starts) % 2 == 0 else "wiener", None))
         for b_s, f_s, r_s, side, v_s in starts:
             st, th0 = _init_theta(kind, u, y, b_s, f_s, d, nbp, fix_b, r_s, side, v_s)
-            th, cost = _refine(st, th0, u, y, max_nfev, margin)
+            th, cost = _refine(st, th0, u, y, max_nfev, poles)
             if not math.isfinite(cost):
                 continue
             model = _to_model(st, th, u, dt_s, fix_b, name)
