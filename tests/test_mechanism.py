@@ -197,14 +197,20 @@ def test_bushing_side_loads_are_the_mesh_moment():
         assert m.side_load_n[i] == pytest.approx(expect, rel=0.05)
 
 
+def _held_press(offset_m: float, periods: int) -> PymunkPlant:
+    """The default device pressed ``offset_m`` off centre, the loop holding a 1 N estimate for ``periods``."""
+    plant = PymunkPlant.from_devices([DeviceParams()], seeds=[1])
+    plant.set_finger(1e-3)
+    plant.set_pose(press_offset_m=offset_m)
+    _closed_loop(plant, 1.0, periods)
+    return plant
+
+
 def test_offcentre_press_tilts_the_board_and_shifts_load_and_friction_to_the_near_rack():
     geo = MechanismParams()
     res = {}
     for off in (0.0, 4e-3):
-        plant = PymunkPlant.from_devices([DeviceParams()], seeds=[1])
-        plant.set_finger(1e-3)
-        plant.set_pose(press_offset_m=off)
-        _closed_loop(plant, 1.0, 2000)
+        plant = _held_press(off, 2000)
         m = plant.mechanisms[0]
         res[off] = (m.tilt_rad, list(m.mesh_force_n), list(m.rack_friction_limit_n), float(plant.contact_force_n[0]))
     tilt0, _, lim0, _ = res[0.0]
@@ -229,10 +235,7 @@ def test_press_over_the_board_edge_reads_low_and_the_loop_overloads_the_finger()
     law the ratio would be 1."""
     true_n = {}
     for offset_m in (0.0, 9e-3):
-        plant = PymunkPlant.from_devices([DeviceParams()], seeds=[1])
-        plant.set_finger(1e-3)
-        plant.set_pose(press_offset_m=offset_m)
-        _closed_loop(plant, 1.0, 3000)
+        plant = _held_press(offset_m, 3000)
         assert float(plant.force_est_n[0]) == pytest.approx(1.0, abs=0.01)
         true_n[offset_m] = float(plant.contact_force_n[0])
     fc = plant.mechanisms[0].fc
