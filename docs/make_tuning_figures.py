@@ -1,10 +1,10 @@
 """Figures and numbers of docs/tuning.md.
 
-Run from the repository root (about 14 minutes on the 2-core development machine, 10 of
-them the four robust tunings, two at a time)::
+Run from the repository root (14 minutes measured on the 2-core development machine shared
+with other jobs, about 12 of them the four robust tunings, two at a time, 5-6 minutes each)::
 
     python docs/make_tuning_figures.py            # everything
-    python docs/make_tuning_figures.py --reuse    # keep the tunings of results.json, redo the rest (4 min)
+    python docs/make_tuning_figures.py --reuse    # keep the tunings of results.json, redo the rest (2.3 min of the full run)
     python docs/make_tuning_figures.py --loops-only   # redo only the loop analyses and Bode/Nyquist figures (10 s)
 
 Writes PNGs and ``results.json`` into ``docs/figures/tuning/``.  Every number quoted in
