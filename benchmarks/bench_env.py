@@ -22,7 +22,12 @@
   one thread at 1-1024 sub-envs, no resets; the ratio threads / one thread is what
   :func:`ebraille_sim.rl.vector_env.use_threads` (the default of ``parallel``) is based on.
 
-Run:  python benchmarks/bench_env.py [--seconds 3] [--envs 1024] [--json FILE]
+With ``--only-resets`` only the reset figures, each the median of ``--repeat`` (3) timings in
+the same process: the scalar env's reset in ms and in env steps (steps and resets
+interleaved), and the vector env's env-steps/s with autoresets against the same env
+without any (the reference), on one thread.
+
+Run:  python benchmarks/bench_env.py [--seconds 3] [--envs 1024] [--json FILE] [--only-resets [--repeat 3]]
 """
 from __future__ import annotations
 
@@ -30,6 +35,7 @@ import argparse
 import json
 import os
 import platform
+import statistics
 import time
 
 import gymnasium as gym
@@ -186,12 +192,56 @@ def kernel_substeps_per_s(n_envs: int, seconds: float) -> float:
             return calls * n_envs * sub / dt
 
 
+def only_resets(seconds: float, n_envs: int, repeat: int) -> dict:
+    """The reset figures (medians of ``repeat`` timings): the scalar env's reset in ms and in
+    env steps, and the vector env's env-steps/s with autoresets and without (one thread)."""
+    scalar = [reset_cost_in_steps(seconds) for _ in range(repeat)]
+    mixed, plain, ends = [], [], []
+    for _ in range(repeat):
+        rate, n_ends, _ = vector_steps_per_s(seconds, n_envs, True, parallel=False)
+        mixed.append(rate)
+        ends.append(n_ends)
+        plain.append(vector_steps_per_s(seconds, n_envs, False, parallel=False)[0])
+    r = statistics.median(x[0] for x in scalar)
+    s = statistics.median(x[1] for x in scalar)
+    ratio = statistics.median(x[2] for x in scalar)
+    out = {"repeat": repeat, "reset_s": r, "step_s": s, "reset_in_steps": ratio,
+           "reset_in_steps_runs": [x[2] for x in scalar], "envs": n_envs,
+           "vector_autoresets_env_steps_per_s": statistics.median(mixed),
+           "vector_no_resets_env_steps_per_s": statistics.median(plain),
+           "episode_ends": statistics.median(ends)}
+    out["ratio_autoresets_to_no_resets"] = out["vector_autoresets_env_steps_per_s"] / out["vector_no_resets_env_steps_per_s"]
+    print(f"scalar env reset: {r * 1e3:.3f} ms, step {s * 1e3:.4f} ms (200 Hz), median of {repeat} "
+          f"(runs: {', '.join(f'{x[2]:.1f}' for x in scalar)} steps)")
+    print(f"vector env {n_envs} envs, one thread: autoresets {out['vector_autoresets_env_steps_per_s']:10.0f} "
+          f"env-steps/s ({out['episode_ends']:.0f} episode ends), no resets "
+          f"{out['vector_no_resets_env_steps_per_s']:10.0f} env-steps/s, ratio {out['ratio_autoresets_to_no_resets']:5.2f}")
+    print(f"load average (1 min) at end {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+    print(f"one reset = {ratio:.1f} env steps (target <= 20)")
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=3.0, help="measuring time per figure, s")
     ap.add_argument("--envs", type=int, default=1024, help="sub-envs of the vector env")
     ap.add_argument("--json", default=None, help="also write the results to this file")
+    ap.add_argument("--only-resets", action="store_true",
+                    help="only the reset cost (ms and env steps) and the vector env with and without autoresets")
+    ap.add_argument("--repeat", type=int, default=3, help="timings per figure with --only-resets (median)")
     a = ap.parse_args(argv)
+    if a.repeat < 1:
+        ap.error(f"--repeat must be at least 1, got {a.repeat}")
+    if a.only_resets:
+        res = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                           "processor": platform.machine(), "load_average_1min_at_start": os.getloadavg()[0]},
+               "seconds_per_figure": a.seconds}
+        res["resets"] = only_resets(a.seconds, a.envs, a.repeat)
+        res["machine"]["load_average_1min_at_end"] = os.getloadavg()[0]
+        if a.json:
+            with open(a.json, "w", encoding="utf-8") as fh:
+                json.dump(res, fh, indent=2)
+        return res
 
     res = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                        "processor": platform.machine(), "load_average_1min_at_start": os.getloadavg()[0]},

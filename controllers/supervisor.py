@@ -437,9 +437,18 @@ class SupervisorConfig:
         """
         packed = self.__dict__.get("_packed")
         if packed is None:
-            packed = _pack(self)
+            packed = _packed_config(self)
             self.__dict__["_packed"] = packed
         return packed
+
+
+@functools.lru_cache(maxsize=256)
+def _packed_config(c: SupervisorConfig) -> np.ndarray:
+    """:func:`_pack` of ``c``, read-only, shared by equal configurations (a device drawn again, or
+    the nominal device in every episode, packs once)."""
+    packed = _pack(c)
+    packed.flags.writeable = False
+    return packed
 
 
 _FIELD_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(SupervisorConfig))
@@ -527,7 +536,6 @@ def _pack(c: SupervisorConfig) -> np.ndarray:
              "sp_win": c.release_window_s, "speed_win": c.speed_hold_s,
              "cmd_delay": c.stuck_response_s, "drop_hist": c.drop_window_s}
     min_dt = max(MIN_CONTROL_PERIOD_S, max(spans.values()) / MAX_WINDOW_SAMPLES)
-    speeds, currents = _envelope(c)
     vals = {
         "force_cap_n": c.force_cap_n, "cap_margin_n": c.cap_margin_n, "sp_max_n": c.force_cap_n - c.cap_margin_n,
         "slew_v_per_s": c.slew_v_per_s, "rated_current_sq_a2": c.rated_current_a ** 2,
@@ -550,7 +558,7 @@ def _pack(c: SupervisorConfig) -> np.ndarray:
         "backoff_s": c.backoff_s, "contact_loss_timeout_s": c.contact_loss_timeout_s, "retract_v": c.retract_v,
         "watchdog_timeout_s": c.watchdog_timeout_s, "retract_s": c.retract_s,
         "retract_moving_s": c.retract_moving_s, "max_retract_s": c.max_retract_s, "min_dt_s": min_dt,
-        "events_cap": EVENT_CAPACITY, "envelope_n": len(speeds), "envelope_base": len(CF),
+        "events_cap": EVENT_CAPACITY, "envelope_n": ENVELOPE_POINTS, "envelope_base": len(CF),
     }
     pos = _N_HEADER
     for w in _WINDOWS:
@@ -565,10 +573,9 @@ def _pack(c: SupervisorConfig) -> np.ndarray:
         pos += 2 * cap
     vals["events_base"] = pos
     vals["state_len"] = pos + 3 * EVENT_CAPACITY
-    cfg = np.empty(len(CF) + 2 * len(speeds))
-    for name, k in zip(CF._fields, CF):
-        cfg[k] = vals[name]
-    cfg[len(CF):] = speeds + currents
+    cfg = np.empty(len(CF) + 2 * ENVELOPE_POINTS)
+    cfg[:len(CF)] = [vals[name] for name in CF._fields]
+    _envelope_table(c, cfg[len(CF):])
     return cfg
 
 
@@ -1209,6 +1216,8 @@ def _envelope(c: SupervisorConfig) -> tuple[list[float], list[float]]:
 
     At each speed the drive force may not exceed :meth:`SupervisorConfig.drive_force_limit_n`;
     beyond :attr:`SupervisorConfig.speed_limit_m_per_s` the limit is a braking current.
+    :func:`_envelope_into` computes the same table in one compiled call (what :meth:`SupervisorConfig.pack`
+    uses); ``tests/test_reset_cost.py`` checks that both agree to the last bit.
     """
     v_max = c.speed_limit_m_per_s
     speeds = [v_max * k / 32 for k in range(33)]
@@ -1216,6 +1225,38 @@ def _envelope(c: SupervisorConfig) -> tuple[list[float], list[float]]:
     speeds.append(1.05 * v_max)
     currents.append(-c.friction_current_a)
     return speeds, currents
+
+
+ENVELOPE_POINTS = 34
+"""Rows of the speed envelope table: 33 speeds from rest to the speed limit and one beyond it."""
+
+_impact_energy_j = njit(cache=True)(limits.impact_energy_j)
+_current_for_push_force_a = njit(cache=True)(limits.current_for_push_force_a)
+
+
+@njit(cache=True)
+def _envelope_into(out, v_max, pinion_mass_kg, board_mass_kg, gear_efficiency, envelope_force_n, reader_b_n_per_m,
+                   reader_m_per_m, push_force_per_a_n, friction_current_a, weight_n):
+    """:func:`_envelope` of a configuration's constants written into ``out`` (speeds, then currents):
+    the laws of :meth:`SupervisorConfig.drive_force_limit_n` and :meth:`SupervisorConfig.current_for_force_a`
+    (:mod:`ebraille_sim.physics.limits`) in one compiled loop."""
+    n = ENVELOPE_POINTS
+    for k in range(n - 1):
+        v = v_max * k / 32
+        e = _impact_energy_j(_pymax(v, 0.0), pinion_mass_kg, board_mass_kg, gear_efficiency)
+        f = limits.drive_force_for_impact_n(e, envelope_force_n, reader_b_n_per_m, reader_m_per_m)
+        out[k] = v
+        out[n + k] = _current_for_push_force_a(_pymax(f, 0.0), push_force_per_a_n, 1.0, 1.0,
+                                               friction_current_a * push_force_per_a_n, weight_n)
+    out[n - 1] = 1.05 * v_max
+    out[2 * n - 1] = -friction_current_a
+
+
+def _envelope_table(c: SupervisorConfig, out: np.ndarray) -> None:
+    """Write :func:`_envelope` of ``c`` into ``out`` (length ``2 * ENVELOPE_POINTS``) in one compiled call."""
+    _envelope_into(out, c.speed_limit_m_per_s, c.pinion_mass_kg, c.board_mass_kg, c.gear_efficiency,
+                   c.envelope_force_n, c.reader_b_n_per_m, c.reader_m_per_m, c.push_force_per_a_n,
+                   c.friction_current_a, c.weight_n)
 
 
 @njit(cache=True)

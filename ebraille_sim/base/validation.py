@@ -110,6 +110,10 @@ def check_number(name: str, value: Any, lo: float | None = None, hi: float | Non
     ValueError
         One line naming ``name``, the value and the admissible set.
     """
+    if type(value) is float and not integer and -math.inf < value < math.inf and \
+            (lo is None or (value > lo if lo_open else value >= lo)) and \
+            (hi is None or (value < hi if hi_open else value <= hi)):
+        return value                   # the common case, without composing the message
     adm = admissible(lo, hi, lo_open, hi_open)
     noun = "an int" if integer else "a number"
     want = f"{noun} {adm}".rstrip()

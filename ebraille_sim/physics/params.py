@@ -27,6 +27,7 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -77,16 +78,27 @@ def check_finite(obj) -> None:
         Every float field must be finite.  Fields whose metadata has
         ``"positive": True`` must be > 0; fields with ``"nonneg": True`` >= 0.
     """
-    for f in dataclasses.fields(obj):
-        v = getattr(obj, f.name)
+    d = obj.__dict__
+    for name, positive, nonneg in _finite_plan(type(obj)):
+        v = d[name]
+        if type(v) is float and (v > 0.0 if positive else (v >= 0.0 if nonneg else -math.inf < v < math.inf)) \
+                and v < math.inf:
+            continue                    # the common case: a finite float within its bound
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             continue
         if isinstance(v, float) and not math.isfinite(v):
-            raise ValueError(f"{type(obj).__name__}.{f.name} must be finite, got {v}")
-        if f.metadata.get("positive") and not v > 0:
-            raise ValueError(f"{type(obj).__name__}.{f.name} must be > 0, got {v}")
-        if f.metadata.get("nonneg") and v < 0:
-            raise ValueError(f"{type(obj).__name__}.{f.name} must be >= 0, got {v}")
+            raise ValueError(f"{type(obj).__name__}.{name} must be finite, got {v}")
+        if positive and not v > 0:
+            raise ValueError(f"{type(obj).__name__}.{name} must be > 0, got {v}")
+        if nonneg and v < 0:
+            raise ValueError(f"{type(obj).__name__}.{name} must be >= 0, got {v}")
+
+
+@functools.lru_cache(maxsize=None)
+def _finite_plan(cls) -> tuple:
+    """``(name, positive, nonneg)`` of every field of the dataclass ``cls``, in order (read once per class)."""
+    return tuple((f.name, bool(f.metadata.get("positive")), bool(f.metadata.get("nonneg")))
+                 for f in dataclasses.fields(cls))
 
 
 def _pos(default, unit, source):

@@ -501,13 +501,16 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
         ``{input_name: ("set" | "add", ndarray of shape (n,))}``.
     """
     t_s = np.asarray(t_s, dtype=float)
-    children = dict(zip(KINDS, rng.spawn(len(KINDS))))
+    # the children of rng.spawn(len(KINDS)), a generator made only for the kinds present
+    bits = rng.bit_generator
+    seeds = dict(zip(KINDS, bits.seed_seq.spawn(len(KINDS))))
     out: dict = {}
     for name in KINDS:
         obj = section.get(name)
         if obj is None or not hasattr(obj, "inputs"):
             continue
-        for inp, (mode, arr) in obj.inputs(t_s, children[name], device).items():
+        child = type(rng)(type(bits)(seed=seeds[name]))
+        for inp, (mode, arr) in obj.inputs(t_s, child, device).items():
             if inp in out and mode == "add" and out[inp][0] == "add":
                 out[inp] = ("add", out[inp][1] + arr)
             else:

@@ -182,8 +182,10 @@ def _passage(name: str) -> str:
     return load_passage(name)
 
 
-@functools.lru_cache(maxsize=64)
+@functools.lru_cache(maxsize=2048)
 def _cells_of(text: str) -> tuple:
+    """The cells of ``text`` (immutable, shared).  Cached per text: the env's episodes are
+    excerpts that start at a word of a shipped passage, a few hundred texts per length."""
     from ebraille_sim.scenarios.braille import text_to_cells
     # the transcription the scenario baselines were recorded with (spaced hyphen, number
     # sign repeated after ':' and '-'); see ebraille_sim.scenarios.braille

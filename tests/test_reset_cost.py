@@ -1,0 +1,300 @@
+"""Cheap resets: the caches behind ``ContactForceEnv.reset`` change no trajectory and are hit,
+shared read-only and keyed on what they depend on.
+
+``REFERENCE`` holds hashes of trajectories recorded by the env before its resets were made
+cheaper (observations, rewards, ends, infos, the drawn specs and packed parameters of the
+scalar env at 200 Hz and 1 kHz, with and without the safety layer, device randomisation,
+disturbances and reset options, and of the vector env with autoresets): the same seeds must
+give the same bits.
+"""
+import dataclasses
+import hashlib
+import math
+
+import numpy as np
+import pytest
+
+from controllers.supervisor import (ENVELOPE_POINTS, SupervisorConfig, _envelope, _envelope_table,
+                                    _pack, _packed_config)
+from ebraille_sim.base.validation import check_number
+from ebraille_sim.physics.params import DeviceParams, FSRParams, MotorParams, check_finite
+from ebraille_sim.rl.env import ContactForceEnv
+from ebraille_sim.scenarios.inputs import _cells_of
+from ebraille_sim.scenarios.population import PopulationSpec, sample_devices
+
+
+def h(x):
+    """A short digest of an array's dtype, shape and bytes."""
+    a = np.ascontiguousarray(np.asarray(x))
+    return hashlib.sha256(a.dtype.str.encode() + str(a.shape).encode() + a.tobytes()).hexdigest()[:16]
+
+
+def record() -> dict:
+    """Digests of a few episodes of the scalar env (seeds 0 and 11 in seven configurations,
+    900 steps with the resets they need and three more) and of the vector env (6 sub-envs,
+    autoresets), keyed by configuration and quantity."""
+    from ebraille_sim.rl.vector_env import ContactForceVectorEnv
+    out = {}
+    cases = [("default", {}, None), ("1khz", {"control_rate_hz": 1000.0}, None),
+             ("nominal", {"randomize_device": False}, None), ("nosafety", {"safety": False}, None),
+             ("options", {}, {"wpm": 300.0, "gap_m": 0.8e-3, "tremor_amplitude_m": 3e-5, "setpoint_n": 1.0}),
+             ("options2", {}, {"passage": "garden", "first_character": 0, "supply_fraction": 0.8}),
+             ("nodist", {"disturbances": False}, {"device": DeviceParams()})]
+    for name, kw, opts in cases:
+        env = ContactForceEnv(**kw)
+        for seed in (0, 11):
+            obs, info = env.reset(seed=seed, options=opts)
+            rows, rews, flags, infos = [obs], [], [], [sorted(info.items())]
+            specs = [repr(env.episode.spec)]
+            params = [env.plant.params.copy()]
+            for k in range(900):
+                a = np.array([0.9 * np.sin(0.013 * k) + 0.2], dtype=np.float32)
+                obs, r, te, tr, info = env.step(a)
+                rows.append(obs); rews.append(r); flags.append((te, tr)); infos.append(sorted(info.items()))
+                if te or tr:
+                    obs, info = env.reset()
+                    rows.append(obs); infos.append(sorted(info.items()))
+                    specs.append(repr(env.episode.spec)); params.append(env.plant.params.copy())
+            for _ in range(3):
+                obs, info = env.reset()
+                rows.append(obs); infos.append(sorted(info.items()))
+                specs.append(repr(env.episode.spec)); params.append(env.plant.params.copy())
+            out[f"{name}_{seed}_obs"] = h(np.array(rows))
+            out[f"{name}_{seed}_rew"] = h(np.array(rews))
+            out[f"{name}_{seed}_flags"] = h(np.array(flags))
+            out[f"{name}_{seed}_info"] = hashlib.sha256(repr(infos).encode()).hexdigest()[:16]
+            out[f"{name}_{seed}_spec"] = hashlib.sha256("\n".join(specs).encode()).hexdigest()[:16]
+            out[f"{name}_{seed}_params"] = h(np.array(params))
+    for name, kw in (("vec", {}), ("vec1k", {"control_rate_hz": 1000.0})):
+        venv = ContactForceVectorEnv(num_envs=6, parallel=False, **kw)
+        obs, _ = venv.reset(seed=3)
+        rows, rews, flags = [obs], [], []
+        for k in range(2000 if not kw else 600):
+            a = np.clip(0.05 + 0.6 * obs[:, 2:3] + 0.2 * obs[:, 4:5], -1, 1).astype(np.float32)
+            obs, r, te, tr, _ = venv.step(a)
+            rows.append(obs); rews.append(r); flags.append(np.stack([te, tr]))
+        venv._load_rows(range(6), {})
+        out[f"{name}_obs"] = h(np.array(rows)); out[f"{name}_rew"] = h(np.array(rews))
+        out[f"{name}_flags"] = h(np.array(flags)); out[f"{name}_params"] = h(venv.params)
+        out[f"{name}_svcfg"] = h(venv._svcfg2); out[f"{name}_state"] = h(venv.state)
+    return out
+
+
+REFERENCE = {
+    '1khz_0_flags': '7742b24394aabe5b',
+    '1khz_0_info': '1023f1f8307f18e6',
+    '1khz_0_obs': 'ceeacedd4c5dd719',
+    '1khz_0_params': '795fbe0bb6d0bdfa',
+    '1khz_0_rew': '7486f617ca19a4a4',
+    '1khz_0_spec': '89bc207f4d4b7168',
+    '1khz_11_flags': '7742b24394aabe5b',
+    '1khz_11_info': 'a7f603cfa39d1634',
+    '1khz_11_obs': '66c1af6ae5cc37d3',
+    '1khz_11_params': '08b8c8c6f54e135b',
+    '1khz_11_rew': '1cb76bae969c3787',
+    '1khz_11_spec': 'b774f763bc6fa9b8',
+    'default_0_flags': '4d6fecb70fdc32bb',
+    'default_0_info': '22c81f8a53531880',
+    'default_0_obs': 'ae7c513f4afdcdfb',
+    'default_0_params': '702c5e069ec6a6d6',
+    'default_0_rew': 'e9b7200f7c6230f3',
+    'default_0_spec': '5da2da99a25c6e3a',
+    'default_11_flags': '7742b24394aabe5b',
+    'default_11_info': '839928915b2787b4',
+    'default_11_obs': '18741485438d4a35',
+    'default_11_params': '08b8c8c6f54e135b',
+    'default_11_rew': '5994dfb1f74535c8',
+    'default_11_spec': '28a303af35809cfc',
+    'nodist_0_flags': '7742b24394aabe5b',
+    'nodist_0_info': '3580fa1387ab65a9',
+    'nodist_0_obs': 'da1163ffdf0ff6d8',
+    'nodist_0_params': 'ed52c3bc9cabcadd',
+    'nodist_0_rew': 'd932b22a7f49d2d5',
+    'nodist_0_spec': '3d8c72a1c4c9f44c',
+    'nodist_11_flags': '7742b24394aabe5b',
+    'nodist_11_info': 'ad77fbe157601a24',
+    'nodist_11_obs': '51260cf5a8776b7e',
+    'nodist_11_params': '9dc4b5ab1f801d00',
+    'nodist_11_rew': '5daea90fdb1f1ae5',
+    'nodist_11_spec': '464204da2bf250c8',
+    'nominal_0_flags': '347c259d485164d9',
+    'nominal_0_info': '111b5e029066ee2d',
+    'nominal_0_obs': 'ac5c94fed50cbd5d',
+    'nominal_0_params': 'ee2f03507570eefb',
+    'nominal_0_rew': '3eafaf51e3528b33',
+    'nominal_0_spec': '1fa0003465c3d6ae',
+    'nominal_11_flags': 'c378addf0057cba0',
+    'nominal_11_info': '2b376f2e1850dad0',
+    'nominal_11_obs': 'd1b5fe1d1c79a694',
+    'nominal_11_params': 'b519c8cee2e34702',
+    'nominal_11_rew': '0b1f3baf3ef5bb7c',
+    'nominal_11_spec': '1b8d8d0554ca25d5',
+    'nosafety_0_flags': 'ef16aa4cb0fe90b2',
+    'nosafety_0_info': 'c8e3d4ce9f555b8c',
+    'nosafety_0_obs': '408cc929a67cc5f4',
+    'nosafety_0_params': 'bdb895b92bf0fd9c',
+    'nosafety_0_rew': 'bf04165d6a362af5',
+    'nosafety_0_spec': 'd19bbc99e3213ecb',
+    'nosafety_11_flags': '09b9b429346f06e9',
+    'nosafety_11_info': 'fcd7be493f61676d',
+    'nosafety_11_obs': '98f0382333c13e7c',
+    'nosafety_11_params': '8f1127ea91913527',
+    'nosafety_11_rew': '9c04f78f0351ad21',
+    'nosafety_11_spec': '4edce1dc110fd0ff',
+    'options2_0_flags': '4d6fecb70fdc32bb',
+    'options2_0_info': '22c81f8a53531880',
+    'options2_0_obs': 'ae7c513f4afdcdfb',
+    'options2_0_params': '702c5e069ec6a6d6',
+    'options2_0_rew': 'e9b7200f7c6230f3',
+    'options2_0_spec': '0d56869bb7c63ae2',
+    'options2_11_flags': '7742b24394aabe5b',
+    'options2_11_info': '839928915b2787b4',
+    'options2_11_obs': '18741485438d4a35',
+    'options2_11_params': '08b8c8c6f54e135b',
+    'options2_11_rew': '5994dfb1f74535c8',
+    'options2_11_spec': '70d51b27ec731203',
+    'options_0_flags': 'f8d7b15de3876b8e',
+    'options_0_info': 'ed3e0bab633d69d4',
+    'options_0_obs': '4350be315cf1589a',
+    'options_0_params': '702c5e069ec6a6d6',
+    'options_0_rew': '4370e237b44a3e07',
+    'options_0_spec': '642c3c08142853ab',
+    'options_11_flags': '8a4f19618e4ef227',
+    'options_11_info': 'cbeef072dbaabb9b',
+    'options_11_obs': '4dfedcd6c809755f',
+    'options_11_params': '596e3961b7d2bf7b',
+    'options_11_rew': '3045fd8dd254e4bd',
+    'options_11_spec': 'e3ab9ead938195ec',
+    'vec1k_flags': '11a404f9edd760cb',
+    'vec1k_obs': '4aa58c587e4a1094',
+    'vec1k_params': '255da0a3575a8607',
+    'vec1k_rew': 'e43d4131ab353b63',
+    'vec1k_state': '335f45467fe820f6',
+    'vec1k_svcfg': 'd3264dfb20828072',
+    'vec_flags': '5f892664e193d856',
+    'vec_obs': '1f2f090425c662d9',
+    'vec_params': '028a213a540882be',
+    'vec_rew': '0b68ffcf8f675ff8',
+    'vec_state': '335f45467fe820f6',
+    'vec_svcfg': '4c9cc499db042df5',
+}
+
+
+def test_trajectories_are_bit_identical_to_the_record_made_before_the_faster_resets():
+    now = record()
+    assert sorted(now) == sorted(REFERENCE)
+    assert {k: v for k, v in now.items() if v != REFERENCE[k]} == {}
+
+
+def test_same_seed_gives_the_same_first_observation_and_trajectory():
+    env = ContactForceEnv()
+    runs = []
+    for _ in range(2):
+        obs, info = env.reset(seed=42)
+        rows, rews = [obs], []
+        for k in range(300):
+            obs, r, te, tr, _ = env.step(np.array([0.3 * math.sin(0.02 * k)], np.float32))
+            rows.append(obs)
+            rews.append(r)
+        runs.append((np.array(rows), np.array(rews), info))
+        env.reset()                                         # an episode in between
+    np.testing.assert_array_equal(runs[0][0], runs[1][0])
+    np.testing.assert_array_equal(runs[0][1], runs[1][1])
+    assert runs[0][2] == runs[1][2]
+
+
+def test_compiled_envelope_equals_the_python_envelope_bit_for_bit():
+    devices = sample_devices(3, 300, dataclasses.replace(PopulationSpec(), calibrate=False))
+    devices += [dataclasses.replace(d, driver_supply_v=d.driver_supply_v * 0.85) for d in devices[:50]]
+    devices += [DeviceParams(), dataclasses.replace(DeviceParams(), driver_supply_v=5.0)]
+    for dev in devices:
+        c = SupervisorConfig.for_device(dev)
+        speeds, currents = _envelope(c)
+        out = np.empty(2 * ENVELOPE_POINTS)
+        _envelope_table(c, out)
+        assert out.tolist() == speeds + currents
+
+
+def test_packed_supervisor_config_is_cached_read_only_and_not_changed_by_an_episode():
+    _packed_config.cache_clear()
+    env = ContactForceEnv(randomize_device=False, disturbances=False)
+    env.reset(seed=1)
+    cfg = env._sup.config
+    shared = cfg.pack()
+    assert not shared.flags.writeable
+    with pytest.raises(ValueError):
+        shared[0] = 1.0
+    before = shared.copy()
+    hits = _packed_config.cache_info().hits
+    for _ in range(3):
+        env.reset()
+        for _ in range(50):
+            env.step(np.array([1.0], np.float32))
+    assert _packed_config.cache_info().hits >= hits + 3        # the nominal device packs once
+    np.testing.assert_array_equal(shared, before)
+    assert env._svcfg is not shared and env._svcfg.flags.writeable   # the live array is the supervisor's copy
+    np.testing.assert_array_equal(_pack(cfg), shared)
+
+
+def test_a_changed_supervisor_config_is_packed_afresh():
+    _packed_config.cache_clear()
+    a = SupervisorConfig()
+    b = dataclasses.replace(a, finger_motion_m=30e-6)
+    c = SupervisorConfig.for_device(dataclasses.replace(DeviceParams(), motor=MotorParams(resistance_ohm=25.0)))
+    pa, pb, pc = a.pack(), b.pack(), c.pack()
+    assert _packed_config.cache_info().misses == 3
+    assert not np.array_equal(pa, pb) and not np.array_equal(pa, pc)
+    for cfg, packed in ((a, pa), (b, pb), (c, pc)):
+        np.testing.assert_array_equal(_pack(cfg), packed)
+    assert SupervisorConfig().pack() is pa                    # an equal config shares the packed array
+    assert _packed_config.cache_info().hits == 1
+
+
+def test_transcriptions_of_excerpts_are_cached_and_shared():
+    env = ContactForceEnv()
+    env.reset(seed=9)
+    text = env.episode.spec.reading.text
+    hits = _cells_of.cache_info().hits
+    env.reset(seed=9)                                         # the same excerpt again
+    assert _cells_of.cache_info().hits > hits
+    cells = _cells_of(text)
+    assert isinstance(cells, tuple) and cells is _cells_of(text)
+    assert _cells_of.cache_info().maxsize >= 432              # every word start of the shipped passages
+
+
+def test_disturbance_generators_are_the_children_of_spawn():
+    from ebraille_sim.scenarios import disturbances as dist
+    t = np.arange(1500) * 5e-3
+    section = dist.validate_section("test", {"tremor": {"rms_m": 1e-5}, "pressing": {"rms_m": 1e-4},
+                                             "battery": {"soc_start": 0.5}})
+    got = dist.build_inputs(section, t, np.random.default_rng(77), DeviceParams())
+    children = dict(zip(dist.KINDS, np.random.default_rng(77).spawn(len(dist.KINDS))))
+    want_x = (section["tremor"].inputs(t, children["tremor"], DeviceParams())["finger_pos_m"][1]
+              + section["pressing"].inputs(t, children["pressing"], DeviceParams())["finger_pos_m"][1])
+    np.testing.assert_array_equal(got["finger_pos_m"][1], want_x)
+
+
+@pytest.mark.parametrize("args", [(1.5, 0.0, 2.0), (0.0, 0.0, None, True), (2.0, None, 2.0, False, True),
+                                  (3.0, 0, 3), (7.25, None, None), (-1e300, None, None)])
+def test_check_number_fast_path_returns_what_the_full_check_returns(args):
+    value, lo, hi, *flags = args + (False,) * (5 - len(args))
+    lo_open, hi_open = flags[0], flags[1]
+    ok = (lo is None or (value > lo if lo_open else value >= lo)) and \
+         (hi is None or (value < hi if hi_open else value <= hi))
+    if ok:
+        out = check_number("x", value, lo, hi, lo_open, hi_open)
+        assert out == value and type(out) is float
+    else:
+        with pytest.raises(ValueError, match="^x "):
+            check_number("x", value, lo, hi, lo_open, hi_open)
+
+
+@pytest.mark.parametrize("value, message", [(math.nan, "must be finite"), (math.inf, "must be finite"),
+                                            (-math.inf, "must be finite"), (0.0, "must be > 0"),
+                                            (-1.0, "must be > 0")])
+def test_parameter_checks_still_reject_bad_values(value, message):
+    with pytest.raises(ValueError, match=f"^FSRParams.resistance_at_1n_ohm {message}"):
+        FSRParams(resistance_at_1n_ohm=value)
+    with pytest.raises(ValueError, match="must be finite"):
+        check_number("x", value if not math.isfinite(value) else math.nan)
+    check_finite(FSRParams())
