@@ -38,7 +38,7 @@ ACTUATOR_BOUND_GAINS = {"kp_v_per_n": 30.0, "ki_v_per_ns": 400.0, "kd_vs_per_n":
                         "derivative_filter_s": 0.001, "schedule": False}
 """Gains of ``actuator_bound``, fixed over force, chosen by hand with true-force feedback on
 ``pressing_90wpm``, ``setpoint_steps`` and ``refresh_60/120wpm`` over the standard suite's
-readers (docs/benchmark.md): 20x the recommended PID's ``kp``; doubling them again changes
+readers (docs/benchmark.md): about 35 times the recommended PID's ``kp``; doubling them again changes
 no worst case by more than 0.01."""
 
 

@@ -6,8 +6,8 @@ nominal drive, ``R`` winding resistance, ``kM`` motor constant, ``g = N/r`` the 
 reflection of :func:`ebraille_sim.physics.drivetrain.shaft_to_rack_per_m`, ``mu`` the
 load-dependent gear loss, ``Fc`` the pinion and guide Coulomb friction).  While the command
 is inside the band the board does not move, so a PID that must reverse the drive - every
-time the finger presses in and then relaxes - first integrates across the band; at the
-recommended ``ki = 1.8 V/(N s)`` and an error of one band width (0.1 N) that takes seconds,
+time the finger presses in and then relaxes - first integrates across the band; at
+its ``ki = 1.8 V/(N s)`` and an error of one band width (0.1 N) that takes seconds,
 and the force drifts out of band meanwhile.  That is what limits the shipped PIDs on
 ``pressing_90wpm`` and ``battery_sag`` (docs/benchmark.md): ``actuator_bound`` with the
 same feedforward and true-force feedback holds those scenarios in band.
@@ -27,9 +27,18 @@ integrating across it.  The hysteresis keeps sensor noise (a few mN on the estim
 toggling ``s``; the setpoint-rate rule of the parent keeps precedence during ramps.  Only
 ``friction_fraction`` = 70 % of the modelled term is compensated: the drawn drives carry
 less friction than the nominal model on some readers, and full compensation made one of
-them limit-cycle at contact (docs/benchmark.md).  The gains are the recommended scheduled PID's (:data:`controllers.schedule.RECOMMENDED`):
-raising them helps ``pressing_90wpm`` a little more but drives ``refresh_120wpm`` to
-peaks above 3 N (docs/benchmark.md).
+them limit-cycle at contact (docs/benchmark.md).
+
+The gains are :data:`FRICTION_GAINS`, kp 0.81 V/N, ki 1.8 V/(N s), kd 0.011 V s/N at 1 N: the
+scheduled PID's recommended design until the Ms <= 2.0 tuning replaced it
+(:data:`controllers.schedule.RECOMMENDED`, kp 0.859, ki 1.72, kd 0.00348).  Here they stay,
+because on the standard benchmark (8 readers, docs/benchmark.md) this controller scores
+63.04 with them and 62.12 with the new design, which also lowers its worst reader on
+``strap_slip`` from 0.97 to 0.84 in band, on ``battery_sag`` from 0.61 to 0.56 and on
+``refresh_60wpm`` from 0.16 to 0.06, and raises its highest peak from 2.13 to 2.32 N; it gains
+only on steady reading (0.99 to 1.00), ``contact_onset`` (0.95 to 1.00) and
+``setpoint_steps`` (0.67 to 0.74).  Raising the gains further helps ``pressing_90wpm`` a
+little more but drives ``refresh_120wpm`` to peaks above 3 N.
 
 Examples
 --------
@@ -55,13 +64,16 @@ from ebraille_sim.physics.params import DeviceParams
 from controllers.compiled import feedforward_v as compiled_feedforward_v
 from controllers.schedule import ScheduleConfig, ScheduledPID
 
-__all__ = ["FrictionConfig", "FrictionPID", "DEFAULT_FRICTION", "make_friction"]
+__all__ = ["FrictionConfig", "FrictionPID", "FRICTION_GAINS", "DEFAULT_FRICTION", "make_friction"]
+
+FRICTION_GAINS = {"kp_v_per_n": 0.81, "ki_v_per_ns": 1.8, "kd_vs_per_n": 0.011}
+"""The PID gains of ``pid_friction`` at 1 N (module docstring: why not :data:`controllers.schedule.RECOMMENDED`'s)."""
 
 
 @dataclass(frozen=True)
 class FrictionConfig(ScheduleConfig):
-    """:class:`~controllers.schedule.ScheduleConfig` (feedforward and reference map on) plus
-    the friction compensation's two settings.
+    """:class:`~controllers.schedule.ScheduleConfig` (feedforward and reference map on, the
+    gains of :data:`FRICTION_GAINS`) plus the friction compensation's two settings.
 
     Parameters
     ----------
@@ -78,6 +90,9 @@ class FrictionConfig(ScheduleConfig):
         One line naming the offending field (also every :class:`ScheduleConfig` check), or
         when ``feedforward`` is off (the friction term is part of the feedforward).
     """
+    kp_v_per_n: float = FRICTION_GAINS["kp_v_per_n"]
+    ki_v_per_ns: float = FRICTION_GAINS["ki_v_per_ns"]
+    kd_vs_per_n: float = FRICTION_GAINS["kd_vs_per_n"]
     feedforward: bool = True
     friction_fraction: float = 0.7
     hysteresis_fraction: float = 0.02
@@ -98,7 +113,7 @@ class FrictionConfig(ScheduleConfig):
 
 
 DEFAULT_FRICTION = FrictionConfig()
-"""The shipped design: the recommended scheduled PID's gains, 70 % of the modelled friction,
+"""The shipped design: the gains of :data:`FRICTION_GAINS`, 70 % of the modelled friction,
 2 % hysteresis (docs/benchmark.md)."""
 
 

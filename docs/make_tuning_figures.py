@@ -4,7 +4,7 @@ Run from the repository root (14 minutes measured on the 2-core development mach
 with other jobs, about 12 of them the four robust tunings, two at a time, 5-6 minutes each)::
 
     python docs/make_tuning_figures.py            # everything
-    python docs/make_tuning_figures.py --reuse    # keep the tunings of results.json, redo the rest (2.3 min of the full run)
+    python docs/make_tuning_figures.py --reuse    # keep the tunings (gains_*.toml), redo the rest (2.3 min of the full run)
     python docs/make_tuning_figures.py --loops-only   # redo only the loop analyses and Bode/Nyquist figures (10 s)
 
 Writes PNGs and ``results.json`` into ``docs/figures/tuning/``.  Every number quoted in
@@ -17,6 +17,7 @@ import json
 import pathlib
 import sys
 import time
+import tomllib
 
 import control
 import matplotlib
@@ -99,7 +100,11 @@ def step_match(results):
 
 
 REC = "recommended (pid_scheduled default)"
-"""``controllers.schedule.RECOMMENDED``: the "friction" tuning, rounded."""
+"""``controllers.schedule.RECOMMENDED``: the "ms2.0" tuning, rounded to three significant digits."""
+EARLIER = "earlier RECOMMENDED (kp 0.81, ki 1.8)"
+"""What ``RECOMMENDED`` was before the "ms2.0" tuning replaced it (the earlier model's
+friction-relaxation tuning, rounded; ``pid_friction`` keeps these gains)."""
+EARLIER_CONFIG = ScheduleConfig(kp_v_per_n=0.81, ki_v_per_ns=1.8, kd_vs_per_n=0.011)
 TUNE_DEFAULT = "Ms <= 1.6 (MS_1_6)"
 """``controllers.schedule.MS_1_6``: the "ms1.6" tuning (what ``tune`` gives by default), rounded."""
 
@@ -467,6 +472,11 @@ def main():
     results["population"]["labels"] = [lab for lab, _ in pop]
     if reuse and "tuning" in old:
         tuned = results["tuning"] = old["tuning"]
+        # results.json keeps 5 digits; the gains files written with it keep the tuner's floats
+        for key, rep in tuned.items():
+            path = OUT / f"gains_{key}.toml"
+            if path.exists():
+                rep["gains_file"] = tomllib.loads(path.read_text())
     else:
         tuned = tuning(results)
         # saved at once, so that a later step can be redone with --reuse
@@ -474,7 +484,7 @@ def main():
         if "--tuning-only" in sys.argv[1:]:
             return
     cfg = {name: _tuned_config(rep) for name, rep in tuned.items()}
-    results["recommended"] = {"config": dataclasses.asdict(RECOMMENDED), "from_tuning": "friction",
+    results["recommended"] = {"config": dataclasses.asdict(RECOMMENDED), "from_tuning": "ms2.0",
                               "ms_1_6": dataclasses.asdict(MS_1_6), "hand": dataclasses.asdict(HAND)}
     step_match(results)
     loop_figures(results, RECOMMENDED)
@@ -483,7 +493,7 @@ def main():
     designs = {"default PID": DEFAULT_PID, "SIMC": simc, "hand design": ScheduledPID(HAND).pid_config_at,
                **{label: ScheduledPID(cfg[key]).pid_config_at for label, key in DESIGN_KEYS.items()},
                TUNE_DEFAULT: ScheduledPID(MS_1_6).pid_config_at, REC: ScheduledPID(RECOMMENDED).pid_config_at,
-               "LQG": make_lqg().statespace()}
+               EARLIER: ScheduledPID(EARLIER_CONFIG).pid_config_at, "LQG": make_lqg().statespace()}
     ms_maps(results, pop, designs)
     pts = linearisation_points(pop, FORCES)
     results["ms_map_friction_0.5"] = {name: _ms_grid(population_ms(c, pts, 0.5).reshape(len(pop), len(FORCES)))
@@ -502,6 +512,7 @@ def main():
                                                    name="pid_feedforward"),
         TUNE_DEFAULT: lambda: ScheduledPID(MS_1_6),
         REC: lambda: ScheduledPID(RECOMMENDED),
+        EARLIER: lambda: ScheduledPID(EARLIER_CONFIG),
         "LQG": lambda: make_lqg(),
     }
     pops = {"tuning population": pop,

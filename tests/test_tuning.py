@@ -451,7 +451,8 @@ def test_tune_report_gives_margins_only_for_a_stable_loop(tmp_path):
 
 
 def test_tune_keeps_the_shipped_controller_that_beats_the_optimum_and_counts_its_runs(tmp_path, capsys):
-    """On steady reading the shipped pid_scheduled beats the Ms <= 1.6 optimum: it is kept, with the reason."""
+    """On steady reading the shipped pid_scheduled beats the Ms <= 1.5 optimum: it is kept, with the reason
+    (its max Ms on the presets at 1 N is 1.56, above that bound and below the default 1.6)."""
     import json
     import tomllib
 
@@ -460,25 +461,25 @@ def test_tune_keeps_the_shipped_controller_that_beats_the_optimum_and_counts_its
     from ebraille_sim.cli import main as cli
     out = tmp_path / "t"
     assert cli(["tune", "steady_90wpm", "--population", "0", "--evaluations", "4", "--scenarios", "single",
-                "--duration", "2.0", "--out", str(out), "--json"]) == 0
+                "--duration", "2.0", "--ms-max", "1.5", "--out", str(out), "--json"]) == 0
     cap = capsys.readouterr()
     doc = json.loads(cap.out)
-    assert doc["ms_bound"] == 1.6 and doc["ms_max_tuned"] <= 1.6
+    assert doc["ms_bound"] == 1.5 and doc["ms_max_tuned"] <= 1.5
     assert doc["selected"] == "shipped"
     assert doc["named_costs"]["shipped"] < doc["named_costs"]["tuned"]
     assert doc["gains"] == gains_document(RECOMMENDED, "pid_scheduled")["gains"]
-    assert doc["ms_max"] == pytest.approx(doc["shipped"]["ms_max"]) and doc["ms_max"] > 1.6
-    assert "exceeds the bound 1.6" in doc["selection_reason"]
+    assert doc["ms_max"] == pytest.approx(doc["shipped"]["ms_max"]) and doc["ms_max"] > 1.5
+    assert "exceeds the bound 1.5" in doc["selection_reason"]
     text = (out / "gains.toml").read_text()
     assert text.startswith("# kept the shipped pid_scheduled: on steady_90wpm its cost is")
-    assert "kp_v_per_n = 0.81" in text
+    assert "kp_v_per_n = 0.859" in text
     rep = json.loads((out / "report.json").read_text())
     with open(out / "gains_tuned.toml", "rb") as fh:
         assert tomllib.load(fh)["gains"] == rep["tuned"]["gains"]
     assert rep["selected"] == "shipped" and "## Selection" in (out / "report.md").read_text()
     # progress: periodic lines on a non-terminal stderr, ending at the runs actually made (5 devices x
     # 1 scenario x (4 references + the candidates within the bound))
-    runs = 5 * (4 + sum(h["ms_max"] <= 1.6 for h in rep["history"]))
+    runs = 5 * (4 + sum(h["ms_max"] <= 1.5 for h in rep["history"]))
     lines = cap.err.strip().splitlines()
     assert lines[-1] == f"tune steady_90wpm: runs {runs}/{runs}"
     assert all("\r" not in ln for ln in lines)
