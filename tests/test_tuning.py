@@ -503,3 +503,29 @@ def test_run_with_a_gains_file_labels_the_run_and_records_the_gains(tmp_path, ca
     assert doc["controller"] == "pid_scheduled" and doc["controller_file"] == str(gains)
     assert doc["controller_gains"] == dataclasses.asdict(cfg)
     assert doc["controller_gains"]["kp_v_per_n"] == 0.6
+
+
+def test_tune_scenarios_keep_the_named_scenarios_estimator():
+    """Every scenario of the tuning set runs with the named scenario's [estimator] settings
+    (the population and the Ms check are built on its device); a shipped primary changes nothing."""
+    import pathlib
+
+    from ebraille_sim.analysis.robust import standard_scenarios, with_estimator
+    from ebraille_sim.commands.tune import _scenarios
+    from ebraille_sim.scenarios.spec import load_scenario
+    fast = load_scenario(str(pathlib.Path(__file__).resolve().parent.parent / "docs" / "figures" / "estimators"
+                             / "setpoint_steps_fast.toml"))
+    est = fast.device.estimator
+    assert (est.model, est.antialias_cutoff_hz) == ("paper:wiener:5@1000", 50.0)
+    for arg in ("standard", "steady_120wpm,contact_onset_unramped", "single"):
+        scen = _scenarios(arg, fast, None)
+        assert all(sc.spec.device.estimator == est for sc in scen), arg
+    names = [sc.name for sc in standard_scenarios(fast)]
+    assert names == ["setpoint_steps", "setpoint_steps_unramped", "steady_90wpm", "contact_onset", "strap_slip"]
+    steady = [sc for sc in standard_scenarios(fast) if sc.name == "steady_90wpm"][0]
+    assert steady.duration_s == 12.0
+    assert steady.spec.reading == load_scenario("steady_90wpm").reading
+    shipped = load_scenario("setpoint_steps")
+    for sc in standard_scenarios(shipped)[2:]:
+        assert sc.spec == load_scenario(sc.name), sc.name
+    assert with_estimator(shipped, shipped.device.estimator) is shipped

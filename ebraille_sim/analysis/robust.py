@@ -126,13 +126,23 @@ def unramped(spec):
                                setpoint=dataclasses.replace(spec.setpoint, ramp_s=0.0))
 
 
+def with_estimator(spec, estimator):
+    """``spec`` with its device's ``[estimator]`` settings replaced by ``estimator``."""
+    if spec.device.estimator == estimator:
+        return spec
+    return dataclasses.replace(spec, device=dataclasses.replace(spec.device, estimator=estimator))
+
+
 def standard_scenarios(primary=None, steady_s: float = 12.0, slip_s: float = 14.0) -> list[TuneScenario]:
     """The tuning set: ``steady_90wpm`` (shortened to ``steady_s``), ``contact_onset``,
     ``setpoint_steps``, ``setpoint_steps`` without its ramp, and ``strap_slip`` shortened to
     ``slip_s`` (one 0.2 mm slip of the pulp away from the board at 8 s, at 1 N).
 
     ``primary`` (a parsed spec) comes first; it replaces the shipped scenario of the same
-    name, and a ramped primary also brings its unramped twin.
+    name, and a ramped primary also brings its unramped twin.  Every scenario of the set
+    runs with the primary's ``[estimator]`` settings (:func:`with_estimator`), so that a
+    primary with another estimator (e.g. ``paper:wiener:5@1000``) tunes for that estimator
+    in every run, as the Ms check does on a population built on the primary's device.
     """
     from ebraille_sim.scenarios.spec import load_scenario
     out = []
@@ -149,6 +159,8 @@ def standard_scenarios(primary=None, steady_s: float = 12.0, slip_s: float = 14.
                TuneScenario("setpoint_steps_unramped", unramped(steps), None),
                TuneScenario("strap_slip", load_scenario("strap_slip"), slip_s)):
         if sc.name not in {s.name for s in out}:
+            if primary is not None:
+                sc = TuneScenario(sc.name, with_estimator(sc.spec, primary.device.estimator), sc.duration_s)
             out.append(sc)
     return out
 

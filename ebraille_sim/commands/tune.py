@@ -51,7 +51,8 @@ def add_arguments(p):
                         "setpoint_steps, setpoint_steps without its ramp and strap_slip shortened), "
                         "'single' (SCENARIO alone), "
                         "or a comma-separated list of scenarios added to SCENARIO "
-                        "(NAME_unramped takes NAME's steps at once)")
+                        "(NAME_unramped takes NAME's steps at once); every scenario runs with "
+                        "SCENARIO's [estimator] settings")
     p.add_argument("--evaluations", type=whole(4, MAX_EVALUATIONS), default=30, metavar="N",
                    help=f"cost evaluations, in [4, {MAX_EVALUATIONS}] (default 30)")
     p.add_argument("--duration", type=number(0, None, lo_open=True), default=None, metavar="S",
@@ -206,7 +207,7 @@ def _scenarios(arg: str, spec, duration):
 
 
 def _scenario_list(arg: str, spec, duration):
-    from ebraille_sim.analysis.robust import TuneScenario, standard_scenarios, unramped
+    from ebraille_sim.analysis.robust import TuneScenario, standard_scenarios, unramped, with_estimator
 
     from ebraille_sim.scenarios.spec import load_scenario
     if arg == "single":
@@ -220,10 +221,12 @@ def _scenario_list(arg: str, spec, duration):
     for name in (n.strip() for n in arg.split(",")):
         if not name or name in {s.name for s in out}:
             continue
+        est = spec.device.estimator
         if name.endswith("_unramped"):
-            out.append(TuneScenario(name, unramped(load_scenario(name[: -len("_unramped")])), None))
+            out.append(TuneScenario(name, with_estimator(unramped(load_scenario(name[: -len("_unramped")])), est),
+                                    None))
         else:
-            sp = load_scenario(name)
+            sp = with_estimator(load_scenario(name), est)
             out.append(TuneScenario(sp.name, sp, 12.0 if sp.name.startswith("steady_") else None))
     return out
 
