@@ -34,6 +34,7 @@ from controllers.pid import DEFAULT_PID, PID  # noqa: E402
 from ebraille_sim.analysis.robust import (evaluate, friction_band_v, linearisation_points, population_ms, robust_tune,  # noqa: E402
                                 standard_scenarios, summarise, tuning_population, unramped)
 from controllers.schedule import HAND, MS_1_6, RECOMMENDED, ScheduleConfig, ScheduledPID  # noqa: E402
+from controllers.friction import FRICTION_GAINS  # noqa: E402
 from ebraille_sim.analysis.tuning import (_sampled_front, analyse_loop, continuous_model, linearize,  # noqa: E402
                                 operating_point, plot_bode, plot_nyquist, simc_pid)
 from ebraille_sim.plant.loop import Plant  # noqa: E402
@@ -104,7 +105,7 @@ REC = "recommended (pid_scheduled default)"
 EARLIER = "earlier RECOMMENDED (kp 0.81, ki 1.8)"
 """What ``RECOMMENDED`` was before the "ms2.0" tuning replaced it (the earlier model's
 friction-relaxation tuning, rounded; ``pid_friction`` keeps these gains)."""
-EARLIER_CONFIG = ScheduleConfig(kp_v_per_n=0.81, ki_v_per_ns=1.8, kd_vs_per_n=0.011)
+EARLIER_CONFIG = ScheduleConfig(**FRICTION_GAINS)
 TUNE_DEFAULT = "Ms <= 1.6 (MS_1_6)"
 """``controllers.schedule.MS_1_6``: the "ms1.6" tuning (what ``tune`` gives by default), rounded."""
 

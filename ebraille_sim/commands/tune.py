@@ -218,10 +218,10 @@ def _scenario_list(arg: str, spec, duration):
             out[0] = TuneScenario(out[0].name, out[0].spec, duration)
         return out
     out = [TuneScenario(spec.name, spec, duration)]
+    est = spec.device.estimator
     for name in (n.strip() for n in arg.split(",")):
         if not name or name in {s.name for s in out}:
             continue
-        est = spec.device.estimator
         if name.endswith("_unramped"):
             out.append(TuneScenario(name, with_estimator(unramped(load_scenario(name[: -len("_unramped")])), est),
                                     None))
