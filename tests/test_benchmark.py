@@ -133,6 +133,8 @@ def test_compare_reports_deltas_and_refuses_another_suite(quick):
     (["lqr"], "unknown controller 'lqr'"),
     (["actuator_bound"], "is a bound the benchmark adds itself"),
     (["pid", "--compare", "missing.json"], "no results file"),
+    (["pid", "--estimator", "foo=1"], "unknown key 'foo' in EstimatorParams"),
+    (["pid", "--estimator", "hysteresis_compensation"], "must be KEY=VALUE"),
 ])
 def test_bad_input_is_one_line(argv, msg, capsys):
     assert cli(["benchmark", *argv, "--suite", "quick"] if "--suite" not in argv else ["benchmark", *argv]) == 2
@@ -173,3 +175,20 @@ def test_friction_pid_jumps_across_the_friction_band_when_the_error_changes_sign
         controllers.make("pid_friction", friction_fraction=1.5)
     with pytest.raises(ValueError, match="needs feedforward = true"):
         controllers.make("pid_friction", feedforward=False)
+
+
+def test_estimator_settings_apply_to_every_episode_and_are_recorded(quick):
+    """A firmware variant (here the hysteresis compensation) runs on every device, the bounds'
+    included; the results file records it; the default run is unchanged by the option."""
+    assert B.estimator_settings(["hysteresis_compensation=true", "hysteresis_deadband_lsb=2"]) == {
+        "hysteresis_compensation": True, "hysteresis_deadband_lsb": 2.0}
+    res = B.run_benchmark(["pid"], suite="quick", jobs=1, estimator={"hysteresis_compensation": True})
+    doc = B.results_document(res)
+    assert doc["estimator"] == {"hysteresis_compensation": True}
+    assert "estimator hysteresis_compensation=true" in B.format_leaderboard(res)
+    base, _ = quick
+    assert B.results_document(base)["estimator"] == {}
+    old = {(r["controller"], r["scenario"], r["reader"]): r for r in base.rows}
+    moved = [k for k, r in ((k, r) for r in res.rows for k in [(r["controller"], r["scenario"], r["reader"])])
+             if r["estimate_rmse_n"] != old[k]["estimate_rmse_n"]]
+    assert moved                                  # the compensation changes the estimate

@@ -30,7 +30,7 @@ from ebraille_sim.physics.fsr import (F_EPS_N, FAULT_NONE, FAULT_OPEN, FAULT_SHO
                                       sensor_voltage, static_conductance, static_voltage, temperature_factor)
 from ebraille_sim.physics.motor import current_decay, current_step, driver_voltage, electrical_power_w, rack_force_n
 from ebraille_sim.physics.noise import noise_v, normal_at
-from ebraille_sim.physics.params import (FINGERS, MOTORS, CircuitParams, DeviceParams, DriveTrainParams,
+from ebraille_sim.physics.params import (FINGERS, FSRS, MOTORS, CircuitParams, DeviceParams, DriveTrainParams,
                                          EstimatorParams, FSRParams)
 from ebraille_sim.plant import kernel, layout
 from ebraille_sim.plant.layout import N_INPUT, P, S, U
@@ -617,3 +617,88 @@ def test_importing_the_plant_does_not_import_scipy_signal():
     code = "import sys, ebraille_sim.plant.loop, ebraille_sim.plant.kernel; print('scipy.signal' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_inverse_hysteresis_retraces_the_input_wherever_the_output_moves():
+    """Forward play operators on a random walk in ln F, then the inverse on their outputs: where
+    the output changed the inverse returns the input (to rounding) and advances the same plays;
+    where it did not (the stretch after a reversal) it holds its last input."""
+    widths, weights = fsr.play_widths(FSRS["nominal"])
+    pp = np.array(widths + weights)
+    n = len(widths)
+    fwd = np.full(n, math.log(F_EPS_N))
+    inv = fwd.copy()
+    rng = np.random.default_rng(3)
+    f = np.abs(1.0 + np.cumsum(rng.normal(0.0, 0.01, 4000)))
+    x_prev, l_prev, moved, held = math.log(F_EPS_N), None, 0, 0
+    for fk in f:
+        x = fsr.log_force(fk)
+        l_out = math.log(fsr.hysteresis(fk, fwd, 0, pp, 0, n, n) + F_EPS_N)
+        xi = fsr.inverse_hysteresis(l_out, x_prev, inv, 0, pp, 0, n, n)
+        if l_prev is None or l_out != l_prev:
+            assert xi == pytest.approx(x, abs=1e-12)
+            np.testing.assert_allclose(inv, fwd, rtol=0, atol=1e-12)
+            moved += 1
+        else:
+            assert xi == x_prev
+            held += 1
+        x_prev, l_prev = xi, l_out
+    assert moved > 500 and held > 1000
+    # on the loading branch (plays at their lower edges) a rise is seen at once, a fall of less
+    # than twice the narrowest width not at all
+    st = np.array([-w for w in widths])
+    assert fsr.inverse_hysteresis(sum(wt * y for wt, y in zip(weights, st)) + 1e-3, 0.0, st.copy(), 0, pp, 0, n,
+                                  n) == pytest.approx(1e-3, abs=1e-12)
+    below = fsr.inverse_hysteresis(sum(wt * y for wt, y in zip(weights, st)) - 1e-3, 0.0, st.copy(), 0, pp, 0, n, n)
+    assert below == pytest.approx(-2.0 * widths[0] - 1e-3 / weights[0], abs=1e-12)
+
+
+def test_hysteresis_compensation_reads_the_loading_branch():
+    """The film's conductance on its loading branch passes unchanged; on the unloading branch
+    (plays at their upper edges, 2 H higher in ln F_eff) it is brought back to the loading
+    branch's value at the same force; a change within the deadband is ignored."""
+    nominal = FSRS["nominal"]
+    widths, weights = fsr.play_widths(nominal)
+    n = len(widths)
+    pp = np.array(widths + weights)
+    h = sum(w * x for w, x in zip(weights, widths))
+    r2, vs, k, ex, gso, db = 1150.0, 5.0, nominal.resistance_at_1n_ohm, nominal.exponent, 1e-7, 0.002
+
+    def volts(f_eff):
+        return divider_voltage(gso + f_eff ** ex / k, r2, vs)
+
+    def state(x, side):
+        return np.array([0.0, x] + [x + side * w for w in widths])
+
+    x = math.log(1.2 + F_EPS_N)
+    v_load = volts(math.exp(x - h) - F_EPS_N)
+    st = state(x, -1.0)
+    st[0] = v_load
+    out = blockmodels.hysteresis_compensated_v(v_load, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
+    assert out == pytest.approx(v_load, rel=1e-12)
+    assert st[1] == pytest.approx(x, abs=1e-12)
+    v_unload = volts(math.exp(x + h) - F_EPS_N)
+    st = state(x, +1.0)
+    st[0] = v_unload
+    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
+    assert out == pytest.approx(v_load, rel=1e-12)
+    assert v_unload > 1.05 * v_load
+    # the film further down its unloading branch: the inversion moves the input with the output
+    # (slope 1 on that branch) and the result is the loading branch 2 H lower
+    v_down = v_unload - 3.0 * db
+    out3 = blockmodels.hysteresis_compensated_v(v_down, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
+    vf = v_unload - 2.0 * db
+    assert st[0] == vf
+    f_down = (k * (fsr.divider_conductance_s(vf, r2, vs) - gso)) ** (1.0 / ex)
+    assert st[1] == pytest.approx(math.log(f_down + F_EPS_N) - h, abs=1e-12)
+    assert out3 == pytest.approx(volts(math.exp(math.log(f_down + F_EPS_N) - 2.0 * h) - F_EPS_N), rel=1e-12)
+    st = state(x, +1.0)
+    st[0] = v_unload
+    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
+    # within the deadband the held voltage is used: the output does not move
+    out2 = blockmodels.hysteresis_compensated_v(v_unload + 0.9 * db, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso,
+                                                r2, vs)
+    assert out2 == out and st[0] == v_unload
+    # a railed or faulted divider passes unchanged
+    assert blockmodels.hysteresis_compensated_v(vs, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso, r2, vs) == vs
+    assert blockmodels.hysteresis_compensated_v(0.0, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso, r2, vs) == 0.0

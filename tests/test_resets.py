@@ -69,7 +69,14 @@ def test_env_trajectories_match_the_record_made_before_caching():
     now = env_trace()
     assert sorted(stored.files) == sorted(now)
     for key in stored.files:
-        np.testing.assert_array_equal(now[key], stored[key], err_msg=key)
+        got = now[key]
+        if key.startswith("state"):
+            # the record predates the estimator's hysteresis-compensation slots, which the
+            # layout appends after every earlier slot
+            from ebraille_sim.estimation.blockmodels import HYSTERESIS_COMP_SLOTS
+            assert got.shape[-1] == stored[key].shape[-1] + len(HYSTERESIS_COMP_SLOTS)
+            got = got[..., :stored[key].shape[-1]]
+        np.testing.assert_array_equal(got, stored[key], err_msg=key)
 
 
 def test_resets_reuse_the_caches_and_the_next_episode_differs():

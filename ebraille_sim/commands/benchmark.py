@@ -27,6 +27,9 @@ def add_arguments(p):
     p.add_argument("--compare", default=None, metavar="RESULTS.json",
                    help="print the changes against an earlier benchmark.json of the same suite")
     p.add_argument("--no-bounds", action="store_true", help="skip actuator_bound and sensor_bound")
+    p.add_argument("--estimator", action="append", default=[], metavar="KEY=VALUE",
+                   help="an estimator setting of every device, bounds included (repeatable), e.g. "
+                        "hysteresis_compensation=true; the [estimator] keys of a scenario file")
 
 
 def main(args) -> int:
@@ -39,6 +42,10 @@ def main(args) -> int:
         raise UserError(f"--readers must be >= 1, got {args.readers}")
     if args.jobs < 1:
         raise UserError(f"--jobs must be >= 1, got {args.jobs}")
+    try:
+        estimator = bm.estimator_settings(args.estimator)
+    except ValueError as exc:
+        raise UserError(f"--estimator: {exc}") from None
     out = check_out_dir(args.out) if args.out is not None else None
     old = bm.load_results(args.compare) if args.compare is not None else None
     if old is not None and (old["suite"], old["suite_version"]) != (suite.name, bm.SUITE_VERSION):
@@ -46,7 +53,7 @@ def main(args) -> int:
                         f"this run is {suite.name} v{bm.SUITE_VERSION}")
     progress = FrameProgress("episodes", enabled=con.progress and not con.json)
     result = bm.run_benchmark(args.controllers, suite, readers=args.readers, jobs=args.jobs,
-                              bounds=not args.no_bounds, progress=progress)
+                              bounds=not args.no_bounds, progress=progress, estimator=estimator)
     progress.close()
     summary = bm.summarise(result)
     doc = bm.results_document(result, summary)

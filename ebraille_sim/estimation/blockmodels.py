@@ -44,7 +44,8 @@ from typing import Any
 import numpy as np
 
 from ebraille_sim.base.compiled import njit
-from ebraille_sim.physics.fsr import N_CREEP, creep_force, divider_conductance_s, divider_voltage
+from ebraille_sim.physics.fsr import (F_EPS_N, N_CREEP, N_PLAYS, creep_force, divider_conductance_s, divider_voltage,
+                                      inverse_hysteresis, log_force, play)
 
 __all__ = [
     "PiecewiseLinear",
@@ -59,6 +60,7 @@ __all__ = [
     "biquad_step",
     "estimator_step",
     "creep_compensated_v",
+    "hysteresis_compensated_v",
 ]
 
 MAX_TF_LEN = 10
@@ -83,7 +85,13 @@ CREEP_COMP_SLOTS = tuple(f"comp_creep_{j}_n" for j in range(N_CREEP))
 """State slots of the firmware's creep prediction: the hereditary terms of its own force
 estimate (N), advanced by :func:`ebraille_sim.physics.fsr.creep_force`."""
 
-OWNED_STATE_SLOTS = ANTIALIAS_SLOTS + OUTPUT_SLOTS + TARE_SLOTS + FILTER_SLOTS + CREEP_COMP_SLOTS
+HYSTERESIS_COMP_SLOTS = ("comp_hyst_v", "comp_hyst_x") + tuple(f"comp_play_{j}" for j in range(N_PLAYS))
+"""State slots of the firmware's hysteresis compensation: the voltage after its noise
+deadband (V), the last inverted operator input (ln N) and its copy of the film's play
+operators (ln N), advanced by :func:`ebraille_sim.physics.fsr.inverse_hysteresis`."""
+
+OWNED_STATE_SLOTS = ANTIALIAS_SLOTS + OUTPUT_SLOTS + TARE_SLOTS + FILTER_SLOTS + CREEP_COMP_SLOTS \
+    + HYSTERESIS_COMP_SLOTS
 """Every state slot the in-loop estimator declares (see :mod:`ebraille_sim.plant.layout`)."""
 
 #: Default absolute tolerance on the remainders ``B(1)`` and ``F(1)`` of a
@@ -997,6 +1005,42 @@ def creep_compensated_v(v, f_est_n, s, z0, p, a0, weight, threshold_n, n_terms, 
     gain = f_c / f_est_n if f_est_n > threshold_n else 1.0
     g = divider_conductance_s(v, r2_ohm, supply_v)
     g_u = g_standoff_s + (g - g_standoff_s) * (reference_gain / gain) ** exponent
+    return divider_voltage(g_u, r2_ohm, supply_v)
+
+
+@njit(cache=True, inline="always")
+def hysteresis_compensated_v(v, s, v0, x0, play0, p, width0, weight0, n_plays, log_halfwidth, deadband_v,
+                             k_ohm, exponent, g_standoff_s, r2_ohm, supply_v):
+    """The divider voltage with the film's hysteresis branch replaced by its loading branch (V).
+
+    The divider is calibrated by pressing monotonically, so the estimator's static map is
+    the loading branch of the film's hysteresis (:func:`ebraille_sim.physics.fsr.hysteresis`),
+    on which the play operators sit at their lower edges and ``ln(F_eff + F_eps)`` is the
+    input less ``log_halfwidth`` (the weighted sum of the widths).  After a reversal the
+    film reads on an inner branch, up to ``2 log_halfwidth`` higher.  The firmware inverts
+    the operator: the voltage ``v`` (after a deadband of ``deadband_v`` against ADC noise,
+    state ``s[v0]``) is turned into the film's conductance (divider inverse), its power-law
+    path into a force with the nominal conduction law ``G = F^n / k``, and
+    :func:`~ebraille_sim.physics.fsr.inverse_hysteresis` (plays ``s[play0:...]``, last input
+    ``s[x0]``) gives the input; the voltage returned is the one the loading branch gives
+    for it.  An individual sensor's sensitivity or creep gain enters the log-force as an
+    offset that the rate-independent operator carries through, so only the nominal widths
+    and exponent matter.  Inside the stretch after a reversal that the film does not show,
+    and while the voltage stays within the deadband, the input is held at its last value.
+    Voltages outside ``(0, supply_v)`` pass unchanged.
+    """
+    if not 0.0 < v < supply_v:
+        return v
+    vf = play(v, s[v0], deadband_v)
+    x = s[x0]
+    if vf != s[v0]:
+        s[v0] = vf
+        g_pow = divider_conductance_s(vf, r2_ohm, supply_v) - g_standoff_s
+        f = (k_ohm * g_pow) ** (1.0 / exponent) if g_pow > 0.0 else 0.0
+        x = inverse_hysteresis(log_force(f), x, s, play0, p, width0, weight0, n_plays)
+        s[x0] = x
+    f_load = math.exp(x - log_halfwidth) - F_EPS_N
+    g_u = g_standoff_s + (f_load ** exponent / k_ohm if f_load > 0.0 else 0.0)
     return divider_voltage(g_u, r2_ohm, supply_v)
 
 

@@ -51,6 +51,9 @@ N_PLAYS = 4
 F_EPS_N = 1e-3
 """Force offset inside the logarithm of the hysteresis operator (N)."""
 
+INVERSE_HYSTERESIS_TOL = 1e-12
+"""Output change (ln N) below which :func:`inverse_hysteresis` holds its input: rounding, not force."""
+
 N_CREEP = 5
 """Retardation terms of the hereditary creep (one per decade of time, each one state slot)."""
 
@@ -173,6 +176,54 @@ def hysteresis(f_lagged_n, s, play0, p, width0, weight0, n_plays):
         s[play0 + j] = yj
         leff += p[weight0 + j] * yj
     return math.exp(leff) - F_EPS_N
+
+
+@njit(cache=True)
+def inverse_hysteresis(l_out, x_prev, s, play0, p, width0, weight0, n_plays):
+    """Input of the play operators that makes :func:`hysteresis` give ``l_out`` (both in ln N).
+
+    ``l_out`` is ``ln(F_eff + F_eps)``, the operator's output; the plays ``s[play0:...]``
+    (widths ``p[width0:...]``, weights ``p[weight0:...]`` summing to 1) hold the operator's
+    memory and are advanced as :func:`hysteresis` advances them, so a sequence of outputs
+    inverted one by one retraces the input.  The output is a nondecreasing, piecewise-linear
+    function of the input: flat until the input has travelled a play's ``2 width`` from the
+    last reversal, then rising with the weights of the plays that move.  Where it is strictly
+    monotone the input is unique; where the output did not change (the flat stretch after a
+    reversal) every input in it fits, and the one returned is ``x_prev``, the last input: a
+    change the film does not show is taken as none.  Outputs within
+    :data:`INVERSE_HYSTERESIS_TOL` of the plays' present output are taken as unchanged (the
+    sum of the plays rounds differently from the ``log`` of the same force).
+    """
+    phi = 0.0
+    for j in range(n_plays):
+        phi += p[weight0 + j] * s[play0 + j]
+    x = x_prev
+    if abs(l_out - phi) > INVERSE_HYSTERESIS_TOL:
+        up = l_out > phi
+        cur = phi
+        slope = 0.0
+        used = 0
+        for _ in range(n_plays):
+            best = -1
+            bx = 0.0
+            for j in range(n_plays):
+                if used & (1 << j):
+                    continue
+                b = s[play0 + j] + p[width0 + j] if up else s[play0 + j] - p[width0 + j]
+                if best < 0 or (b < bx if up else b > bx):
+                    best = j
+                    bx = b
+            end = cur + slope * (bx - x)
+            if slope > 0.0 and ((end >= l_out) if up else (end <= l_out)):
+                break
+            cur = end
+            x = bx
+            slope += p[weight0 + best]
+            used |= 1 << best
+        x += (l_out - cur) / slope
+    for j in range(n_plays):
+        s[play0 + j] = play(x, s[play0 + j], p[width0 + j])
+    return x
 
 
 @njit(cache=True, inline="always")

@@ -462,6 +462,12 @@ class EstimatorParams(_Checked):
     creep_reference_hold_s: float = _pos(20.0, "s", "[D] hold of the divider's calibration "
                                          "(estimation.calibration.calibrate_device; centre of calibrate_r2's "
                                          "5-60 s holds): the compensated voltage is the one read after it")
+    hysteresis_compensation: bool = _p(False, "-", "[E] firmware inverts the nominal FSR's play-operator "
+                                       "hysteresis and reads every voltage on the calibrated loading branch "
+                                       "(docs/model.md); off by default")
+    hysteresis_deadband_lsb: float = _nn(1.5, "LSB", "[E] changes of the ADC voltage below this many counts "
+                                         "are taken as noise by the hysteresis compensation (the default "
+                                         "noise, 0.4 LSB rms, moves the code by one count often, by two rarely)")
 
 
 @dataclass(frozen=True)

@@ -25,8 +25,9 @@ Per physics step ``h`` (default 0.1 ms), with the command held over the control 
    (:func:`~ebraille_sim.physics.fingertip.prony_step`, :func:`~ebraille_sim.physics.fingertip.contact_force`);
 6. FSR mechanical lag; at every sensor sample the hysteresis, hereditary creep, conduction,
    divider (or fault), noise and ADC, then the estimator's creep compensation
-   (:func:`~ebraille_sim.estimation.blockmodels.creep_compensated_v`, when on) and the
-   anti-alias filter; at every estimator
+   (:func:`~ebraille_sim.estimation.blockmodels.creep_compensated_v`, when on), the
+   hysteresis compensation (:func:`~ebraille_sim.estimation.blockmodels.hysteresis_compensated_v`,
+   when on) and the anti-alias filter; at every estimator
    sample the block-oriented estimator (:func:`~ebraille_sim.estimation.blockmodels.estimator_step`).
 
 Stability: the semi-implicit step is stable while ``w h < 2`` for the stiffest
@@ -37,7 +38,8 @@ from __future__ import annotations
 
 from ebraille_sim.base.compiled import njit
 
-from ebraille_sim.estimation.blockmodels import biquad_step, creep_compensated_v, estimator_step, tared_v
+from ebraille_sim.estimation.blockmodels import (biquad_step, creep_compensated_v, estimator_step,
+                                                hysteresis_compensated_v, tared_v)
 from ebraille_sim.physics.drivetrain import (end_stop, friction_velocity_update, gear_loss_n, loaded_friction_n,
                                              mesh_force, shaft_speed_rad_per_s, stribeck, viscous_force_n,
                                              weight_along_n)
@@ -63,8 +65,8 @@ def estimator_update(s, p, u):
 
 @njit(cache=True, inline="always")
 def sensor_sample(s, p, u):
-    """One ADC sample of the FSR divider, then the estimator's creep compensation (when on),
-    the anti-alias filter and the estimator."""
+    """One ADC sample of the FSR divider, then the estimator's creep and hysteresis
+    compensations (when on), the anti-alias filter and the estimator."""
     f_lag = s[S.fsr_force_lagged_n]
     f_eff = hysteresis(f_lag, s, S.play_0, p, P.play_w0, P.play_weight0, N_PLAYS)
     f_c = creep_force(f_eff, f_lag, s, S.creep_0_n, p, P.creep_a0, p[P.fsr_creep_weight], p[P.fsr_load_threshold_n],
@@ -83,6 +85,11 @@ def sensor_sample(s, p, u):
                                  p[P.comp_creep_weight], p[P.comp_load_threshold_n], N_CREEP, p[P.comp_fsr_n],
                                  p[P.comp_g_standoff_s], p[P.comp_reference_gain], p[P.r2_ohm],
                                  p[P.divider_supply_v])
+    if p[P.est_hyst_comp] > 0.0:
+        vq = hysteresis_compensated_v(vq, s, S.comp_hyst_v, S.comp_hyst_x, S.comp_play_0, p, P.comp_play_w0,
+                                      P.comp_play_weight0, N_PLAYS, p[P.comp_hyst_halfwidth],
+                                      p[P.comp_hyst_deadband_v], p[P.comp_fsr_k_ohm], p[P.comp_fsr_n],
+                                      p[P.comp_g_standoff_s], p[P.r2_ohm], p[P.divider_supply_v])
     y = biquad_step(tared_v(vq, s[S.tare_v]), s, S.aa_z1, S.aa_z2,
                     p[P.aa_b0], p[P.aa_b1], p[P.aa_b2], p[P.aa_a1], p[P.aa_a2])
     s[S.estimator_phase] += 1.0

@@ -83,7 +83,7 @@ STATE_BLOCKS = (
     _motor.STATE_SLOTS, _drivetrain.STATE_SLOTS, _fingertip.STATE_SLOTS, _fsr.STATE_SLOTS,
     _est.ANTIALIAS_SLOTS, LOOP_STATE_SLOTS[:2], _noise.STATE_SLOTS, _est.OUTPUT_SLOTS,
     _motor.ENERGY_SLOTS, LOOP_STATE_SLOTS[2:], _est.TARE_SLOTS, _fsr.HYSTERESIS_SLOTS, _fsr.CREEP_SLOTS, _est.FILTER_SLOTS,
-    _est.CREEP_COMP_SLOTS,
+    _est.CREEP_COMP_SLOTS, _est.HYSTERESIS_COMP_SLOTS,
 )
 """The modules' slot declarations in state-vector order."""
 
@@ -120,9 +120,12 @@ PARAM_NAMES = [
     # the estimator's creep compensation (the device's nominal FSR)
     "est_creep_comp", "comp_creep_weight", "comp_fsr_n", "comp_g_standoff_s", "comp_load_threshold_n",
     "comp_reference_gain",
+    # the estimator's hysteresis compensation (the device's nominal FSR)
+    "est_hyst_comp", "comp_fsr_k_ohm", "comp_hyst_halfwidth", "comp_hyst_deadband_v",
     "seed",
 ] + [f"creep_a{j}" for j in range(N_CREEP)] + [f"comp_creep_a{j}" for j in range(N_CREEP)] \
   + [f"play_w{j}" for j in range(N_PLAYS)] + [f"play_weight{j}" for j in range(N_PLAYS)] \
+  + [f"comp_play_w{j}" for j in range(N_PLAYS)] + [f"comp_play_weight{j}" for j in range(N_PLAYS)] \
   + [f"est_num{j}" for j in range(MAX_TF_LEN)] + [f"est_den{j}" for j in range(MAX_TF_LEN)] \
   + [f"est_in_x{j}" for j in range(MAX_BREAKPOINTS)] + [f"est_in_y{j}" for j in range(MAX_BREAKPOINTS)] \
   + [f"est_out_x{j}" for j in range(MAX_BREAKPOINTS)] + [f"est_out_y{j}" for j in range(MAX_BREAKPOINTS)]

@@ -164,6 +164,7 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     p[P.est_clamp] = 1.0 if e.clamp_nonnegative else 0.0
     p[P.est_nyquist_average] = 1.0 if e.nyquist_average else 0.0
     _pack_creep_compensation(p, e, dt_sensor)
+    _pack_hysteresis_compensation(p, e, c)
     p[P.seed] = float(seed)
     return p
 
@@ -182,6 +183,21 @@ def _pack_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
     p[P.comp_g_standoff_s] = 1.0 / nominal.standoff_resistance_ohm
     p[P.comp_load_threshold_n] = nominal.load_threshold_n
     p[P.comp_reference_gain] = creep_gain(e.creep_reference_hold_s, nominal)
+
+
+def _pack_hysteresis_compensation(p: np.ndarray, e, circuit) -> None:
+    """The estimator's hysteresis compensation: on/off, the play operators and the resistance
+    at 1 N of the nominal FSR (``FSRS["nominal"]``; its exponent and stand-off are packed with
+    the creep compensation), and the noise deadband in volts."""
+    nominal = FSRS["nominal"]
+    p[P.est_hyst_comp] = 1.0 if e.hysteresis_compensation else 0.0
+    widths, weights = play_widths(nominal)
+    for j in range(N_PLAYS):
+        p[P[f"comp_play_w{j}"]] = widths[j]
+        p[P[f"comp_play_weight{j}"]] = weights[j]
+    p[P.comp_hyst_halfwidth] = sum(w * x for w, x in zip(weights, widths))
+    p[P.comp_fsr_k_ohm] = nominal.resistance_at_1n_ohm
+    p[P.comp_hyst_deadband_v] = e.hysteresis_deadband_lsb * circuit.adc_lsb_v
 
 
 @functools.lru_cache(maxsize=64)
@@ -284,6 +300,10 @@ def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None
     s[S.fsr_code] = code0
     s[S.fsr_voltage_v] = v_read
     s[S.tare_v] = v_read if device.estimator.tare_at_start else 0.0
+    s[S.comp_hyst_v] = v_read
+    s[S.comp_hyst_x] = lf
+    for j in range(N_PLAYS):
+        s[S[f"comp_play_{j}"]] = lf
     _estimator_steady_state(s, p, v_read - s[S.tare_v])
     return s
 

@@ -201,6 +201,8 @@ class EstimatorSpec:
     nyquist_average: bool | None = _key(None, "-", "bool")
     creep_compensation: bool | None = _key(None, "-", "bool")
     creep_reference_hold_s: float | None = _key(None, "s", "float", lo=0, hi=1e5, lo_open=True)
+    hysteresis_compensation: bool | None = _key(None, "-", "bool")
+    hysteresis_deadband_lsb: float | None = _key(None, "LSB", "float", lo=0, hi=1e3)
 
 
 @dataclass(frozen=True)
@@ -372,7 +374,9 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
                                        ("clamp_nonnegative", "clamp_nonnegative"),
                                        ("nyquist_average", "nyquist_average"),
                                        ("creep_compensation", "creep_compensation"),
-                                       ("creep_reference_hold_s", "creep_reference_hold_s")) if k1 in est})
+                                       ("creep_reference_hold_s", "creep_reference_hold_s"),
+                                       ("hysteresis_compensation", "hysteresis_compensation"),
+                                       ("hysteresis_deadband_lsb", "hysteresis_deadband_lsb")) if k1 in est})
         if "model" in est and not est["model"].startswith("paper:"):
             mp = pathlib.Path(est["model"])
             if not mp.is_absolute():

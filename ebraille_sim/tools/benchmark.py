@@ -53,7 +53,7 @@ import numpy as np
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
 
 __all__ = ["BenchScenario", "Suite", "SUITES", "SUITE_VERSION", "POPULATION_SEED", "BOUNDS", "cvar_low",
-           "plan_episodes", "run_episode", "run_benchmark", "summarise", "score_formula", "format_leaderboard",
+           "plan_episodes", "estimator_settings", "run_episode", "run_benchmark", "summarise", "score_formula", "format_leaderboard",
            "format_markdown", "results_document", "write_results", "load_results", "compare", "format_compare"]
 
 SUITE_VERSION = 1
@@ -203,16 +203,48 @@ def _sensor_bound_metrics(res) -> dict:
     return m
 
 
+def estimator_settings(settings) -> dict:
+    """Checked estimator settings for every episode: ``{field: value}`` of
+    :class:`ebraille_sim.physics.params.EstimatorParams`, or ``KEY=VALUE`` strings (``true`` /
+    ``false``, numbers, or text); one-line ValueError for an unknown key or a bad value."""
+    from ebraille_sim.base.validation import replace_checked
+    from ebraille_sim.physics.params import EstimatorParams
+    out = {}
+    for item in ([] if settings is None else settings.items() if isinstance(settings, dict) else settings):
+        if isinstance(item, str):
+            key, sep, text = item.partition("=")
+            if not sep or not key.strip():
+                raise ValueError(f"estimator setting {item!r} must be KEY=VALUE")
+            low = text.strip().lower()
+            if low in ("true", "false"):
+                value = low == "true"
+            else:
+                try:
+                    value = float(text)
+                except ValueError:
+                    value = text.strip()
+            item = (key.strip(), value)
+        out[str(item[0])] = item[1]
+    replace_checked(EstimatorParams(), **out)
+    return dict(sorted(out.items()))
+
+
 def run_episode(task) -> list[dict]:
-    """Run one ``(controller, BenchScenario, reader, readers)`` task; rows of kept metrics.
+    """Run one ``(controller, BenchScenario, reader, readers, estimator items)`` task; rows of
+    kept metrics.
 
     ``actuator_bound`` episodes also give the ``sensor_bound`` row, except in fault scenarios
-    (a failed sensor's error is not an estimation error).
+    (a failed sensor's error is not an estimation error).  The estimator items (pairs of
+    :class:`~ebraille_sim.physics.params.EstimatorParams` fields and values) replace the
+    device's estimator settings.
     """
+    from ebraille_sim.base.validation import replace_checked
     from ebraille_sim.scenarios.runner import run_scenario
-    ctrl, sc, reader, n = task
+    ctrl, sc, reader, n, est = task
     spec = _spec(sc.scenario, sc.duration_s, sc.wpm)
     device = _devices(sc.scenario, sc.duration_s, sc.wpm, n)[reader]
+    if est:
+        device = dataclasses.replace(device, estimator=replace_checked(device.estimator, **dict(est)))
     seed = spec.seed + 101 * reader
     base = {"scenario": sc.key, "reader": reader, "seed": seed}
     try:
@@ -239,10 +271,11 @@ class BenchmarkResult:
     rows: list
     wall_s: float
     jobs: int
+    estimator: dict = dataclasses.field(default_factory=dict)
 
 
 def run_benchmark(controllers, suite: str | Suite = "standard", readers: int | None = None, jobs: int = 1,
-                  bounds: bool = True, progress=None) -> BenchmarkResult:
+                  bounds: bool = True, progress=None, estimator=None) -> BenchmarkResult:
     """Run ``controllers`` (and the bounds) on a suite.
 
     Parameters
@@ -258,8 +291,12 @@ def run_benchmark(controllers, suite: str | Suite = "standard", readers: int | N
         Also run ``actuator_bound`` (which gives ``sensor_bound``).
     progress : callable, optional
         ``progress(done, total)`` after each episode.
+    estimator : dict or list of str, optional
+        Estimator settings of every device, the bounds' included (:func:`estimator_settings`):
+        a firmware variant, such as ``{"hysteresis_compensation": True}``.
     """
     import controllers as ctrl_mod
+    est = estimator_settings(estimator)
     suite = get_suite(suite) if isinstance(suite, str) else suite
     names = list(dict.fromkeys(str(c) for c in controllers))
     if not names:
@@ -271,7 +308,7 @@ def run_benchmark(controllers, suite: str | Suite = "standard", readers: int | N
     if bounds:
         names.append("actuator_bound")
     n = suite.readers if readers is None else int(readers)
-    tasks = [(c, suite.scenarios[i], r, n) for c, i, r in plan_episodes(names, suite, n)]
+    tasks = [(c, suite.scenarios[i], r, n, tuple(est.items())) for c, i, r in plan_episodes(names, suite, n)]
     if jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
     t0 = time.perf_counter()
@@ -291,7 +328,7 @@ def run_benchmark(controllers, suite: str | Suite = "standard", readers: int | N
                 if progress:
                     progress(k + 1, len(tasks))
     return BenchmarkResult(suite, names + (["sensor_bound"] if bounds else []), n, rows,
-                           time.perf_counter() - t0, jobs)
+                           time.perf_counter() - t0, jobs, est)
 
 
 def summarise(result: BenchmarkResult) -> dict:
@@ -333,13 +370,21 @@ def _f(v, fmt="{:.3f}"):
     return "-" if v is None else fmt.format(v)
 
 
+def _firmware(result: BenchmarkResult) -> str:
+    """``", estimator k=v, ..."`` when the run changed the devices' estimator settings."""
+    if not result.estimator:
+        return ""
+    return ", estimator " + ", ".join(f"{k}={str(v).lower() if isinstance(v, bool) else v}"
+                                      for k, v in result.estimator.items())
+
+
 def format_leaderboard(result: BenchmarkResult, summary: dict | None = None) -> str:
     """The leaderboard and the per-scenario worst-case table as terminal text."""
     s = summarise(result) if summary is None else summary
     order = _ranked(s)
     w = max(14, *(len(c) for c in order))
     lines = [f"suite {result.suite.name} v{SUITE_VERSION}: {len(result.suite.scenarios)} scenarios x "
-             f"{result.readers} readers", score_formula(), "",
+             f"{result.readers} readers{_firmware(result)}", score_formula(), "",
              f"{'controller':<{w}}  {'score':>7}  {'peak N':>6}  {'>3N':>5}"]
     for c in order:
         peak = max((v["peak_force_n_max"] or 0.0) for v in s[c]["scenarios"].values())
@@ -364,7 +409,7 @@ def format_markdown(result: BenchmarkResult, summary: dict | None = None) -> str
     s = summarise(result) if summary is None else summary
     order = _ranked(s)
     out = [f"Suite `{result.suite.name}` v{SUITE_VERSION}: {len(result.suite.scenarios)} scenarios x "
-           f"{result.readers} readers.  `{score_formula()}`", "",
+           f"{result.readers} readers{_firmware(result)}.  `{score_formula()}`", "",
            "| controller | score | max peak force (N) | share of episodes > 3 N |", "|---|---:|---:|---:|"]
     for c in order:
         peak = max((v["peak_force_n_max"] or 0.0) for v in s[c]["scenarios"].values())
@@ -391,6 +436,7 @@ def results_document(result: BenchmarkResult, summary: dict | None = None) -> di
             "population_seed": POPULATION_SEED, "score_formula": score_formula(),
             "scenarios": [dataclasses.asdict(sc) for sc in result.suite.scenarios],
             "controllers": result.controllers, "ranking": _ranked(s), "summary": s,
+            "estimator": dict(result.estimator),
             "rows": result.rows, "wall_s": round(result.wall_s, 3), "jobs": result.jobs}
 
 
