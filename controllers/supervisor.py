@@ -91,6 +91,12 @@ functions around the inner controller, which a compiled loop calls directly::
 :meth:`Supervisor.update` is exactly this.  The windows are sized for control periods of at
 least :data:`MIN_CONTROL_PERIOD_S`; the event log keeps :data:`EVENT_CAPACITY` events.
 
+The two functions are compiled without Numba's reference counting (``_nrt=False``: they
+allocate nothing) and every helper of a normal period is inlined into them; only the rare
+paths (a fault, an event, the safe states) call out.  Counting the references of the two
+arrays at every helper, an atomic operation each, would cost more than the period's own
+arithmetic.
+
 Examples
 --------
 >>> from controllers import make
@@ -607,11 +613,18 @@ def _pymax(a, b):
 
 @njit(cache=True, inline="always")
 def _at(sv, cfg, head, base, i):
-    """Index in ``sv`` of the time of entry ``i`` (0: front) of the ring at slots ``head``/``base``."""
-    return int(cfg[base]) + 2 * ((int(sv[head]) + i) % int(cfg[base + 1]))
+    """Index in ``sv`` of the time of entry ``i`` (0: front) of the ring at slots ``head``/``base``.
+
+    The head is below the capacity and ``i`` at most the count, so the ring wraps at most once:
+    a compare and a subtraction stand for the remainder."""
+    j = int(sv[head]) + i
+    cap = int(cfg[base + 1])
+    if j >= cap:
+        j -= cap
+    return int(cfg[base]) + 2 * j
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _append(sv, cfg, head, base, t, x):
     n = int(sv[head + 1])
     if n >= int(cfg[base + 1]):
@@ -624,11 +637,12 @@ def _append(sv, cfg, head, base, t, x):
 
 @njit(cache=True, inline="always")
 def _pop_front(sv, cfg, head, base):
-    sv[head] = (int(sv[head]) + 1) % int(cfg[base + 1])
+    j = int(sv[head]) + 1
+    sv[head] = 0 if j >= int(cfg[base + 1]) else j
     sv[head + 1] -= 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _cut_front(sv, cfg, head, base, cut):
     """Drop the front entries older than ``cut`` (a window emptied this way is a configuration error)."""
     while True:
@@ -640,7 +654,7 @@ def _cut_front(sv, cfg, head, base, cut):
             break
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _win_push(sv, cfg, w, wc, t, x):
     """Running min/max push (monotonic deques) of the window at state slot ``w``, config slot ``wc``."""
     if math.isnan(sv[w]):
@@ -732,7 +746,7 @@ def _safe(sv, cfg, cur, dt):
     return u
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _motion(sv, cfg, cur, dt):
     """Rack speed from the back-EMF of the last period, travel integral, held peak speed."""
     vs = cfg[CF.driver_supply_v]
@@ -745,7 +759,7 @@ def _motion(sv, cfg, cur, dt):
     _win_push(sv, cfg, SV.speed_win_t0, CF.speed_win_span, sv[SV.t], v)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _interp_envelope(cfg, x):
     """Current limit at speed ``x`` from the envelope table: linear between the points (``bisect_right``)."""
     n = int(cfg[CF.envelope_n])
@@ -767,7 +781,7 @@ def _interp_envelope(cfg, x):
     return y0 + (y1 - y0) * (x - x0) / (x1 - x0)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _envelope_cap(sv, cfg, u, cur):
     """Largest command that keeps the next period's current within the speed-dependent limit."""
     v_held = _pymax(_win_hi(sv, cfg, SV.speed_win_t0, CF.speed_win_span), 0.0)
@@ -778,7 +792,7 @@ def _envelope_cap(sv, cfg, u, cur):
     return _pymin(u, u_applied + cfg[CF.motor_resistance_ohm] * (i_lim - cur))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rest_push_lower_edge_n(cfg, cur):
     """Least force (N) that the drive at current ``cur`` applies to the finger when nothing else
     takes it: the steady push bound with break-away friction, the weight against the push and the
@@ -787,7 +801,7 @@ def _rest_push_lower_edge_n(cfg, cur):
                                       cfg[CF.push_weight_n]) - cfg[CF.guide_static_n])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _detect(sv, cfg, f, cur, dt):
     """The detectors that need the motor current; the fault code, or 0."""
     v = sv[SV.speed]
@@ -859,7 +873,7 @@ def _detect(sv, cfg, f, cur, dt):
     return 0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def supervise_begin(sv, cfg, f, sp, dt, cur):
     """First half of one supervised period: detectors, contact tracking, the safe states.
 
@@ -976,7 +990,7 @@ def supervise_begin(sv, cfg, f, sp, dt, cur):
     return 1, math.nan, _pymin(sp, cfg[CF.sp_max_n])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def supervise_end(sv, cfg, u, f, sp, dt, cur):
     """Second half of a period whose :func:`supervise_begin` gave code 1: shape the inner command.
 
