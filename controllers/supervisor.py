@@ -488,7 +488,8 @@ _EVENT_NAMES = ("fault", "contact_lost", "contact_regained", "nonfinite", "finit
 
 _WINDOWS = ("est_win", "cmd_win", "sp_win", "speed_win")
 """Running min and max windows: the estimate (stuck rule), the delayed command (stuck rule
-without a current), the setpoint (release) and the rack speed (held peak)."""
+without a current), the setpoint (release) and the rack speed (held peak: only its maximum is
+kept, its minimum's deque stays empty)."""
 _QUEUES = ("cmd_delay", "drop_hist")
 """Plain time-ordered queues: the command delayed by ``stuck_response_s`` and the recent
 estimates of the drop rule."""
@@ -655,19 +656,37 @@ def _cut_front(sv, cfg, head, base, cut):
 
 
 @njit(cache=True, inline="always")
-def _win_push(sv, cfg, w, wc, t, x):
-    """Running min/max push (monotonic deques) of the window at state slot ``w``, config slot ``wc``."""
+def _win_push(sv, cfg, w, wc, t, x, keep_min):
+    """Running min/max push (monotonic deques) of the window at state slot ``w``, config slot ``wc``.
+
+    The back of both deques is the last value pushed: a push leaves it there and a cut never
+    reaches it (its time is the newest).  The deques are strictly monotonic, so the same value
+    again pops just that entry from each and appends ``(t, x)`` in its place: that is done by
+    writing the entry.  ``keep_min`` false keeps only the running maximum (a window whose
+    minimum no rule reads; its minimum's deque is left empty)."""
     if math.isnan(sv[w]):
         sv[w] = t
     lo, hi = w + 1, w + 3
-    while sv[lo + 1] > 0.0 and sv[_at(sv, cfg, lo, wc + 1, int(sv[lo + 1]) - 1) + 1] >= x:
-        sv[lo + 1] -= 1.0
-    while sv[hi + 1] > 0.0 and sv[_at(sv, cfg, hi, wc + 3, int(sv[hi + 1]) - 1) + 1] <= x:
-        sv[hi + 1] -= 1.0
-    _append(sv, cfg, lo, wc + 1, t, x)
-    _append(sv, cfg, hi, wc + 3, t, x)
+    if sv[hi + 1] > 0.0 and sv[_at(sv, cfg, hi, wc + 3, int(sv[hi + 1]) - 1) + 1] == x:
+        k = _at(sv, cfg, hi, wc + 3, int(sv[hi + 1]) - 1)
+        sv[k] = t
+        sv[k + 1] = x
+        if keep_min:
+            k = _at(sv, cfg, lo, wc + 1, int(sv[lo + 1]) - 1)
+            sv[k] = t
+            sv[k + 1] = x
+    else:
+        if keep_min:
+            while sv[lo + 1] > 0.0 and sv[_at(sv, cfg, lo, wc + 1, int(sv[lo + 1]) - 1) + 1] >= x:
+                sv[lo + 1] -= 1.0
+        while sv[hi + 1] > 0.0 and sv[_at(sv, cfg, hi, wc + 3, int(sv[hi + 1]) - 1) + 1] <= x:
+            sv[hi + 1] -= 1.0
+        if keep_min:
+            _append(sv, cfg, lo, wc + 1, t, x)
+        _append(sv, cfg, hi, wc + 3, t, x)
     cut = t - cfg[wc]
-    _cut_front(sv, cfg, lo, wc + 1, cut)
+    if keep_min:
+        _cut_front(sv, cfg, lo, wc + 1, cut)
     _cut_front(sv, cfg, hi, wc + 3, cut)
 
 
@@ -756,7 +775,7 @@ def _motion(sv, cfg, cur, dt):
     sv[SV.speed] = v
     if abs(cur) > cfg[CF.half_friction_current_a]:     # an unpowered motor (a cut supply) reads its command as speed
         sv[SV.travel_m] = _pymax(0.0, sv[SV.travel_m] + v * dt)
-    _win_push(sv, cfg, SV.speed_win_t0, CF.speed_win_span, sv[SV.t], v)
+    _win_push(sv, cfg, SV.speed_win_t0, CF.speed_win_span, sv[SV.t], v, False)
 
 
 @njit(cache=True, inline="always")
@@ -919,7 +938,7 @@ def supervise_begin(sv, cfg, f, sp, dt, cur):
     if sv[SV.theta] > cfg[CF.i2t_limit_a2s]:
         _trip(sv, cfg, FAULT.motor_overcurrent)
         return 0, _safe(sv, cfg, cur, dt), math.nan
-    _win_push(sv, cfg, SV.est_win_t0, CF.est_win_span, t, f)
+    _win_push(sv, cfg, SV.est_win_t0, CF.est_win_span, t, f, True)
     if not has_cur:
         # the command window (the stuck rule without a current measurement) lags by the
         # estimator's response: a command that moved within the last ``stuck_response_s``
@@ -931,12 +950,12 @@ def supervise_begin(sv, cfg, f, sp, dt, cur):
                 break
             t_old, u_old = sv[k], sv[k + 1]
             _pop_front(sv, cfg, SV.cmd_delay_head, CF.cmd_delay_base)
-            _win_push(sv, cfg, SV.cmd_win_t0, CF.cmd_win_span, t_old, u_old)
+            _win_push(sv, cfg, SV.cmd_win_t0, CF.cmd_win_span, t_old, u_old, True)
     sp_now = sp if math.isfinite(sp) else 0.0
     if sp_now < sv[SV.sp_last] - 1e-9:
         sv[SV.fall_t] = t                  # the setpoint fell: an intended release
     sv[SV.sp_last] = sp_now
-    _win_push(sv, cfg, SV.sp_win_t0, CF.sp_win_span, t, sp_now)
+    _win_push(sv, cfg, SV.sp_win_t0, CF.sp_win_span, t, sp_now, True)
     moving = (not has_cur) or abs(sv[SV.u_prev] - cfg[CF.motor_resistance_ohm] * cur) > cfg[CF.stuck_emf_v]
     # without a current measurement only: with one, the travel the back-EMF integral gives
     # decides (:func:`_detect`); ``u - R i`` of one period reads as motion inside the
