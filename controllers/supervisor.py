@@ -489,7 +489,8 @@ _EVENT_NAMES = ("fault", "contact_lost", "contact_regained", "nonfinite", "finit
 _WINDOWS = ("est_win", "cmd_win", "sp_win", "speed_win")
 """Running min and max windows: the estimate (stuck rule), the delayed command (stuck rule
 without a current), the setpoint (release) and the rack speed (held peak: only its maximum is
-kept, its minimum's deque stays empty)."""
+kept; its minimum's deque stays empty and the start of its ring holds the detectors' cached
+compressions, :func:`_soft_compression_m`)."""
 _QUEUES = ("cmd_delay", "drop_hist")
 """Plain time-ordered queues: the command delayed by ``stuck_response_s`` and the recent
 estimates of the drop rule."""
@@ -821,6 +822,25 @@ def _rest_push_lower_edge_n(cfg, cur):
 
 
 @njit(cache=True, inline="always")
+def _soft_compression_m(sv, cfg, pair, force_n):
+    """:func:`~ebraille_sim.physics.fingertip.compression_at_force_m` of ``force_n`` on the soft
+    reader, through a one-entry cache: the ``pair``-th (force, compression) pair at the start of
+    the speed window's unused minimum ring (:data:`_WINDOWS`).
+
+    The estimate holds its value for an estimator period, so most periods ask for the force of
+    the last call, and the law is computed again only when the force differs.  The pair depends
+    on the configuration alone, so a reset keeps it; a ring of zeros holds the pair (0, 0), which
+    is the law's value.  The callers' forces are positive or a sum with a positive margin, never
+    a negative zero (which would compare equal to 0 with a compression of the other sign); a
+    NaN never matches."""
+    k = int(cfg[CF.speed_win_lo_base]) + 2 * pair
+    if force_n != sv[k]:
+        sv[k] = force_n
+        sv[k + 1] = compression_at_force_m(force_n, cfg[CF.soft_b_n_per_m], cfg[CF.soft_m_per_m])
+    return sv[k + 1]
+
+
+@njit(cache=True, inline="always")
 def _detect(sv, cfg, f, cur, dt):
     """The detectors that need the motor current; the fault code, or 0."""
     v = sv[SV.speed]
@@ -849,14 +869,14 @@ def _detect(sv, cfg, f, cur, dt):
             # over many presses in refresh mode does not add up) and slowly otherwise (the
             # finger drifts, presses and the strap slips over a session: only a fast mismatch,
             # a board running into the finger while the reading stays low, trips)
-            target = sv[SV.travel_m] - compression_at_force_m(f, cfg[CF.soft_b_n_per_m], cfg[CF.soft_m_per_m])
+            target = sv[SV.travel_m] - _soft_compression_m(sv, cfg, 0, f)
             if sv[SV.t] - sv[SV.fall_t] <= cfg[CF.release_window_s]:
                 sv[SV.contact_travel_m] = _pymax(sv[SV.contact_travel_m], target)
             else:
                 sv[SV.contact_travel_m] = sv[SV.contact_travel_m] + (target - sv[SV.contact_travel_m]) * _pymin(
                     1.0, dt / cfg[CF.travel_follow_s])
-        allowed = (compression_at_force_m(_win_hi(sv, cfg, SV.est_win_t0, CF.est_win_span) + cfg[CF.implausible_n],
-                                          cfg[CF.soft_b_n_per_m], cfg[CF.soft_m_per_m]) + cfg[CF.stuck_travel_m])
+        allowed = (_soft_compression_m(sv, cfg, 1, _win_hi(sv, cfg, SV.est_win_t0, CF.est_win_span)
+                                       + cfg[CF.implausible_n]) + cfg[CF.stuck_travel_m])
         if sv[SV.travel_m] - sv[SV.contact_travel_m] > allowed:
             return FAULT.fsr_implausible
     # no contact within the travel the gap allows
