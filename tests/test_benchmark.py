@@ -192,3 +192,17 @@ def test_estimator_settings_apply_to_every_episode_and_are_recorded(quick):
     moved = [k for k, r in ((k, r) for r in res.rows for k in [(r["controller"], r["scenario"], r["reader"])])
              if r["estimate_rmse_n"] != old[k]["estimate_rmse_n"]]
     assert moved                                  # the compensation changes the estimate
+
+
+def test_workers_are_not_forked_from_a_process_that_loaded_pytorch(monkeypatch):
+    """A forked child of a process whose PyTorch thread pool ran deadlocks at its first network
+    evaluation, so once ``torch`` is imported (a policy was loaded) workers start another way."""
+    import sys
+    import types
+
+    from ebraille_sim.tools.parallel import process_context
+    monkeypatch.delitem(sys.modules, "torch", raising=False)
+    plain = process_context().get_start_method()
+    monkeypatch.setitem(sys.modules, "torch", types.ModuleType("torch"))
+    assert process_context().get_start_method() != "fork"
+    assert plain in ("fork", "forkserver", "spawn")

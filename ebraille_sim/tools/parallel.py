@@ -9,12 +9,16 @@ def process_context():
 
     ``fork`` when available and this process runs no other thread (workers start at
     once, with the simulator already imported and compiled); otherwise ``forkserver``
-    with the simulator preloaded, or ``spawn`` where neither exists.
+    with the simulator preloaded, or ``spawn`` where neither exists.  A process that has
+    imported PyTorch (a learned policy was loaded) does not fork: PyTorch's native thread
+    pool, which ``threading`` does not count, leaves a forked child deadlocked at its first
+    network evaluation.
     """
     import multiprocessing
+    import sys
     import threading
     methods = multiprocessing.get_all_start_methods()
-    if "fork" in methods and threading.active_count() == 1:
+    if "fork" in methods and threading.active_count() == 1 and "torch" not in sys.modules:
         return multiprocessing.get_context("fork")
     if "forkserver" in methods:
         ctx = multiprocessing.get_context("forkserver")
