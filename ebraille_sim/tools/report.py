@@ -99,24 +99,53 @@ def _csv_field(text: str) -> str:
 def write_trace_csv(path, trace: dict) -> None:
     """Write the trace columns :data:`TRACE_COLUMNS` as CSV (the ``csv`` module's default
     dialect, ``\\r\\n`` line ends; numbers with 9 significant digits, ``char_index`` as an
-    integer), column by column: each column is formatted in one pass and the rows are joined
-    once, with the bytes the row-by-row ``csv.writer`` gives."""
+    integer), with the bytes the row-by-row ``csv.writer`` gives.
+
+    The cells go row by row into one object array, and the whole body is formatted by one
+    ``%`` operation of the row format repeated once per row (``%.9g`` is the format ``csv``
+    rows get from ``format(v, ".9g")``).  A float column that repeats its values (a setpoint,
+    a quantised voltage) is formatted once per distinct bit pattern instead.  As with the
+    rows of ``zip``, the shortest column sets the number of rows.
+    """
     cols = TRACE_COLUMNS
-    texts = []
-    for c in cols:
-        arr = np.asarray(trace[c])
+    arrays = [np.asarray(trace[c]) for c in cols]
+    n = min((len(a) for a in arrays), default=0)
+    cells = np.empty((n, len(cols)), dtype=object)
+    fmts = []
+    for j, (c, arr) in enumerate(zip(cols, arrays)):
+        arr = arr[:n]
         if c == "char_index":
-            texts.append([str(v) for v in arr.astype(np.int64).tolist()])
+            cells[:, j] = arr.astype(np.int64)
+            fmts.append("%d")
         elif c == "character":
-            texts.append([_csv_field(str(v)) for v in arr.tolist()])
+            cells[:, j] = _distinct_texts(arr.astype(str), lambda vals: [_csv_field(v) for v in vals])
+            fmts.append("%s")
         else:
-            texts.append([format(v, ".9g") for v in arr.astype(float).tolist()])
+            arr = arr.astype(float)
+            if n > 1 and np.count_nonzero(arr[1:] != arr[:-1]) < n // 4:
+                cells[:, j] = _distinct_texts(arr.view(np.int64), _format_bits)
+                fmts.append("%s")
+            else:
+                cells[:, j] = arr
+                fmts.append("%.9g")
     header = ",".join(_csv_field(c) for c in cols)
+    body = (",".join(fmts) + "\r\n") * n % tuple(cells.ravel().tolist())
     with open(path, "w", newline="", encoding="utf-8") as fh:
         fh.write(header + "\r\n")
-        if texts and texts[0]:
-            fh.write("\r\n".join(map(",".join, zip(*texts))))
-            fh.write("\r\n")
+        fh.write(body)
+
+
+def _format_bits(bits: list) -> list[str]:
+    """``format(v, ".9g")`` of the floats whose int64 bit patterns are ``bits``."""
+    values = np.array(bits, dtype=np.int64).view(np.float64).tolist()
+    return ("%.9g\n" * len(values) % tuple(values)).split("\n")[:-1]
+
+
+def _distinct_texts(keys: np.ndarray, texts) -> np.ndarray:
+    """The text of every element of ``keys`` as an object array, with ``texts`` (a function of
+    the list of distinct keys returning their texts) called once per distinct key."""
+    distinct, index = np.unique(keys, return_inverse=True)
+    return np.array(texts(distinct.tolist()), dtype=object)[index.reshape(-1)]
 
 
 def force_figure(result: RunResult, controller_file=None, backend: str | None = None):
