@@ -425,7 +425,10 @@ def test_a_reader_that_stops_early_gets_no_traceback():
 # ---------------------------------------------------------------- run: force.png names what it shows
 
 def test_force_figure_names_controller_backend_and_its_vertical_lines(tmp_path, capsys, monkeypatch):
+    from ebraille_sim.commands import run as run_command
     from ebraille_sim.tools import report
+
+    monkeypatch.setattr(run_command, "PLOT_PROCESS", False)      # the figure object is drawn here
 
     seen = {}
     draw = report.force_figure
@@ -452,6 +455,61 @@ def test_force_figure_names_controller_backend_and_its_vertical_lines(tmp_path, 
     starts = [float(s) for s in seen["starts"] if s <= seen["t_end"]]
     assert len(starts) >= 2
     assert seen["vlines"] == sorted(starts + [0.5])
+
+
+def _figure_data(n: int = 500) -> dict:
+    import numpy as np
+    t = np.arange(1, n + 1) * 1e-3
+    return {"t_s": t, "setpoint_n": np.ones(n), "force_est_n": 1 - np.exp(-t / 0.05),
+            "force_true_n": 1 - np.exp(-t / 0.04), "command_v": np.full(n, 0.5), "starts_s": np.array([0.1, 0.3]),
+            "band_fraction": 0.1, "reading_start_s": 0.2, "title": "synthetic: controller pid, seed 1"}
+
+
+def test_force_plotter_draws_in_its_process_what_draw_force_figure_draws_here():
+    from ebraille_sim.tools.forceplot import ForcePlotter, draw_force_figure, png_bytes
+    data = _figure_data()
+    with ForcePlotter.start() as plotter:
+        plotter.send(data)
+        png = plotter.png()
+    here = png_bytes(draw_force_figure(data))
+    assert png is not None and png[:8] == here[:8] == b"\x89PNG\r\n\x1a\n"
+    assert png[16:24] == here[16:24]                          # IHDR: the same width and height
+    assert plotter._proc.returncode == 0
+
+
+def test_force_plotter_failure_and_cancel_leave_no_process():
+    from ebraille_sim.tools.forceplot import ForcePlotter
+    bad = ForcePlotter.start()
+    bad.send({"t_s": [0.0]})                                  # missing columns: the helper fails
+    assert bad.png() is None and bad._proc.returncode == 1
+    idle = ForcePlotter.start()
+    idle.close()                                              # never sent: ended, not left behind
+    assert idle._proc.returncode is not None and idle.png() is None
+
+
+def test_run_in_a_fresh_process_draws_force_png_in_the_helper(tmp_path):
+    """A run from the command line draws force.png in the helper process (Matplotlib is not
+    loaded in the run's own process) and writes the same trace as a run without it."""
+    import subprocess
+    import sys
+    code = ("import sys\n"
+            "from ebraille_sim.tools import forceplot\n"
+            "sent = []\n"
+            "send = forceplot.ForcePlotter.send\n"
+            "forceplot.ForcePlotter.send = lambda self, data: (sent.append(1), send(self, data))[1]\n"
+            "from ebraille_sim.cli import main\n"
+            "code = main(sys.argv[1:])\n"
+            "assert sent == [1] and 'matplotlib' not in sys.modules, sorted(sys.modules)\n"
+            "sys.exit(code)\n")
+    out = tmp_path / "fresh"
+    p = subprocess.run([sys.executable, "-c", code, "run", "steady_90wpm", "--duration", "2", "--quiet",
+                        "--out", str(out)], cwd=tmp_path, capture_output=True, text=True,
+                       env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+    assert p.returncode == 0, p.stderr
+    png = (out / "force.png").read_bytes()
+    assert png.startswith(b"\x89PNG\r\n\x1a\n") and len(png) > 5000
+    assert cli(["run", "steady_90wpm", "--duration", "2", "--quiet", "--no-plot", "--out", str(tmp_path / "here")]) == 0
+    assert (out / "trace.csv").read_bytes() == (tmp_path / "here" / "trace.csv").read_bytes()
 
 
 # ---------------------------------------------------------------- outputs all at once; interrupts
