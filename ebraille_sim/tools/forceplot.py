@@ -64,10 +64,11 @@ def draw_force_figure(data: dict):
     fig = Figure(figsize=(11, 6))
     FigureCanvasAgg(fig)
     ax, ax2 = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
-    t, sp = data["t_s"], data["setpoint_n"]
+    t, sp = np.asarray(data["t_s"]), np.asarray(data["setpoint_n"])
     band = data["band_fraction"]
-    ax.fill_between(t, sp * (1 - band), sp * (1 + band), color="0.9", label=f"band +/-{band:.0%}")
-    ax.plot(t, sp, "k--", lw=1, label="setpoint")
+    keep = _corners(sp)
+    ax.fill_between(t[keep], sp[keep] * (1 - band), sp[keep] * (1 + band), color="0.9", label=f"band +/-{band:.0%}")
+    ax.plot(t[keep], sp[keep], "k--", lw=1, label="setpoint")
     ax.plot(t, data["force_est_n"], color="tab:orange", lw=0.8, label="estimated (Wiener)")
     ax.plot(t, data["force_true_n"], color="tab:blue", lw=1.0, label="true (finger)")
     starts = data["starts_s"]
@@ -84,6 +85,17 @@ def draw_force_figure(data: dict):
     ax2.set_xlabel("time (s)")
     fig.subplots_adjust(**_MARGINS)
     return fig
+
+
+def _corners(y):
+    """Indices of the samples of ``y`` that are not inside a run of equal values: the polyline
+    through them is the polyline through every sample (a setpoint holds for long stretches)."""
+    import numpy as np
+    y = np.asarray(y)
+    keep = np.ones(len(y), dtype=bool)
+    if len(y) > 2:
+        keep[1:-1] = (y[1:-1] != y[:-2]) | (y[1:-1] != y[2:])
+    return np.flatnonzero(keep)
 
 
 def png_bytes(fig) -> bytes:
