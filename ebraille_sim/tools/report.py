@@ -122,7 +122,7 @@ def write_trace_csv(path, trace: dict) -> None:
             fmts.append("%s")
         else:
             arr = arr.astype(float)
-            if n > 1 and np.count_nonzero(arr[1:] != arr[:-1]) < n // 4:
+            if n > 1 and np.count_nonzero(arr[1:] != arr[:-1]) < n // 2:
                 cells[:, j] = _distinct_texts(arr.view(np.int64), _format_bits)
                 fmts.append("%s")
             else:
