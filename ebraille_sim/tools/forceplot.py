@@ -40,7 +40,22 @@ _TIMEOUT_S = 300.0
 and the figure is drawn here instead."""
 
 
-def draw_force_figure(data: dict):
+def _new_figure():
+    """The empty figure of force.png: two axes sharing time, their fixed labels and margins,
+    at :data:`DPI` on an Agg canvas."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(11, 6), dpi=DPI)
+    FigureCanvasAgg(fig)
+    ax, ax2 = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    ax.set_ylabel("contact force (N)")
+    ax2.set_ylabel("command (V)")
+    ax2.set_xlabel("time (s)")
+    fig.subplots_adjust(**_MARGINS)
+    return fig
+
+
+def draw_force_figure(data: dict, fig=None):
     """The figure of force.png: true and estimated force against the setpoint band, and the command.
 
     Parameters
@@ -50,6 +65,9 @@ def draw_force_figure(data: dict):
         ``force_est_n``, ``force_true_n``, ``command_v`` (arrays of one length),
         ``starts_s`` (character starts up to the last sample), ``band_fraction``,
         ``reading_start_s`` and ``title``.
+    fig : matplotlib.figure.Figure, optional
+        An empty figure of :func:`_new_figure` to draw into (the helper process makes and
+        draws it once while it waits for the data, which loads the fonts); default: a new one.
 
     Returns
     -------
@@ -59,11 +77,8 @@ def draw_force_figure(data: dict):
         reading.
     """
     import numpy as np
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    fig = Figure(figsize=(11, 6))
-    FigureCanvasAgg(fig)
-    ax, ax2 = fig.subplots(2, 1, sharex=True, gridspec_kw={"height_ratios": [3, 1]})
+    fig = _new_figure() if fig is None else fig
+    ax, ax2 = fig.axes
     t, sp = np.asarray(data["t_s"]), np.asarray(data["setpoint_n"])
     band = data["band_fraction"]
     keep = _corners(sp)
@@ -76,14 +91,10 @@ def draw_force_figure(data: dict):
         for i, s in enumerate(starts):
             ax.axvline(s, color="0.75", lw=0.4, zorder=0, label="character starts" if i == 0 else None)
     ax.axvline(data["reading_start_s"], color="tab:green", lw=1, label="reading starts")
-    ax.set_ylabel("contact force (N)")
     ax.set_title(data["title"])
     ax.legend(loc="upper right", fontsize=8, ncol=3)
     ax.set_ylim(0, max(1.5 * float(np.max(sp)), float(np.max(data["force_true_n"])) * 1.05))
     ax2.plot(t, data["command_v"], color="tab:red", lw=0.8)
-    ax2.set_ylabel("command (V)")
-    ax2.set_xlabel("time (s)")
-    fig.subplots_adjust(**_MARGINS)
     return fig
 
 
@@ -202,16 +213,16 @@ def _read_payload(stream) -> bytes | None:
 
 
 def serve() -> None:
-    """The helper process of :class:`ForcePlotter`: load Matplotlib, read the figure data
-    from stdin, write the PNG to stdout.  Exit status 1 with the error on stderr when
+    """The helper process of :class:`ForcePlotter`: load Matplotlib and draw the empty figure,
+    read the figure data from stdin, write the PNG to stdout.  Exit status 1 with the error on stderr when
     drawing fails, 0 without output when the input ends before the data."""
     try:
-        from matplotlib.backends import backend_agg  # noqa: F401
-        from matplotlib.figure import Figure  # noqa: F401
+        fig = _new_figure()
+        fig.canvas.draw()                         # loads the fonts and lays out the fixed texts
         payload = _read_payload(sys.stdin.buffer)
         if payload is None:
             os._exit(0)
-        png = png_bytes(draw_force_figure(pickle.loads(payload)))
+        png = png_bytes(draw_force_figure(pickle.loads(payload), fig))
         sys.stdout.buffer.write(png)
         sys.stdout.buffer.flush()
     except BaseException as exc:                  # noqa: BLE001 (reported to the parent, which draws again)
