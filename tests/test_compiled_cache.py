@@ -98,3 +98,22 @@ def test_a_function_loaded_from_the_cache_runs_without_the_compiler_registries(t
     assert arraymath == "False" and linalg == "False"         # loaded, not yet called
     got, want = values.strip().split("] [")
     assert got + "]" == "[" + want
+
+
+def test_the_threaded_vector_step_runs_in_a_fresh_process_as_the_serial_one():
+    """The ``parallel=True`` row step (threads started by its reload hook when it comes from
+    the cache) gives the serial step's observations and rewards in a fresh process."""
+    code = ("import sys\nimport numpy as np\nfrom ebraille_sim.rl.vector_env import ContactForceVectorEnv, step_rows\n"
+            "out = []\nfor par in (True, False):\n"
+            "    env = ContactForceVectorEnv(num_envs=4, parallel=par)\n"
+            "    obs, _ = env.reset(seed=3)\n    acc = [obs.copy()]\n"
+            "    for k in range(30):\n"
+            "        obs, r, term, trunc, _ = env.step(np.full((4, 1), 0.3, np.float32))\n"
+            "        acc += [obs.copy(), r.copy()]\n"
+            "    out.append(np.concatenate([a.ravel() for a in acc]))\n"
+            "loaded = sum(step_rows.stats.cache_hits.values()) > 0\n"
+            "print(np.array_equal(out[0], out[1]), not loaded or 'numba.np.arraymath' not in sys.modules)\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                       env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.split() == ["True", "True"]
