@@ -631,6 +631,48 @@ def test_trace_rate_keeps_every_kth_period_and_the_full_rate_metrics(tmp_path):
     assert {k: v for k, v in m_full.items() if k not in drop} == {k: v for k, v in m_thin.items() if k not in drop}
 
 
+def test_compiled_csv_floats_are_the_bytes_of_percent_9g():
+    """The compiled formatter writes every covered float as ``"%.9g" % v`` does: random bit
+    patterns, values of every magnitude it covers, ties to even, zeros, infinities, NaN."""
+    import numpy as np
+
+    from ebraille_sim.tools.csvformat import FLOAT, csv_body
+    rng = np.random.default_rng(7)
+    vals = np.concatenate([
+        rng.normal(size=60000) * 10.0 ** rng.integers(-18, 9, size=60000),
+        rng.integers(-2 ** 63, 2 ** 63 - 1, size=60000, dtype=np.int64).view(np.float64),
+        np.arange(1, 20001) * 0.001, rng.integers(0, 4000, 20000) * 0.25, np.round(rng.normal(size=20000), 3),
+        [0.0, -0.0, np.nan, -np.nan, np.inf, -np.inf, 1e-5, 1e-4, 9.99999999e-5, 999999999.4, 12345678.25,
+         12345678.75, 1234567.125, 1234567.375, 1e8, 99999999.95, 0.1, 1 / 3, 100.0, -2.5e-9]])
+    vals = vals[~(np.abs(vals) >= 1e9) & ~((np.abs(vals) < 1e-18) & (vals != 0))]
+    assert csv_body([(FLOAT, vals)]) == ("%.9g\r\n" * len(vals) % tuple(vals.tolist())).encode()
+    assert csv_body([(FLOAT, np.array([1.0, 999999999.5]))]) is None      # 1e+09: not covered
+    assert csv_body([(FLOAT, np.array([1e-20]))]) is None
+
+
+def test_trace_csv_with_numbers_the_compiled_formatter_leaves_out_is_the_csv_writers(tmp_path):
+    import csv
+
+    import numpy as np
+
+    from ebraille_sim.scenarios.runner import TRACE_COLUMNS
+    from ebraille_sim.tools.report import write_trace_csv
+    n = 50
+    tr = {c: np.linspace(-3.0, 4.0, n) for c in TRACE_COLUMNS}
+    tr["energy_j"] = np.where(np.arange(n) % 7 == 0, 3.5e12, 1e-25 * np.arange(n))
+    tr["setpoint_n"] = np.full(n, 1.25)
+    tr["char_index"] = np.arange(n) % 4 - 1
+    tr["character"] = np.array(["", "a,b", 'say "hi"', "\u2801"] * (n // 4) + ["", "x"], dtype=object)
+    write_trace_csv(tmp_path / "fast.csv", tr)
+    with open(tmp_path / "slow.csv", "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(TRACE_COLUMNS)
+        for k in range(n):
+            w.writerow([int(tr[c][k]) if c == "char_index" else str(tr[c][k]) if c == "character"
+                        else f"{float(tr[c][k]):.9g}" for c in TRACE_COLUMNS])
+    assert (tmp_path / "fast.csv").read_bytes() == (tmp_path / "slow.csv").read_bytes()
+
+
 def test_trace_csv_is_the_bytes_of_the_row_by_row_csv_writer(tmp_path):
     """trace.csv is written column by column; the file equals what ``csv.writer`` writes row
     by row (9 significant digits, integer char_index, the braille character, CRLF)."""

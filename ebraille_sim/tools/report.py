@@ -99,40 +99,58 @@ def _csv_field(text: str) -> str:
 def write_trace_csv(path, trace: dict) -> None:
     """Write the trace columns :data:`TRACE_COLUMNS` as CSV (the ``csv`` module's default
     dialect, ``\\r\\n`` line ends; numbers with 9 significant digits, ``char_index`` as an
-    integer), with the bytes the row-by-row ``csv.writer`` gives.
+    integer), with the bytes the row-by-row ``csv.writer`` gives.  As with the rows of
+    ``zip``, the shortest column sets the number of rows.
 
-    The cells go row by row into one object array, and the whole body is formatted by one
-    ``%`` operation of the row format repeated once per row (``%.9g`` is the format ``csv``
-    rows get from ``format(v, ".9g")``).  A float column that repeats its values (a setpoint,
-    a quantised voltage) is formatted once per distinct bit pattern instead.  As with the
-    rows of ``zip``, the shortest column sets the number of rows.
+    The rows are formatted in compiled code (:func:`ebraille_sim.tools.csvformat.csv_body`,
+    the bytes of ``"%.9g" % v``), the braille characters once per distinct character.  A
+    trace holding a number that code does not cover (``|v| >= 1e9``, ``0 < |v| < 1e-19``)
+    is formatted in Python instead: one ``%`` operation of the row format repeated once per
+    row over the cells in row order, a float column that repeats its values formatted once
+    per distinct bit pattern.
     """
+    from ebraille_sim.tools.csvformat import FLOAT, INT, TEXT, csv_body
     cols = TRACE_COLUMNS
     arrays = [np.asarray(trace[c]) for c in cols]
     n = min((len(a) for a in arrays), default=0)
-    cells = np.empty((n, len(cols)), dtype=object)
-    fmts = []
-    for j, (c, arr) in enumerate(zip(cols, arrays)):
+    columns = []
+    for c, arr in zip(cols, arrays):
         arr = arr[:n]
         if c == "char_index":
-            cells[:, j] = arr.astype(np.int64)
-            fmts.append("%d")
+            columns.append((INT, arr.astype(np.int64)))
         elif c == "character":
-            cells[:, j] = _distinct_texts(arr.astype(str), lambda vals: [_csv_field(v) for v in vals])
-            fmts.append("%s")
+            distinct, index = np.unique(arr.astype(str), return_inverse=True)
+            columns.append((TEXT, (index.reshape(-1), [_csv_field(v) for v in distinct.tolist()])))
         else:
-            arr = arr.astype(float)
-            if n > 1 and np.count_nonzero(arr[1:] != arr[:-1]) < n // 2:
-                cells[:, j] = _distinct_texts(arr.view(np.int64), _format_bits)
+            columns.append((FLOAT, arr.astype(float)))
+    body = csv_body(columns) if columns else b""
+    header = ",".join(_csv_field(c) for c in cols) + "\r\n"
+    with open(path, "wb") as fh:
+        fh.write(header.encode("utf-8"))
+        fh.write(body if body is not None else _python_body(columns, n).encode("utf-8"))
+
+
+def _python_body(columns: list, n: int) -> str:
+    """The rows of :func:`ebraille_sim.tools.csvformat.csv_body` 's ``columns``, formatted in Python."""
+    from ebraille_sim.tools.csvformat import FLOAT, INT
+    cells = np.empty((n, len(columns)), dtype=object)
+    fmts = []
+    for j, (kind, values) in enumerate(columns):
+        if kind == INT:
+            cells[:, j] = values
+            fmts.append("%d")
+        elif kind == FLOAT:
+            if n > 1 and np.count_nonzero(values[1:] != values[:-1]) < n // 2:
+                cells[:, j] = _distinct_texts(values.view(np.int64), _format_bits)
                 fmts.append("%s")
             else:
-                cells[:, j] = arr
+                cells[:, j] = values
                 fmts.append("%.9g")
-    header = ",".join(_csv_field(c) for c in cols)
-    body = (",".join(fmts) + "\r\n") * n % tuple(cells.ravel().tolist())
-    with open(path, "w", newline="", encoding="utf-8") as fh:
-        fh.write(header + "\r\n")
-        fh.write(body)
+        else:
+            index, texts = values
+            cells[:, j] = np.array(texts, dtype=object)[index]
+            fmts.append("%s")
+    return (",".join(fmts) + "\r\n") * n % tuple(cells.ravel().tolist())
 
 
 def _format_bits(bits: list) -> list[str]:
