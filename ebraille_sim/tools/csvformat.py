@@ -225,7 +225,8 @@ def _body(n, kinds, slots, floats, ints, text_index, text_bytes, text_offsets, b
 
 
 def csv_body(columns: list) -> bytes | None:
-    """The CSV rows of ``columns``, UTF-8 bytes, or None where a float is not covered.
+    """The CSV rows of ``columns``, UTF-8 bytes, or None where a number is not covered (a
+    float of the ranges above, the most negative 64-bit integer).
 
     Parameters
     ----------
@@ -240,6 +241,8 @@ def csv_body(columns: list) -> bytes | None:
     n = len(first[0]) if first_kind == TEXT else len(first)
     fl = [np.asarray(v, dtype=np.float64) for k, v in columns if k == FLOAT]
     it = [np.asarray(v, dtype=np.int64) for k, v in columns if k == INT]
+    if any(a.size and a.min() == np.iinfo(np.int64).min for a in it):
+        return None
     slots = np.zeros(len(columns), dtype=np.int64)
     nf = ni = 0
     texts_width = 0
