@@ -60,11 +60,16 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"error: {message}\n")
 
 
-def _commands():
+def _commands(only: str | None = None):
+    """The sub-command modules, in the order of the help (``only``: just the module of that
+    name, when there is one; the others are not imported)."""
     from ebraille_sim import commands
     mods = []
-    for info in sorted(pkgutil.iter_modules(commands.__path__), key=lambda m: m.name):
-        mod = importlib.import_module(f"{commands.__name__}.{info.name}")
+    names = sorted(info.name for info in pkgutil.iter_modules(commands.__path__))
+    if only in names:
+        names = [only]
+    for name in names:
+        mod = importlib.import_module(f"{commands.__name__}.{name}")
         if hasattr(mod, "NAME") and hasattr(mod, "main"):
             mods.append(mod)
     order = {"run": 0, "list": 1}
@@ -87,13 +92,18 @@ def add_output_options(p, json_file: bool = False) -> None:
                    help="print nothing but errors and warnings (no progress; --json still prints its document)")
 
 
-def build_parser():
+def build_parser(command: str | None = None):
+    """The parser of the command line and ``{name: module}`` of its sub-commands.
+
+    With ``command`` (the first argument, when it names a sub-command) only that
+    sub-command's parser is built: it parses its arguments, and reports errors and help, as
+    the full parser does, without importing the other sub-commands."""
     parser = _Parser(prog="ebraille-sim",
                      description="Closed-loop contact-force simulator for a finger-wearable E-Braille reader.")
     parser.add_argument("--version", action="version", version=f"ebraille-sim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     table = {}
-    for mod in _commands():
+    for mod in _commands(command):
         p = sub.add_parser(mod.NAME, help=mod.HELP, description=mod.HELP, epilog=getattr(mod, "EPILOG", None))
         mod.add_arguments(p)
         add_output_options(p, json_file=getattr(mod, "JSON_FILE", False))
@@ -103,7 +113,8 @@ def build_parser():
 
 def main(argv=None) -> int:
     from ebraille_sim.commands import Console, UserError
-    parser, table = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser, table = build_parser(argv[0] if argv and not argv[0].startswith("-") else None)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:

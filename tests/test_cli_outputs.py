@@ -425,7 +425,10 @@ def test_a_reader_that_stops_early_gets_no_traceback():
 # ---------------------------------------------------------------- run: force.png names what it shows
 
 def test_force_figure_names_controller_backend_and_its_vertical_lines(tmp_path, capsys, monkeypatch):
+    from ebraille_sim.commands import run as run_command
     from ebraille_sim.tools import report
+
+    monkeypatch.setattr(run_command, "PLOT_PROCESS", False)      # the figure object is drawn here
 
     seen = {}
     draw = report.force_figure
@@ -452,6 +455,61 @@ def test_force_figure_names_controller_backend_and_its_vertical_lines(tmp_path, 
     starts = [float(s) for s in seen["starts"] if s <= seen["t_end"]]
     assert len(starts) >= 2
     assert seen["vlines"] == sorted(starts + [0.5])
+
+
+def _figure_data(n: int = 500) -> dict:
+    import numpy as np
+    t = np.arange(1, n + 1) * 1e-3
+    return {"t_s": t, "setpoint_n": np.ones(n), "force_est_n": 1 - np.exp(-t / 0.05),
+            "force_true_n": 1 - np.exp(-t / 0.04), "command_v": np.full(n, 0.5), "starts_s": np.array([0.1, 0.3]),
+            "band_fraction": 0.1, "reading_start_s": 0.2, "title": "synthetic: controller pid, seed 1"}
+
+
+def test_force_plotter_draws_in_its_process_what_draw_force_figure_draws_here():
+    from ebraille_sim.tools.forceplot import ForcePlotter, draw_force_figure, png_bytes
+    data = _figure_data()
+    with ForcePlotter.start() as plotter:
+        plotter.send(data)
+        png = plotter.png()
+    here = png_bytes(draw_force_figure(data))
+    assert png is not None and png[:8] == here[:8] == b"\x89PNG\r\n\x1a\n"
+    assert png[16:24] == here[16:24]                          # IHDR: the same width and height
+    assert plotter._proc.returncode == 0
+
+
+def test_force_plotter_failure_and_cancel_leave_no_process():
+    from ebraille_sim.tools.forceplot import ForcePlotter
+    bad = ForcePlotter.start()
+    bad.send({"t_s": [0.0]})                                  # missing columns: the helper fails
+    assert bad.png() is None and bad._proc.returncode == 1
+    idle = ForcePlotter.start()
+    idle.close()                                              # never sent: ended, not left behind
+    assert idle._proc.returncode is not None and idle.png() is None
+
+
+def test_run_in_a_fresh_process_draws_force_png_in_the_helper(tmp_path):
+    """A run from the command line draws force.png in the helper process (Matplotlib is not
+    loaded in the run's own process) and writes the same trace as a run without it."""
+    import subprocess
+    import sys
+    code = ("import sys\n"
+            "from ebraille_sim.tools import forceplot\n"
+            "sent = []\n"
+            "send = forceplot.ForcePlotter.send\n"
+            "forceplot.ForcePlotter.send = lambda self, data: (sent.append(1), send(self, data))[1]\n"
+            "from ebraille_sim.cli import main\n"
+            "code = main(sys.argv[1:])\n"
+            "assert sent == [1] and 'matplotlib' not in sys.modules, sorted(sys.modules)\n"
+            "sys.exit(code)\n")
+    out = tmp_path / "fresh"
+    p = subprocess.run([sys.executable, "-c", code, "run", "steady_90wpm", "--duration", "2", "--quiet",
+                        "--out", str(out)], cwd=tmp_path, capture_output=True, text=True,
+                       env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+    assert p.returncode == 0, p.stderr
+    png = (out / "force.png").read_bytes()
+    assert png.startswith(b"\x89PNG\r\n\x1a\n") and len(png) > 5000
+    assert cli(["run", "steady_90wpm", "--duration", "2", "--quiet", "--no-plot", "--out", str(tmp_path / "here")]) == 0
+    assert (out / "trace.csv").read_bytes() == (tmp_path / "here" / "trace.csv").read_bytes()
 
 
 # ---------------------------------------------------------------- outputs all at once; interrupts
@@ -571,6 +629,48 @@ def test_trace_rate_keeps_every_kth_period_and_the_full_rate_metrics(tmp_path):
     m_thin = json.loads((thin / "metrics.json").read_text())["metrics"]
     drop = {"wall_time_s", "real_time_factor"}
     assert {k: v for k, v in m_full.items() if k not in drop} == {k: v for k, v in m_thin.items() if k not in drop}
+
+
+def test_compiled_csv_floats_are_the_bytes_of_percent_9g():
+    """The compiled formatter writes every covered float as ``"%.9g" % v`` does: random bit
+    patterns, values of every magnitude it covers, ties to even, zeros, infinities, NaN."""
+    import numpy as np
+
+    from ebraille_sim.tools.csvformat import FLOAT, csv_body
+    rng = np.random.default_rng(7)
+    vals = np.concatenate([
+        rng.normal(size=60000) * 10.0 ** rng.integers(-18, 9, size=60000),
+        rng.integers(-2 ** 63, 2 ** 63 - 1, size=60000, dtype=np.int64).view(np.float64),
+        np.arange(1, 20001) * 0.001, rng.integers(0, 4000, 20000) * 0.25, np.round(rng.normal(size=20000), 3),
+        [0.0, -0.0, np.nan, -np.nan, np.inf, -np.inf, 1e-5, 1e-4, 9.99999999e-5, 999999999.4, 12345678.25,
+         12345678.75, 1234567.125, 1234567.375, 1e8, 99999999.95, 0.1, 1 / 3, 100.0, -2.5e-9]])
+    vals = vals[~(np.abs(vals) >= 1e9) & ~((np.abs(vals) < 1e-18) & (vals != 0))]
+    assert csv_body([(FLOAT, vals)]) == ("%.9g\r\n" * len(vals) % tuple(vals.tolist())).encode()
+    assert csv_body([(FLOAT, np.array([1.0, 999999999.5]))]) is None      # 1e+09: not covered
+    assert csv_body([(FLOAT, np.array([1e-20]))]) is None
+
+
+def test_trace_csv_with_numbers_the_compiled_formatter_leaves_out_is_the_csv_writers(tmp_path):
+    import csv
+
+    import numpy as np
+
+    from ebraille_sim.scenarios.runner import TRACE_COLUMNS
+    from ebraille_sim.tools.report import write_trace_csv
+    n = 50
+    tr = {c: np.linspace(-3.0, 4.0, n) for c in TRACE_COLUMNS}
+    tr["energy_j"] = np.where(np.arange(n) % 7 == 0, 3.5e12, 1e-25 * np.arange(n))
+    tr["setpoint_n"] = np.full(n, 1.25)
+    tr["char_index"] = np.arange(n) % 4 - 1
+    tr["character"] = np.array(["", "a,b", 'say "hi"', "\u2801"] * (n // 4) + ["", "x"], dtype=object)
+    write_trace_csv(tmp_path / "fast.csv", tr)
+    with open(tmp_path / "slow.csv", "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(TRACE_COLUMNS)
+        for k in range(n):
+            w.writerow([int(tr[c][k]) if c == "char_index" else str(tr[c][k]) if c == "character"
+                        else f"{float(tr[c][k]):.9g}" for c in TRACE_COLUMNS])
+    assert (tmp_path / "fast.csv").read_bytes() == (tmp_path / "slow.csv").read_bytes()
 
 
 def test_trace_csv_is_the_bytes_of_the_row_by_row_csv_writer(tmp_path):

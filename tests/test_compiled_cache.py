@@ -74,3 +74,46 @@ def test_code_outside_the_package_that_uses_its_njit_is_keyed_on_the_package_too
     stamp = locator.get_source_stamp()
     assert stamp[0] == compiled.source_key() and stamp[2] == ours.stat().st_size
     assert type(plain.g._cache._impl.locator).__name__ != "_PackageCacheLocator"
+
+
+def test_a_function_loaded_from_the_cache_runs_without_the_compiler_registries(tmp_path):
+    """Loading from the cache skips Numba's registry refresh (no ``numba.np.arraymath``, no
+    ``scipy.linalg`` at load): a loaded function that allocates arrays and calls BLAS
+    (``np.dot``) still gives the compiled result, in a fresh process."""
+    mod = tmp_path / "blas_loop.py"
+    mod.write_text("import numpy as np\n\nfrom ebraille_sim.base.compiled import njit\n\n\n@njit\n"
+                   "def f(a, m):\n    out = np.empty(a.shape[0] + 1)\n    out[:-1] = np.dot(m, a)\n"
+                   "    out[-1] = np.dot(a, a)\n    return out\n")
+    code = ("import sys\nimport numpy as np\nsys.path.insert(0, sys.argv[1])\nimport blas_loop\n"
+            "a = np.arange(3.0) + 0.5\nm = np.arange(9.0).reshape(3, 3) / 7.0\n"
+            "blas_loop.f.compile('(float64[::1], float64[:, ::1])')\n"
+            "before = ['numba.np.arraymath' in sys.modules, 'scipy.linalg' in sys.modules]\n"
+            "print(sorted(blas_loop.f.stats.cache_hits.values()) or [0], *before,\n"
+            "      blas_loop.f(a, m).tolist(), (m @ a).tolist() + [float(a @ a)])\n")
+    env = {**__import__("os").environ, "PYTHONPATH": str(ROOT), "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    runs = [subprocess.run([sys.executable, "-c", code, str(tmp_path)], check=True, capture_output=True, text=True,
+                           env=env, cwd=tmp_path).stdout.split(" ", 3) for _ in range(2)]
+    (hits0, *_), (hits1, arraymath, linalg, values) = runs
+    assert hits0 == "[0]" and hits1 == "[1]"                  # compiled, then loaded from the cache
+    assert arraymath == "False" and linalg == "False"         # loaded, not yet called
+    got, want = values.strip().split("] [")
+    assert got + "]" == "[" + want
+
+
+def test_the_threaded_vector_step_runs_in_a_fresh_process_as_the_serial_one():
+    """The ``parallel=True`` row step (threads started by its reload hook when it comes from
+    the cache) gives the serial step's observations and rewards in a fresh process."""
+    code = ("import sys\nimport numpy as np\nfrom ebraille_sim.rl.vector_env import ContactForceVectorEnv, step_rows\n"
+            "out = []\nfor par in (True, False):\n"
+            "    env = ContactForceVectorEnv(num_envs=4, parallel=par)\n"
+            "    obs, _ = env.reset(seed=3)\n    acc = [obs.copy()]\n"
+            "    for k in range(30):\n"
+            "        obs, r, term, trunc, _ = env.step(np.full((4, 1), 0.3, np.float32))\n"
+            "        acc += [obs.copy(), r.copy()]\n"
+            "    out.append(np.concatenate([a.ravel() for a in acc]))\n"
+            "loaded = sum(step_rows.stats.cache_hits.values()) > 0\n"
+            "print(np.array_equal(out[0], out[1]), not loaded or 'numba.np.arraymath' not in sys.modules)\n")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                       env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.split() == ["True", "True"]

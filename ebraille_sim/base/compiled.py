@@ -112,17 +112,48 @@ if _PackageCacheLocator not in caching.CacheImpl._locator_classes:
     caching.CacheImpl._locator_classes.insert(0, _PackageCacheLocator)
 
 
+class _LoadingCache(caching.FunctionCache):
+    """Numba's function cache, loading without a refresh of the compiler's registries.
+
+    Numba's ``load_overload`` refreshes the target context before it reads the cache: that
+    installs every typing and lowering registry, which imports Numba's whole NumPy support
+    and, through it, ``scipy.linalg`` (about 0.4 s at the first load of a process).  A
+    function rebuilt from the cache is machine code that needs none of them, only the
+    runtime's symbols (:meth:`numba.core.runtime.nrt.rtsys.initialize`, done here).  A cache
+    miss compiles as before, and Numba's compiler refreshes the registries itself.
+    """
+
+    def load_overload(self, sig, target_context):
+        from numba.core.runtime import nrt
+        nrt.rtsys.initialize(target_context)
+        with self._guard_against_spurious_io_errors():
+            return self._load_overload(sig, target_context)
+
+
+def _with_loading_cache(dispatcher):
+    dispatcher._cache = _LoadingCache(dispatcher.py_func)
+    return dispatcher
+
+
 def njit(*args, **kwargs):
     """``numba.njit`` with ``cache=True`` by default, cached under the package key.
 
-    ``_nrt=False`` (compile without reference counting, for functions that allocate nothing)
-    is a Numba option without a public promise; where the installed Numba does not know it,
-    it is dropped and the function compiles with reference counting, the same results.
+    A cached function is loaded by :class:`_LoadingCache` (for the lazily compiled form:
+    a function, or keyword options only; an explicit signature keeps Numba's cache; a Numba
+    without the internals it relies on keeps its own cache).  ``_nrt=False`` (compile
+    without reference counting, for functions that allocate nothing) is a Numba option
+    without a public promise; where the installed Numba does not know it, it is dropped and
+    the function compiles with reference counting, the same results.
     """
     kwargs.setdefault("cache", True)
     if "_nrt" in kwargs and not _KNOWS_NRT:
         kwargs.pop("_nrt")
-    return numba.njit(*args, **kwargs)
+    if not kwargs["cache"] or not _LOADING_CACHE_OK or any(not callable(a) for a in args):
+        return numba.njit(*args, **kwargs)
+    kwargs["cache"] = False
+    if args:
+        return _with_loading_cache(numba.njit(**kwargs)(args[0]))
+    return lambda func: _with_loading_cache(numba.njit(**kwargs)(func))
 
 
 def _knows_nrt() -> bool:
@@ -133,6 +164,18 @@ def _knows_nrt() -> bool:
     return hasattr(CPUTargetOptions, "_nrt")
 
 
+def _loading_cache_ok() -> bool:
+    """Whether this Numba has the internals :class:`_LoadingCache` overrides and calls."""
+    try:
+        from numba.core.runtime import nrt
+        from numba.core.dispatcher import Dispatcher
+    except ImportError:
+        return False
+    return (hasattr(caching.FunctionCache, "_load_overload")
+            and hasattr(caching.FunctionCache, "_guard_against_spurious_io_errors")
+            and hasattr(getattr(nrt, "rtsys", None), "initialize")
+            and "_cache" in getattr(Dispatcher, "__init__").__code__.co_names)
+
+
 _KNOWS_NRT = _knows_nrt()
-
-
+_LOADING_CACHE_OK = _loading_cache_ok()

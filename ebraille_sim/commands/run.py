@@ -10,6 +10,12 @@ EPILOG = ("exit status: 0 when the run meets every [criteria] limit of the scena
 ANIMATION_NAME = "animation.gif"
 """File name of ``--animate`` without a path, inside the run folder."""
 
+PLOT_PROCESS = True
+"""Draw force.png in a helper process started before the simulation
+(:class:`ebraille_sim.tools.forceplot.ForcePlotter`), so that Matplotlib loads while Numba
+loads and the run simulates, and the figure is drawn while the trace is written.  It is
+used when Matplotlib is not loaded in this process yet; False draws the figure here."""
+
 
 class _Backends:
     """The names of :data:`ebraille_sim.plant.loop.PLANT_BACKENDS`, read when argparse asks."""
@@ -129,7 +135,25 @@ def _draw(frames, path, con):
         bar.close()
 
 
+def _start_plotter(args):
+    """The helper process that draws force.png (None: the figure is drawn here, or not at all)."""
+    import sys
+    if args.no_plot or not PLOT_PROCESS or "matplotlib.figure" in sys.modules:
+        return None
+    from ebraille_sim.tools.forceplot import ForcePlotter
+    return ForcePlotter.start()
+
+
 def main(args) -> int:
+    plotter = _start_plotter(args)
+    try:
+        return _run(args, plotter)
+    finally:
+        if plotter is not None:
+            plotter.close()
+
+
+def _run(args, plotter) -> int:
     import sys
 
     import pathlib
@@ -181,7 +205,7 @@ def main(args) -> int:
     drawn = None
     with staged(out, RUN_OWNED) as folder:
         names = write_run_files(result, folder, plot=not args.no_plot, trace=args.trace, controller=ctrl,
-                                controller_file=gains_file, backend=args.backend)
+                                controller_file=gains_file, backend=args.backend, plotter=plotter)
         if inside:
             drawn = _draw(frames, folder / anim.name, con)
     written = [out / n for n in names]

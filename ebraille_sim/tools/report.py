@@ -99,24 +99,94 @@ def _csv_field(text: str) -> str:
 def write_trace_csv(path, trace: dict) -> None:
     """Write the trace columns :data:`TRACE_COLUMNS` as CSV (the ``csv`` module's default
     dialect, ``\\r\\n`` line ends; numbers with 9 significant digits, ``char_index`` as an
-    integer), column by column: each column is formatted in one pass and the rows are joined
-    once, with the bytes the row-by-row ``csv.writer`` gives."""
+    integer), with the bytes the row-by-row ``csv.writer`` gives.  As with the rows of
+    ``zip``, the shortest column sets the number of rows.
+
+    The rows are formatted in compiled code (:func:`ebraille_sim.tools.csvformat.csv_body`,
+    the bytes of ``"%.9g" % v``), the braille characters once per distinct character.  A
+    trace holding a number that code does not cover (``|v| >= 1e9``, ``0 < |v| < 1e-19``)
+    is formatted in Python instead: one ``%`` operation of the row format repeated once per
+    row over the cells in row order, a float column that repeats its values formatted once
+    per distinct bit pattern.
+    """
+    from ebraille_sim.tools.csvformat import FLOAT, INT, TEXT, csv_body
     cols = TRACE_COLUMNS
-    texts = []
-    for c in cols:
-        arr = np.asarray(trace[c])
+    arrays = [np.asarray(trace[c]) for c in cols]
+    n = min((len(a) for a in arrays), default=0)
+    columns = []
+    for c, arr in zip(cols, arrays):
+        arr = arr[:n]
         if c == "char_index":
-            texts.append([str(v) for v in arr.astype(np.int64).tolist()])
+            columns.append((INT, arr.astype(np.int64)))
         elif c == "character":
-            texts.append([_csv_field(str(v)) for v in arr.tolist()])
+            distinct, index = np.unique(arr.astype(str), return_inverse=True)
+            columns.append((TEXT, (index.reshape(-1), [_csv_field(v) for v in distinct.tolist()])))
         else:
-            texts.append([format(v, ".9g") for v in arr.astype(float).tolist()])
-    header = ",".join(_csv_field(c) for c in cols)
-    with open(path, "w", newline="", encoding="utf-8") as fh:
-        fh.write(header + "\r\n")
-        if texts and texts[0]:
-            fh.write("\r\n".join(map(",".join, zip(*texts))))
-            fh.write("\r\n")
+            columns.append((FLOAT, arr.astype(float)))
+    body = csv_body(columns) if columns else b""
+    header = ",".join(_csv_field(c) for c in cols) + "\r\n"
+    with open(path, "wb") as fh:
+        fh.write(header.encode("utf-8"))
+        fh.write(body if body is not None else _python_body(columns, n).encode("utf-8"))
+
+
+def _python_body(columns: list, n: int) -> str:
+    """The rows of :func:`ebraille_sim.tools.csvformat.csv_body` 's ``columns``, formatted in Python."""
+    from ebraille_sim.tools.csvformat import FLOAT, INT
+    cells = np.empty((n, len(columns)), dtype=object)
+    fmts = []
+    for j, (kind, values) in enumerate(columns):
+        if kind == INT:
+            cells[:, j] = values
+            fmts.append("%d")
+        elif kind == FLOAT:
+            if n > 1 and np.count_nonzero(values[1:] != values[:-1]) < n // 2:
+                cells[:, j] = _distinct_texts(values.view(np.int64), _format_bits)
+                fmts.append("%s")
+            else:
+                cells[:, j] = values
+                fmts.append("%.9g")
+        else:
+            index, texts = values
+            cells[:, j] = np.array(texts, dtype=object)[index]
+            fmts.append("%s")
+    return (",".join(fmts) + "\r\n") * n % tuple(cells.ravel().tolist())
+
+
+def _format_bits(bits: list) -> list[str]:
+    """``format(v, ".9g")`` of the floats whose int64 bit patterns are ``bits``."""
+    values = np.array(bits, dtype=np.int64).view(np.float64).tolist()
+    return ("%.9g\n" * len(values) % tuple(values)).split("\n")[:-1]
+
+
+def _distinct_texts(keys: np.ndarray, texts) -> np.ndarray:
+    """The text of every element of ``keys`` as an object array, with ``texts`` (a function of
+    the list of distinct keys returning their texts) called once per distinct key."""
+    distinct, index = np.unique(keys, return_inverse=True)
+    return np.array(texts(distinct.tolist()), dtype=object)[index.reshape(-1)]
+
+
+def figure_data(result: RunResult, controller_file=None, backend: str | None = None) -> dict:
+    """What force.png shows, as plain arrays and texts (:func:`ebraille_sim.tools.forceplot.draw_force_figure`).
+
+    Parameters
+    ----------
+    result : RunResult
+    controller_file : path, optional
+        The gains file the controller came from, named in the title.
+    backend : str, optional
+        The plant backend the run used (``"lumped"``, ``"pymunk"``), named in the title.
+    """
+    tr = result.trace
+    t = np.asarray(tr["t_s"])
+    starts = result.schedule.boundaries_s()
+    title = f"{result.spec.name}: controller {controller_label(result, controller_file)}"
+    if backend is not None:
+        title += f", {backend} backend"
+    return {"t_s": t, "setpoint_n": np.asarray(tr["setpoint_n"]), "force_est_n": np.asarray(tr["force_est_n"]),
+            "force_true_n": np.asarray(tr["force_true_n"]), "command_v": np.asarray(tr["command_v"]),
+            "starts_s": starts[starts <= t[-1]], "band_fraction": result.spec.setpoint.band_fraction,
+            "reading_start_s": result.spec.reading.start_s, "title": f"{title}, seed {result.seed}"}
 
 
 def force_figure(result: RunResult, controller_file=None, backend: str | None = None):
@@ -133,47 +203,18 @@ def force_figure(result: RunResult, controller_file=None, backend: str | None = 
     Returns
     -------
     matplotlib.figure.Figure
-        Thin grey vertical lines mark the start of each braille character (up to 400 of
-        them; none when there are more), the green line the start of reading.
+        Drawn by :func:`ebraille_sim.tools.forceplot.draw_force_figure` on an Agg canvas (not
+        a pyplot figure): thin grey vertical lines mark the start of each braille character
+        (up to 400 of them; none when there are more), the green line the start of reading.
     """
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    tr = result.trace
-    t = tr["t_s"]
-    band = result.spec.setpoint.band_fraction
-    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(11, 6), sharex=True, gridspec_kw={"height_ratios": [3, 1]})
-    sp = tr["setpoint_n"]
-    ax.fill_between(t, sp * (1 - band), sp * (1 + band), color="0.9", label=f"band +/-{band:.0%}")
-    ax.plot(t, sp, "k--", lw=1, label="setpoint")
-    ax.plot(t, tr["force_est_n"], color="tab:orange", lw=0.8, label="estimated (Wiener)")
-    ax.plot(t, tr["force_true_n"], color="tab:blue", lw=1.0, label="true (finger)")
-    starts = result.schedule.boundaries_s()
-    starts = starts[starts <= t[-1]]
-    if len(starts) <= 400:
-        for i, s in enumerate(starts):
-            ax.axvline(s, color="0.75", lw=0.4, zorder=0, label="character starts" if i == 0 else None)
-    ax.axvline(result.spec.reading.start_s, color="tab:green", lw=1, label="reading starts")
-    ax.set_ylabel("contact force (N)")
-    title = f"{result.spec.name}: controller {controller_label(result, controller_file)}"
-    if backend is not None:
-        title += f", {backend} backend"
-    ax.set_title(f"{title}, seed {result.seed}")
-    ax.legend(loc="upper right", fontsize=8, ncol=3)
-    ax.set_ylim(0, max(1.5 * float(np.max(sp)), float(np.max(tr["force_true_n"])) * 1.05))
-    ax2.plot(t, tr["command_v"], color="tab:red", lw=0.8)
-    ax2.set_ylabel("command (V)")
-    ax2.set_xlabel("time (s)")
-    fig.tight_layout()
-    return fig
+    from ebraille_sim.tools.forceplot import draw_force_figure
+    return draw_force_figure(figure_data(result, controller_file, backend))
 
 
 def plot_force(result: RunResult, path, controller_file=None, backend: str | None = None) -> None:
     """Write :func:`force_figure` to ``path``."""
-    import matplotlib.pyplot as plt
-    fig = force_figure(result, controller_file, backend)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    from ebraille_sim.tools.forceplot import png_bytes
+    pathlib.Path(path).write_bytes(png_bytes(force_figure(result, controller_file, backend)))
 
 
 RUN_OUTPUTS = ("metrics.json", "trace.csv", "trace.parquet", "force.png", "animation.gif", "animation")
@@ -221,14 +262,19 @@ def write_trace_parquet(path, trace: dict) -> None:
 
 
 def write_run_files(result: RunResult, folder, plot: bool = True, trace: str = "csv", controller=None,
-                    controller_file=None, backend: str | None = None) -> list[str]:
+                    controller_file=None, backend: str | None = None, plotter=None) -> list[str]:
     """Write metrics.json, the trace and force.png straight into ``folder`` (which must exist).
 
-    The arguments are those of :func:`write_outputs`; returns the names written.
+    The arguments are those of :func:`write_outputs`; returns the names written.  With
+    ``plotter`` (a started :class:`ebraille_sim.tools.forceplot.ForcePlotter`) force.png is
+    drawn by that process while this one writes the other files; where it fails, the figure
+    is drawn here.
     """
     if trace not in TRACE_FORMATS:
         raise ValueError(f"trace format must be one of {', '.join(TRACE_FORMATS)}, got {trace!r}")
     folder = pathlib.Path(folder)
+    if plot and plotter is not None:
+        plotter.send(figure_data(result, controller_file, backend))
     (folder / "metrics.json").write_text(json.dumps(
         metrics_document(result, controller, controller_file), indent=2) + "\n")
     if trace == "csv":
@@ -236,7 +282,11 @@ def write_run_files(result: RunResult, folder, plot: bool = True, trace: str = "
     elif trace == "parquet":
         write_trace_parquet(folder / "trace.parquet", result.trace)
     if plot:
-        plot_force(result, folder / "force.png", controller_file, backend)
+        png = plotter.png() if plotter is not None else None
+        if png is None:
+            plot_force(result, folder / "force.png", controller_file, backend)
+        else:
+            (folder / "force.png").write_bytes(png)
     return [n for n in RUN_OUTPUTS if (folder / n).exists()]
 
 
