@@ -16,6 +16,12 @@ The arithmetic is written in the order of the recursions in :mod:`controllers.pi
 Python's ``min``/``max`` semantics (:func:`py_min`, :func:`py_max`), so a run gives the same
 commands to the last bit whichever way it is stepped.
 
+:func:`pid_step` and :func:`pid_reset` allocate nothing and are compiled without Numba's
+reference counting (``_nrt=False``), and the dispatchers :func:`controller_step` and
+:func:`controller_reset` are inlined into their callers: a compiled loop then steps the PID
+without an atomic reference count per array per call, which cost more than the PID's own
+arithmetic.  The LQG step allocates its small vectors and keeps the runtime.
+
 PID family (one step for all variants, switched by the parameters):
 
 * ``variant`` 0, the fixed-gain :class:`~controllers.pid.PID`: gains scaled by the pulp's
@@ -269,7 +275,7 @@ def _pid_gain_scale(p, r):
     return _stiffness_ratio(p, r, f_s)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def pid_reset(s, p, y, r, command_v):
     """Bumpless reset of a PID-family controller (``reset`` of the classes)."""
     u0 = py_min(py_max(command_v, p[PP.u_min_v]), p[PP.u_max_v])
@@ -287,7 +293,7 @@ def pid_reset(s, p, y, r, command_v):
     s[PS.has_prev_setpoint] = 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def pid_step(s, p, y, r, h):
     """One sample of a PID-family controller (``update`` of the classes); returns the command, V."""
     if p[PP.variant] == 0.0:
@@ -423,7 +429,7 @@ def lqg_step(s, p, force_est_n, setpoint_n, dt_s):
     return u
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def controller_step(kind, s, p, force_est_n, setpoint_n, dt_s, motor_current_a):
     """One ``update`` of a compiled controller of ``kind`` (the current is unused by these kinds)."""
     if kind == KIND_PID:
@@ -431,7 +437,7 @@ def controller_step(kind, s, p, force_est_n, setpoint_n, dt_s, motor_current_a):
     return lqg_step(s, p, force_est_n, setpoint_n, dt_s)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def controller_reset(kind, s, p, force_est_n, setpoint_n, command_v):
     """``reset`` of a compiled controller of ``kind``."""
     if kind == KIND_PID:

@@ -91,6 +91,12 @@ functions around the inner controller, which a compiled loop calls directly::
 :meth:`Supervisor.update` is exactly this.  The windows are sized for control periods of at
 least :data:`MIN_CONTROL_PERIOD_S`; the event log keeps :data:`EVENT_CAPACITY` events.
 
+The two functions are compiled without Numba's reference counting (``_nrt=False``: they
+allocate nothing) and every helper of a normal period is inlined into them; only the rare
+paths (a fault, an event, the safe states) call out.  Counting the references of the two
+arrays at every helper, an atomic operation each, would cost more than the period's own
+arithmetic.
+
 Examples
 --------
 >>> from controllers import make
@@ -482,7 +488,9 @@ _EVENT_NAMES = ("fault", "contact_lost", "contact_regained", "nonfinite", "finit
 
 _WINDOWS = ("est_win", "cmd_win", "sp_win", "speed_win")
 """Running min and max windows: the estimate (stuck rule), the delayed command (stuck rule
-without a current), the setpoint (release) and the rack speed (held peak)."""
+without a current), the setpoint (release) and the rack speed (held peak: only its maximum is
+kept; its minimum's deque stays empty and the start of its ring holds the detectors' cached
+compressions, :func:`_soft_compression_m`)."""
 _QUEUES = ("cmd_delay", "drop_hist")
 """Plain time-ordered queues: the command delayed by ``stuck_response_s`` and the recent
 estimates of the drop rule."""
@@ -607,11 +615,18 @@ def _pymax(a, b):
 
 @njit(cache=True, inline="always")
 def _at(sv, cfg, head, base, i):
-    """Index in ``sv`` of the time of entry ``i`` (0: front) of the ring at slots ``head``/``base``."""
-    return int(cfg[base]) + 2 * ((int(sv[head]) + i) % int(cfg[base + 1]))
+    """Index in ``sv`` of the time of entry ``i`` (0: front) of the ring at slots ``head``/``base``.
+
+    The head is below the capacity and ``i`` at most the count, so the ring wraps at most once:
+    a compare and a subtraction stand for the remainder."""
+    j = int(sv[head]) + i
+    cap = int(cfg[base + 1])
+    if j >= cap:
+        j -= cap
+    return int(cfg[base]) + 2 * j
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _append(sv, cfg, head, base, t, x):
     n = int(sv[head + 1])
     if n >= int(cfg[base + 1]):
@@ -624,11 +639,12 @@ def _append(sv, cfg, head, base, t, x):
 
 @njit(cache=True, inline="always")
 def _pop_front(sv, cfg, head, base):
-    sv[head] = (int(sv[head]) + 1) % int(cfg[base + 1])
+    j = int(sv[head]) + 1
+    sv[head] = 0 if j >= int(cfg[base + 1]) else j
     sv[head + 1] -= 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _cut_front(sv, cfg, head, base, cut):
     """Drop the front entries older than ``cut`` (a window emptied this way is a configuration error)."""
     while True:
@@ -640,20 +656,38 @@ def _cut_front(sv, cfg, head, base, cut):
             break
 
 
-@njit(cache=True)
-def _win_push(sv, cfg, w, wc, t, x):
-    """Running min/max push (monotonic deques) of the window at state slot ``w``, config slot ``wc``."""
+@njit(cache=True, inline="always")
+def _win_push(sv, cfg, w, wc, t, x, keep_min):
+    """Running min/max push (monotonic deques) of the window at state slot ``w``, config slot ``wc``.
+
+    The back of both deques is the last value pushed: a push leaves it there and a cut never
+    reaches it (its time is the newest).  The deques are strictly monotonic, so the same value
+    again pops just that entry from each and appends ``(t, x)`` in its place: that is done by
+    writing the entry.  ``keep_min`` false keeps only the running maximum (a window whose
+    minimum no rule reads; its minimum's deque is left empty)."""
     if math.isnan(sv[w]):
         sv[w] = t
     lo, hi = w + 1, w + 3
-    while sv[lo + 1] > 0.0 and sv[_at(sv, cfg, lo, wc + 1, int(sv[lo + 1]) - 1) + 1] >= x:
-        sv[lo + 1] -= 1.0
-    while sv[hi + 1] > 0.0 and sv[_at(sv, cfg, hi, wc + 3, int(sv[hi + 1]) - 1) + 1] <= x:
-        sv[hi + 1] -= 1.0
-    _append(sv, cfg, lo, wc + 1, t, x)
-    _append(sv, cfg, hi, wc + 3, t, x)
+    if sv[hi + 1] > 0.0 and sv[_at(sv, cfg, hi, wc + 3, int(sv[hi + 1]) - 1) + 1] == x:
+        k = _at(sv, cfg, hi, wc + 3, int(sv[hi + 1]) - 1)
+        sv[k] = t
+        sv[k + 1] = x
+        if keep_min:
+            k = _at(sv, cfg, lo, wc + 1, int(sv[lo + 1]) - 1)
+            sv[k] = t
+            sv[k + 1] = x
+    else:
+        if keep_min:
+            while sv[lo + 1] > 0.0 and sv[_at(sv, cfg, lo, wc + 1, int(sv[lo + 1]) - 1) + 1] >= x:
+                sv[lo + 1] -= 1.0
+        while sv[hi + 1] > 0.0 and sv[_at(sv, cfg, hi, wc + 3, int(sv[hi + 1]) - 1) + 1] <= x:
+            sv[hi + 1] -= 1.0
+        if keep_min:
+            _append(sv, cfg, lo, wc + 1, t, x)
+        _append(sv, cfg, hi, wc + 3, t, x)
     cut = t - cfg[wc]
-    _cut_front(sv, cfg, lo, wc + 1, cut)
+    if keep_min:
+        _cut_front(sv, cfg, lo, wc + 1, cut)
     _cut_front(sv, cfg, hi, wc + 3, cut)
 
 
@@ -732,7 +766,7 @@ def _safe(sv, cfg, cur, dt):
     return u
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _motion(sv, cfg, cur, dt):
     """Rack speed from the back-EMF of the last period, travel integral, held peak speed."""
     vs = cfg[CF.driver_supply_v]
@@ -742,10 +776,10 @@ def _motion(sv, cfg, cur, dt):
     sv[SV.speed] = v
     if abs(cur) > cfg[CF.half_friction_current_a]:     # an unpowered motor (a cut supply) reads its command as speed
         sv[SV.travel_m] = _pymax(0.0, sv[SV.travel_m] + v * dt)
-    _win_push(sv, cfg, SV.speed_win_t0, CF.speed_win_span, sv[SV.t], v)
+    _win_push(sv, cfg, SV.speed_win_t0, CF.speed_win_span, sv[SV.t], v, False)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _interp_envelope(cfg, x):
     """Current limit at speed ``x`` from the envelope table: linear between the points (``bisect_right``)."""
     n = int(cfg[CF.envelope_n])
@@ -767,7 +801,7 @@ def _interp_envelope(cfg, x):
     return y0 + (y1 - y0) * (x - x0) / (x1 - x0)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _envelope_cap(sv, cfg, u, cur):
     """Largest command that keeps the next period's current within the speed-dependent limit."""
     v_held = _pymax(_win_hi(sv, cfg, SV.speed_win_t0, CF.speed_win_span), 0.0)
@@ -778,7 +812,7 @@ def _envelope_cap(sv, cfg, u, cur):
     return _pymin(u, u_applied + cfg[CF.motor_resistance_ohm] * (i_lim - cur))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rest_push_lower_edge_n(cfg, cur):
     """Least force (N) that the drive at current ``cur`` applies to the finger when nothing else
     takes it: the steady push bound with break-away friction, the weight against the push and the
@@ -787,7 +821,26 @@ def _rest_push_lower_edge_n(cfg, cur):
                                       cfg[CF.push_weight_n]) - cfg[CF.guide_static_n])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _soft_compression_m(sv, cfg, pair, force_n):
+    """:func:`~ebraille_sim.physics.fingertip.compression_at_force_m` of ``force_n`` on the soft
+    reader, through a one-entry cache: the ``pair``-th (force, compression) pair at the start of
+    the speed window's unused minimum ring (:data:`_WINDOWS`).
+
+    The estimate holds its value for an estimator period, so most periods ask for the force of
+    the last call, and the law is computed again only when the force differs.  The pair depends
+    on the configuration alone, so a reset keeps it; a ring of zeros holds the pair (0, 0), which
+    is the law's value.  The callers' forces are positive or a sum with a positive margin, never
+    a negative zero (which would compare equal to 0 with a compression of the other sign); a
+    NaN never matches."""
+    k = int(cfg[CF.speed_win_lo_base]) + 2 * pair
+    if force_n != sv[k]:
+        sv[k] = force_n
+        sv[k + 1] = compression_at_force_m(force_n, cfg[CF.soft_b_n_per_m], cfg[CF.soft_m_per_m])
+    return sv[k + 1]
+
+
+@njit(cache=True, inline="always")
 def _detect(sv, cfg, f, cur, dt):
     """The detectors that need the motor current; the fault code, or 0."""
     v = sv[SV.speed]
@@ -816,14 +869,14 @@ def _detect(sv, cfg, f, cur, dt):
             # over many presses in refresh mode does not add up) and slowly otherwise (the
             # finger drifts, presses and the strap slips over a session: only a fast mismatch,
             # a board running into the finger while the reading stays low, trips)
-            target = sv[SV.travel_m] - compression_at_force_m(f, cfg[CF.soft_b_n_per_m], cfg[CF.soft_m_per_m])
+            target = sv[SV.travel_m] - _soft_compression_m(sv, cfg, 0, f)
             if sv[SV.t] - sv[SV.fall_t] <= cfg[CF.release_window_s]:
                 sv[SV.contact_travel_m] = _pymax(sv[SV.contact_travel_m], target)
             else:
                 sv[SV.contact_travel_m] = sv[SV.contact_travel_m] + (target - sv[SV.contact_travel_m]) * _pymin(
                     1.0, dt / cfg[CF.travel_follow_s])
-        allowed = (compression_at_force_m(_win_hi(sv, cfg, SV.est_win_t0, CF.est_win_span) + cfg[CF.implausible_n],
-                                          cfg[CF.soft_b_n_per_m], cfg[CF.soft_m_per_m]) + cfg[CF.stuck_travel_m])
+        allowed = (_soft_compression_m(sv, cfg, 1, _win_hi(sv, cfg, SV.est_win_t0, CF.est_win_span)
+                                       + cfg[CF.implausible_n]) + cfg[CF.stuck_travel_m])
         if sv[SV.travel_m] - sv[SV.contact_travel_m] > allowed:
             return FAULT.fsr_implausible
     # no contact within the travel the gap allows
@@ -859,7 +912,7 @@ def _detect(sv, cfg, f, cur, dt):
     return 0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def supervise_begin(sv, cfg, f, sp, dt, cur):
     """First half of one supervised period: detectors, contact tracking, the safe states.
 
@@ -905,7 +958,7 @@ def supervise_begin(sv, cfg, f, sp, dt, cur):
     if sv[SV.theta] > cfg[CF.i2t_limit_a2s]:
         _trip(sv, cfg, FAULT.motor_overcurrent)
         return 0, _safe(sv, cfg, cur, dt), math.nan
-    _win_push(sv, cfg, SV.est_win_t0, CF.est_win_span, t, f)
+    _win_push(sv, cfg, SV.est_win_t0, CF.est_win_span, t, f, True)
     if not has_cur:
         # the command window (the stuck rule without a current measurement) lags by the
         # estimator's response: a command that moved within the last ``stuck_response_s``
@@ -917,12 +970,12 @@ def supervise_begin(sv, cfg, f, sp, dt, cur):
                 break
             t_old, u_old = sv[k], sv[k + 1]
             _pop_front(sv, cfg, SV.cmd_delay_head, CF.cmd_delay_base)
-            _win_push(sv, cfg, SV.cmd_win_t0, CF.cmd_win_span, t_old, u_old)
+            _win_push(sv, cfg, SV.cmd_win_t0, CF.cmd_win_span, t_old, u_old, True)
     sp_now = sp if math.isfinite(sp) else 0.0
     if sp_now < sv[SV.sp_last] - 1e-9:
         sv[SV.fall_t] = t                  # the setpoint fell: an intended release
     sv[SV.sp_last] = sp_now
-    _win_push(sv, cfg, SV.sp_win_t0, CF.sp_win_span, t, sp_now)
+    _win_push(sv, cfg, SV.sp_win_t0, CF.sp_win_span, t, sp_now, True)
     moving = (not has_cur) or abs(sv[SV.u_prev] - cfg[CF.motor_resistance_ohm] * cur) > cfg[CF.stuck_emf_v]
     # without a current measurement only: with one, the travel the back-EMF integral gives
     # decides (:func:`_detect`); ``u - R i`` of one period reads as motion inside the
@@ -976,7 +1029,7 @@ def supervise_begin(sv, cfg, f, sp, dt, cur):
     return 1, math.nan, _pymin(sp, cfg[CF.sp_max_n])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def supervise_end(sv, cfg, u, f, sp, dt, cur):
     """Second half of a period whose :func:`supervise_begin` gave code 1: shape the inner command.
 

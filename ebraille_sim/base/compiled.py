@@ -113,8 +113,26 @@ if _PackageCacheLocator not in caching.CacheImpl._locator_classes:
 
 
 def njit(*args, **kwargs):
-    """``numba.njit`` with ``cache=True`` by default, cached under the package key."""
+    """``numba.njit`` with ``cache=True`` by default, cached under the package key.
+
+    ``_nrt=False`` (compile without reference counting, for functions that allocate nothing)
+    is a Numba option without a public promise; where the installed Numba does not know it,
+    it is dropped and the function compiles with reference counting, the same results.
+    """
     kwargs.setdefault("cache", True)
+    if "_nrt" in kwargs and not _KNOWS_NRT:
+        kwargs.pop("_nrt")
     return numba.njit(*args, **kwargs)
+
+
+def _knows_nrt() -> bool:
+    try:
+        from numba.core.cpu import CPUTargetOptions
+    except ImportError:
+        return False
+    return hasattr(CPUTargetOptions, "_nrt")
+
+
+_KNOWS_NRT = _knows_nrt()
 
 
