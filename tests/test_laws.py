@@ -667,38 +667,69 @@ def test_hysteresis_compensation_reads_the_loading_branch():
     def volts(f_eff):
         return divider_voltage(gso + f_eff ** ex / k, r2, vs)
 
-    def state(x, side):
-        return np.array([0.0, x] + [x + side * w for w in widths])
+    nm = blockmodels.HYSTERESIS_MEDIAN - 1
+    M0 = 2 + n
+
+    def state(x, side, v):
+        return np.array([v, x] + [x + side * w for w in widths] + [v] * nm)
 
     x = math.log(1.2 + F_EPS_N)
     v_load = volts(math.exp(x - h) - F_EPS_N)
-    st = state(x, -1.0)
-    st[0] = v_load
-    out = blockmodels.hysteresis_compensated_v(v_load, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
+    st = state(x, -1.0, v_load)
+    out = blockmodels.hysteresis_compensated_v(v_load, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
     assert out == pytest.approx(v_load, rel=1e-12)
     assert st[1] == pytest.approx(x, abs=1e-12)
     v_unload = volts(math.exp(x + h) - F_EPS_N)
-    st = state(x, +1.0)
-    st[0] = v_unload
-    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
+    st = state(x, +1.0, v_unload)
+    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
     assert out == pytest.approx(v_load, rel=1e-12)
     assert v_unload > 1.05 * v_load
     # the film further down its unloading branch: the inversion moves the input with the output
     # (slope 1 on that branch) and the result is the loading branch 2 H lower
     v_down = v_unload - 3.0 * db
-    out3 = blockmodels.hysteresis_compensated_v(v_down, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
+    st[M0:M0 + nm] = v_down                          # a sustained change: the median passes it
+    out3 = blockmodels.hysteresis_compensated_v(v_down, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
     vf = v_unload - 2.0 * db
     assert st[0] == vf
     f_down = (k * (fsr.divider_conductance_s(vf, r2, vs) - gso)) ** (1.0 / ex)
     assert st[1] == pytest.approx(math.log(f_down + F_EPS_N) - h, abs=1e-12)
     assert out3 == pytest.approx(volts(math.exp(math.log(f_down + F_EPS_N) - 2.0 * h) - F_EPS_N), rel=1e-12)
-    st = state(x, +1.0)
-    st[0] = v_unload
-    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
+    st = state(x, +1.0, v_unload)
+    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
     # within the deadband the held voltage is used: the output does not move
-    out2 = blockmodels.hysteresis_compensated_v(v_unload + 0.9 * db, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso,
+    out2 = blockmodels.hysteresis_compensated_v(v_unload + 0.9 * db, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso,
                                                 r2, vs)
     assert out2 == out and st[0] == v_unload
     # a railed or faulted divider passes unchanged
-    assert blockmodels.hysteresis_compensated_v(vs, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso, r2, vs) == vs
-    assert blockmodels.hysteresis_compensated_v(0.0, st, 0, 1, 2, pp, 0, n, n, h, db, k, ex, gso, r2, vs) == 0.0
+    assert blockmodels.hysteresis_compensated_v(vs, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso, r2, vs) == vs
+    assert blockmodels.hysteresis_compensated_v(0.0, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso, r2, vs) == 0.0
+
+
+def test_running_median_passes_a_ramp_delayed_and_removes_a_spike():
+    nm = blockmodels.HYSTERESIS_MEDIAN - 1
+    st = np.zeros(nm)
+    out = [blockmodels.running_median_v(float(k), st, 0, nm) for k in range(1, 12)]
+    assert out[nm // 2:] == [float(k) for k in range(1, 12 - nm // 2)]
+    st = np.full(nm, 1.0)
+    seq = [1.0, 1.0, 5.0, 1.0, 1.0, 1.0, -3.0, -3.0, 1.0, 1.0]
+    assert [blockmodels.running_median_v(v, st, 0, nm) for v in seq] == [1.0] * len(seq)
+
+
+def test_assembly_measures_the_units_hysteresis_and_the_firmware_packs_it():
+    """A press to 1 N, on to 2 N and back to 1 N through the plant's laws reads the unit's loop
+    (R_F+ - R_F-)/R_F+; with the compensation on and no loop given, the packed play widths are
+    those of that loop with the nominal exponent; a loop given explicitly is used as given."""
+    import dataclasses as dc
+    from ebraille_sim.estimation.calibration import measured_hysteresis_fraction
+    nominal = FSRS["nominal"]
+    for h in (0.05, 0.10, 0.15):
+        assert measured_hysteresis_fraction(dc.replace(nominal, hysteresis_fraction=h)) == pytest.approx(h, abs=3e-4)
+    unit = dc.replace(nominal, hysteresis_fraction=0.14, exponent=0.95)
+    for given, expect in ((None, measured_hysteresis_fraction(unit)), (0.10, 0.10)):
+        dev = DeviceParams(fsr=unit, estimator=EstimatorParams(hysteresis_compensation=True, hysteresis_fraction=given))
+        p = pack_params(dev, 0)
+        widths, _ = play_widths(dc.replace(nominal, hysteresis_fraction=expect))
+        np.testing.assert_allclose([p[P[f"comp_play_w{j}"]] for j in range(N_PLAYS)], widths, rtol=1e-12)
+        assert p[P.comp_hyst_halfwidth] == pytest.approx(-math.log(1.0 - expect) / (2.0 * nominal.exponent), rel=1e-12)
+    with pytest.raises(ValueError, match="hysteresis_fraction"):
+        EstimatorParams(hysteresis_fraction=1.0)

@@ -61,6 +61,7 @@ __all__ = [
     "estimator_step",
     "creep_compensated_v",
     "hysteresis_compensated_v",
+    "running_median_v",
 ]
 
 MAX_TF_LEN = 10
@@ -85,10 +86,15 @@ CREEP_COMP_SLOTS = tuple(f"comp_creep_{j}_n" for j in range(N_CREEP))
 """State slots of the firmware's creep prediction: the hereditary terms of its own force
 estimate (N), advanced by :func:`ebraille_sim.physics.fsr.creep_force`."""
 
-HYSTERESIS_COMP_SLOTS = ("comp_hyst_v", "comp_hyst_x") + tuple(f"comp_play_{j}" for j in range(N_PLAYS))
+HYSTERESIS_MEDIAN = 5
+"""ADC samples in the hysteresis compensation's running median (odd)."""
+
+HYSTERESIS_COMP_SLOTS = ("comp_hyst_v", "comp_hyst_x") + tuple(f"comp_play_{j}" for j in range(N_PLAYS)) \
+    + tuple(f"comp_med_{j}" for j in range(HYSTERESIS_MEDIAN - 1))
 """State slots of the firmware's hysteresis compensation: the voltage after its noise
-deadband (V), the last inverted operator input (ln N) and its copy of the film's play
-operators (ln N), advanced by :func:`ebraille_sim.physics.fsr.inverse_hysteresis`."""
+deadband (V), the last inverted operator input (ln N), its copy of the film's play
+operators (ln N), advanced by :func:`ebraille_sim.physics.fsr.inverse_hysteresis`, and the
+previous ADC voltages of its running median (V, newest first)."""
 
 OWNED_STATE_SLOTS = ANTIALIAS_SLOTS + OUTPUT_SLOTS + TARE_SLOTS + FILTER_SLOTS + CREEP_COMP_SLOTS \
     + HYSTERESIS_COMP_SLOTS
@@ -1009,7 +1015,23 @@ def creep_compensated_v(v, f_est_n, s, z0, p, a0, weight, threshold_n, n_terms, 
 
 
 @njit(cache=True, inline="always")
-def hysteresis_compensated_v(v, s, v0, x0, play0, p, width0, weight0, n_plays, log_halfwidth, deadband_v,
+def running_median_v(v, s, m0, n_prev):
+    """Median of ``v`` and the ``n_prev`` voltages before it (``s[m0:m0+n_prev]``, newest first,
+    shifted in place).  A monotone sequence passes delayed by ``n_prev // 2`` samples and
+    unchanged in value; a spike of fewer than ``n_prev // 2 + 1`` samples is removed."""
+    w = np.empty(n_prev + 1)
+    w[0] = v
+    for j in range(n_prev):
+        w[j + 1] = s[m0 + j]
+    for j in range(n_prev - 1, 0, -1):
+        s[m0 + j] = s[m0 + j - 1]
+    s[m0] = v
+    w.sort()
+    return w[n_prev // 2]
+
+
+@njit(cache=True, inline="always")
+def hysteresis_compensated_v(v, s, v0, x0, play0, m0, p, width0, weight0, n_plays, log_halfwidth, deadband_v,
                              k_ohm, exponent, g_standoff_s, r2_ohm, supply_v):
     """The divider voltage with the film's hysteresis branch replaced by its loading branch (V).
 
@@ -1018,8 +1040,10 @@ def hysteresis_compensated_v(v, s, v0, x0, play0, p, width0, weight0, n_plays, l
     on which the play operators sit at their lower edges and ``ln(F_eff + F_eps)`` is the
     input less ``log_halfwidth`` (the weighted sum of the widths).  After a reversal the
     film reads on an inner branch, up to ``2 log_halfwidth`` higher.  The firmware inverts
-    the operator: the voltage ``v`` (after a deadband of ``deadband_v`` against ADC noise,
-    state ``s[v0]``) is turned into the film's conductance (divider inverse), its power-law
+    the operator: the voltage ``v``, after a running median of :data:`HYSTERESIS_MEDIAN`
+    samples (:func:`running_median_v`, states ``s[m0:...]``: a single noisy sample is no
+    reversal) and a deadband of ``deadband_v`` (state ``s[v0]``: neither is a code toggling
+    at a boundary), is turned into the film's conductance (divider inverse), its power-law
     path into a force with the nominal conduction law ``G = F^n / k``, and
     :func:`~ebraille_sim.physics.fsr.inverse_hysteresis` (plays ``s[play0:...]``, last input
     ``s[x0]``) gives the input; the voltage returned is the one the loading branch gives
@@ -1031,7 +1055,7 @@ def hysteresis_compensated_v(v, s, v0, x0, play0, p, width0, weight0, n_plays, l
     """
     if not 0.0 < v < supply_v:
         return v
-    vf = play(v, s[v0], deadband_v)
+    vf = play(running_median_v(v, s, m0, HYSTERESIS_MEDIAN - 1), s[v0], deadband_v)
     x = s[x0]
     if vf != s[v0]:
         s[v0] = vf

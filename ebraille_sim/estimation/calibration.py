@@ -53,6 +53,33 @@ def loading_branch_factor(fsr) -> float:
     return math.exp(-sum(w * r for w, r in zip(weights, widths)))
 
 
+@functools.lru_cache(maxsize=256)
+def measured_hysteresis_fraction(fsr, force_n: float = 1.0, peak_n: float = 2.0, steps: int = 400) -> float:
+    """The unit's hysteresis as an assembly check measures it: ``(R_F+ - R_F-)/R_F+`` at ``force_n``.
+
+    The film is pressed from zero to ``force_n`` (``R_F+``, the loading branch), on to
+    ``peak_n`` and let down to ``force_n`` again (``R_F-``), slowly (``steps`` force points a
+    leg) and without creep, through the plant's own hysteresis and conduction laws
+    (:func:`ebraille_sim.physics.fsr.hysteresis`, :func:`ebraille_sim.physics.fsr.conductance_s`);
+    the stand-off path is left out, as a measurement at 1 N would subtract it.  For the play
+    model the result is the unit's ``hysteresis_fraction`` up to the 1 mN offset of its log.
+    """
+    from ebraille_sim.physics.fsr import N_PLAYS, conductance_s, hysteresis, log_force
+    widths, weights = play_widths(fsr)
+    p = np.array(list(widths) + list(weights))
+    s = np.full(N_PLAYS, log_force(0.0))
+
+    def g(f_eff):
+        return conductance_s(f_eff, fsr.resistance_at_1n_ohm, fsr.exponent, 0.0, 1.0)
+
+    for f in np.linspace(0.0, force_n, steps):
+        f_eff = hysteresis(float(f), s, 0, p, 0, N_PLAYS, N_PLAYS)
+    g_load = g(f_eff)
+    for f in np.concatenate([np.linspace(force_n, peak_n, steps), np.linspace(peak_n, force_n, steps)]):
+        f_eff = hysteresis(float(f), s, 0, p, 0, N_PLAYS, N_PLAYS)
+    return 1.0 - g_load / g(f_eff)
+
+
 def loading_voltage(force_n: float, fsr, circuit, hold_s: float) -> float:
     """Noise-free divider voltage after pressing to ``force_n`` and holding ``hold_s``.
 

@@ -465,9 +465,21 @@ class EstimatorParams(_Checked):
     hysteresis_compensation: bool = _p(False, "-", "[E] firmware inverts the nominal FSR's play-operator "
                                        "hysteresis and reads every voltage on the calibrated loading branch "
                                        "(docs/model.md); off by default")
-    hysteresis_deadband_lsb: float = _nn(1.5, "LSB", "[E] changes of the ADC voltage below this many counts "
-                                         "are taken as noise by the hysteresis compensation (the default "
-                                         "noise, 0.4 LSB rms, moves the code by one count often, by two rarely)")
+    hysteresis_fraction: float | None = _p(None, "-", "[D] the loop the hysteresis compensation inverts: "
+                                           "None measures the unit's at assembly (a press to 2 N and a "
+                                           "let-down to 1 N, estimation.calibration."
+                                           "measured_hysteresis_fraction); 0.10 is the datasheet's nominal")
+    hysteresis_deadband_lsb: float = _nn(1.5, "LSB", "[E] after a 5-sample running median, changes of the "
+                                         "ADC voltage up to this many counts are taken as noise by the "
+                                         "hysteresis compensation (the median removes single noisy samples; "
+                                         "the creep compensation's transient after a fast press moves its "
+                                         "voltage back by more than one count; docs/model.md)")
+
+    def __post_init__(self):
+        super().__post_init__()
+        h = self.hysteresis_fraction
+        if h is not None and not (isinstance(h, (int, float)) and 0.0 <= h < 1.0):
+            raise ValueError(f"EstimatorParams.hysteresis_fraction = {h!r} must be None or in [0, 1)")
 
 
 @dataclass(frozen=True)

@@ -86,7 +86,8 @@ def sensor_sample(s, p, u):
                                  p[P.comp_g_standoff_s], p[P.comp_reference_gain], p[P.r2_ohm],
                                  p[P.divider_supply_v])
     if p[P.est_hyst_comp] > 0.0:
-        vq = hysteresis_compensated_v(vq, s, S.comp_hyst_v, S.comp_hyst_x, S.comp_play_0, p, P.comp_play_w0,
+        vq = hysteresis_compensated_v(vq, s, S.comp_hyst_v, S.comp_hyst_x, S.comp_play_0, S.comp_med_0, p,
+                                      P.comp_play_w0,
                                       P.comp_play_weight0, N_PLAYS, p[P.comp_hyst_halfwidth],
                                       p[P.comp_hyst_deadband_v], p[P.comp_fsr_k_ohm], p[P.comp_fsr_n],
                                       p[P.comp_g_standoff_s], p[P.r2_ohm], p[P.divider_supply_v])

@@ -21,13 +21,15 @@ True
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from ebraille_sim.estimation.blockmodels import pwl_eval
+from ebraille_sim.estimation.blockmodels import HYSTERESIS_MEDIAN, pwl_eval
+from ebraille_sim.estimation.calibration import measured_hysteresis_fraction
 from ebraille_sim.estimation.models import load_estimator
 from ebraille_sim.physics.drivetrain import (mesh_damping_n_s_per_m, reflected_force_n, reflected_inertia_kg,
                                              shaft_to_rack_per_m)
@@ -164,7 +166,7 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     p[P.est_clamp] = 1.0 if e.clamp_nonnegative else 0.0
     p[P.est_nyquist_average] = 1.0 if e.nyquist_average else 0.0
     _pack_creep_compensation(p, e, dt_sensor)
-    _pack_hysteresis_compensation(p, e, c)
+    _pack_hysteresis_compensation(p, e, c, s)
     p[P.seed] = float(seed)
     return p
 
@@ -185,13 +187,19 @@ def _pack_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
     p[P.comp_reference_gain] = creep_gain(e.creep_reference_hold_s, nominal)
 
 
-def _pack_hysteresis_compensation(p: np.ndarray, e, circuit) -> None:
-    """The estimator's hysteresis compensation: on/off, the play operators and the resistance
-    at 1 N of the nominal FSR (``FSRS["nominal"]``; its exponent and stand-off are packed with
-    the creep compensation), and the noise deadband in volts."""
+def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr) -> None:
+    """The estimator's hysteresis compensation: on/off; play operators of the nominal FSR's
+    exponent (``FSRS["nominal"]``, whose resistance at 1 N is packed too and whose exponent and
+    stand-off are packed with the creep compensation) with the loop the estimator was given,
+    or, when it was given none, the unit's loop as measured at assembly
+    (:func:`ebraille_sim.estimation.calibration.measured_hysteresis_fraction`); and the noise
+    deadband in volts."""
     nominal = FSRS["nominal"]
     p[P.est_hyst_comp] = 1.0 if e.hysteresis_compensation else 0.0
-    widths, weights = play_widths(nominal)
+    h = e.hysteresis_fraction
+    if h is None:
+        h = measured_hysteresis_fraction(fsr) if e.hysteresis_compensation else nominal.hysteresis_fraction
+    widths, weights = play_widths(dataclasses.replace(nominal, hysteresis_fraction=h))
     for j in range(N_PLAYS):
         p[P[f"comp_play_w{j}"]] = widths[j]
         p[P[f"comp_play_weight{j}"]] = weights[j]
@@ -301,6 +309,8 @@ def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None
     s[S.fsr_voltage_v] = v_read
     s[S.tare_v] = v_read if device.estimator.tare_at_start else 0.0
     s[S.comp_hyst_v] = v_read
+    for j in range(HYSTERESIS_MEDIAN - 1):
+        s[S[f"comp_med_{j}"]] = v_read
     s[S.comp_hyst_x] = lf
     for j in range(N_PLAYS):
         s[S[f"comp_play_{j}"]] = lf

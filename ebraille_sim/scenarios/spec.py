@@ -202,6 +202,7 @@ class EstimatorSpec:
     creep_compensation: bool | None = _key(None, "-", "bool")
     creep_reference_hold_s: float | None = _key(None, "s", "float", lo=0, hi=1e5, lo_open=True)
     hysteresis_compensation: bool | None = _key(None, "-", "bool")
+    hysteresis_fraction: float | None = _key(None, "-", "float", lo=0, hi=1, hi_open=True)
     hysteresis_deadband_lsb: float | None = _key(None, "LSB", "float", lo=0, hi=1e3)
 
 
@@ -376,6 +377,7 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
                                        ("creep_compensation", "creep_compensation"),
                                        ("creep_reference_hold_s", "creep_reference_hold_s"),
                                        ("hysteresis_compensation", "hysteresis_compensation"),
+                                       ("hysteresis_fraction", "hysteresis_fraction"),
                                        ("hysteresis_deadband_lsb", "hysteresis_deadband_lsb")) if k1 in est})
         if "model" in est and not est["model"].startswith("paper:"):
             mp = pathlib.Path(est["model"])
