@@ -28,8 +28,13 @@ Unlike :class:`controllers.PID`, the start is not bumpless: the first command is
 the policy outputs for the first observation (``command_v`` given to ``reset`` is
 shown to the policy as its previous action).
 
-Stable-Baselines3 (and PyTorch) are imported only when a policy is loaded; install them
-with ``pip install 'ebraille-sim[rl]'``.
+The deterministic actor is also kept as ``policy.npz`` beside ``policy.zip`` (written by
+``ebraille-sim train`` and :func:`ebraille_sim.rl.sb3.write_policy_metadata`; format
+:data:`ACTOR_FORMAT`): where it exists, a deterministic policy runs from it with NumPy
+(:class:`MlpActor`), without PyTorch or Stable-Baselines3 and at the cost of a few small
+matrix products per evaluation.  Otherwise, and for ``deterministic=False``,
+Stable-Baselines3 (and PyTorch) are imported when the policy is loaded; install them with
+``pip install 'ebraille-sim[rl]'``.
 
 Examples
 --------
@@ -51,7 +56,8 @@ from controllers.base import check_dt, check_finite
 from controllers.features import (CURRENT_SCALE_A, N_OBS, N_Z, Z_PREV_ACTION, config_vector, observe, reset_features,
                                   write_observation)
 
-__all__ = ["ALGORITHMS", "POLICY_FORMAT", "PolicyController", "load_policy"]
+__all__ = ["ACTOR_FORMAT", "ALGORITHMS", "POLICY_FORMAT", "MlpActor", "PolicyController", "actor_from_sb3",
+           "load_actor", "load_policy", "save_actor"]
 
 POLICY_FORMAT = "ebraille-sim-policy/1"
 ALGORITHMS = ("ppo", "sac")
@@ -60,6 +66,110 @@ _ENV_KEYS = ("control_rate_hz", "safe_force_n", "warn_force_n", "rate_filter_s",
              "effort_weight", "violation_weight", "driver_supply_v")
 _ENV_OPTIONAL_KEYS = ("current_scale_a",)
 _PERIOD_TOL = 1e-6
+
+
+ACTOR_FORMAT = "ebraille-sim-mlp/1"
+"""Value of ``format`` in a ``policy.npz`` written by :func:`save_actor`."""
+
+_ACTIVATIONS = {"tanh": np.tanh, "relu": lambda x: np.maximum(x, np.float32(0.0))}
+
+
+class MlpActor:
+    """The deterministic action of a Stable-Baselines3 MLP actor, evaluated with NumPy.
+
+    ``a = out(W_k act(... act(W_1 x + b_1) ...) + b_k)`` in float32, with ``act`` the
+    hidden layers' activation (``tanh`` for SB3's PPO, ``relu`` for its SAC) and ``out``
+    the identity then a clip to [-1, 1] (PPO's Gaussian mean, clipped as SB3's ``predict``
+    clips it) or ``tanh`` (SAC's squashed mean).  It has SB3's ``predict`` signature, so
+    :class:`PolicyController` runs it as it runs an SB3 model; it needs neither PyTorch nor
+    Stable-Baselines3.  Its actions equal SB3's to float32 rounding (the sums run in another
+    order; tested to 1e-5).
+    """
+
+    def __init__(self, weights, biases, activation: str, squash: bool):
+        if activation not in _ACTIVATIONS:
+            raise ValueError(f"unknown activation {activation!r}; allowed: {', '.join(_ACTIVATIONS)}")
+        if not weights or len(weights) != len(biases):
+            raise ValueError("an MLP actor needs one bias per weight matrix, and at least one layer")
+        self.weights = [np.ascontiguousarray(w, dtype=np.float32) for w in weights]
+        self.biases = [np.ascontiguousarray(b, dtype=np.float32) for b in biases]
+        for k, (w, b) in enumerate(zip(self.weights, self.biases)):
+            if w.ndim != 2 or b.shape != (w.shape[0],) or (k and w.shape[1] != self.weights[k - 1].shape[0]):
+                raise ValueError(f"layer {k} of the MLP actor has shapes {w.shape} and {b.shape}, "
+                                 "which do not chain")
+            if not (np.all(np.isfinite(w)) and np.all(np.isfinite(b))):
+                raise ValueError(f"layer {k} of the MLP actor holds non-finite weights")
+        self.activation = activation
+        self.squash = bool(squash)
+        self._act = _ACTIVATIONS[activation]
+
+    def predict(self, observation, deterministic: bool = True):
+        """``(action of shape (n_out,), None)`` for one observation, as SB3's ``predict``."""
+        if not deterministic:
+            raise ValueError("a NumPy policy gives the deterministic action only; load the .zip with "
+                             "Stable-Baselines3 for sampled actions")
+        h = np.asarray(observation, dtype=np.float32).reshape(-1)
+        if h.shape[0] != self.weights[0].shape[1]:
+            raise ValueError(f"observation of {h.shape[0]} values for an actor that takes {self.weights[0].shape[1]}")
+        for w, b in zip(self.weights[:-1], self.biases[:-1]):
+            h = self._act(w @ h + b)
+        a = self.weights[-1] @ h + self.biases[-1]
+        a = np.tanh(a) if self.squash else np.clip(a, np.float32(-1.0), np.float32(1.0))
+        return a.astype(np.float32), None
+
+
+def save_actor(actor: MlpActor, path) -> str:
+    """Write ``actor`` as ``policy.npz`` (format :data:`ACTOR_FORMAT`); returns the path."""
+    arrays = {"format": np.array(ACTOR_FORMAT), "activation": np.array(actor.activation),
+              "squash": np.array(actor.squash), "layers": np.array(len(actor.weights))}
+    for k, (w, b) in enumerate(zip(actor.weights, actor.biases)):
+        arrays[f"w{k}"], arrays[f"b{k}"] = w, b
+    path = os.fspath(path)
+    with open(path, "wb") as fh:
+        np.savez(fh, **arrays)
+    return path
+
+
+def load_actor(path) -> MlpActor:
+    """Read a ``policy.npz`` written by :func:`save_actor`; one-line ValueError if it is not one."""
+    path = os.fspath(path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if "format" not in z.files or str(z["format"]) != ACTOR_FORMAT:
+                raise ValueError(f"{path}: not a policy actor (format {ACTOR_FORMAT!r} expected)")
+            n = int(z["layers"])
+            return MlpActor([z[f"w{k}"] for k in range(n)], [z[f"b{k}"] for k in range(n)],
+                            str(z["activation"]), bool(z["squash"]))
+    except (OSError, KeyError, ValueError, EOFError) as exc:
+        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        raise ValueError(msg if msg.startswith(path) else f"{path}: cannot read the policy actor ({msg})") from None
+
+
+def actor_from_sb3(model) -> MlpActor:
+    """The deterministic actor of a Stable-Baselines3 PPO or SAC model with an MLP policy."""
+    policy = model.policy
+    if hasattr(policy, "actor") and hasattr(policy.actor, "latent_pi"):       # SAC
+        hidden, out, squash = policy.actor.latent_pi, policy.actor.mu, True
+    elif hasattr(policy, "mlp_extractor") and hasattr(policy, "action_net"):   # PPO
+        hidden, out, squash = policy.mlp_extractor.policy_net, policy.action_net, False
+        if getattr(policy, "squash_output", False):
+            raise ValueError("a PPO policy with squashed output (gSDE) is not supported by the NumPy actor")
+    else:
+        raise ValueError(f"unsupported policy {type(policy).__name__}: the NumPy actor reads SB3's MLP "
+                         "policies of PPO and SAC")
+    weights, biases, acts = [], [], set()
+    for layer in list(hidden) + [out]:
+        name = type(layer).__name__
+        if name == "Linear":
+            weights.append(layer.weight.detach().cpu().numpy())
+            biases.append(layer.bias.detach().cpu().numpy())
+        elif name.lower() in _ACTIVATIONS:
+            acts.add(name.lower())
+        else:
+            raise ValueError(f"unsupported layer {name} in the policy network")
+    if len(acts) > 1:
+        raise ValueError(f"the policy network mixes activations {sorted(acts)}")
+    return MlpActor(weights, biases, acts.pop() if acts else "tanh", squash)
 
 
 def _paths(path: str) -> tuple[str, str]:
@@ -72,6 +182,11 @@ def _paths(path: str) -> tuple[str, str]:
         return path + ".zip", path + ".json"
     raise ValueError(f"policy path {path!r} must be a folder written by 'ebraille-sim train' or a .zip file "
                      "saved by Stable-Baselines3")
+
+
+def _actor_path(zip_path: str) -> str:
+    """``policy.npz`` beside ``policy.zip`` (``PATH.npz`` beside ``PATH.zip``)."""
+    return zip_path[:-4] + ".npz"
 
 
 def read_metadata(json_path: str) -> dict:
@@ -158,6 +273,17 @@ class PolicyController:
         self._first = True
         self._command_v = u0
 
+    def applied(self, command_v: float) -> None:
+        """The command that reached the drive this period (V), when a supervisor shaped it.
+
+        The env's safety layer shows the policy the applied command, as a fraction of the
+        supply, as its previous action; :class:`controllers.supervisor.Supervisor` calls this
+        every period so that the next observation shows the same here.
+        """
+        u = float(command_v)
+        if math.isfinite(u):
+            self._z[Z_PREV_ACTION] = min(1.0, max(-1.0, u / self.supply_v))
+
     def update(self, force_est_n: float, setpoint_n: float, dt_s: float,
                motor_current_a: float | None = None) -> float:
         """Motor command, V; the policy is evaluated once per training period (held in between).
@@ -207,12 +333,14 @@ def load_policy(path, **overrides) -> PolicyController:
     if not str(path):
         raise ValueError("policy: needs a path, e.g. policy:runs/train-ppo")
     zip_path, json_path = _paths(path)
-    if not os.path.exists(zip_path):
+    npz_path = _actor_path(zip_path)
+    use_actor = det and os.path.isfile(npz_path)
+    if not use_actor and not os.path.exists(zip_path):
         raise FileNotFoundError(f"policy file not found: {zip_path}")
     if not os.path.isfile(json_path):
         raise ValueError(f"policy {zip_path} has no metadata {json_path} (algorithm and env settings it was "
                          f"trained with); write it with ebraille_sim.rl.sb3.write_policy_metadata("
                          f"{zip_path!r}, model, env)")
     meta = read_metadata(json_path)
-    model = _load_sb3(meta["algo"], zip_path)
+    model = load_actor(npz_path) if use_actor else _load_sb3(meta["algo"], zip_path)
     return PolicyController(model, meta["env"], deterministic=det)

@@ -1240,7 +1240,11 @@ class Supervisor:
     last_f = _scalar("last_f")
 
     def update(self, force_est_n: float, setpoint_n: float, dt_s: float, motor_current_a: float | None = None) -> float:
-        """One period: run the detectors, then pass, shape or replace the inner command."""
+        """One period: run the detectors, then pass, shape or replace the inner command.
+
+        An inner controller with an ``applied(command_v)`` method is told the command that
+        left the supervisor, every period (a learned policy observes it, as it did in the
+        env's safety layer)."""
         c = self.config
         if not 0.0 < dt_s < math.inf:
             check_dt(dt_s)
@@ -1261,6 +1265,9 @@ class Supervisor:
                 self.inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=reset_cmd)
         elif code == 2:
             self.inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=0.0)
+        applied = getattr(self.inner, "applied", None)
+        if applied is not None:
+            applied(u)
         return u
 
 

@@ -7,7 +7,8 @@ Run from the repository root (about 2 minutes of wall time with ``-j 2`` on the 
     python docs/make_benchmark_figures.py --reuse    # redraw the figure from benchmark.json
 
 The run is the command ``ebraille-sim benchmark pid pid_scheduled pid_feedforward
-pid_friction pid_dob lqg -j 2 --out docs/figures/benchmark``; it writes ``benchmark.json`` (the
+pid_friction pid_dob lqg policy:docs/figures/rl/ppo policy:docs/figures/rl/sac -j 2 --out
+docs/figures/benchmark`` (the two learned policies run from their NumPy actors); it writes ``benchmark.json`` (the
 results file ``--compare`` reads) and ``leaderboard.md`` there, and ``fast_estimator.json``
 (the paper Wiener model's linear block re-discretised at 1 kHz against the 100 Hz one).  The
 same controllers then run with the estimator's hysteresis compensation on (``--estimator
@@ -35,7 +36,8 @@ from ebraille_sim.cli import main as cli  # noqa: E402
 
 OUT = ROOT / "docs" / "figures" / "benchmark"
 OUT_HC = ROOT / "docs" / "figures" / "benchmark_hysteresis"
-CONTROLLERS = ["pid", "pid_scheduled", "pid_feedforward", "pid_friction", "pid_dob", "lqg"]
+CONTROLLERS = ["pid", "pid_scheduled", "pid_feedforward", "pid_friction", "pid_dob", "lqg",
+               "policy:docs/figures/rl/ppo", "policy:docs/figures/rl/sac"]
 
 
 def figure(doc: dict, path: pathlib.Path) -> None:
@@ -127,7 +129,9 @@ def hysteresis_free(path: pathlib.Path, controllers=("pid", "pid_dob"), key: str
 
 
 def main(argv=None) -> int:
+    import os
     argv = sys.argv[1:] if argv is None else argv
+    os.chdir(ROOT)                      # the learned policies are named by paths from the root
     OUT.mkdir(parents=True, exist_ok=True)
     if "--reuse" not in argv:
         code = cli(["benchmark", *CONTROLLERS, "-j", "2", "--out", str(OUT)])

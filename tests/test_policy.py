@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import controllers
+from controllers.features import Z_PREV_ACTION
 from controllers.policy import POLICY_FORMAT, PolicyController, load_policy, read_metadata
 from ebraille_sim.rl.env import ContactForceEnv, EnvConfig
 from ebraille_sim.plant.layout import S
@@ -65,6 +66,41 @@ def test_policy_in_a_1khz_loop_matches_the_200hz_env_exactly():
     assert np.max(np.abs(np.array(loop_commands) / 6.0 - env_actions)) <= 1e-9
     assert np.max(np.abs(np.array(loop_forces) - env_forces)) <= 1e-9
     assert max(env_forces) > 0.5                                  # the policy did press
+
+
+def test_supervised_policy_sees_the_applied_command_as_in_the_env_safety_layer():
+    """With the safety layer on, the env shows the policy the supervised (applied) command as its
+    previous action; a PolicyController inside the scenario's Supervisor, at the env's 200 Hz,
+    is told that command every period and so acts and presses exactly as in the env."""
+    from controllers.supervisor import Supervisor, SupervisorConfig
+    env = ContactForceEnv(randomize_device=False, safety=True)
+    obs, info = env.reset(seed=5, options={"disturbances": False, "gap_m": 1e-3, "setpoint_n": 0.7})
+    ep = env.episode
+    policy = LinearPolicy()
+    env_forces, env_applied = [], []
+    for _ in range(400):                                          # 2 s
+        a = float(np.clip(policy.predict(obs)[0][0], -1, 1))
+        obs, _, term, trunc, info = env.step(np.array([a], np.float32))
+        env_forces.append(info["force_true_n"])
+        env_applied.append(info["command_v"])
+        assert not (term or trunc)
+    dev = DeviceParams(rates=RateParams(control_rate_hz=200.0))
+    plant = Plant.from_devices([dev], [ep.sensor_seed])
+    plant.set_finger(1e-3)
+    inner = PolicyController(policy, EnvConfig().policy_metadata())
+    ctrl = Supervisor(inner, SupervisorConfig.for_device(dev))
+    st = plant.state[0]
+    ctrl.reset(force_est_n=float(st[S.force_est_n]), setpoint_n=0.7)
+    loop_forces, loop_applied = [], []
+    for k in range(400):
+        u = ctrl.update(float(st[S.force_est_n]), ep.setpoint_n[k], 5e-3, float(st[S.current_a]))
+        assert inner._z[Z_PREV_ACTION] == pytest.approx(max(-1.0, min(1.0, u / 6.0)), abs=1e-15)
+        plant.advance(u)
+        loop_applied.append(u)
+        loop_forces.append(float(st[S.contact_force_n]))
+    assert np.max(np.abs(np.array(loop_applied) - env_applied)) <= 1e-9
+    assert np.max(np.abs(np.array(loop_forces) - env_forces)) <= 1e-9
+    assert max(env_forces) > 0.5
 
 
 def test_policy_controller_holds_between_evaluations_and_validates_inputs():
@@ -136,6 +172,10 @@ def test_trained_policy_loads_and_runs_a_scenario(tmp_path):
     from ebraille_sim.scenarios.runner import run_scenario
     rec = train("ppo", 1024, tmp_path, seed=0, n_envs=1)
     assert rec["steps"] >= 1024 and rec["wall_time_s"] > 0
+    assert (tmp_path / "policy.npz").is_file()
+    from controllers.policy import MlpActor
+    assert isinstance(controllers.make(f"policy:{tmp_path}").model, MlpActor)
+    assert not isinstance(controllers.make(f"policy:{tmp_path}", deterministic=False).model, MlpActor)
     ctrl = controllers.make(f"policy:{tmp_path}")
     assert ctrl.name == "policy" and ctrl.period_s == pytest.approx(0.005)
     env = ContactForceEnv()
@@ -146,3 +186,49 @@ def test_trained_policy_loads_and_runs_a_scenario(tmp_path):
     res = run_scenario("contact_onset", controller=f"policy:{tmp_path}", duration_s=0.3)
     assert res.controller_name == "policy" and np.all(np.isfinite(res.trace["command_v"]))
     assert np.all(np.abs(res.trace["command_v"]) <= 6.0)
+
+
+def test_shipped_learned_policies_run_from_numpy_without_pytorch():
+    """The PPO and SAC actors kept in docs/figures/rl load as NumPy MLPs (no PyTorch, no SB3) and
+    hold a supervised steady reading in band."""
+    import pathlib
+    root = pathlib.Path(__file__).resolve().parent.parent / "docs" / "figures" / "rl"
+    code = ("import sys, controllers\n"
+            "from ebraille_sim.scenarios.runner import run_scenario\n"
+            f"for name in ('ppo', 'sac'):\n"
+            f"    r = run_scenario('steady_90wpm', controller='policy:' + {str(root)!r} + '/' + name, duration_s=4.0)\n"
+            "    print(name, r.metrics['in_band_fraction'])\n"
+            "print(any(m in sys.modules for m in ('torch', 'stable_baselines3')))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out[-1] == "False"
+    assert float(out[1]) > 0.8 and float(out[3]) > 0.8
+
+
+def test_numpy_actor_equals_sb3_predict_and_bad_files_are_one_line(tmp_path):
+    from controllers.policy import MlpActor, load_actor, save_actor
+    rng = np.random.default_rng(0)
+    actor = MlpActor([rng.normal(size=(8, 7)), rng.normal(size=(1, 8))], [rng.normal(size=8), rng.normal(size=1)],
+                     "relu", True)
+    p = save_actor(actor, tmp_path / "a.npz")
+    again = load_actor(p)
+    obs = rng.normal(size=7).astype(np.float32)
+    h = np.maximum(actor.weights[0] @ obs + actor.biases[0], 0.0)
+    assert again.predict(obs)[0][0] == pytest.approx(np.tanh(actor.weights[1] @ h + actor.biases[1])[0], abs=1e-6)
+    with pytest.raises(ValueError, match="deterministic action only"):
+        again.predict(obs, deterministic=False)
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="bad.npz") as exc:
+        load_actor(tmp_path / "bad.npz")
+    assert "\n" not in str(exc.value)
+    with pytest.raises(ValueError, match="do not chain"):
+        MlpActor([np.ones((4, 7)), np.ones((1, 5))], [np.ones(4), np.ones(1)], "tanh", False)
+    sb3 = pytest.importorskip("stable_baselines3")
+    from controllers.policy import actor_from_sb3
+    env = ContactForceEnv()
+    obs_all = rng.uniform(env.observation_space.low, env.observation_space.high, size=(500, 7)).astype(np.float32)
+    for cls in (sb3.PPO, sb3.SAC):
+        model = cls("MlpPolicy", env, seed=0, device="cpu")
+        a = actor_from_sb3(model)
+        ref = model.predict(obs_all, deterministic=True)[0].reshape(-1)
+        got = np.array([a.predict(o)[0][0] for o in obs_all])
+        assert np.max(np.abs(ref - got)) <= 1e-5

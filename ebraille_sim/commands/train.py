@@ -3,7 +3,8 @@
 The policy learns on ``EBraille/ContactForce-v0`` (randomised readers, FSR units, motors,
 drive trains, passages, rates, setpoints and disturbances) through Stable-Baselines3's own
 vectorisation of the registered id, with no wrapper of ours.  The output folder receives
-``policy.zip`` (the SB3 model) and ``policy.json`` (algorithm, the env settings the
+``policy.zip`` (the SB3 model), ``policy.npz`` (its deterministic actor for NumPy,
+:class:`controllers.policy.MlpActor`) and ``policy.json`` (algorithm, the env settings the
 observation depends on, and the training record: steps, seed, wall time, versions), which
 ``--controller policy:DIR`` loads in ``ebraille-sim run``.
 
@@ -25,7 +26,7 @@ MAX_STEPS = 10 ** 9
 TRAIN_SEED_LIMIT = 2 ** 32
 """Env ``k`` is seeded with ``seed + k``, and NumPy's global seed must lie below 2**32."""
 
-TRAIN_OWNED = ("policy.zip", "policy.json")
+TRAIN_OWNED = ("policy.zip", "policy.json", "policy.npz")
 """What ``train`` writes into its folder."""
 
 
@@ -148,6 +149,8 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
     model.save(out / "policy.zip")
+    from controllers.policy import actor_from_sb3, save_actor
+    save_actor(actor_from_sb3(model), out / "policy.npz")
     record = {
         "steps": int(model.num_timesteps), "seed": int(seed), "envs": int(n_envs), "wall_time_s": round(wall, 1),
         "steps_per_s": round(model.num_timesteps / wall, 1),

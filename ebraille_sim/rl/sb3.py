@@ -300,7 +300,9 @@ def policy_metadata(model_or_algo, env) -> dict:
 
 
 def write_policy_metadata(path, model_or_algo, env) -> str:
-    """Write the metadata beside a model saved with ``model.save`` so ``policy:PATH.zip`` loads it.
+    """Write the metadata beside a model saved with ``model.save`` so ``policy:PATH.zip`` loads it;
+    given the model (not only its algorithm), also its deterministic actor as ``PATH.npz``
+    (:func:`controllers.policy.save_actor`), which then runs without PyTorch.
 
     Parameters
     ----------
@@ -320,4 +322,7 @@ def write_policy_metadata(path, model_or_algo, env) -> str:
     out = stem + ".json"
     with open(out, "w", encoding="utf-8") as fh:
         fh.write(json.dumps(meta, indent=2) + "\n")
+    if not isinstance(model_or_algo, str):
+        from controllers.policy import actor_from_sb3, save_actor
+        save_actor(actor_from_sb3(model_or_algo), stem + ".npz")
     return out
