@@ -33,20 +33,26 @@ def test_importing_controllers_does_not_import_torch_or_sb3():
     assert out.stdout.strip() == "False"
 
 
-def test_policy_in_a_1khz_loop_matches_the_200hz_env_exactly():
-    """The controller rebuilds the env's observation: same actions, same forces (to 1e-9)."""
-    env = ContactForceEnv(randomize_device=False, safety=False)
-    obs, info = env.reset(seed=5, options={"disturbances": False, "gap_m": 1e-3,
-                                           "setpoint_steps": [(1.5, 1.2)], "setpoint_n": 0.7})
-    ep = env.episode
-    policy = LinearPolicy()
-    env_forces, env_actions = [], []
-    for _ in range(500):                                          # 2.5 s
+def _env_episode(policy, safety: bool, steps: int, **options):
+    """``policy`` in the nominal 200 Hz env from a 1 mm gap at 0.7 N: the episode, and the true
+    forces, actions and applied commands (V) of ``steps`` steps."""
+    env = ContactForceEnv(randomize_device=False, safety=safety)
+    obs, _ = env.reset(seed=5, options={"disturbances": False, "gap_m": 1e-3, "setpoint_n": 0.7, **options})
+    forces, actions, applied = [], [], []
+    for _ in range(steps):
         a = float(np.clip(policy.predict(obs)[0][0], -1, 1))
         obs, _, term, trunc, info = env.step(np.array([a], np.float32))
-        env_forces.append(info["force_true_n"])
-        env_actions.append(a)
+        forces.append(info["force_true_n"])
+        actions.append(a)
+        applied.append(info["command_v"])
         assert not (term or trunc)
+    return env.episode, forces, actions, applied
+
+
+def test_policy_in_a_1khz_loop_matches_the_200hz_env_exactly():
+    """The controller rebuilds the env's observation: same actions, same forces (to 1e-9)."""
+    policy = LinearPolicy()
+    ep, env_forces, env_actions, _ = _env_episode(policy, False, 500, setpoint_steps=[(1.5, 1.2)])   # 2.5 s
 
     dev = DeviceParams(rates=RateParams(control_rate_hz=1000.0))
     plant = Plant.from_devices([dev], [ep.sensor_seed])
@@ -73,17 +79,8 @@ def test_supervised_policy_sees_the_applied_command_as_in_the_env_safety_layer()
     previous action; a PolicyController inside the scenario's Supervisor, at the env's 200 Hz,
     is told that command every period and so acts and presses exactly as in the env."""
     from controllers.supervisor import Supervisor, SupervisorConfig
-    env = ContactForceEnv(randomize_device=False, safety=True)
-    obs, info = env.reset(seed=5, options={"disturbances": False, "gap_m": 1e-3, "setpoint_n": 0.7})
-    ep = env.episode
     policy = LinearPolicy()
-    env_forces, env_applied = [], []
-    for _ in range(400):                                          # 2 s
-        a = float(np.clip(policy.predict(obs)[0][0], -1, 1))
-        obs, _, term, trunc, info = env.step(np.array([a], np.float32))
-        env_forces.append(info["force_true_n"])
-        env_applied.append(info["command_v"])
-        assert not (term or trunc)
+    ep, env_forces, _, env_applied = _env_episode(policy, True, 400)                                    # 2 s
     dev = DeviceParams(rates=RateParams(control_rate_hz=200.0))
     plant = Plant.from_devices([dev], [ep.sensor_seed])
     plant.set_finger(1e-3)
