@@ -24,6 +24,7 @@ True
 """
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import functools
 import math
@@ -131,6 +132,25 @@ def static_error_table(model, fsr, circuit, forces_n=(0.2, 0.3, 0.5, 0.75, 1.0, 
     return rows
 
 
+def _interp(x: float, xs: list, ys: list, last: int) -> float:
+    """``numpy.interp(x, xs, ys)`` of one float inside ``[xs[0], xs[-1]]`` (or NaN), in Python
+    floats: the segment and the operations of NumPy's ``arr_interp`` for one point (the last
+    breakpoint not above ``x``, the slope of its segment, ``slope (x - x_j) + y_j``, the other
+    end when that is NaN), so the same number without the call into NumPy."""
+    if x != x:
+        return x
+    j = bisect.bisect_right(xs, x) - 1
+    if j == last or xs[j] == x:
+        return ys[j]
+    slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
+    y = slope * (x - xs[j]) + ys[j]
+    if y != y:
+        y = slope * (x - xs[j + 1]) + ys[j + 1]
+        if y != y and ys[j] == ys[j + 1]:
+            y = ys[j]
+    return y
+
+
 def _steady_map(model):
     """The scalar map ``u -> model.steady_state(u)``, with the linear block's gain and the
     nonlinearities' breakpoints read once (the same floating-point operations, so the same
@@ -146,13 +166,15 @@ def _steady_map(model):
         yb = np.asarray(nl.y_bp, dtype=float)
         slopes = nl.segment_slopes()
         x0, xn, y0, yn, s0, sn = (float(v) for v in (xb[0], xb[-1], yb[0], yb[-1], slopes[0], slopes[-1]))
+        xs, ys = xb.tolist(), yb.tolist()
+        last = len(xs) - 1
 
         def f(x):
             if x < x0:
                 return y0 + s0 * (x - x0)
             if x > xn:
                 return yn + sn * (x - xn)
-            return float(np.interp(x, xb, yb))
+            return _interp(x, xs, ys, last)
         return f
 
     f_in, f_out = pwl(model.input_nl), pwl(model.output_nl)

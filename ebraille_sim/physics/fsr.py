@@ -294,8 +294,11 @@ def play_widths(fsr) -> tuple[list[float], list[float]]:
 
 
 def creep_gain(hold_s, fsr):
-    """:func:`held_creep_gain` of an FSR after holding ``hold_s`` (s; float or array)."""
+    """:func:`held_creep_gain` of an FSR after holding ``hold_s`` (s; float or array); a Python
+    or NumPy float is one call, without the vectorising."""
     w = creep_term_weight(fsr.creep_per_decade, fsr.creep_tau_min_s, fsr.creep_tau_max_s)
+    if type(hold_s) is float or type(hold_s) is np.float64:
+        return float(held_creep_gain(float(hold_s), w, fsr.creep_tau_min_s, fsr.creep_tau_max_s, N_CREEP))
     f = np.vectorize(lambda t: held_creep_gain(float(t), w, fsr.creep_tau_min_s, fsr.creep_tau_max_s, N_CREEP))
     out = f(np.asarray(hold_s, dtype=float))
     return float(out) if np.ndim(out) == 0 else out

@@ -34,8 +34,8 @@ from ebraille_sim.estimation.models import load_estimator
 from ebraille_sim.physics.drivetrain import (mesh_damping_n_s_per_m, reflected_force_n, reflected_inertia_kg,
                                              shaft_to_rack_per_m)
 from ebraille_sim.physics.fingertip import prony_coefficients, tangent_stiffness_n_per_m
-from ebraille_sim.physics.fsr import (adc_code, adc_voltage, creep_decay, creep_gain, creep_taus_s, creep_term_weight,
-                                      lag_alpha, log_force, play_widths, static_voltage)
+from ebraille_sim.physics.fsr import (N_CREEP, adc_code, adc_voltage, creep_decay, creep_gain, creep_taus_s,
+                                      creep_term_weight, lag_alpha, log_force, play_widths, static_voltage)
 from ebraille_sim.physics.motor import current_decay
 from ebraille_sim.physics.params import FSRS, DeviceParams
 from ebraille_sim.plant import kernel
@@ -136,18 +136,14 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     p[P.relax_c1] = f.relax_weight_1
     p[P.relax_c2] = f.relax_weight_2
     p[P.relax_c3] = f.relax_weight_3
-    a, beta = prony_coefficients(h, (f.relax_tau_1_s, f.relax_tau_2_s, f.relax_tau_3_s))
-    for j in range(3):
-        p[P[f"relax_a{j + 1}"]] = a[j]
-        p[P[f"relax_beta{j + 1}"]] = beta[j]
+    p[_RELAX_SLOTS] = _prony_row(h, f.relax_tau_1_s, f.relax_tau_2_s, f.relax_tau_3_s)
     p[P.fsr_lag_alpha] = lag_alpha(h, s.mechanical_lag_s)
     p[P.fsr_k_ohm] = s.resistance_at_1n_ohm
     p[P.fsr_n] = s.exponent
     p[P.fsr_g_standoff_s] = 1.0 / s.standoff_resistance_ohm
     dt_sensor = 1.0 / r.sensor_rate_hz
     p[P.fsr_creep_weight] = creep_term_weight(s.creep_per_decade, s.creep_tau_min_s, s.creep_tau_max_s)
-    for j, tau in enumerate(creep_taus_s(s.creep_tau_min_s, s.creep_tau_max_s)):
-        p[P[f"creep_a{j}"]] = creep_decay(dt_sensor, tau)
+    p[_CREEP_SLOTS] = _creep_decays(dt_sensor, s.creep_tau_min_s, s.creep_tau_max_s)
     p[P.fsr_load_threshold_n] = s.load_threshold_n
     p[P.fsr_tempco_per_k] = s.temperature_coeff_per_k
     p[P.fsr_noise_v] = s.noise_v_rms
@@ -156,9 +152,8 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     p[P.adc_lsb_v] = c.adc_lsb_v
     p[P.adc_max_code] = c.adc_max_code
     widths, weights = play_widths(s)
-    for j in range(N_PLAYS):
-        p[P[f"play_w{j}"]] = widths[j]
-        p[P[f"play_weight{j}"]] = weights[j]
+    p[_PLAY_W_SLOTS] = widths
+    p[_PLAY_WEIGHT_SLOTS] = weights
     bb, aa = _antialias_filter(float(e.antialias_cutoff_hz), float(r.sensor_rate_hz))
     p[P.aa_b0], p[P.aa_b1], p[P.aa_b2] = bb
     p[P.aa_a1], p[P.aa_a2] = aa[1], aa[2]
@@ -171,10 +166,59 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     return p
 
 
+_RELAX_SLOTS = np.array([P[f"relax_{k}{j}"] for k in ("a", "beta") for j in (1, 2, 3)])
+_CREEP_SLOTS = np.array([P[f"creep_a{j}"] for j in range(N_CREEP)])
+_PLAY_W_SLOTS = np.array([P[f"play_w{j}"] for j in range(N_PLAYS)])
+_PLAY_WEIGHT_SLOTS = np.array([P[f"play_weight{j}"] for j in range(N_PLAYS)])
+
+
+@functools.lru_cache(maxsize=64)
+def _prony_row(h_s: float, tau_1_s: float, tau_2_s: float, tau_3_s: float) -> np.ndarray:
+    """:func:`~ebraille_sim.physics.fingertip.prony_coefficients` as the values of ``_RELAX_SLOTS``
+    (``a1..a3``, then ``beta1..beta3``; computed once per step and time constants, read-only)."""
+    a, beta = prony_coefficients(h_s, (tau_1_s, tau_2_s, tau_3_s))
+    row = np.array(list(a) + list(beta), dtype=float)
+    row.flags.writeable = False
+    return row
+
+
+@functools.lru_cache(maxsize=64)
+def _creep_decays(dt_sensor_s: float, tau_min_s: float, tau_max_s: float) -> np.ndarray:
+    """Per-sample decays of the creep terms, the values of ``_CREEP_SLOTS`` (computed once per
+    sensor period and time-constant range, read-only)."""
+    row = np.array([creep_decay(dt_sensor_s, tau) for tau in creep_taus_s(tau_min_s, tau_max_s)], dtype=float)
+    row.flags.writeable = False
+    return row
+
+
+def _cached_slots(fill, *key) -> tuple[np.ndarray, np.ndarray]:
+    """``(slots, values)`` that ``fill(p, *key)`` writes into a zero parameter row: every slot
+    it sets, with the value it sets (a written zero included)."""
+    row = np.zeros(N_PARAM)
+    fill(row, *key)
+    probe = np.full(N_PARAM, np.nan)
+    fill(probe, *key)
+    slots = np.flatnonzero(~np.isnan(probe) | np.isnan(row))
+    values = row[slots]
+    slots.flags.writeable = values.flags.writeable = False
+    return slots, values
+
+
 def _pack_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
     """The estimator's creep compensation: on/off, and the creep law of the nominal FSR
     (``FSRS["nominal"]``: the firmware does not know the individual sensor's parameters)
-    at the sensor rate, with the creep gain of the calibration hold as its reference."""
+    at the sensor rate, with the creep gain of the calibration hold as its reference.
+    Depends only on the estimator and the sensor period: the slots are computed once per pair."""
+    slots, values = _creep_compensation_slots(e, float(dt_sensor_s))
+    p[slots] = values
+
+
+@functools.lru_cache(maxsize=64)
+def _creep_compensation_slots(e, dt_sensor_s: float) -> tuple[np.ndarray, np.ndarray]:
+    return _cached_slots(_fill_creep_compensation, e, dt_sensor_s)
+
+
+def _fill_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
     nominal = FSRS["nominal"]
     p[P.est_creep_comp] = 1.0 if e.creep_compensation else 0.0
     p[P.comp_creep_weight] = creep_term_weight(nominal.creep_per_decade, nominal.creep_tau_min_s,
@@ -193,19 +237,30 @@ def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr) -> None:
     stand-off are packed with the creep compensation) with the loop the estimator was given,
     or, when it was given none, the unit's loop as measured at assembly
     (:func:`ebraille_sim.estimation.calibration.measured_hysteresis_fraction`); and the noise
-    deadband in volts."""
-    nominal = FSRS["nominal"]
-    p[P.est_hyst_comp] = 1.0 if e.hysteresis_compensation else 0.0
+    deadband in volts.  Given the loop, the slots depend only on the estimator and the ADC's
+    LSB: they are computed once per combination."""
     h = e.hysteresis_fraction
     if h is None:
-        h = measured_hysteresis_fraction(fsr) if e.hysteresis_compensation else nominal.hysteresis_fraction
+        h = measured_hysteresis_fraction(fsr) if e.hysteresis_compensation else FSRS["nominal"].hysteresis_fraction
+    slots, values = _hysteresis_compensation_slots(e, float(circuit.adc_lsb_v), h)
+    p[slots] = values
+
+
+@functools.lru_cache(maxsize=256)
+def _hysteresis_compensation_slots(e, adc_lsb_v: float, h) -> tuple[np.ndarray, np.ndarray]:
+    return _cached_slots(_fill_hysteresis_compensation, e, adc_lsb_v, h)
+
+
+def _fill_hysteresis_compensation(p: np.ndarray, e, adc_lsb_v: float, h) -> None:
+    nominal = FSRS["nominal"]
+    p[P.est_hyst_comp] = 1.0 if e.hysteresis_compensation else 0.0
     widths, weights = play_widths(dataclasses.replace(nominal, hysteresis_fraction=h))
     for j in range(N_PLAYS):
         p[P[f"comp_play_w{j}"]] = widths[j]
         p[P[f"comp_play_weight{j}"]] = weights[j]
     p[P.comp_hyst_halfwidth] = sum(w * x for w, x in zip(weights, widths))
     p[P.comp_fsr_k_ohm] = nominal.resistance_at_1n_ohm
-    p[P.comp_hyst_deadband_v] = e.hysteresis_deadband_lsb * circuit.adc_lsb_v
+    p[P.comp_hyst_deadband_v] = e.hysteresis_deadband_lsb * adc_lsb_v
 
 
 @functools.lru_cache(maxsize=64)

@@ -492,7 +492,9 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
     t_s : ndarray, shape (n,)
         Start times of the control periods, s.
     rng : numpy.random.Generator
-        The run's input generator; kind ``k`` of :data:`KINDS` draws from its child ``k``.
+        The run's input generator; kind ``k`` of :data:`KINDS` draws from its child ``k``
+        (the ``SeedSequence`` that ``rng.spawn(len(KINDS))`` would give it; only the children
+        of the kinds present are made, and ``rng`` is left as it was).
     device : DeviceParams
 
     Returns
@@ -501,15 +503,17 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
         ``{input_name: ("set" | "add", ndarray of shape (n,))}``.
     """
     t_s = np.asarray(t_s, dtype=float)
-    # the children of rng.spawn(len(KINDS)), a generator made only for the kinds present
+    # child k of rng.spawn(len(KINDS)) (its spawn key extended by k), made only for the kinds present
     bits = rng.bit_generator
-    seeds = dict(zip(KINDS, bits.seed_seq.spawn(len(KINDS))))
+    parent = bits.seed_seq
     out: dict = {}
-    for name in KINDS:
+    for k, name in enumerate(KINDS):
         obj = section.get(name)
         if obj is None or not hasattr(obj, "inputs"):
             continue
-        child = type(rng)(type(bits)(seed=seeds[name]))
+        seed = np.random.SeedSequence(parent.entropy, spawn_key=parent.spawn_key + (parent.n_children_spawned + k,),
+                                      pool_size=parent.pool_size)
+        child = type(rng)(type(bits)(seed=seed))
         for inp, (mode, arr) in obj.inputs(t_s, child, device).items():
             if inp in out and mode == "add" and out[inp][0] == "add":
                 out[inp] = ("add", out[inp][1] + arr)
