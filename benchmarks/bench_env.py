@@ -19,8 +19,8 @@
   calibration, episode inputs and packing) in units of one env step (a control period at
   200 Hz) measured in the same run; the target is at most 20 steps.
 * threads: env-steps/s of the vector env's compiled row loop on threads (``prange``) and on
-  one thread at 1-1024 sub-envs, no resets; the ratio threads / one thread is what
-  :func:`ebraille_sim.rl.vector_env.use_threads` (the default of ``parallel``) is based on.
+  one thread at 1-1024 sub-envs, no resets; the ratio threads / one thread, which the default
+  (``parallel=None``, :class:`ebraille_sim.rl.vector_env.ThreadChoice`) measures while it runs.
 
 With ``--only-resets`` only the reset figures, each the median of ``--repeat`` (3) timings in
 the same process: the scalar env's reset in ms and in env steps (steps and resets
@@ -266,12 +266,11 @@ def main(argv=None):
     res["reset"] = {"reset_s": r_s, "step_s": s_s, "reset_in_steps": ratio}
     print(f"scalar env reset: {r_s * 1e3:.3f} ms, step {s_s * 1e3:.4f} ms (200 Hz): one reset = {ratio:.1f} steps")
 
-    from ebraille_sim.rl.vector_env import use_threads
     res["threads"] = thread_table()
     for row in res["threads"]:
         print(f"vector env {row['envs']:5d} envs, no resets: one thread {row['one_thread_env_steps_per_s']:10.0f} "
               f"env-steps/s, threads {row['threads_env_steps_per_s']:10.0f} env-steps/s, "
-              f"threads/one {row['ratio_threads_to_one']:5.2f}, default uses threads: {use_threads(row['envs'])}")
+              f"threads/one {row['ratio_threads_to_one']:5.2f}")
 
     rows = []
     for label, resets, kwargs in [("200 Hz, autoresets, default", True, {}),

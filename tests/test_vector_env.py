@@ -133,15 +133,11 @@ def test_vector_render_gives_one_frame_per_env():
     venv.close()
 
 
-def test_threads_only_with_enough_cores_and_envs():
-    from ebraille_sim.rl.vector_env import THREADS_MIN_CPUS, THREADS_MIN_ENVS, use_threads
-    assert not use_threads(1024, cpus=2)                       # measured: one thread wins on 2 cores
-    assert not use_threads(THREADS_MIN_ENVS - 1, cpus=64)
-    assert use_threads(THREADS_MIN_ENVS, cpus=THREADS_MIN_CPUS)
-    assert not use_threads(4096, cpus=None) or (os.cpu_count() or 1) >= THREADS_MIN_CPUS
-    venv = ContactForceVectorEnv(num_envs=3)
-    assert venv.parallel is use_threads(3) and venv.parallel is False
+def test_parallel_argument():
+    assert ContactForceVectorEnv(num_envs=1).parallel is False          # one sub-env: no choice to make
+    assert ContactForceVectorEnv(num_envs=1)._choice is None
     assert ContactForceVectorEnv(num_envs=3, parallel=True).parallel is True
+    assert ContactForceVectorEnv(num_envs=3, parallel=False)._choice is None
     with pytest.raises(ValueError, match="parallel must be True, False or None"):
         ContactForceVectorEnv(num_envs=3, parallel="yes")
 
@@ -191,3 +187,39 @@ def test_the_batched_safety_layer_equals_each_rows_python_supervisor():
     assert [sup.mode for sup in fast._sups] == [sup.mode for sup in slow._sups]
     fast.close()
     slow.close()
+
+
+def test_default_threading_follows_the_timings_and_changes_no_number():
+    """ThreadChoice keeps the way whose timed steps were faster and re-times the other every
+    PROBE_EVERY steps; the default env, whichever way it steps, gives the one-thread numbers."""
+    from ebraille_sim.rl.vector_env import PROBE_EVERY, PROBE_STEPS, ThreadChoice
+    cost = {False: 2.0, True: 1.0}
+    ch = ThreadChoice()
+    ways = []
+    for k in range(3 * PROBE_EVERY):
+        if k == PROBE_EVERY + 10:
+            cost[True] = 5.0                      # threads become slow (the other cores got busy)
+        w = ch.pick()
+        ways.append(w)
+        ch.record(w, cost[w])
+    assert ways[:1 + PROBE_STEPS] == [False] * (1 + PROBE_STEPS)
+    assert ways[1 + PROBE_STEPS:2 + 2 * PROBE_STEPS] == [True] * (1 + PROBE_STEPS)
+    assert ways[2 + 2 * PROBE_STEPS + 5] is True             # threads measured faster: kept
+    assert ch.threads is False and ways[-1] is False          # the running mean saw them slow down
+    assert sum(1 for w in ways[-PROBE_EVERY:] if w) <= PROBE_STEPS + 1   # only probes on threads
+
+    a = ContactForceVectorEnv(num_envs=4, parallel=False)
+    b = ContactForceVectorEnv(num_envs=4)
+    oa, _ = a.reset(seed=11)
+    ob, _ = b.reset(seed=11)
+    rng = np.random.default_rng(0)
+    used = set()
+    for _ in range(300):
+        act = rng.uniform(-1, 1, size=(4, 1)).astype(np.float32)
+        oa, ra, ta, tra, _ = a.step(act)
+        ob, rb, tb, trb, _ = b.step(act)
+        used.add(bool(b.parallel))
+        np.testing.assert_array_equal(oa, ob)
+        np.testing.assert_array_equal(ra, rb)
+    if (os.cpu_count() or 1) >= 2:
+        assert b._choice is not None

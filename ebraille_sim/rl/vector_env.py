@@ -10,10 +10,14 @@ plant inputs (finger position, driver supply, ... as built for the episode's spe
 :func:`ebraille_sim.rl.env.post_step` (the scalar env's reward, termination and observation).
 With ``parallel=True`` the rows are spread over threads with ``numba.prange``; rows are
 independent, so the result does not depend on the thread count.  The default
-(``parallel=None``) uses threads only where they pay: :func:`use_threads` (at least
-:data:`THREADS_MIN_CPUS` cores and :data:`THREADS_MIN_ENVS` sub-envs).  On a 2-core machine
-shared with other work (load average 6) threads ran at 0.09-0.60x of one thread from 4 to
-1024 sub-envs and no faster at 1 (``benchmarks/bench_env.py`` prints this table).
+(``parallel=None``) uses threads only where they pay, measured while it runs: with at least
+two cores and two sub-envs it times the compiled step both ways (:class:`ThreadChoice`: after
+one untimed call of each, :data:`PROBE_STEPS` steps of each), keeps the faster, and times the
+other again every :data:`PROBE_EVERY` steps, so a machine whose load changes is followed.
+Which way runs changes no number.  Idle on 2 cores threads ran 2.4-3.0 times faster than
+one thread from 16 to 1024 sub-envs; with other work on both cores (load average 6) they ran
+at 0.09-0.60 times one thread (``benchmarks/bench_env.py`` prints this table), which is why
+no fixed rule serves.
 
 Sub-env ``i`` is exactly the scalar env reset with seed ``seed + i`` (or ``seeds[i]``): the
 same episode draws, the same packed rows (built by :meth:`ebraille_sim.plant.loop.Plant.from_devices`)
@@ -45,6 +49,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 
 import numpy as np
 from gymnasium import spaces
@@ -74,35 +79,66 @@ from ebraille_sim.rl.env import (
 )
 from ebraille_sim.plant.layout import N_INPUT, N_PARAM, N_STATE, S, U
 
-__all__ = ["ContactForceVectorEnv", "THREADS_MIN_CPUS", "THREADS_MIN_ENVS", "step_row", "step_rows",
-           "step_rows_serial", "use_threads"]
+__all__ = ["ContactForceVectorEnv", "PROBE_EVERY", "PROBE_STEPS", "ThreadChoice", "step_row", "step_rows",
+           "step_rows_serial"]
 
-THREADS_MIN_CPUS = 4
-"""Fewest cores on which the default spreads rows over threads.  On 2 shared cores threads
-were slower than one thread at every size from 4 to 1024 sub-envs."""
+PROBE_STEPS = 4
+"""Steps timed in each way of stepping when the default compares them."""
 
-THREADS_MIN_ENVS = 256
-"""Fewest sub-envs for which the default spreads rows over threads: below it a period's work
-per row (10-50 physics substeps, a few microseconds) does not cover waking the threads."""
+PROBE_EVERY = 256
+"""Steps between two timings of the way of stepping not in use (default ``parallel``)."""
 
 
-def use_threads(num_envs: int, cpus: int | None = None) -> bool:
-    """Whether the default vector env steps its rows on threads.
+class ThreadChoice:
+    """Which way the default vector env steps its rows: one thread or threads, by timing.
 
-    Parameters
-    ----------
-    num_envs : int
-        Number of sub-envs.
-    cpus : int, optional
-        Cores available (default ``os.cpu_count()``).
-
-    Returns
-    -------
-    bool
-        True with at least :data:`THREADS_MIN_CPUS` cores and :data:`THREADS_MIN_ENVS` sub-envs.
+    :meth:`pick` names the way of the next step and :meth:`record` takes its wall time.  Each
+    way's first call is not timed (it loads the compiled function and, for threads, starts the
+    pool); then :data:`PROBE_STEPS` steps of each are timed, the faster way is kept, and every
+    :data:`PROBE_EVERY` steps the other way is timed again for :data:`PROBE_STEPS` steps.
     """
-    cpus = os.cpu_count() if cpus is None else cpus
-    return (cpus or 1) >= THREADS_MIN_CPUS and num_envs >= THREADS_MIN_ENVS
+
+    def __init__(self):
+        self.threads = False
+        self._warm = {False: False, True: False}
+        self._times = {False: [], True: []}
+        self._mean = {False: math.inf, True: math.inf}
+        self._probing: bool | None = None
+        self._countdown = PROBE_EVERY
+
+    def pick(self) -> bool:
+        """True: step on threads; False: on one thread."""
+        for way in (False, True):
+            if not self._warm[way] or (self._mean[way] == math.inf and len(self._times[way]) < PROBE_STEPS):
+                return way
+        if self._probing is not None:
+            return self._probing
+        self._countdown -= 1
+        if self._countdown <= 0:
+            self._probing = not self.threads
+            self._times[self._probing] = []
+            return self._probing
+        return self.threads
+
+    def record(self, way: bool, seconds: float) -> None:
+        """The wall time of a step taken the way :meth:`pick` named (the way in use keeps a
+        running mean of its last :data:`PROBE_STEPS` steps)."""
+        if not self._warm[way]:
+            self._warm[way] = True
+            return
+        times = self._times[way]
+        times.append(float(seconds))
+        if len(times) > PROBE_STEPS:
+            del times[0]
+        if len(times) < PROBE_STEPS:
+            return
+        self._mean[way] = sum(times) / len(times)
+        if self._probing is None or way == self._probing:
+            if way == self._probing:
+                self._probing = None
+                self._countdown = PROBE_EVERY
+                self._times[way] = []
+            self.threads = self._mean[True] < self._mean[False]
 
 
 @njit(cache=True)
@@ -186,7 +222,8 @@ class ContactForceVectorEnv(VectorEnv):
         None or ``"rgb_array"`` (``render()`` returns one frame per sub-env).
     parallel : bool, optional
         Spread the rows over threads (numba ``prange``); False runs them on one thread;
-        None (default) decides by :func:`use_threads` (number of sub-envs and cores).
+        None (default) times both ways while it runs and keeps the faster
+        (:class:`ThreadChoice`), on one thread where a single core or sub-env leaves no choice.
     **env_kwargs
         The scalar env's arguments (:class:`ebraille_sim.rl.env.EnvConfig`); ``backend`` must be
         ``"lumped"``.
@@ -219,7 +256,9 @@ class ContactForceVectorEnv(VectorEnv):
         self.max_episode_steps = (self.config.max_episode_steps() if max_episode_steps is None
                                   else int(max_episode_steps))
         self.render_mode = render_mode
-        self.parallel = use_threads(self.num_envs) if parallel is None else bool(parallel)
+        cpus = os.cpu_count() or 1
+        self._choice = ThreadChoice() if parallel is None and cpus >= 2 and self.num_envs >= 2 else None
+        self.parallel = (False if parallel is None else bool(parallel)) if self._choice is None else False
         self._step_fn = step_rows if self.parallel else step_rows_serial
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -395,9 +434,19 @@ class ContactForceVectorEnv(VectorEnv):
         if self.config.safety and not fused:
             a = self._supervised(a)
         sv2, cfg2 = (self._sv2, self._svcfg2) if fused else (self._no_sv, self._no_sv)
-        self._step_fn(self.state, self.params, self.inputs, self._z, self._c, self._seq, self._setpoint,
-                      self._n_steps, a, self._active, self._substeps, self._obs, self._reward,
-                      self._violation, self._terminated, self._truncated, fused, sv2, cfg2, self._dt)
+        choice = self._choice
+        if choice is not None:
+            way = choice.pick()
+            fn = step_rows if way else step_rows_serial
+            t0 = time.perf_counter()
+        else:
+            fn = self._step_fn
+        fn(self.state, self.params, self.inputs, self._z, self._c, self._seq, self._setpoint,
+           self._n_steps, a, self._active, self._substeps, self._obs, self._reward,
+           self._violation, self._terminated, self._truncated, fused, sv2, cfg2, self._dt)
+        if choice is not None:
+            choice.record(way, time.perf_counter() - t0)
+            self.parallel = choice.threads
         if done.any():
             self._load_rows(np.flatnonzero(done), {})
             self._reward[done] = 0.0
