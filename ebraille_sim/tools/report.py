@@ -192,13 +192,7 @@ def figure_data(result: RunResult, controller_file=None, backend: str | None = N
 def force_figure(result: RunResult, controller_file=None, backend: str | None = None):
     """The figure of force.png: true and estimated force against the setpoint, and the command.
 
-    Parameters
-    ----------
-    result : RunResult
-    controller_file : path, optional
-        The gains file the controller came from, named in the title.
-    backend : str, optional
-        The plant backend the run used (``"lumped"``, ``"pymunk"``), named in the title.
+    The parameters are those of :func:`figure_data`.
 
     Returns
     -------
