@@ -708,28 +708,15 @@ def test_hysteresis_compensation_reads_the_loading_branch():
 def test_running_median_passes_a_ramp_delayed_and_removes_a_spike():
     nm = blockmodels.HYSTERESIS_MEDIAN - 1
     st = np.zeros(nm)
-    out = [blockmodels.running_median_v(float(k), st, 0, nm) for k in range(1, 12)]
+    out = [blockmodels.running_median_v(float(k), st, 0) for k in range(1, 12)]
     assert out[nm // 2:] == [float(k) for k in range(1, 12 - nm // 2)]
     st = np.full(nm, 1.0)
     seq = [1.0, 1.0, 5.0, 1.0, 1.0, 1.0, -3.0, -3.0, 1.0, 1.0]
-    assert [blockmodels.running_median_v(v, st, 0, nm) for v in seq] == [1.0] * len(seq)
-
-
-def test_assembly_measures_the_units_hysteresis_and_the_firmware_packs_it():
-    """A press to 1 N, on to 2 N and back to 1 N through the plant's laws reads the unit's loop
-    (R_F+ - R_F-)/R_F+; with the compensation on and no loop given, the packed play widths are
-    those of that loop with the nominal exponent; a loop given explicitly is used as given."""
-    import dataclasses as dc
-    from ebraille_sim.estimation.calibration import measured_hysteresis_fraction
-    nominal = FSRS["nominal"]
-    for h in (0.05, 0.10, 0.15):
-        assert measured_hysteresis_fraction(dc.replace(nominal, hysteresis_fraction=h)) == pytest.approx(h, abs=3e-4)
-    unit = dc.replace(nominal, hysteresis_fraction=0.14, exponent=0.95)
-    for given, expect in ((None, measured_hysteresis_fraction(unit)), (0.10, 0.10)):
-        dev = DeviceParams(fsr=unit, estimator=EstimatorParams(hysteresis_compensation=True, hysteresis_fraction=given))
-        p = pack_params(dev, 0)
-        widths, _ = play_widths(dc.replace(nominal, hysteresis_fraction=expect))
-        np.testing.assert_allclose([p[P[f"comp_play_w{j}"]] for j in range(N_PLAYS)], widths, rtol=1e-12)
-        assert p[P.comp_hyst_halfwidth] == pytest.approx(-math.log(1.0 - expect) / (2.0 * nominal.exponent), rel=1e-12)
-    with pytest.raises(ValueError, match="hysteresis_fraction"):
-        EstimatorParams(hysteresis_fraction=1.0)
+    assert [blockmodels.running_median_v(v, st, 0) for v in seq] == [1.0] * len(seq)
+    # the selection is the median of the last five samples, whatever their order
+    rng = np.random.default_rng(4)
+    x = rng.integers(0, 4, 3000).astype(float)           # many ties, as quantised codes have
+    st = x[3::-1].copy()
+    got = [blockmodels.running_median_v(x[k], st, 0) for k in range(4, len(x))]
+    np.testing.assert_array_equal(got, [np.median(x[k - 4:k + 1]) for k in range(4, len(x))])
+    np.testing.assert_array_equal(st, x[:-5:-1])

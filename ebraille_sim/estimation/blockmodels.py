@@ -1015,19 +1015,27 @@ def creep_compensated_v(v, f_est_n, s, z0, p, a0, weight, threshold_n, n_terms, 
 
 
 @njit(cache=True, inline="always")
-def running_median_v(v, s, m0, n_prev):
-    """Median of ``v`` and the ``n_prev`` voltages before it (``s[m0:m0+n_prev]``, newest first,
-    shifted in place).  A monotone sequence passes delayed by ``n_prev // 2`` samples and
-    unchanged in value; a spike of fewer than ``n_prev // 2 + 1`` samples is removed."""
-    w = np.empty(n_prev + 1)
-    w[0] = v
-    for j in range(n_prev):
-        w[j + 1] = s[m0 + j]
-    for j in range(n_prev - 1, 0, -1):
-        s[m0 + j] = s[m0 + j - 1]
+def running_median_v(v, s, m0):
+    """Median of ``v`` and the four voltages before it (``s[m0:m0+4]``, newest first, shifted in
+    place): :data:`HYSTERESIS_MEDIAN` = 5 samples, selected by comparisons, nothing allocated.
+    A monotone sequence passes delayed by two samples and unchanged in value; a spike of one or
+    two samples is removed."""
+    a, b, c, d, e = v, s[m0], s[m0 + 1], s[m0 + 2], s[m0 + 3]
+    s[m0 + 3] = d
+    s[m0 + 2] = c
+    s[m0 + 1] = b
     s[m0] = v
-    w.sort()
-    return w[n_prev // 2]
+    if a > b:
+        a, b = b, a
+    if c > d:
+        c, d = d, c
+    if a > c:                      # the smaller of the two pairs' minima is below the median
+        a, b, c, d = c, d, a, b
+    if b > e:                      # of b, c <= d, e the second smallest is the median of five
+        b, e = e, b
+    if b > c:
+        b, e, c, d = c, d, b, e
+    return c if c < e else e
 
 
 @njit(cache=True, inline="always")
@@ -1055,7 +1063,7 @@ def hysteresis_compensated_v(v, s, v0, x0, play0, m0, p, width0, weight0, n_play
     """
     if not 0.0 < v < supply_v:
         return v
-    vf = play(running_median_v(v, s, m0, HYSTERESIS_MEDIAN - 1), s[v0], deadband_v)
+    vf = play(running_median_v(v, s, m0), s[v0], deadband_v)
     x = s[x0]
     if vf != s[v0]:
         s[v0] = vf
