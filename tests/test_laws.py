@@ -720,3 +720,23 @@ def test_running_median_passes_a_ramp_delayed_and_removes_a_spike():
     got = [blockmodels.running_median_v(x[k], st, 0) for k in range(4, len(x))]
     np.testing.assert_array_equal(got, [np.median(x[k - 4:k + 1]) for k in range(4, len(x))])
     np.testing.assert_array_equal(st, x[:-5:-1])
+
+
+def test_assembly_measures_the_units_hysteresis_and_the_firmware_packs_it():
+    """A press to 1 N, on to 2 N and back to 1 N through the plant's laws reads the unit's loop
+    (R_F+ - R_F-)/R_F+; with the compensation on and no loop given, the packed play widths are
+    those of that loop with the nominal exponent; a loop given explicitly is used as given."""
+    import dataclasses as dc
+    from ebraille_sim.estimation.calibration import measured_hysteresis_fraction
+    nominal = FSRS["nominal"]
+    for h in (0.05, 0.10, 0.15):
+        assert measured_hysteresis_fraction(dc.replace(nominal, hysteresis_fraction=h)) == pytest.approx(h, abs=3e-4)
+    unit = dc.replace(nominal, hysteresis_fraction=0.14, exponent=0.95)
+    for given, expect in ((None, measured_hysteresis_fraction(unit)), (0.10, 0.10)):
+        dev = DeviceParams(fsr=unit, estimator=EstimatorParams(hysteresis_compensation=True, hysteresis_fraction=given))
+        p = pack_params(dev, 0)
+        widths, _ = play_widths(dc.replace(nominal, hysteresis_fraction=expect))
+        np.testing.assert_allclose([p[P[f"comp_play_w{j}"]] for j in range(N_PLAYS)], widths, rtol=1e-12)
+        assert p[P.comp_hyst_halfwidth] == pytest.approx(-math.log(1.0 - expect) / (2.0 * nominal.exponent), rel=1e-12)
+    with pytest.raises(ValueError, match="hysteresis_fraction"):
+        EstimatorParams(hysteresis_fraction=1.0)
