@@ -31,16 +31,16 @@ def _linear_plant_run(d_v: float, n: int, dt_s: float = 1e-3, setpoint_n: float 
 def test_estimate_converges_to_a_constant_input_disturbance_within_tau():
     d_v = 0.5
     tau = DEFAULT_DOB.q_time_constant_s
-    d_hat, force = _linear_plant_run(d_v, 2000)
+    d_hat, force = _linear_plant_run(d_v, 4000)
     k_tau = round(tau / 1e-3) - 1                        # the sample ending at t = tau
     assert abs(d_hat[k_tau] - d_v) <= math.exp(-1.0) * d_v * 1.02
     assert abs(d_hat[5 * (k_tau + 1) - 1] - d_v) < 0.01 * d_v
-    # the loop rejects it: the force is back on the setpoint, the PID's integral carries only
-    # the uncompensated 10 %
+    # the loop rejects it: within 4 s the force is back on the setpoint (0.3 mN off), the PID's
+    # slow integral (zero at ki/kp = 1.4 rad/s) carrying the uncompensated 34 %
     assert abs(force[-1] - 1.0) < 1e-3
-    # measured 0.063 N: the nominal plant's gain follows the pulp's tangent stiffness at 1 N
+    # measured 0.100 N: the nominal plant's gain follows the pulp's tangent stiffness at 1 N
     # (8571 N/m with the tap-dissipation weights, c0 = 0.15)
-    assert 0.04 < abs(force - 1.0).max() < 0.08
+    assert 0.08 < abs(force - 1.0).max() < 0.12
 
 
 def test_without_the_observer_the_same_disturbance_takes_the_pid_longer():
@@ -68,7 +68,7 @@ def _error_rms(controller: str, duration_s: float = 8.0) -> float:
 
 
 def test_pressing_force_error_lower_than_pid():
-    # measured (supervised, nominal reader, 8 s, seed 12, after 2 s): pid 0.136 N, pid_dob 0.081 N RMS
+    # measured (supervised, nominal reader, 8 s, seed 12, after 2 s): pid 0.130 N, pid_dob 0.088 N RMS
     e_pid, e_dob = _error_rms("pid"), _error_rms("pid_dob")
     assert e_dob < 0.75 * e_pid
     assert e_dob < 0.1
@@ -119,7 +119,7 @@ def test_registered_and_a_controller():
     assert "pid_dob" in controllers.available()
     c = controllers.make("pid_dob", kp_v_per_n=1.5)
     assert isinstance(c, DOBPID) and isinstance(c, controllers.Controller)
-    assert c.config.kp_v_per_n == 1.5 and c.config.ki_v_per_ns == 8.0
+    assert c.config.kp_v_per_n == 1.5 and c.config.ki_v_per_ns == DEFAULT_DOB.ki_v_per_ns == 2.5
 
 
 def test_deterministic():
@@ -129,3 +129,20 @@ def test_deterministic():
         np.testing.assert_array_equal(a.trace[key], b.trace[key])
     assert {k: v for k, v in a.metrics.items() if k != "real_time_factor"} == \
         {k: v for k, v in b.metrics.items() if k != "real_time_factor"}
+
+
+def test_observer_loop_through_a_stuck_drive_stays_below_one_for_the_population():
+    """While the drive sticks the current is u / R and the observer closes a positive loop of gain
+    f R_n / R: it must stay below 1 for a winding 6 population standard deviations below
+    nominal, and the command then settles at u_pid / (1 - f R_n / R)."""
+    from ebraille_sim.scenarios.population import PopulationSpec
+    f = DEFAULT_DOB.compensation_fraction
+    r_low = R_OHM * (1.0 - 6.0 * PopulationSpec().motor_r_sigma)
+    assert f * R_OHM / r_low < 1.0
+    c = controllers.make("pid_dob", ki_v_per_ns=0.0)
+    c.reset(force_est_n=1.0, setpoint_n=1.0, command_v=0.0)
+    u = 0.0
+    for _ in range(1000):                                  # 0.1 N short, the drive stuck
+        u = c.update(0.9, 1.0, 1e-3, motor_current_a=u / r_low)
+    loop = f * R_OHM / r_low
+    assert u == pytest.approx(DEFAULT_DOB.kp_v_per_n * 0.1 / (1.0 - loop), rel=1e-3)
