@@ -41,7 +41,7 @@ def test_suites_are_fixed_and_plans_cover_every_episode():
 
 def test_quick_suite_ranks_the_bounds_beside_the_controller(quick):
     res, s = quick
-    assert res.controllers == ["pid", "actuator_bound", "sensor_bound"]
+    assert res.controllers == ["pid", "actuator_bound", "hysteresis_bound", "sensor_bound"]
     n_sc = len(res.suite.scenarios)
     assert sum(r["controller"] == "pid" for r in res.rows) == n_sc * res.readers
     # true-force feedback holds the force under pressing far better than the FSR-fed PID
@@ -52,8 +52,13 @@ def test_quick_suite_ranks_the_bounds_beside_the_controller(quick):
     # refresh at 120 wpm is out of reach even with the true force, where the derived sensor
     # bound can come out a little above the actuator bound)
     assert min(s["actuator_bound"]["score"], s["sensor_bound"]["score"]) > s["pid"]["score"] + 10
-    # the sensor bound is not defined on a fault scenario (a broken lead is not an estimation error)
+    # seeing the force only through the film's hysteresis, a fast controller still holds the
+    # pressing: the film's blind stretch alone is not what the FSR-fed PID loses to
+    assert s["pid"]["score"] < s["hysteresis_bound"]["score"]
+    assert press["hysteresis_bound"]["in_band_fraction_cvar10"] > 0.95
+    # the derived bounds are not defined on a fault scenario (a broken lead is not an estimation error)
     assert s["sensor_bound"]["scenarios"]["fault_fsr_open"]["episodes"] == 0
+    assert s["hysteresis_bound"]["scenarios"]["fault_fsr_open"]["episodes"] == 0
     for c in s:
         for key, st in s[c]["scenarios"].items():
             if st["episodes"]:

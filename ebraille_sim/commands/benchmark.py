@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 NAME = "benchmark"
-HELP = "rank controllers on a fixed scenario suite over a reader population, beside the actuator and sensor bounds"
+HELP = ("rank controllers on a fixed scenario suite over a reader population, beside the actuator, "
+        "hysteresis and sensor bounds")
 EPILOG = ("score = 100 * mean over tracking scenarios of (CVaR10(in_band) + CVaR10(char_in_band)) / 2 "
           "- 100 * fraction of episodes with peak force > 3 N.  CVaR10 is the mean of the worst 10 % of "
-          "the readers.  actuator_bound: a controller fed the true force; sensor_bound: its force shifted by "
-          "the estimator error (docs/benchmark.md).  The same command gives the same numbers.")
+          "the readers.  actuator_bound: a controller fed the true force; hysteresis_bound: the same "
+          "controller fed the true force through the FSR's hysteresis and its exact inverse; sensor_bound: "
+          "the actuator bound's force shifted by the estimator error (docs/benchmark.md).  The same command gives the same numbers.")
 
 
 SUITE_NAMES = ("quick", "standard")
@@ -26,7 +28,7 @@ def add_arguments(p):
                    help="write benchmark.json (the results file) and leaderboard.md into DIR")
     p.add_argument("--compare", default=None, metavar="RESULTS.json",
                    help="print the changes against an earlier benchmark.json of the same suite")
-    p.add_argument("--no-bounds", action="store_true", help="skip actuator_bound and sensor_bound")
+    p.add_argument("--no-bounds", action="store_true", help="skip actuator_bound, hysteresis_bound and sensor_bound")
     p.add_argument("--estimator", action="append", default=[], metavar="KEY=VALUE",
                    help="an estimator setting of every device, bounds included (repeatable), e.g. "
                         "hysteresis_compensation=true; the [estimator] keys of a scenario file")

@@ -31,7 +31,11 @@ episode: its true-force trajectory ``F`` shifted by the estimator's error along 
 ``F - (F_est - F)``, is what the finger would feel if a controller held the *estimate* as
 well as ``actuator_bound`` holds the true force; its metrics are computed on that
 trajectory (energy is the actuator run's).  It is a first-order estimate, not a proof
-(docs/benchmark.md).
+(docs/benchmark.md).  ``hysteresis_bound`` is ``actuator_bound``'s controller fed the true
+force through the unit's FSR hysteresis and its exact inverse
+(:class:`controllers.bounds.HysteresisSeen`): what the film lets any firmware know, with no
+other sensor error, so it shows what the film's blind stretch after a reversal costs.  Both
+derived bounds are left out of the fault scenarios.
 
 Examples
 --------
@@ -66,7 +70,7 @@ POPULATION_SEED = 2026
 ALPHA = 0.1
 """Tail fraction of the CVaR."""
 
-BOUNDS = ("actuator_bound", "sensor_bound")
+BOUNDS = ("actuator_bound", "hysteresis_bound", "sensor_bound")
 """Leaderboard entries that are bounds, not controllers one could ship."""
 
 FRACTIONS = ("in_band_fraction", "char_in_band_fraction")
@@ -234,7 +238,8 @@ def run_episode(task) -> list[dict]:
     kept metrics.
 
     ``actuator_bound`` episodes also give the ``sensor_bound`` row, except in fault scenarios
-    (a failed sensor's error is not an estimation error).  The estimator items (pairs of
+    (a failed sensor's error is not an estimation error); ``hysteresis_bound`` runs on the
+    reader's own FSR and gives no row in fault scenarios.  The estimator items (pairs of
     :class:`~ebraille_sim.physics.params.EstimatorParams` fields and values) replace the
     device's estimator settings.
     """
@@ -247,8 +252,14 @@ def run_episode(task) -> list[dict]:
         device = dataclasses.replace(device, estimator=replace_checked(device.estimator, **dict(est)))
     seed = spec.seed + 101 * reader
     base = {"scenario": sc.key, "reader": reader, "seed": seed}
+    controller = ctrl
+    if ctrl == "hysteresis_bound":
+        if sc.fault:
+            return []
+        from controllers.bounds import make_hysteresis_bound
+        controller = make_hysteresis_bound(device.fsr)
     try:
-        res = run_scenario(spec, controller=ctrl, seed=seed, device=device)
+        res = run_scenario(spec, controller=controller, seed=seed, device=device)
     except (ValueError, FloatingPointError) as exc:
         return [dict(base, controller=ctrl, error=str(exc).splitlines()[0])]
     rows = [dict(base, controller=ctrl, **{k: _num(res.metrics.get(k)) for k in KEPT})]
@@ -288,7 +299,7 @@ def run_benchmark(controllers, suite: str | Suite = "standard", readers: int | N
     jobs : int
         Local worker processes (1: this process).  The numbers do not depend on it.
     bounds : bool
-        Also run ``actuator_bound`` (which gives ``sensor_bound``).
+        Also run ``actuator_bound`` (which gives ``sensor_bound``) and ``hysteresis_bound``.
     progress : callable, optional
         ``progress(done, total)`` after each episode.
     estimator : dict or list of str, optional
@@ -306,7 +317,7 @@ def run_benchmark(controllers, suite: str | Suite = "standard", readers: int | N
             raise ValueError(f"{c!r} is a bound the benchmark adds itself; give controllers to compare")
         ctrl_mod.make(c)
     if bounds:
-        names.append("actuator_bound")
+        names += ["actuator_bound", "hysteresis_bound"]
     n = suite.readers if readers is None else int(readers)
     tasks = [(c, suite.scenarios[i], r, n, tuple(est.items())) for c, i, r in plan_episodes(names, suite, n)]
     if jobs < 1:
