@@ -85,6 +85,7 @@ OPTIONS = {
         "--envs": _ints(["0", "-1", "257"]),
         "--control-rate": _floats(["0", "-1", "0.5", "3"], "1e9"),
         "--threads": _ints(["0", "-1", "65"]),
+        "--estimator": ["nope=1", "hysteresis_compensation", "=true", "hysteresis_deadband_lsb=-1"],
     },
     "regress": {
         "--only": ["no_such_scenario", "{tmp}/missing.toml"],

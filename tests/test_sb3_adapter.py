@@ -5,6 +5,7 @@ need the ``rl`` extra and are skipped without it.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -14,6 +15,7 @@ import pytest
 
 import controllers
 from controllers.policy import POLICY_FORMAT, load_policy, read_metadata
+from ebraille_sim.physics.params import EstimatorParams
 from ebraille_sim.rl.sb3 import VecEnvAdapter, policy_metadata, write_policy_metadata
 from ebraille_sim.rl.vector_env import ContactForceVectorEnv
 
@@ -132,7 +134,8 @@ def test_metadata_for_a_plain_sb3_zip_and_the_missing_file_error(tmp_path):
     assert meta["format"] == POLICY_FORMAT and meta["algo"] == "ppo"
     assert meta["env"] == venv.config.policy_metadata() and meta["env"]["control_rate_hz"] == 500.0
     assert policy_metadata("SAC", {"control_rate_hz": 500.0})["env"] == meta["env"]   # kwargs give the same
-    assert json.loads((tmp_path / "ppo.json").read_text())["training"] == {"source": "stable-baselines3"}
+    assert json.loads((tmp_path / "ppo.json").read_text())["training"] == {
+        "source": "stable-baselines3", "estimator": dataclasses.asdict(EstimatorParams())}
     with pytest.raises(ValueError, match="algorithm must be one of ppo, sac"):
         policy_metadata("dqn", venv)
     with pytest.raises(ValueError, match="cannot find the env configuration"):

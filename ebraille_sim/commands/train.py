@@ -5,8 +5,10 @@ drive trains, passages, rates, setpoints and disturbances) through Stable-Baseli
 vectorisation of the registered id, with no wrapper of ours.  The output folder receives
 ``policy.zip`` (the SB3 model), ``policy.npz`` (its deterministic actor for NumPy,
 :class:`controllers.policy.MlpActor`) and ``policy.json`` (algorithm, the env settings the
-observation depends on, and the training record: steps, seed, wall time, versions), which
-``--controller policy:DIR`` loads in ``ebraille-sim run``.
+observation depends on, and the training record: steps, seed, wall time, versions, and the
+estimator settings of the devices trained on), which ``--controller policy:DIR`` loads in
+``ebraille-sim run``.  ``--estimator KEY=VALUE`` (repeatable, as in ``ebraille-sim benchmark``)
+trains on a firmware variant: every drawn device carries those estimator settings.
 
 Needs the ``rl`` extra: ``pip install 'ebraille-sim[rl]'``.
 """
@@ -44,6 +46,10 @@ def add_arguments(p):
                    help="env step rate = the policy's control rate, Hz; divides the 10 kHz physics rate "
                         "(default: 200)")
     p.add_argument("--threads", type=whole(1, 64), default=1, metavar="N", help="PyTorch threads, in [1, 64] (default: 1)")
+    p.add_argument("--estimator", action="append", default=[], metavar="KEY=VALUE",
+                   help="an estimator setting of every device trained on (repeatable), e.g. "
+                        "hysteresis_compensation=true; the [estimator] keys of a scenario file, recorded in "
+                        "policy.json")
 
 
 def _check(args):
@@ -94,7 +100,7 @@ def _progress_callback(report, total: int, reports: int = 50):
 
 
 def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_rate_hz: float = 200.0,
-          threads: int = 1, verbose: int = 0, progress=None) -> dict:
+          threads: int = 1, verbose: int = 0, progress=None, estimator=None) -> dict:
     """Train and save a policy; returns the ``training`` record written to ``policy.json``.
 
     Parameters
@@ -113,6 +119,11 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
         PyTorch intra-op threads.
     progress : callable, optional
         Called as ``progress(done_steps, total_steps)`` about 50 times during training.
+    estimator : dict or list of str, optional
+        Estimator settings of the env's base device, and so of every device drawn around it
+        (:func:`ebraille_sim.tools.benchmark.estimator_settings`), such as
+        ``{"hysteresis_compensation": True}``; the record's ``estimator`` holds every
+        estimator field of the devices trained on.
     """
     import json
     import pathlib
@@ -128,12 +139,24 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
     from controllers.policy import POLICY_FORMAT
 
     from ebraille_sim.rl.env import ENV_ID, EnvConfig, register_envs
+    from ebraille_sim.tools.benchmark import estimator_settings
     if algo not in ("ppo", "sac"):
         raise ValueError(f"algo must be 'ppo' or 'sac', got {algo!r}")
+    est = estimator_settings(estimator)
+    base = None
+    if est:
+        import dataclasses
+
+        from ebraille_sim.base.validation import replace_checked
+        from ebraille_sim.physics.params import DeviceParams
+        nominal = DeviceParams()
+        base = dataclasses.replace(nominal, estimator=replace_checked(nominal.estimator, **est))
     register_envs()
-    cfg = EnvConfig(control_rate_hz=control_rate_hz)
+    cfg = EnvConfig(control_rate_hz=control_rate_hz, base_device=base)
     torch.set_num_threads(threads)
     env_kwargs = {"control_rate_hz": cfg.control_rate_hz, "max_episode_steps": cfg.max_episode_steps()}
+    if base is not None:
+        env_kwargs["base_device"] = base
     venv = make_vec_env(ENV_ID, n_envs=n_envs, seed=seed, env_kwargs=env_kwargs)
     if algo == "ppo":
         model = sb3.PPO("MlpPolicy", venv, seed=seed, device="cpu", verbose=verbose, **_PPO)
@@ -159,6 +182,7 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
         "versions": {"stable_baselines3": sb3.__version__, "torch": torch.__version__,
                      "python": platform.python_version()},
         "machine": {"cpus": __import__("os").cpu_count(), "processor": platform.machine()},
+        "estimator": cfg.estimator_metadata(),
     }
     meta = {"format": POLICY_FORMAT, "algo": algo, "env_id": ENV_ID, "env": cfg.policy_metadata(),
             "training": record}
@@ -170,22 +194,30 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
 def main(args) -> int:
     import pathlib
 
-    from ebraille_sim.commands import FrameProgress, check_out_dir, console
+    from ebraille_sim.commands import FrameProgress, UserError, check_out_dir, console
+    from ebraille_sim.tools.benchmark import estimator_settings
     from ebraille_sim.tools.outputs import staged
     con = console(args)
     _check(args)
+    try:
+        estimator = estimator_settings(args.estimator)
+    except ValueError as exc:
+        raise UserError(f"--estimator: {exc}") from None
     out = check_out_dir(args.out if args.out is not None else pathlib.Path("runs") / f"train-{args.algo}")
     bar = FrameProgress(f"train {args.algo}", enabled=con.progress, every=1)
     try:
         with staged(out, TRAIN_OWNED) as folder:
             rec = train(args.algo, args.steps, folder, seed=args.seed, n_envs=args.envs,
-                        control_rate_hz=args.control_rate, threads=args.threads, progress=bar)
+                        control_rate_hz=args.control_rate, threads=args.threads, progress=bar,
+                        estimator=estimator)
     finally:
         bar.close()
     ret = rec["mean_episode_return_last_100"]
     con.result({"algo": args.algo, **rec, "out": str(out),
                 "files": [str(out / "policy.zip"), str(out / "policy.json")]})
+    firmware = "".join(f", estimator {k}={str(v).lower() if isinstance(v, bool) else v}"
+                       for k, v in estimator.items())
     con.say(f"trained {args.algo.upper()} for {rec['steps']} steps in {rec['wall_time_s']:.1f} s "
-          f"({rec['steps_per_s']:.0f} steps/s)" + ("" if ret is None else f"; mean episode return {ret:.1f}"))
+          f"({rec['steps_per_s']:.0f} steps/s{firmware})" + ("" if ret is None else f"; mean episode return {ret:.1f}"))
     con.say(f"wrote {out / 'policy.zip'}, {out / 'policy.json'}  (use --controller policy:{out})")
     return 0

@@ -413,6 +413,12 @@ class EnvConfig:
                 "violation_weight": self.violation_weight,
                 "driver_supply_v": self.base_device.driver_supply_v, "current_scale_a": self.current_scale_a}
 
+    def estimator_metadata(self) -> dict:
+        """Every :class:`~ebraille_sim.physics.params.EstimatorParams` field of the base device,
+        which every drawn device keeps: the firmware a policy trained on this config met
+        (JSON-serialisable; recorded in ``policy.json``'s ``training``)."""
+        return dataclasses.asdict(self.base_device.estimator)
+
 
 @functools.lru_cache(maxsize=32)
 def _distribution(cfg: EnvConfig):

@@ -291,11 +291,13 @@ def policy_metadata(model_or_algo, env) -> dict:
     algo = algo.lower()
     if algo not in ALGORITHMS:
         raise ValueError(f"algorithm must be one of {', '.join(ALGORITHMS)}, got {algo!r}")
+    cfg = _env_config(env)
     training = {"source": "stable-baselines3"}
     steps = getattr(model_or_algo, "num_timesteps", None)
     if isinstance(steps, (int, np.integer)):
         training["steps"] = int(steps)
-    return {"format": POLICY_FORMAT, "algo": algo, "env_id": ENV_ID, "env": _env_config(env).policy_metadata(),
+    training["estimator"] = cfg.estimator_metadata()
+    return {"format": POLICY_FORMAT, "algo": algo, "env_id": ENV_ID, "env": cfg.policy_metadata(),
             "training": training}
 
 
