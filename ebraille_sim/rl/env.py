@@ -246,18 +246,15 @@ def post_step(z, c, force_est_n, force_true_n, current_a, setpoint_shown_n, setp
 # reads and writes besides the plant's state and input rows, so that the step is one call of
 # five arguments (Numba's dispatcher checks the type of every argument on each call).  The
 # state and inputs stay arguments of their own: the plant kernel's substeps run about a fifth
-# slower on slices of one array, which the compiler must assume to overlap.  Slots 0-11 are
-# the step's outputs, in the order of the info dict; then the episode's sizes and flags; then
-# the start offsets of the parts (part i spans [offset i, offset i+1)); then the parts.  The
+# slower on slices of one array, which the compiler must assume to overlap.  Slot 0 is the
+# agent's command in volts (written by the step); then the episode's sizes and flags; then the
+# start offsets of the parts (part i spans [offset i, offset i+1)); then the parts.  The
 # plant's parameter row, the supervisor's state and configuration, the features and the
 # observation (float32, viewing its part's bytes) are views of their parts.
-(W_REWARD, W_TERMINATED, W_FORCE_TRUE, W_FORCE_EST, W_SETPOINT, W_COMMAND, W_VIOLATION, W_TIME, W_CHAR,
- W_ACTION_V, W_MODE, W_FAULT) = range(12)
-N_OUT = 12
-W_SAFETY, W_SUBSTEPS, W_DT, W_PROF_STRIDE = range(N_OUT, N_OUT + 4)
-W_OFFSETS = N_OUT + 4
-(P_PARAMS, P_SV, P_CFG, P_Z, P_OBS, P_C, P_SETPOINT, P_CHAR, P_PROF, P_ROWS) = range(10)
-N_PARTS = 10
+W_ACTION_V, W_SAFETY, W_SUBSTEPS, W_DT, W_PROF_STRIDE = range(5)
+W_OFFSETS = 5
+(P_PARAMS, P_SV, P_CFG, P_Z, P_OBS, P_C, P_SETPOINT, P_PROF, P_ROWS) = range(9)
+N_PARTS = 9
 W_HEADER = W_OFFSETS + N_PARTS + 1
 N_OBS_SLOTS = (N_OBS + 1) // 2
 """Slots of the observation's part: the float32 observation is a view of its bytes."""
@@ -301,13 +298,15 @@ def scalar_step(state, inputs, ws, k, action):
     controller's, what :func:`supervised_action` does through
     :class:`~controllers.supervisor.Supervisor`), advances the plant
     (:func:`ebraille_sim.plant.kernel.advance`, as :meth:`ebraille_sim.plant.loop.Plant.advance`)
-    and computes reward, termination and the next observation (:func:`post_step`) into the
-    workspace's parts and output slots.
+    and computes reward, termination and the next observation (:func:`post_step`, into the
+    workspace's parts).
 
     Returns
     -------
-    int
-        0, or 1 when the simulation diverged (a non-finite contact force).
+    (reward, terminated, force_true_n, force_est_n, setpoint_n, command_v, violation, time_s, mode, fault)
+        The info's numbers after the step (``setpoint_n`` and ``time_s`` of period ``k + 1``,
+        the supervisor's mode and fault codes, 0 without the safety layer); a non-finite
+        ``force_true_n`` means the simulation diverged.
     """
     c = _part(ws, P_C)
     setpoint = _part(ws, P_SETPOINT)
@@ -333,23 +332,17 @@ def scalar_step(state, inputs, ws, k, action):
         if code == 1:
             code, u, reset_cmd = supervise_end(sv, cfg, a * scale, f, sp, dt_s, cur)
         a = _clip(u / scale, -1.0, 1.0)
-        ws[W_MODE] = sv[SV.mode]
-        ws[W_FAULT] = sv[SV.fault]
+        mode = sv[SV.mode]
+        fault = sv[SV.fault]
+    else:
+        mode = fault = 0.0
     inputs[U.command_v] = a * scale
     kernel.advance(state, _part(ws, P_PARAMS), inputs, int(ws[W_SUBSTEPS]))
     ft = state[S.contact_force_n]
     r, v, term = post_step(_part(ws, P_Z), c, state[S.force_est_n], ft, state[S.current_a],
                            setpoint[k], setpoint[k + 1], a, _part(ws, P_OBS).view(np.float32)[:N_OBS])
-    ws[W_REWARD] = r
-    ws[W_TERMINATED] = 1.0 if term else 0.0
-    ws[W_FORCE_TRUE] = ft
-    ws[W_FORCE_EST] = state[S.force_est_n]
-    ws[W_SETPOINT] = setpoint[k + 1]
-    ws[W_COMMAND] = inputs[U.command_v]
-    ws[W_VIOLATION] = v
-    ws[W_TIME] = (k + 1) * dt_s
-    ws[W_CHAR] = _part(ws, P_CHAR)[k + 1]
-    return 0 if math.isfinite(ft) else 1
+    return (r, term, ft, state[S.force_est_n], setpoint[k + 1], inputs[U.command_v], v, (k + 1) * dt_s, mode,
+            fault)
 
 
 class ActionCommand:
@@ -667,6 +660,8 @@ def check_action(action, n: int | None = None):
 
 _NO_ARRAY = np.zeros(0)
 _FLOAT_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
+_MODE_NAMES = {float(i): name for i, name in enumerate(MODES)}
+_FAULT_NAMES = {0.0: None, **{float(i + 1): name for i, name in enumerate(FAULTS)}}
 
 
 class ContactForceEnv(gym.Env):
@@ -768,7 +763,7 @@ class ContactForceEnv(gym.Env):
         rows = np.array([j for j, _ in self._varying], dtype=np.float64)
         obs = np.zeros(N_OBS_SLOTS)
         parts = (plant.params, self._sv, self._svcfg, self._z, obs, self._c,
-                 ep.setpoint_n, ep.char_index, prof, rows)
+                 ep.setpoint_n, prof, rows)
         ws = pack_workspace(parts, self._sup is not None, plant.substeps, self._dt, prof.shape[1])
         plant.params = workspace_part(ws, P_PARAMS).reshape(plant.params.shape)
         if self._sup is not None:
@@ -776,7 +771,7 @@ class ContactForceEnv(gym.Env):
             self._sv, self._svcfg = self._sup.compiled()
         self._z = workspace_part(ws, P_Z)
         self._obs = workspace_part(ws, P_OBS).view(np.float32)[:N_OBS]
-        self._out = ws[:N_OUT]
+        self._chars = ep.char_index.tolist()
         self._ws = ws
 
     def _info(self, violation: float) -> dict:
@@ -808,23 +803,22 @@ class ContactForceEnv(gym.Env):
         k = self._k
         if k >= self._n_steps:
             raise RuntimeError("the episode has ended; call reset()")
-        diverged = scalar_step(self._st, self._inp, ws, k, a)
+        r, term, ft, fe, sp, cv, v, t, mode, fault = scalar_step(self._st, self._inp, ws, k, a)
         self._k = k = k + 1
-        if diverged:
+        if ft - ft != 0.0:                                      # inf or nan
             raise FloatingPointError("the simulation diverged (non-finite contact force)")
-        r, term, ft, fe, sp, cv, v, t, ci, av, mode, fault = self._out.tolist()
         if self._sup is None:
             info = {"force_true_n": ft, "force_est_n": fe, "setpoint_n": sp, "command_v": cv, "violation": v,
-                    "time_s": t, "char_index": int(ci)}
+                    "time_s": t, "char_index": self._chars[k]}
         else:
-            av = ws[W_ACTION_V]
+            av = ws[W_ACTION_V]                                 # numpy's float64, as sup.inner keeps it
             self._sup.inner.command_v = av
             info = {"force_true_n": ft, "force_est_n": fe, "setpoint_n": sp, "command_v": cv, "violation": v,
-                    "time_s": t, "char_index": int(ci), "action_v": av, "supervisor_mode": MODES[int(mode)],
-                    "supervisor_fault": None if fault == 0.0 else FAULTS[int(fault) - 1]}
+                    "time_s": t, "char_index": self._chars[k], "action_v": av,
+                    "supervisor_mode": _MODE_NAMES[mode], "supervisor_fault": _FAULT_NAMES[fault]}
         if self._history is not None:
             self._record(info, ft)
-        return self._obs.copy(), r, term != 0.0, k >= self._n_steps, info
+        return self._obs.copy(), r, term, k >= self._n_steps, info
 
     def _record(self, info: dict, force_true_n: float) -> None:
         h = self._history
