@@ -261,8 +261,8 @@ N_OBS_SLOTS = (N_OBS + 1) // 2
 
 
 def pack_workspace(parts, safety: bool, substeps: int, dt_s: float, prof_stride: int) -> np.ndarray:
-    """The workspace of :func:`scalar_step`: ``parts`` (arrays in the order of the ``P_*``
-    indices, copied as float64) after the output slots and the header."""
+    """The workspace of :func:`scalar_step`: the header, then ``parts`` (arrays in the order
+    of the ``P_*`` indices, copied as float64)."""
     sizes = [int(np.size(x)) for x in parts]
     offsets = np.cumsum([W_HEADER] + sizes)
     ws = np.zeros(int(offsets[-1]))
@@ -291,8 +291,9 @@ def scalar_step(state, inputs, ws, k, action):
     """One step of the scalar env on a lumped plant, in one compiled call on its workspace.
 
     ``state`` and ``inputs`` are the plant's rows, ``ws`` the episode's workspace
-    (:func:`pack_workspace`), ``k`` the period, ``action`` the agent's (finite) action.  Writes period ``k``'s varying inputs (``inputs[rows[j]] =
-    prof[j, k]``), passes the clipped ``action`` through the safety layer when the
+    (:func:`pack_workspace`), ``k`` the period (below the episode's steps: not checked here),
+    ``action`` the agent's (finite) action.  Writes period ``k``'s varying inputs
+    (``inputs[rows[j]] = prof[j, k]``), passes the clipped ``action`` through the safety layer when the
     workspace's safety flag is set (:func:`controllers.supervisor.supervise_begin` and
     :func:`~controllers.supervisor.supervise_end` with the agent's command as the inner
     controller's, what :func:`supervised_action` does through
@@ -705,7 +706,6 @@ class ContactForceEnv(gym.Env):
         self._ws = None
         self._n_steps = 0
         self._dt = self.config.dt_s
-        self._substeps = self.config.substeps
         self._sv = self._svcfg = _NO_ARRAY
 
     # -- episode ---------------------------------------------------------------------------
