@@ -23,9 +23,11 @@
   (``parallel=None``, :class:`ebraille_sim.rl.vector_env.ThreadChoice`) measures while it runs.
 
 With ``--only-single`` only the single env against Pendulum-v1, with Gymnasium's wrappers
-and unwrapped: ``--repeat`` (3) rounds in the same process, each measuring the four in turn,
-and the medians of the rounds' ratios (on a shared machine the rates drift between figures;
-a ratio within a round is the figure to compare).
+and unwrapped: ``--repeat`` (3) rounds in the same process, each measuring the two envs
+interleaved (500 steps of one, then of the other, ``--seconds`` each in all;
+:func:`interleaved_steps_per_s`), with wrappers, then unwrapped; the medians of the rounds'
+ratios.  On a machine shared with other jobs the rates drift by a factor of 2 between figures
+measured one after the other; interleaved, both envs see the same load.
 
 With ``--only-resets`` only the reset figures, each the median of ``--repeat`` (3) timings in
 the same process: the scalar env's reset in ms and in env steps (steps and resets
@@ -77,6 +79,36 @@ def single_steps_per_s(env, seconds: float, seed: int = 0) -> float:
         dt = time.perf_counter() - t0
         if dt >= seconds:
             return n / dt
+
+
+def interleaved_steps_per_s(envs, seconds: float, seed: int = 0, chunk: int = 500) -> list[float]:
+    """Steps per second of each of ``envs``, stepped in turn ``chunk`` steps at a time until
+    each has run about ``seconds`` (resets included, the actions and warm-up of
+    :func:`single_steps_per_s`): on a machine whose load drifts, every env sees the same load,
+    so their ratio holds where rates measured one after the other do not."""
+    runs = []
+    for env in envs:
+        rng = np.random.default_rng(seed)
+        space = env.action_space
+        actions = rng.uniform(space.low, space.high, size=(4096,) + space.shape).astype(np.float32)
+        env.reset(seed=seed)
+        for k in range(200):
+            _, _, term, trunc, _ = env.step(actions[k])
+            if term or trunc:
+                env.reset()
+        runs.append([env, actions, 0, 0.0])
+    while min(r[3] for r in runs) < seconds:
+        for r in runs:
+            env, actions, n = r[0], r[1], r[2]
+            t0 = time.perf_counter()
+            for _ in range(chunk):
+                _, _, term, trunc, _ = env.step(actions[n & 4095])
+                n += 1
+                if term or trunc:
+                    env.reset()
+            r[3] += time.perf_counter() - t0
+            r[2] = n
+    return [r[2] / r[3] for r in runs]
 
 
 def reset_cost_in_steps(seconds: float, seed: int = 0, **kwargs) -> tuple[float, float, float]:
@@ -228,13 +260,15 @@ def only_resets(seconds: float, n_envs: int, repeat: int) -> dict:
 
 def only_single(seconds: float, repeat: int) -> dict:
     """The single env against Pendulum-v1, with wrappers and unwrapped: ``repeat`` rounds of
-    the four rates in turn, and the medians of the rounds' ratios ours / Pendulum."""
+    the two envs stepped interleaved (:func:`interleaved_steps_per_s`), and the medians of the
+    rounds' ratios ours / Pendulum."""
     rounds = []
     for i in range(repeat):
-        row = {"pendulum_steps_per_s": single_steps_per_s(gym.make("Pendulum-v1"), seconds),
-               "ours_steps_per_s": single_steps_per_s(gym.make(ENV_ID), seconds),
-               "pendulum_unwrapped_steps_per_s": single_steps_per_s(gym.make("Pendulum-v1").unwrapped, seconds),
-               "ours_unwrapped_steps_per_s": single_steps_per_s(gym.make(ENV_ID).unwrapped, seconds)}
+        ours, pend = interleaved_steps_per_s([gym.make(ENV_ID), gym.make("Pendulum-v1")], seconds)
+        ours_raw, pend_raw = interleaved_steps_per_s([gym.make(ENV_ID).unwrapped,
+                                                      gym.make("Pendulum-v1").unwrapped], seconds)
+        row = {"pendulum_steps_per_s": pend, "ours_steps_per_s": ours,
+               "pendulum_unwrapped_steps_per_s": pend_raw, "ours_unwrapped_steps_per_s": ours_raw}
         row["ratio"] = row["ours_steps_per_s"] / row["pendulum_steps_per_s"]
         row["ratio_unwrapped"] = row["ours_unwrapped_steps_per_s"] / row["pendulum_unwrapped_steps_per_s"]
         rounds.append(row)

@@ -180,7 +180,7 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from ebraille_sim.base.compiled import njit
+from ebraille_sim.base.compiled import entry_point, njit
 from ebraille_sim.base.validation import check_bool, check_choice, check_number, check_pair, check_range
 
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
@@ -773,6 +773,7 @@ class ContactForceEnv(gym.Env):
         self._obs = workspace_part(ws, P_OBS).view(np.float32)[:N_OBS]
         self._chars = ep.char_index.tolist()
         self._ws = ws
+        self._step_fn = entry_point(scalar_step, self._st, self._inp, ws, 0, 0.0)
 
     def _info(self, violation: float) -> dict:
         st = self._st
@@ -803,7 +804,7 @@ class ContactForceEnv(gym.Env):
         k = self._k
         if k >= self._n_steps:
             raise RuntimeError("the episode has ended; call reset()")
-        r, term, ft, fe, sp, cv, v, t, mode, fault = scalar_step(self._st, self._inp, ws, k, a)
+        r, term, ft, fe, sp, cv, v, t, mode, fault = self._step_fn(self._st, self._inp, ws, k, a)
         self._k = k = k + 1
         if ft - ft != 0.0:                                      # inf or nan
             raise FloatingPointError("the simulation diverged (non-finite contact force)")
