@@ -261,9 +261,9 @@ N_OBS_SLOTS = (N_OBS + 1) // 2
 
 
 def pack_workspace(parts, safety: bool, substeps: int, dt_s: float, prof_stride: int) -> np.ndarray:
-    """The workspace of :func:`scalar_step`: the header, then ``parts`` (arrays in the order
-    of the ``P_*`` indices, copied as float64)."""
-    sizes = [int(np.size(x)) for x in parts]
+    """The workspace of :func:`scalar_step`: the header, then ``parts`` in the order of the
+    ``P_*`` indices (an array is copied as float64, an int ``n`` reserves ``n`` zeros)."""
+    sizes = [x if isinstance(x, int) else int(np.size(x)) for x in parts]
     offsets = np.cumsum([W_HEADER] + sizes)
     ws = np.zeros(int(offsets[-1]))
     ws[W_SAFETY] = 1.0 if safety else 0.0
@@ -272,7 +272,8 @@ def pack_workspace(parts, safety: bool, substeps: int, dt_s: float, prof_stride:
     ws[W_PROF_STRIDE] = prof_stride
     ws[W_OFFSETS:W_OFFSETS + N_PARTS + 1] = offsets
     for i, x in enumerate(parts):
-        ws[offsets[i]:offsets[i + 1]] = np.ravel(x)
+        if not isinstance(x, int):
+            ws[offsets[i]:offsets[i + 1]] = np.ravel(x)
     return ws
 
 
@@ -704,6 +705,7 @@ class ContactForceEnv(gym.Env):
         self._sup = None
         self._compiled = False
         self._ws = None
+        self._step_fn = None
         self._n_steps = 0
         self._dt = self.config.dt_s
         self._sv = self._svcfg = _NO_ARRAY
@@ -761,9 +763,8 @@ class ContactForceEnv(gym.Env):
         plant = self.plant
         prof = (np.stack([arr for _, arr in self._varying]) if self._varying else np.zeros((0, ep.n_steps)))
         rows = np.array([j for j, _ in self._varying], dtype=np.float64)
-        obs = np.zeros(N_OBS_SLOTS)
-        parts = (plant.params, self._sv, self._svcfg, self._z, obs, self._c,
-                 ep.setpoint_n, prof, rows)
+        parts = (plant.params, self._sv.size, self._svcfg.size, self._z, N_OBS_SLOTS, self._c, ep.setpoint_n, prof,
+                 rows)                                    # the supervisor's parts are filled by bind
         ws = pack_workspace(parts, self._sup is not None, plant.substeps, self._dt, prof.shape[1])
         plant.params = workspace_part(ws, P_PARAMS).reshape(plant.params.shape)
         if self._sup is not None:
@@ -773,7 +774,8 @@ class ContactForceEnv(gym.Env):
         self._obs = workspace_part(ws, P_OBS).view(np.float32)[:N_OBS]
         self._chars = ep.char_index.tolist()
         self._ws = ws
-        self._step_fn = entry_point(scalar_step, self._st, self._inp, ws, 0, 0.0)
+        if self._step_fn is None:
+            self._step_fn = entry_point(scalar_step, self._st, self._inp, ws, 0, 0.0)
 
     def _info(self, violation: float) -> dict:
         st = self._st
