@@ -22,12 +22,19 @@
   one thread at 1-1024 sub-envs, no resets; the ratio threads / one thread, which the default
   (``parallel=None``, :class:`ebraille_sim.rl.vector_env.ThreadChoice`) measures while it runs.
 
+With ``--only-single`` only the single env against Pendulum-v1, with Gymnasium's wrappers
+and unwrapped: ``--repeat`` (3) rounds in the same process, each measuring the two envs
+interleaved (500 steps of one, then of the other, ``--seconds`` each in all;
+:func:`interleaved_steps_per_s`), with wrappers, then unwrapped; the medians of the rounds'
+ratios.  On a machine shared with other jobs the rates drift by a factor of 2 between figures
+measured one after the other; interleaved, both envs see the same load.
+
 With ``--only-resets`` only the reset figures, each the median of ``--repeat`` (3) timings in
 the same process: the scalar env's reset in ms and in env steps (steps and resets
 interleaved), and the vector env's env-steps/s with autoresets against the same env
 without any (the reference), on one thread.
 
-Run:  python benchmarks/bench_env.py [--seconds 3] [--envs 1024] [--json FILE] [--only-resets [--repeat 3]]
+Run:  python benchmarks/bench_env.py [--seconds 3] [--envs 1024] [--json FILE] [--only-single | --only-resets] [--repeat 3]
 """
 from __future__ import annotations
 
@@ -72,6 +79,36 @@ def single_steps_per_s(env, seconds: float, seed: int = 0) -> float:
         dt = time.perf_counter() - t0
         if dt >= seconds:
             return n / dt
+
+
+def interleaved_steps_per_s(envs, seconds: float, seed: int = 0, chunk: int = 500) -> list[float]:
+    """Steps per second of each of ``envs``, stepped in turn ``chunk`` steps at a time until
+    each has run about ``seconds`` (resets included, the actions and warm-up of
+    :func:`single_steps_per_s`): on a machine whose load drifts, every env sees the same load,
+    so their ratio holds where rates measured one after the other do not."""
+    runs = []
+    for env in envs:
+        rng = np.random.default_rng(seed)
+        space = env.action_space
+        actions = rng.uniform(space.low, space.high, size=(4096,) + space.shape).astype(np.float32)
+        env.reset(seed=seed)
+        for k in range(200):
+            _, _, term, trunc, _ = env.step(actions[k])
+            if term or trunc:
+                env.reset()
+        runs.append([env, actions, 0, 0.0])
+    while min(r[3] for r in runs) < seconds:
+        for r in runs:
+            env, actions, n = r[0], r[1], r[2]
+            t0 = time.perf_counter()
+            for _ in range(chunk):
+                _, _, term, trunc, _ = env.step(actions[n & 4095])
+                n += 1
+                if term or trunc:
+                    env.reset()
+            r[3] += time.perf_counter() - t0
+            r[2] = n
+    return [r[2] / r[3] for r in runs]
 
 
 def reset_cost_in_steps(seconds: float, seed: int = 0, **kwargs) -> tuple[float, float, float]:
@@ -221,6 +258,35 @@ def only_resets(seconds: float, n_envs: int, repeat: int) -> dict:
     return out
 
 
+def only_single(seconds: float, repeat: int) -> dict:
+    """The single env against Pendulum-v1, with wrappers and unwrapped: ``repeat`` rounds of
+    the two envs stepped interleaved (:func:`interleaved_steps_per_s`), and the medians of the
+    rounds' ratios ours / Pendulum."""
+    rounds = []
+    for i in range(repeat):
+        ours, pend = interleaved_steps_per_s([gym.make(ENV_ID), gym.make("Pendulum-v1")], seconds)
+        ours_raw, pend_raw = interleaved_steps_per_s([gym.make(ENV_ID).unwrapped,
+                                                      gym.make("Pendulum-v1").unwrapped], seconds)
+        row = {"pendulum_steps_per_s": pend, "ours_steps_per_s": ours,
+               "pendulum_unwrapped_steps_per_s": pend_raw, "ours_unwrapped_steps_per_s": ours_raw}
+        row["ratio"] = row["ours_steps_per_s"] / row["pendulum_steps_per_s"]
+        row["ratio_unwrapped"] = row["ours_unwrapped_steps_per_s"] / row["pendulum_unwrapped_steps_per_s"]
+        rounds.append(row)
+        print(f"round {i + 1}: with wrappers ours {row['ours_steps_per_s']:8.0f} Pendulum-v1 "
+              f"{row['pendulum_steps_per_s']:8.0f} ratio {row['ratio']:5.2f};  unwrapped ours "
+              f"{row['ours_unwrapped_steps_per_s']:8.0f} Pendulum-v1 {row['pendulum_unwrapped_steps_per_s']:8.0f} "
+              f"ratio {row['ratio_unwrapped']:5.2f}", flush=True)
+    out = {"repeat": repeat, "rounds": rounds}
+    for key in rounds[0]:
+        out[key] = statistics.median(r[key] for r in rounds)
+    runs = ", ".join(f"{r['ratio']:.2f}" for r in rounds)
+    runs_raw = ", ".join(f"{r['ratio_unwrapped']:.2f}" for r in rounds)
+    print(f"single env / Pendulum-v1, median of {repeat} rounds: with wrappers {out['ratio']:5.2f} "
+          f"(runs: {runs}), unwrapped {out['ratio_unwrapped']:5.2f} (runs: {runs_raw})")
+    print(f"load average (1 min) at end {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=3.0, help="measuring time per figure, s")
@@ -228,10 +294,25 @@ def main(argv=None):
     ap.add_argument("--json", default=None, help="also write the results to this file")
     ap.add_argument("--only-resets", action="store_true",
                     help="only the reset cost (ms and env steps) and the vector env with and without autoresets")
-    ap.add_argument("--repeat", type=int, default=3, help="timings per figure with --only-resets (median)")
+    ap.add_argument("--only-single", action="store_true",
+                    help="only the single env against Pendulum-v1, with wrappers and unwrapped (rounds, medians)")
+    ap.add_argument("--repeat", type=int, default=3,
+                    help="timings per figure (rounds with --only-single) with --only-resets or --only-single (median)")
     a = ap.parse_args(argv)
     if a.repeat < 1:
         ap.error(f"--repeat must be at least 1, got {a.repeat}")
+    if a.only_single and a.only_resets:
+        ap.error("--only-single and --only-resets exclude each other")
+    if a.only_single:
+        res = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                           "processor": platform.machine(), "load_average_1min_at_start": os.getloadavg()[0]},
+               "seconds_per_figure": a.seconds}
+        res["single"] = only_single(a.seconds, a.repeat)
+        res["machine"]["load_average_1min_at_end"] = os.getloadavg()[0]
+        if a.json:
+            with open(a.json, "w", encoding="utf-8") as fh:
+                json.dump(res, fh, indent=2)
+        return res
     if a.only_resets:
         res = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                            "processor": platform.machine(), "load_average_1min_at_start": os.getloadavg()[0]},

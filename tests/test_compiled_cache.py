@@ -117,3 +117,17 @@ def test_the_threaded_vector_step_runs_in_a_fresh_process_as_the_serial_one():
                        env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
     assert p.returncode == 0, p.stderr
     assert p.stdout.split() == ["True", "True"]
+
+
+def test_entry_point_runs_the_compiled_code_and_falls_back_to_the_function():
+    import numpy as np
+    from ebraille_sim.plant import kernel
+    from ebraille_sim.plant.layout import N_INPUT, N_PARAM, N_STATE
+    s, p, u = np.zeros(N_STATE), np.zeros(N_PARAM), np.zeros(N_INPUT)
+    fn = compiled.entry_point(kernel.advance, s, p, u, 0)
+    assert fn is not kernel.advance and callable(fn)
+    assert fn(s, p, u, 0) is None and not s.any()        # zero substeps change nothing
+
+    def plain(x):
+        return x + 1
+    assert compiled.entry_point(plain, 1) is plain

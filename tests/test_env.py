@@ -134,6 +134,41 @@ def test_bad_constructor_arguments_are_rejected():
         ContactForceEnv(backend="spice")
 
 
+def test_every_form_of_a_finite_action_steps_the_same_and_each_step_returns_its_own_info():
+    """A Python float, a float32 or float64 array of one element and an integer array step the
+    same numbers; the observation and info of one step are not changed by the next (a stored
+    info keeps its values)."""
+    runs = []
+    for form in (lambda x: x, lambda x: np.array([x], np.float32), lambda x: np.array([[x]], np.float64),
+                 lambda x: np.float64(x), lambda x: np.array([round(x)], np.int64)):
+        env = ContactForceEnv()
+        env.reset(seed=4)
+        out = []
+        for k in range(60):
+            x = float(np.float32(0.5 * math.sin(0.1 * k))) if k % 7 else float(k % 2)
+            out.append(env.step(form(x)))
+        runs.append(out)
+    for i in (1, 2, 3):
+        for (o1, r1, t1, u1, i1), (o2, r2, t2, u2, i2) in zip(runs[0], runs[i]):
+            assert np.array_equal(o1, o2) and (r1, t1, u1) == (r2, t2, u2) and repr(i1) == repr(i2)
+    assert len(runs[4]) == 60
+    out = runs[0]
+    first_obs, first_info = out[0][0].copy(), dict(out[0][4])
+    assert out[0][4] is not out[1][4] and out[0][0] is not out[1][0]
+    assert np.array_equal(out[0][0], first_obs) and out[0][4] == first_info
+    assert first_info["time_s"] == 0.005 and out[1][4]["time_s"] == 0.01
+
+
+def test_non_finite_python_float_action_is_a_one_line_error():
+    env = ContactForceEnv()
+    env.reset(seed=0)
+    for bad in (float("nan"), float("inf"), -float("inf")):
+        with pytest.raises(ValueError, match="action must be finite") as err:
+            env.step(bad)
+        assert "\n" not in str(err.value)
+    assert env._k == 0
+
+
 def test_nan_or_misshapen_action_is_an_error():
     env = ContactForceEnv()
     env.reset(seed=0)

@@ -180,7 +180,7 @@ from dataclasses import dataclass
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
-from ebraille_sim.base.compiled import njit
+from ebraille_sim.base.compiled import entry_point, njit
 from ebraille_sim.base.validation import check_bool, check_choice, check_number, check_pair, check_range
 
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
@@ -189,7 +189,7 @@ from ebraille_sim.plant.layout import S, U
 from ebraille_sim.plant.loop import loop_step
 from ebraille_sim.rl.registration import ENV_ID, register_envs
 from controllers import features
-from controllers.supervisor import supervise_begin, supervise_end
+from controllers.supervisor import FAULTS, MODES, SV, supervise_begin, supervise_end
 from controllers.features import (C_CMD_SCALE, C_DT, C_SAFE, C_WARN, C_WU, C_WV, ERROR_SCALE_N, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, Z_STEP, _clip,
                                   observe, reset_features, write_observation)
 
@@ -242,28 +242,89 @@ def post_step(z, c, force_est_n, force_true_n, current_a, setpoint_shown_n, setp
     return r, v, force_true_n > c[C_SAFE]
 
 
-@njit(cache=True)
-def scalar_step(state, params, inputs, prof_rows, prof, k, action, safety, sv, cfg, z, c, setpoint, dt_s, n_sub,
-                obs):
-    """One step of the scalar env on a lumped plant, in one compiled call.
+# The scalar env's workspace: one float64 array per episode holding what its compiled step
+# reads and writes besides the plant's state and input rows, so that the step is one call of
+# five arguments (Numba's dispatcher checks the type of every argument on each call).  The
+# state and inputs stay arguments of their own: the plant kernel's substeps run about a fifth
+# slower on slices of one array, which the compiler must assume to overlap.  Slot 0 is the
+# agent's command in volts (written by the step); then the episode's sizes and flags; then the
+# start offsets of the parts (part i spans [offset i, offset i+1)); then the parts.  The
+# plant's parameter row, the supervisor's state and configuration, the features and the
+# observation (float32, viewing its part's bytes) are views of their parts.
+W_ACTION_V, W_SAFETY, W_SUBSTEPS, W_DT, W_PROF_STRIDE = range(5)
+W_OFFSETS = 5
+(P_PARAMS, P_SV, P_CFG, P_Z, P_OBS, P_C, P_SETPOINT, P_PROF, P_ROWS) = range(9)
+N_PARTS = 9
+W_HEADER = W_OFFSETS + N_PARTS + 1
+N_OBS_SLOTS = (N_OBS + 1) // 2
+"""Slots of the observation's part: the float32 observation is a view of its bytes."""
 
-    Writes period ``k``'s varying inputs (``inputs[prof_rows[j]] = prof[j, k]``), passes the
-    clipped ``action`` through the safety layer when ``safety`` (:func:`controllers.supervisor.supervise_begin`
-    and :func:`~controllers.supervisor.supervise_end` with the agent's command as the inner
-    controller's, what :func:`supervised_action` does through :class:`~controllers.supervisor.Supervisor`),
-    advances the plant (:func:`ebraille_sim.plant.kernel.advance`, as :meth:`ebraille_sim.plant.loop.Plant.advance`)
-    and computes reward, termination and the next observation (:func:`post_step`).
+
+def pack_workspace(parts, safety: bool, substeps: int, dt_s: float, prof_stride: int) -> np.ndarray:
+    """The workspace of :func:`scalar_step`: the header, then ``parts`` in the order of the
+    ``P_*`` indices (an array is copied as float64, an int ``n`` reserves ``n`` zeros)."""
+    sizes = [x if isinstance(x, int) else int(np.size(x)) for x in parts]
+    offsets = np.cumsum([W_HEADER] + sizes)
+    ws = np.zeros(int(offsets[-1]))
+    ws[W_SAFETY] = 1.0 if safety else 0.0
+    ws[W_SUBSTEPS] = substeps
+    ws[W_DT] = dt_s
+    ws[W_PROF_STRIDE] = prof_stride
+    ws[W_OFFSETS:W_OFFSETS + N_PARTS + 1] = offsets
+    for i, x in enumerate(parts):
+        if not isinstance(x, int):
+            ws[offsets[i]:offsets[i + 1]] = np.ravel(x)
+    return ws
+
+
+def workspace_part(ws: np.ndarray, i: int) -> np.ndarray:
+    """Part ``i`` (a ``P_*`` index) of a workspace, as a view."""
+    return ws[int(ws[W_OFFSETS + i]):int(ws[W_OFFSETS + i + 1])]
+
+
+@njit(cache=True)
+def _part(ws, i):
+    return ws[int(ws[W_OFFSETS + i]):int(ws[W_OFFSETS + i + 1])]
+
+
+@njit(cache=True)
+def scalar_step(state, inputs, ws, k, action):
+    """One step of the scalar env on a lumped plant, in one compiled call on its workspace.
+
+    ``state`` and ``inputs`` are the plant's rows, ``ws`` the episode's workspace
+    (:func:`pack_workspace`), ``k`` the period (below the episode's steps: not checked here),
+    ``action`` the agent's (finite) action.  Writes period ``k``'s varying inputs
+    (``inputs[rows[j]] = prof[j, k]``), passes the clipped ``action`` through the safety layer when the
+    workspace's safety flag is set (:func:`controllers.supervisor.supervise_begin` and
+    :func:`~controllers.supervisor.supervise_end` with the agent's command as the inner
+    controller's, what :func:`supervised_action` does through
+    :class:`~controllers.supervisor.Supervisor`), advances the plant
+    (:func:`ebraille_sim.plant.kernel.advance`, as :meth:`ebraille_sim.plant.loop.Plant.advance`)
+    and computes reward, termination and the next observation (:func:`post_step`, into the
+    workspace's parts).
 
     Returns
     -------
-    (reward, violation, terminated, applied)
-        ``applied`` is the command as a fraction of the supply, in [-1, 1].
+    (reward, terminated, force_true_n, force_est_n, setpoint_n, command_v, violation, time_s, mode, fault)
+        The info's numbers after the step (``setpoint_n`` and ``time_s`` of period ``k + 1``,
+        the supervisor's mode and fault codes, 0 without the safety layer); a non-finite
+        ``force_true_n`` means the simulation diverged.
     """
-    for j in range(prof_rows.shape[0]):
-        inputs[prof_rows[j]] = prof[j, k]
+    c = _part(ws, P_C)
+    setpoint = _part(ws, P_SETPOINT)
+    prof = _part(ws, P_PROF)
+    rows = _part(ws, P_ROWS)
+    stride = int(ws[W_PROF_STRIDE])
+    for j in range(rows.shape[0]):
+        inputs[int(rows[j])] = prof[j * stride + k]
     a = _clip(action, -1.0, 1.0)
     scale = c[C_CMD_SCALE]
+    ws[W_ACTION_V] = a * scale
+    dt_s = ws[W_DT]
+    safety = ws[W_SAFETY] != 0.0
     if safety:
+        sv = _part(ws, P_SV)
+        cfg = _part(ws, P_CFG)
         f = state[S.force_est_n]
         sp = setpoint[k]
         cur = state[S.current_a]
@@ -273,11 +334,17 @@ def scalar_step(state, params, inputs, prof_rows, prof, k, action, safety, sv, c
         if code == 1:
             code, u, reset_cmd = supervise_end(sv, cfg, a * scale, f, sp, dt_s, cur)
         a = _clip(u / scale, -1.0, 1.0)
+        mode = sv[SV.mode]
+        fault = sv[SV.fault]
+    else:
+        mode = fault = 0.0
     inputs[U.command_v] = a * scale
-    kernel.advance(state, params, inputs, n_sub)
-    r, v, term = post_step(z, c, state[S.force_est_n], state[S.contact_force_n], state[S.current_a],
-                           setpoint[k], setpoint[k + 1], a, obs)
-    return r, v, term, a
+    kernel.advance(state, _part(ws, P_PARAMS), inputs, int(ws[W_SUBSTEPS]))
+    ft = state[S.contact_force_n]
+    r, v, term = post_step(_part(ws, P_Z), c, state[S.force_est_n], ft, state[S.current_a],
+                           setpoint[k], setpoint[k + 1], a, _part(ws, P_OBS).view(np.float32)[:N_OBS])
+    return (r, term, ft, state[S.force_est_n], setpoint[k + 1], inputs[U.command_v], v, (k + 1) * dt_s, mode,
+            fault)
 
 
 class ActionCommand:
@@ -600,6 +667,9 @@ def check_action(action, n: int | None = None):
 # ---------------------------------------------------------------------------------------------
 
 _NO_ARRAY = np.zeros(0)
+_FLOAT_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
+_MODE_NAMES = {float(i): name for i, name in enumerate(MODES)}
+_FAULT_NAMES = {0.0: None, **{float(i + 1): name for i, name in enumerate(FAULTS)}}
 
 
 class ContactForceEnv(gym.Env):
@@ -640,8 +710,10 @@ class ContactForceEnv(gym.Env):
         self._history = None
         self._sup = None
         self._compiled = False
+        self._ws = None
+        self._step_fn = None
+        self._n_steps = 0
         self._dt = self.config.dt_s
-        self._substeps = self.config.substeps
         self._sv = self._svcfg = _NO_ARRAY
 
     # -- episode ---------------------------------------------------------------------------
@@ -666,14 +738,10 @@ class ContactForceEnv(gym.Env):
         self._inp = self.plant.inputs[0]
         self._varying = [(U[name], arr) for name, arr in ep.run.profiles.items()]
         self._compiled = isinstance(self.plant, Plant)
-        if self._compiled:
-            self._substeps = self.plant.substeps
-            self._prof_rows = np.array([j for j, _ in self._varying], dtype=np.int64)
-            self._prof = (np.stack([arr for _, arr in self._varying]) if self._varying
-                          else np.zeros((0, ep.n_steps)))
-            self._params0 = self.plant.params[0]
+        self._ws = None
         self.episode = ep
         self._k = 0
+        self._n_steps = ep.n_steps
         fe = float(self._st[S.force_est_n])
         self._sup = None
         if self.config.safety:
@@ -685,12 +753,35 @@ class ContactForceEnv(gym.Env):
             self._sv, self._svcfg = self._sup.compiled()
         else:
             self._sv = self._svcfg = _NO_ARRAY
+        if self._compiled:
+            self._bind_workspace(ep)
         reset_features(self._z, fe)
         write_observation(self._z, self._c, fe, ep.setpoint_n[0], float(self._st[S.current_a]), self._obs)
         if self.render_mode is not None:
             self._history = {"t_s": [0.0], "force_true_n": [float(self._st[S.contact_force_n])],
                              "force_est_n": [fe], "setpoint_n": [float(ep.setpoint_n[0])]}
         return self._obs.copy(), self._info(0.0)
+
+    def _bind_workspace(self, ep: Episode) -> None:
+        """Pack the episode's arrays into one workspace (:func:`pack_workspace`) and make the
+        plant's parameter row, the supervisor's arrays, the features and the observation views
+        of it."""
+        plant = self.plant
+        prof = (np.stack([arr for _, arr in self._varying]) if self._varying else np.zeros((0, ep.n_steps)))
+        rows = np.array([j for j, _ in self._varying], dtype=np.float64)
+        parts = (plant.params, self._sv.size, self._svcfg.size, self._z, N_OBS_SLOTS, self._c, ep.setpoint_n, prof,
+                 rows)                                    # the supervisor's parts are filled by bind
+        ws = pack_workspace(parts, self._sup is not None, plant.substeps, self._dt, prof.shape[1])
+        plant.params = workspace_part(ws, P_PARAMS).reshape(plant.params.shape)
+        if self._sup is not None:
+            self._sup.bind(workspace_part(ws, P_SV), workspace_part(ws, P_CFG))
+            self._sv, self._svcfg = self._sup.compiled()
+        self._z = workspace_part(ws, P_Z)
+        self._obs = workspace_part(ws, P_OBS).view(np.float32)[:N_OBS]
+        self._chars = ep.char_index.tolist()
+        self._ws = ws
+        if self._step_fn is None:
+            self._step_fn = entry_point(scalar_step, self._st, self._inp, ws, 0, 0.0)
 
     def _info(self, violation: float) -> dict:
         st = self._st
@@ -707,6 +798,46 @@ class ContactForceEnv(gym.Env):
                 "action_v": sup.inner.command_v, "supervisor_mode": sup.mode, "supervisor_fault": sup.fault}
 
     def step(self, action):
+        ws = self._ws
+        if ws is None:
+            return self._step_python(action)
+        if type(action) is np.ndarray and action.dtype in _FLOAT_DTYPES and action.size == 1:
+            a = action.item()
+            if a - a != 0.0:                                    # inf or nan
+                a = check_action(action)
+        elif type(action) is float and action - action == 0.0:
+            a = action
+        else:
+            a = check_action(action)
+        k = self._k
+        if k >= self._n_steps:
+            raise RuntimeError("the episode has ended; call reset()")
+        r, term, ft, fe, sp, cv, v, t, mode, fault = self._step_fn(self._st, self._inp, ws, k, a)
+        self._k = k = k + 1
+        if ft - ft != 0.0:                                      # inf or nan
+            raise FloatingPointError("the simulation diverged (non-finite contact force)")
+        if self._sup is None:
+            info = {"force_true_n": ft, "force_est_n": fe, "setpoint_n": sp, "command_v": cv, "violation": v,
+                    "time_s": t, "char_index": self._chars[k]}
+        else:
+            av = ws[W_ACTION_V]                                 # numpy's float64, as sup.inner keeps it
+            self._sup.inner.command_v = av
+            info = {"force_true_n": ft, "force_est_n": fe, "setpoint_n": sp, "command_v": cv, "violation": v,
+                    "time_s": t, "char_index": self._chars[k], "action_v": av,
+                    "supervisor_mode": _MODE_NAMES[mode], "supervisor_fault": _FAULT_NAMES[fault]}
+        if self._history is not None:
+            self._record(info, ft)
+        return self._obs.copy(), r, term, k >= self._n_steps, info
+
+    def _record(self, info: dict, force_true_n: float) -> None:
+        h = self._history
+        h["t_s"].append(info["time_s"])
+        h["force_true_n"].append(force_true_n)
+        h["force_est_n"].append(info["force_est_n"])
+        h["setpoint_n"].append(info["setpoint_n"])
+
+    def _step_python(self, action):
+        """The step on a plant that is not the compiled lumped one (another backend)."""
         if self.episode is None:
             raise RuntimeError("call reset() before step()")
         a = check_action(action)
@@ -716,38 +847,22 @@ class ContactForceEnv(gym.Env):
         if k >= ep.n_steps:
             raise RuntimeError("the episode has ended; call reset()")
         st = self._st
-        if self._compiled:
-            sup = self._sup
-            r, v, term, a_applied = scalar_step(st, self._params0, self._inp, self._prof_rows, self._prof, k, a,
-                                                sup is not None, self._sv, self._svcfg, self._z, self._c,
-                                                ep.setpoint_n, self._dt, self._substeps, self._obs)
-            self._k = k + 1
-            ft = st[S.contact_force_n]
-            if not math.isfinite(ft):
-                raise FloatingPointError("the simulation diverged (non-finite contact force)")
-            if sup is not None:
-                sup.inner.command_v = a * self._c[C_CMD_SCALE]
-        else:
-            inp = self._inp
-            for j, arr in self._varying:
-                inp[j] = arr[k]
-            if self._sup is not None:
-                a = supervised_action(self._sup, a, self._c[C_CMD_SCALE], float(st[S.force_est_n]),
-                                      float(ep.setpoint_n[k]), self.config.dt_s, float(st[S.current_a]))
-            loop_step(self.plant, a * self._c[C_CMD_SCALE])
-            self._k = k + 1
-            ft = float(st[S.contact_force_n])
-            if not math.isfinite(ft):
-                raise FloatingPointError("the simulation diverged (non-finite contact force)")
-            r, v, term = post_step(self._z, self._c, float(st[S.force_est_n]), ft, float(st[S.current_a]),
-                                   ep.setpoint_n[k], ep.setpoint_n[k + 1], a, self._obs)
+        inp = self._inp
+        for j, arr in self._varying:
+            inp[j] = arr[k]
+        if self._sup is not None:
+            a = supervised_action(self._sup, a, self._c[C_CMD_SCALE], float(st[S.force_est_n]),
+                                  float(ep.setpoint_n[k]), self.config.dt_s, float(st[S.current_a]))
+        loop_step(self.plant, a * self._c[C_CMD_SCALE])
+        self._k = k + 1
+        ft = float(st[S.contact_force_n])
+        if not math.isfinite(ft):
+            raise FloatingPointError("the simulation diverged (non-finite contact force)")
+        r, v, term = post_step(self._z, self._c, float(st[S.force_est_n]), ft, float(st[S.current_a]),
+                               ep.setpoint_n[k], ep.setpoint_n[k + 1], a, self._obs)
         info = self._info(v)
         if self._history is not None:
-            h = self._history
-            h["t_s"].append(info["time_s"])
-            h["force_true_n"].append(ft)
-            h["force_est_n"].append(info["force_est_n"])
-            h["setpoint_n"].append(info["setpoint_n"])
+            self._record(info, ft)
         return self._obs.copy(), float(r), bool(term), self._k >= ep.n_steps, info
 
     # -- rendering ---------------------------------------------------------------------------
