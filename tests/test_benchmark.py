@@ -56,6 +56,13 @@ def test_quick_suite_ranks_the_bounds_beside_the_controller(quick):
     # pressing: the film's blind stretch alone is not what the FSR-fed PID loses to
     assert s["pid"]["score"] < s["hysteresis_bound"]["score"]
     assert press["hysteresis_bound"]["in_band_fraction_cvar10"] > 0.95
+    # under the supervisor's limits the drive holds every refresh character at 120 wpm when the
+    # controller sees the true force (measured 1.00 on both readers), whatever the film
+    # withholds; the FSR-fed PID holds none
+    refresh = {c: s[c]["scenarios"]["refresh_120wpm"] for c in s}
+    assert refresh["actuator_bound"]["char_in_band_fraction_cvar10"] > 0.95
+    assert refresh["hysteresis_bound"]["char_in_band_fraction_cvar10"] > 0.95
+    assert refresh["pid"]["char_in_band_fraction_cvar10"] < 0.1
     # the derived bounds are not defined on a fault scenario (a broken lead is not an estimation error)
     assert s["sensor_bound"]["scenarios"]["fault_fsr_open"]["episodes"] == 0
     assert s["hysteresis_bound"]["scenarios"]["fault_fsr_open"]["episodes"] == 0
