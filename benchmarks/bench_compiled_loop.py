@@ -1,16 +1,27 @@
-"""Speed of one scenario run: the compiled loop against the per-period loop and the kernel alone.
+"""Speed of one scenario run: the compiled loop against the per-period loop and two compiled references.
 
 For 60 s of ``steady_90wpm`` with the built-in PID, without and with the safety supervisor
-(``run_scenario(..., supervised=False)`` and the default), this reports, as the median of ``--repeat`` runs in one process:
+(``run_scenario(..., supervised=False)`` and the default), this reports, as the median of
+``--repeat`` rounds in one process:
 
 * the wall time of the whole call and of its control loop, with the loop in one compiled
   call (:mod:`ebraille_sim.scenarios.compiled_loop`) and with one Python iteration per
   control period (the path of Python controllers);
-* the compiled bound: the same number of physics steps in one call of
-  :func:`ebraille_sim.plant.kernel.advance` with the command held, i.e. the plant without
-  any controller, which no loop can beat.
+* two references measured in the same rounds:
 
-Run:  python benchmarks/bench_compiled_loop.py [--repeat 3] [--duration 60] [--json FILE]
+  - the all-compiled loop: physics, estimator, PID and trace of the same run in one compiled
+    call (the control loop of the unsupervised compiled run, without building the inputs,
+    the plant or the metrics);
+  - the kernel alone: the same number of physics steps in one call of
+    :func:`ebraille_sim.plant.kernel.advance` with the command held, i.e. the plant without
+    any controller, which no loop can beat.
+
+Each round times every row once, one after the other, and the ratios are those of each round's
+own times (their median is printed): on a shared machine the speed of the whole machine
+changes by up to 1.6 times from one second to the next, and rows timed seconds apart would
+compare two machines.
+
+Run:  python benchmarks/bench_compiled_loop.py [--repeat 5] [--duration 60] [--json FILE]
 """
 from __future__ import annotations
 
@@ -46,36 +57,48 @@ def _kernel_only(duration_s: float) -> float:
     return time.perf_counter() - t0
 
 
+ROWS = (("compiled loop", True, False), ("per-period loop", False, False),
+        ("compiled, supervised", True, True), ("per-period, supervised", False, True))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--repeat", type=int, default=5)
     ap.add_argument("--duration", type=float, default=60.0)
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
+    if a.repeat < 1 or not a.duration > 0:
+        ap.error("--repeat must be at least 1 and --duration positive")
     for compiled in (True, False):                       # compile / load every cache first
         _run(0.2, compiled)
         _run(0.2, compiled, True)
     _kernel_only(0.2)
-    rows = {}
-    for label, fn in (("compiled loop", lambda: _run(a.duration, True)),
-                      ("per-period loop", lambda: _run(a.duration, False)),
-                      ("compiled, supervised", lambda: _run(a.duration, True, True)),
-                      ("per-period, supervised", lambda: _run(a.duration, False, True))):
-        runs = [fn() for _ in range(max(1, a.repeat))]
-        rows[label] = {"total_s": statistics.median(r[0] for r in runs),
-                       "loop_s": statistics.median(r[1] for r in runs)}
-    bound = statistics.median(_kernel_only(a.duration) for _ in range(max(1, a.repeat)))
+    rounds = []
+    for _ in range(a.repeat):
+        r = {label: _run(a.duration, compiled, supervised) for label, compiled, supervised in ROWS}
+        r["kernel alone"] = _kernel_only(a.duration)
+        rounds.append(r)
+    med = statistics.median
+    rows = {label: {"total_s": med(r[label][0] for r in rounds), "loop_s": med(r[label][1] for r in rounds)}
+            for label, _, _ in ROWS}
+    bound = med(r["kernel alone"] for r in rounds)
+    loop_ref = med(r["compiled loop"][1] for r in rounds)
+    of_loop = {label: med(r["compiled loop"][1] / r[label][0] for r in rounds) for label, _, _ in ROWS}
+    of_kernel = {label: med(r["kernel alone"] / r[label][0] for r in rounds) for label, _, _ in ROWS}
     doc = {"machine": f"{platform.machine()} python {platform.python_version()}", "duration_s": a.duration,
-           "rows": rows, "kernel_only_s": bound}
-    print(f"steady_90wpm, {a.duration:g} s, default pid, median of {a.repeat} ({doc['machine']})")
-    print(f"{'':>22} {'total s':>8} {'loop s':>8} {'loop / bound':>12} {'bound / total':>13}")
+           "rows": rows, "kernel_only_s": bound, "all_compiled_loop_s": loop_ref,
+           "all_compiled_loop_over_total": of_loop, "kernel_over_total": of_kernel,
+           "rounds": [{k: list(v) if isinstance(v, tuple) else v for k, v in r.items()} for r in rounds]}
+    print(f"steady_90wpm, {a.duration:g} s, default pid, medians of {a.repeat} rounds ({doc['machine']})")
+    print(f"{'':>22} {'total s':>8} {'loop s':>8} {'all-compiled / total':>21} {'kernel / total':>15}")
     for label, r in rows.items():
-        print(f"{label:>22} {r['total_s']:>8.3f} {r['loop_s']:>8.3f} {r['loop_s'] / bound:>12.2f} "
-              f"{bound / r['total_s']:>13.2f}")
-    print(f"{'kernel alone':>22} {'':>8} {bound:>8.3f} {1.0:>12.2f}")
+        print(f"{label:>22} {r['total_s']:>8.3f} {r['loop_s']:>8.3f} {of_loop[label]:>21.2f} {of_kernel[label]:>15.2f}")
+    print(f"{'all-compiled loop':>22} {'':>8} {loop_ref:>8.3f}")
+    print(f"{'kernel alone':>22} {'':>8} {bound:>8.3f}")
     print(f"per-period / compiled loop: {rows['per-period loop']['loop_s'] / rows['compiled loop']['loop_s']:.2f}x "
           f"unsupervised, {rows['per-period, supervised']['loop_s'] / rows['compiled, supervised']['loop_s']:.2f}x "
-          f"supervised; run_scenario (supervised) = {bound / rows['compiled, supervised']['total_s']:.2f} of the bound")
+          f"supervised; run_scenario (supervised) = {of_loop['compiled, supervised']:.2f} of the all-compiled loop, "
+          f"{of_kernel['compiled, supervised']:.2f} of the kernel alone")
     if a.json:
         with open(a.json, "w") as fh:
             json.dump(doc, fh, indent=2)

@@ -219,6 +219,7 @@ LEGIBLE_REQUIRED = L.LEGIBLE_REQUIRED
 OFFSET = dataclasses.replace(P, array_offset_x_m=1.5e-3, electrode_diameter_m=1.4e-3)    # another geometry
 TIGHT_CV = dataclasses.replace(L.CONSTANT_VOLTAGE, dynamic_range=1.3, pressure_exponent=0.7,
                                contact_area_exponent=0.45)
+OTHER_Z = dataclasses.replace(L.CONSTANT_VOLTAGE, pressure_exponent=0.7)   # default geometry, another impedance law
 
 
 def _edge_forces(params):
@@ -279,8 +280,9 @@ def test_compiled_legibility_pass_equals_the_numpy_reference(seed):
     got = L.legibility_metrics(f, sp, ci, cells)
     assert got == {"legible_char_fraction": _ref_legible_fraction(f, sp, ci, cells, L.DEFAULT),
                    "legible_char_fraction_cv": _ref_legible_fraction(f, sp, ci, cells, L.CONSTANT_VOLTAGE)}
-    # stimulators with another geometry are counted in their own pass; order kept
-    params = [OFFSET, L.DEFAULT, TIGHT_CV, OFFSET, L.CONSTANT_VOLTAGE]
+    # stimulators with another geometry are counted in their own pass, one with another
+    # impedance law in the same pass gets its own impedance; order kept
+    params = [OFFSET, L.DEFAULT, TIGHT_CV, OTHER_Z, OFFSET, L.CONSTANT_VOLTAGE]
     assert L._legible_fractions(f, sp, ci, cells, params) == \
         [_ref_legible_fraction(f, sp, ci, cells, p) for p in params]
     assert L._legible_fractions(f, sp, ci, cells, [TIGHT_CV]) == [_ref_legible_fraction(f, sp, ci, cells, TIGHT_CV)]

@@ -214,6 +214,12 @@ def _stimulator(params: LegibilityParams) -> _Stimulator:
                        params.compliance_v, math.pi * (0.5 * params.electrode_diameter_m) ** 2, lo, hi)
 
 
+def _impedance_law(stim: _Stimulator) -> tuple:
+    """The fields :func:`_impedance` reads (stimulators equal in them share its values)."""
+    return (stim.contact_area_1n_m2, stim.contact_area_exponent, stim.impedance_pressed_ohm,
+            stim.impedance_interface_ohm, stim.reference_pressure_pa, stim.pressure_exponent, stim.touch_force_n)
+
+
 def _electrode_distances_m(params: LegibilityParams) -> np.ndarray:
     """Distance (m) of each electrode centre from the centre of the contact patch, shape (6,)."""
     return np.hypot(*electrode_centres_m(params).T)
@@ -279,12 +285,23 @@ def _sample_coverage(force_n, contact, distance_m, phi):
 
 
 @njit
+def _nominal(setpoint_n, stim):
+    """Full-coverage impedance (ohm) and nominal current density (A/m2) at the setpoint (N)."""
+    z_sp = _impedance(setpoint_n, stim)
+    return z_sp, _current_a(1.0, z_sp, z_sp, stim) / stim.electrode_area_m2
+
+
+@njit
 def _sample_intensity(force_n, setpoint_n, phi, stim, ratio):
     """Relative intensity of each electrode at one sample, into ``ratio`` (0 where ``phi`` is 0)."""
-    z = _impedance(force_n, stim)
-    z_sp = _impedance(setpoint_n, stim)
+    z_sp, j_nom = _nominal(setpoint_n, stim)
+    _sample_intensity_z(_impedance(force_n, stim), z_sp, j_nom, phi, stim, ratio)
+
+
+@njit
+def _sample_intensity_z(z, z_sp, j_nom, phi, stim, ratio):
+    """:func:`_sample_intensity` given the full-coverage impedance ``z`` (ohm) at the sample's force."""
     area = stim.electrode_area_m2
-    j_nom = _current_a(1.0, z_sp, z_sp, stim) / area
     for e in range(phi.size):
         j = _current_a(phi[e], z, z_sp, stim) / (phi[e] * area) if phi[e] > 1e-12 else 0.0
         ratio[e] = j / j_nom
@@ -456,20 +473,31 @@ def character_legibility(force_n, setpoint_n, char_index, cells, params: Legibil
 
 
 @njit
-def _legibility_counts(force_n, setpoint_n, char_index, masks, contact, distance_m, stims):
+def _legibility_counts(force_n, setpoint_n, char_index, masks, contact, distance_m, stims, z_first):
     """One pass over the samples: per cell, the samples in which each stimulator in
     ``stims`` kept all raised dots legible, the samples shown, and whether the cell has
-    raised dots.  The coverage is computed once per sample for all stimulators."""
+    raised dots.  The coverage is computed once per sample for all stimulators, the
+    impedance once per sample for stimulators of the same impedance law (``z_first[m]``: the
+    first stimulator whose law is that of ``stims[m]``), the setpoint's nominal values once
+    per setpoint."""
     n_cells = masks.size
     n_ok = np.zeros((len(stims), n_cells), np.int64)
     n_all = np.zeros(n_cells, np.int64)
     shown = np.zeros(n_cells, np.bool_)
     phi = np.empty(distance_m.size)
     ratio = np.empty(distance_m.size)
+    z_sp = np.empty(len(stims))
+    j_nom = np.empty(len(stims))
+    z = np.empty(len(stims))
+    sp_last = math.nan                                      # setpoint whose nominal values are held
     for k in range(char_index.size):
         c = char_index[k]
         if c < 0:
             continue
+        if not setpoint_n[k] == sp_last:
+            sp_last = setpoint_n[k]
+            for m in range(len(stims)):
+                z_sp[m], j_nom[m] = _nominal(sp_last, stims[m])
         n_all[c] += 1
         dots = masks[c] & 0b111111
         if dots == 0:                                       # nothing to stimulate: vacuously legible
@@ -480,7 +508,8 @@ def _legibility_counts(force_n, setpoint_n, char_index, masks, contact, distance
         _sample_coverage(force_n[k], contact, distance_m, phi)
         for m in range(len(stims)):
             stim = stims[m]
-            _sample_intensity(force_n[k], setpoint_n[k], phi, stim, ratio)
+            z[m] = z[z_first[m]] if z_first[m] < m else _impedance(force_n[k], stim)
+            _sample_intensity_z(z[m], z_sp[m], j_nom[m], phi, stim, ratio)
             ok = True
             for e in range(distance_m.size):
                 if (dots >> e) & 1 and not (ratio[e] >= stim.band_low and ratio[e] <= stim.band_high):
@@ -520,7 +549,9 @@ def _legible_fractions(force_n, setpoint_n, char_index, cells, params_list) -> l
     out: list = [None] * len(params_list)
     for (contact, distances), members in by_geometry.items():
         stims = tuple(_stimulator(params_list[i]) for i in members)
-        n_ok, n_all, shown = _legibility_counts(f, sp, ci, masks, contact, np.array(distances), stims)
+        laws = [_impedance_law(st) for st in stims]
+        z_first = np.array([laws.index(law) for law in laws], dtype=np.int64)
+        n_ok, n_all, shown = _legibility_counts(f, sp, ci, masks, contact, np.array(distances), stims, z_first)
         keep = np.nonzero(shown)[0]
         if keep.size == 0:
             continue
