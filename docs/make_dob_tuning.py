@@ -27,6 +27,14 @@ runs the chosen gains on its own population, which the search never saw.
 ``--fast`` ranks, the same way, the best candidates of a search on the 1 kHz estimator path
 (``model = "paper:wiener:5@1000"``, 50 Hz anti-alias cutoff) with the compensation, over
 eight scenarios (the seven and refresh_120wpm), and writes ``dob_tuning_fast.json``.
+
+``--hold-bias`` runs ``pid_dob_fast_16.json`` on refresh_60wpm and refresh_120wpm on the 16
+training readers and writes ``refresh_hold_bias.json``: per reader, the fraction of characters
+held, the true force and the estimate averaged over the hold windows and their difference
+(the estimate's bias, a property of the sensor chain along that force), the share of hold
+samples above and below the band, the unit's film hysteresis and creep, and the bias when the
+same true force is replayed through the unit's sensor chain (zero-order hold at the control
+rate) with the estimator as in the loop and with its creep compensation off.
 """
 from __future__ import annotations
 
@@ -120,12 +128,74 @@ def search(ex, n: int, folder: pathlib.Path, scenarios=SCENARIOS, extra=()) -> l
     return rows
 
 
+OUT_BIAS = ROOT / "docs" / "figures" / "benchmark" / "refresh_hold_bias.json"
+FAST_16 = ROOT / "docs" / "figures" / "benchmark_fast" / "pid_dob_fast_16.json"
+
+
+def replay_estimate(device, force_n: np.ndarray, dt_s: float) -> np.ndarray:
+    """The estimate of ``device``'s sensor chain fed ``force_n`` (held over each period ``dt_s``)."""
+    from ebraille_sim.plant.kernel import advance_sensor_only
+    from ebraille_sim.plant.layout import N_INPUT, S, U
+    from ebraille_sim.plant.loop import initial_state, pack_params
+    p = pack_params(device, 0)
+    s = initial_state(device, p)
+    u = np.zeros(N_INPUT)
+    u[U.driver_supply_v] = device.driver_supply_v
+    n_sub = int(round(device.rates.physics_rate_hz * dt_s))
+    out = np.empty(force_n.size)
+    for k in range(force_n.size):
+        advance_sensor_only(s, p, u, float(force_n[k]), n_sub)
+        out[k] = s[S.force_est_n]
+    return out
+
+
+def hold_bias(task) -> dict:
+    """One training reader's refresh run with ``pid_dob_fast_16.json`` (see ``--hold-bias``)."""
+    from ebraille_sim.scenarios.inputs import refresh_phases
+    from ebraille_sim.scenarios.runner import run_scenario
+    key, reader, n = task
+    sc = {s.key: s for s in bench.get_suite("standard").scenarios}[key]
+    spec = bench._spec(sc.scenario, sc.duration_s, sc.wpm)
+    unit = sample_devices(TRAIN_SEED, n, base=spec.device)[reader]
+    dev = dataclasses.replace(unit, estimator=replace_checked(unit.estimator, hysteresis_compensation=True,
+                                                              **FAST_ESTIMATOR))
+    res = run_scenario(spec, controller=str(FAST_16), seed=spec.seed + 101 * (reader + SEED_SHIFT), device=dev)
+    tr = res.trace
+    _, hold = refresh_phases(res.spec, res.schedule, tr["t_s"])
+    f, fe, sp = tr["force_true_n"], tr["force_est_n"], tr["setpoint_n"]
+    dt = float(tr["t_s"][1] - tr["t_s"][0])
+    no_creep = dataclasses.replace(dev, estimator=replace_checked(dev.estimator, creep_compensation=False))
+    r3 = lambda v: round(float(v), 3)
+    return {"scenario": key, "reader": reader, "char_in_band": r3(res.metrics["char_in_band_fraction"]),
+            "hold_true_n": r3(f[hold].mean()), "hold_estimate_n": r3(fe[hold].mean()),
+            "hold_bias_n": r3((fe - f)[hold].mean()),
+            "hold_above_band": r3(np.mean(f[hold] > sp[hold] * (1 + spec.setpoint.band_fraction))),
+            "hold_below_band": r3(np.mean(f[hold] < sp[hold] * (1 - spec.setpoint.band_fraction))),
+            "fsr_hysteresis_fraction": r3(unit.fsr.hysteresis_fraction),
+            "fsr_creep_per_decade": round(float(unit.fsr.creep_per_decade), 4),
+            "replay_bias_n": r3((replay_estimate(dev, f, dt) - f)[hold].mean()),
+            "replay_bias_without_creep_compensation_n": r3((replay_estimate(no_creep, f, dt) - f)[hold].mean())}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--search", type=int, default=0, metavar="N", help="run the random search of N candidates")
     ap.add_argument("--fast", action="store_true", help="rank the 1 kHz estimator path's finalists")
+    ap.add_argument("--hold-bias", action="store_true", help="the estimate's bias in refresh hold windows")
     ap.add_argument("-j", "--jobs", type=int, default=2)
     args = ap.parse_args(argv)
+    if args.hold_bias:
+        tasks = [(k, r, 16) for k in ("refresh_60wpm", "refresh_120wpm") for r in range(16)]
+        with ProcessPoolExecutor(args.jobs) as ex:
+            rows = list(ex.map(hold_bias, tasks))
+        for r in rows:
+            print(json.dumps(r), flush=True)
+        OUT_BIAS.write_text(json.dumps({"controller": str(FAST_16.relative_to(ROOT)),
+                                        "training_population_seed": TRAIN_SEED, "scenario_seed_shift": SEED_SHIFT,
+                                        "estimator": {"hysteresis_compensation": True, **FAST_ESTIMATOR},
+                                        "rows": rows}, indent=1) + "\n")
+        print(f"wrote {OUT_BIAS.relative_to(ROOT)}")
+        return 0
     finalists, scenarios, extra, out_path = FINALISTS, SCENARIOS, (), OUT
     if args.fast:
         finalists, scenarios = FAST_FINALISTS, SCENARIOS + ("refresh_120wpm",)
