@@ -16,7 +16,7 @@ hysteresis_compensation=true --out docs/figures/benchmark_hysteresis``), and
 ``hysteresis_free.json`` holds ``pid``, ``pid_dob`` and ``pid_dob`` with its first design's high
 gains (``pid_dob_high_gain.json``) on ``pressing_90wpm`` with each reader's FSR as drawn and
 with its hysteresis removed.  Last, ``pid_dob`` and two gains files of it
-(``docs/figures/benchmark_fast``) run without bounds on the firmware variant with the 1 kHz
+(``docs/figures/benchmark_fast``) run beside the bounds on the firmware variant with the 1 kHz
 estimator path and the hysteresis compensation (``--out docs/figures/benchmark_fast``).  Every number quoted in docs/benchmark.md comes
 from those files.
 """
@@ -156,7 +156,7 @@ def main(argv=None) -> int:
         if code:
             return code
         hysteresis_free(OUT / "hysteresis_free.json")
-        code = cli(["benchmark", *FAST_CONTROLLERS, *FAST_FIRMWARE, "--no-bounds", "-j", "2", "--out", str(OUT_FAST)])
+        code = cli(["benchmark", *FAST_CONTROLLERS, *FAST_FIRMWARE, "-j", "2", "--out", str(OUT_FAST)])
         if code:
             return code
     doc = json.loads((OUT / "benchmark.json").read_text())

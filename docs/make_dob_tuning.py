@@ -35,6 +35,12 @@ held, the true force and the estimate averaged over the hold windows and their d
 samples above and below the band, the unit's film hysteresis and creep, and the bias when the
 same true force is replayed through the unit's sensor chain (zero-order hold at the control
 rate) with the estimator as in the loop and with its creep compensation off.
+
+``--nominal-calibration`` runs ``pid_dob_fast_16.json`` on the benchmark's reader 0 (the
+scenarios' nominal device, its divider as shipped) and on the same device with the one-point
+assembly calibration of the drawn readers
+(:func:`ebraille_sim.estimation.calibration.calibrate_device`), on this firmware, and writes
+``nominal_calibration.json`` beside the gains file.
 """
 from __future__ import annotations
 
@@ -177,13 +183,49 @@ def hold_bias(task) -> dict:
             "replay_bias_without_creep_compensation_n": r3((replay_estimate(no_creep, f, dt) - f)[hold].mean())}
 
 
+OUT_NOMINAL = ROOT / "docs" / "figures" / "benchmark_fast" / "nominal_calibration.json"
+NOMINAL_SCENARIOS = ("pressing_90wpm", "everyday_session", "battery_sag", "tremor_90wpm", "refresh_60wpm",
+                     "refresh_120wpm")
+
+
+def nominal_calibration(task) -> dict:
+    """Reader 0 of the benchmark with its divider as shipped or calibrated like a drawn unit."""
+    from ebraille_sim.estimation.calibration import calibrate_device, steady_estimate
+    from ebraille_sim.estimation.models import cached_model
+    from ebraille_sim.scenarios.runner import run_scenario
+    key, calibrated = task
+    sc = {s.key: s for s in bench.get_suite("standard").scenarios}[key]
+    spec = bench._spec(sc.scenario, sc.duration_s, sc.wpm)
+    dev = calibrate_device(spec.device) if calibrated else spec.device
+    reading = steady_estimate(cached_model(dev.estimator.model), 1.0, dev.fsr, dev.circuit,
+                              dev.estimator.creep_reference_hold_s)
+    dev = dataclasses.replace(dev, estimator=replace_checked(dev.estimator, hysteresis_compensation=True,
+                                                             **FAST_ESTIMATOR))
+    m = run_scenario(spec, controller=str(FAST_16), seed=spec.seed, device=dev).metrics
+    return {"scenario": key, "one_point_calibration": calibrated, "r2_ohm": round(dev.circuit.r2_ohm, 1),
+            "estimate_after_1n_hold_n": round(reading, 4), "in_band": round(m["in_band_fraction"], 3),
+            "char_in_band": round(m["char_in_band_fraction"] or 0.0, 3)}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--search", type=int, default=0, metavar="N", help="run the random search of N candidates")
     ap.add_argument("--fast", action="store_true", help="rank the 1 kHz estimator path's finalists")
     ap.add_argument("--hold-bias", action="store_true", help="the estimate's bias in refresh hold windows")
+    ap.add_argument("--nominal-calibration", action="store_true",
+                    help="reader 0 with its divider as shipped and calibrated like a drawn unit")
     ap.add_argument("-j", "--jobs", type=int, default=2)
     args = ap.parse_args(argv)
+    if args.nominal_calibration:
+        with ProcessPoolExecutor(args.jobs) as ex:
+            rows = list(ex.map(nominal_calibration, [(k, c) for k in NOMINAL_SCENARIOS for c in (False, True)]))
+        for r in rows:
+            print(json.dumps(r), flush=True)
+        OUT_NOMINAL.write_text(json.dumps({"controller": str(FAST_16.relative_to(ROOT)),
+                                           "estimator": {"hysteresis_compensation": True, **FAST_ESTIMATOR},
+                                           "rows": rows}, indent=1) + "\n")
+        print(f"wrote {OUT_NOMINAL.relative_to(ROOT)}")
+        return 0
     if args.hold_bias:
         tasks = [(k, r, 16) for k in ("refresh_60wpm", "refresh_120wpm") for r in range(16)]
         with ProcessPoolExecutor(args.jobs) as ex:
