@@ -294,23 +294,27 @@ def test_creep_compensation_scales_the_conduction_path_by_the_gain_ratio():
     g = 1.0 / 9000.0
     v = divider_voltage(g, r2, vs)
     f_c = creep_force(1.0, 1.0, st_law, 1, pp, 0, w, thr, 3)
-    out = creep_compensated_v(v, 1.0, st, 1, pp, 0, w, thr, 3, n, gso, c_ref, r2, vs)
+    out = creep_compensated_v(v, 1.0, st, 1, pp, 0, w, thr, 3, n, gso, c_ref, r2, vs, 0.0)
     np.testing.assert_array_equal(st, st_law)                    # same states as the law advances
     g_u = gso + (g - gso) * (c_ref / f_c) ** n
     assert out == pytest.approx(divider_voltage(g_u, r2, vs), rel=1e-13)
     assert f_c == pytest.approx(1.0 + w * (1.0 + 1.25 + 1.0), rel=1e-15)
     # below the load threshold the predicted gain is 1; only the calibration's gain is applied
     st2 = np.array([0.0, 1.0, 2.0, 3.0])
-    out_low = creep_compensated_v(v, 0.01, st2, 1, pp, 0, w, thr, 3, n, gso, c_ref, r2, vs)
+    out_low = creep_compensated_v(v, 0.01, st2, 1, pp, 0, w, thr, 3, n, gso, c_ref, r2, vs, 0.0)
     assert out_low == pytest.approx(divider_voltage(gso + (g - gso) * c_ref ** n, r2, vs), rel=1e-13)
     # a railed or faulted divider passes unchanged (the states still advance)
     st3 = np.array([0.0, 1.0, 2.0, 3.0])
-    assert creep_compensated_v(vs, 1.0, st3, 1, pp, 0, w, thr, 3, n, gso, c_ref, r2, vs) == vs
-    assert creep_compensated_v(0.0, 1.0, st3, 1, pp, 0, w, thr, 3, n, gso, c_ref, r2, vs) == 0.0
+    assert creep_compensated_v(vs, 1.0, st3, 1, pp, 0, w, thr, 3, n, gso, c_ref, r2, vs, 0.0) == vs
+    assert creep_compensated_v(0.0, 1.0, st3, 1, pp, 0, w, thr, 3, n, gso, c_ref, r2, vs, 0.0) == 0.0
     # the predicted gain equal to the reference leaves the voltage alone
     st4 = np.zeros(4)
-    assert creep_compensated_v(v, 1.0, st4, 1, np.ones(3), 0, w, thr, 3, n, gso, 1.0, r2, vs) == pytest.approx(
+    assert creep_compensated_v(v, 1.0, st4, 1, np.ones(3), 0, w, thr, 3, n, gso, 1.0, r2, vs, 0.0) == pytest.approx(
         v, rel=1e-13)
+    # a session's preload scales the conduction path by (1 + preload) as well
+    st5 = np.array([0.0, 1.0, 2.0, 3.0])
+    out_pre = creep_compensated_v(v, 1.0, st5, 1, pp, 0, w, thr, 3, n, gso, c_ref, r2, vs, -0.06)
+    assert out_pre == pytest.approx(divider_voltage(gso + (g - gso) * (c_ref / f_c) ** n * 0.94, r2, vs), rel=1e-13)
 
 
 def test_adc_rounds_down_and_clips_at_the_rails():
@@ -544,7 +548,7 @@ def _substep_by_hand(s, p, u):
         vq = creep_compensated_v(vq, s[S.force_est_n], s, S.comp_creep_0_n, p, P.comp_creep_a0,
                                  p[P.comp_creep_weight], p[P.comp_load_threshold_n], fsr.N_CREEP, p[P.comp_fsr_n],
                                  p[P.comp_g_standoff_s], p[P.comp_reference_gain], p[P.r2_ohm],
-                                 p[P.divider_supply_v])
+                                 p[P.divider_supply_v], u[U.est_creep_preload])
     y = biquad_step(tared_v(vq, s[S.tare_v]), s, S.aa_z1, S.aa_z2,
                     p[P.aa_b0], p[P.aa_b1], p[P.aa_b2], p[P.aa_a1], p[P.aa_a2])
     s[S.estimator_phase] = 0.0

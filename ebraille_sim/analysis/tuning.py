@@ -355,7 +355,7 @@ def _compensation_point(device: DeviceParams, raw_v: float, estimate_n: float, l
         st[:] = zz
         return fn(v, f, st, 0, p, P.comp_creep_a0, p[P.comp_creep_weight], p[P.comp_load_threshold_n], N_CREEP,
                   p[P.comp_fsr_n], p[P.comp_g_standoff_s], p[P.comp_reference_gain], p[P.r2_ohm],
-                  p[P.divider_supply_v])
+                  p[P.divider_supply_v], 0.0)
     v0 = out(raw_v, estimate_n, z)
     hv = 1e-6 * max(abs(raw_v), 1e-3)
     hf = 1e-6 * max(abs(estimate_n), 1e-3)

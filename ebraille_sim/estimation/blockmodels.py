@@ -46,6 +46,7 @@ import numpy as np
 from ebraille_sim.base.compiled import njit
 from ebraille_sim.physics.fsr import (F_EPS_N, N_CREEP, N_PLAYS, creep_force, divider_conductance_s, divider_voltage,
                                       inverse_hysteresis, log_force, play)
+from ebraille_sim.physics.params import FSRS
 
 __all__ = [
     "PiecewiseLinear",
@@ -61,8 +62,14 @@ __all__ = [
     "estimator_step",
     "creep_compensated_v",
     "hysteresis_compensated_v",
+    "FIRMWARE_FSR",
     "running_median_v",
 ]
+
+FIRMWARE_FSR = FSRS["nominal"]
+"""The FSR model the estimator's creep and hysteresis compensations assume (the firmware does
+not know the individual unit's parameters; the hysteresis compensation takes the unit's
+measured loop width, :mod:`ebraille_sim.plant.loop`)."""
 
 MAX_TF_LEN = 10
 """Longest numerator/denominator of a linear block the compiled loop evaluates."""
@@ -990,7 +997,7 @@ def tared_v(v, tare_v):
 
 @njit(cache=True, inline="always")
 def creep_compensated_v(v, f_est_n, s, z0, p, a0, weight, threshold_n, n_terms, exponent, g_standoff_s,
-                        reference_gain, r2_ohm, supply_v):
+                        reference_gain, r2_ohm, supply_v, preload):
     """The divider voltage with the predicted creep of the film replaced by the calibration's (V).
 
     The firmware runs the FSR's hereditary creep law (:func:`ebraille_sim.physics.fsr.creep_force`,
@@ -1004,13 +1011,20 @@ def creep_compensated_v(v, f_est_n, s, z0, p, a0, weight, threshold_n, n_terms, 
     an exact estimate, the result is the voltage the sensor gives after the calibration hold
     at the same force, whatever its load history.  Voltages outside ``(0, supply_v)`` (a
     railed divider or a fault) pass unchanged.
+
+    ``preload`` carries the load the firmware followed before its states start: the film's
+    resistance factor, by the same law, of that earlier load continued to now, relative to a
+    film loaded from the states' start, minus one (0 for none; negative, as creep lowers the
+    resistance).  The conduction path is scaled by ``1 + preload`` besides ``(c_ref / c)^n``:
+    the prediction of a firmware that has followed the whole session
+    (:class:`ebraille_sim.scenarios.disturbances.FSRDrift`).
     """
     f_c = creep_force(f_est_n, f_est_n, s, z0, p, a0, weight, threshold_n, n_terms)
     if not 0.0 < v < supply_v:
         return v
     gain = f_c / f_est_n if f_est_n > threshold_n else 1.0
     g = divider_conductance_s(v, r2_ohm, supply_v)
-    g_u = g_standoff_s + (g - g_standoff_s) * (reference_gain / gain) ** exponent
+    g_u = g_standoff_s + (g - g_standoff_s) * (reference_gain / gain) ** exponent * (1.0 + preload)
     return divider_voltage(g_u, r2_ohm, supply_v)
 
 

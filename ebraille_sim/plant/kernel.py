@@ -84,7 +84,7 @@ def sensor_sample(s, p, u):
         vq = creep_compensated_v(vq, s[S.force_est_n], s, S.comp_creep_0_n, p, P.comp_creep_a0,
                                  p[P.comp_creep_weight], p[P.comp_load_threshold_n], N_CREEP, p[P.comp_fsr_n],
                                  p[P.comp_g_standoff_s], p[P.comp_reference_gain], p[P.r2_ohm],
-                                 p[P.divider_supply_v])
+                                 p[P.divider_supply_v], u[U.est_creep_preload])
     if p[P.est_hyst_comp] > 0.0:
         vq = hysteresis_compensated_v(vq, s, S.comp_hyst_v, S.comp_hyst_x, S.comp_play_0, S.comp_med_0, p,
                                       P.comp_play_w0, P.comp_play_weight0, N_PLAYS, p[P.comp_hyst_halfwidth],

@@ -134,6 +134,6 @@ N_PARAM = len(PARAM_NAMES)
 
 INPUT_NAMES = ["command_v", "finger_pos_m", "gravity_along_m_per_s2", "fsr_temp_offset_k",
                "driver_supply_v", "fsr_fault", "fsr_fault_value", "motor_jammed",
-               "press_offset_m", "finger_tilt_rad", "gravity_lateral_m_per_s2"]
+               "press_offset_m", "finger_tilt_rad", "gravity_lateral_m_per_s2", "est_creep_preload"]
 U = slots("InputSlots", INPUT_NAMES)
 N_INPUT = len(INPUT_NAMES)

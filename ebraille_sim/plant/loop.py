@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ebraille_sim.estimation.blockmodels import HYSTERESIS_MEDIAN, pwl_eval
+from ebraille_sim.estimation.blockmodels import FIRMWARE_FSR, HYSTERESIS_MEDIAN, pwl_eval
 from ebraille_sim.estimation.calibration import measured_hysteresis_fraction
 from ebraille_sim.estimation.models import load_estimator
 from ebraille_sim.physics.drivetrain import (mesh_damping_n_s_per_m, reflected_force_n, reflected_inertia_kg,
@@ -37,7 +37,7 @@ from ebraille_sim.physics.fingertip import prony_coefficients, tangent_stiffness
 from ebraille_sim.physics.fsr import (N_CREEP, adc_code, adc_voltage, creep_decay, creep_gain, creep_taus_s,
                                       creep_term_weight, lag_alpha, log_force, play_widths, static_voltage)
 from ebraille_sim.physics.motor import current_decay
-from ebraille_sim.physics.params import FSRS, DeviceParams
+from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import (MAX_BREAKPOINTS, MAX_TF_LEN, N_INPUT, N_PARAM, N_PLAYS, N_STATE, P, S, U)
 
@@ -206,7 +206,7 @@ def _cached_slots(fill, *key) -> tuple[np.ndarray, np.ndarray]:
 
 def _pack_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
     """The estimator's creep compensation: on/off, and the creep law of the nominal FSR
-    (``FSRS["nominal"]``: the firmware does not know the individual sensor's parameters)
+    (:data:`~ebraille_sim.estimation.blockmodels.FIRMWARE_FSR`, the nominal unit: the firmware does not know the individual sensor's parameters)
     at the sensor rate, with the creep gain of the calibration hold as its reference.
     Depends only on the estimator and the sensor period: the slots are computed once per pair."""
     slots, values = _creep_compensation_slots(e, float(dt_sensor_s))
@@ -219,7 +219,7 @@ def _creep_compensation_slots(e, dt_sensor_s: float) -> tuple[np.ndarray, np.nda
 
 
 def _fill_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
-    nominal = FSRS["nominal"]
+    nominal = FIRMWARE_FSR
     p[P.est_creep_comp] = 1.0 if e.creep_compensation else 0.0
     p[P.comp_creep_weight] = creep_term_weight(nominal.creep_per_decade, nominal.creep_tau_min_s,
                                                nominal.creep_tau_max_s)
@@ -233,7 +233,7 @@ def _fill_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
 
 def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr) -> None:
     """The estimator's hysteresis compensation: on/off; play operators of the nominal FSR's
-    exponent (``FSRS["nominal"]``, whose resistance at 1 N is packed too and whose exponent and
+    exponent (:data:`~ebraille_sim.estimation.blockmodels.FIRMWARE_FSR`, whose resistance at 1 N is packed too and whose exponent and
     stand-off are packed with the creep compensation) with the loop the estimator was given,
     or, when it was given none, the unit's loop as measured at assembly
     (:func:`ebraille_sim.estimation.calibration.measured_hysteresis_fraction`); and the noise
@@ -241,7 +241,7 @@ def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr) -> None:
     LSB: they are computed once per combination."""
     h = e.hysteresis_fraction
     if h is None:
-        h = measured_hysteresis_fraction(fsr) if e.hysteresis_compensation else FSRS["nominal"].hysteresis_fraction
+        h = measured_hysteresis_fraction(fsr) if e.hysteresis_compensation else FIRMWARE_FSR.hysteresis_fraction
     slots, values = _hysteresis_compensation_slots(e, float(circuit.adc_lsb_v), h)
     p[slots] = values
 
@@ -252,7 +252,7 @@ def _hysteresis_compensation_slots(e, adc_lsb_v: float, h) -> tuple[np.ndarray, 
 
 
 def _fill_hysteresis_compensation(p: np.ndarray, e, adc_lsb_v: float, h) -> None:
-    nominal = FSRS["nominal"]
+    nominal = FIRMWARE_FSR
     p[P.est_hyst_comp] = 1.0 if e.hysteresis_compensation else 0.0
     widths, weights = play_widths(dataclasses.replace(nominal, hysteresis_fraction=h))
     for j in range(N_PLAYS):

@@ -77,6 +77,7 @@ import numpy as np
 
 from ebraille_sim.base.fields import sourced
 from ebraille_sim.base.validation import check_keys, check_number, check_pair
+from ebraille_sim.estimation.blockmodels import FIRMWARE_FSR
 from ebraille_sim.physics.fsr import held_resistance_factor
 from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2
 from ebraille_sim.scenarios.spec import ScenarioError, check_section_table
@@ -356,7 +357,10 @@ class FSRDrift:
     (:func:`ebraille_sim.physics.fsr.held_resistance_factor`: conductance rising about
     2.7 % per decade, datasheet < 5 % per decade), is advanced by the offset: the run sees
     ``c(t_off + t)`` instead of ``c(t)``.  Folded into the temperature input (module
-    docstring).  A reading session of 30 min to 2 h [E] gives offsets of 1800-7200 s;
+    docstring).  The firmware has followed the same session: its creep compensation predicts
+    with its own law (:data:`ebraille_sim.estimation.blockmodels.FIRMWARE_FSR`) advanced by
+    the same offset, the ``est_creep_preload`` input (``factor - 1`` of that law,
+    :func:`ebraille_sim.estimation.blockmodels.creep_compensated_v`).  A reading session of 30 min to 2 h [E] gives offsets of 1800-7200 s;
     standard FSR ink drifts about 12 % in conductance over 48 h ([R] Sensitronics).
     """
     session_offset_s: float = sourced(1800.0, "s", "[E] 30 min into a session; creep law of "
@@ -526,6 +530,7 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
             raise ScenarioError("[disturbances.fsr_drift] needs an FSR with a nonzero temperature_coeff_per_k "
                                 "(the creep offset is applied through the temperature input)")
         offset = np.empty(len(t_s))
+        preload = np.empty(len(t_s)) if drift is not None else None
         # sample by sample, so in chunks: a long run's temporaries stay at the chunk's size
         for a in range(0, len(t_s), PROFILE_CHUNK):
             tc = t_s[a:a + PROFILE_CHUNK]
@@ -535,7 +540,10 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
             else:
                 scale = (1.0 + alpha * dtemp) * drift.factor(tc, device.fsr)
                 offset[a:a + PROFILE_CHUNK] = (scale - 1.0) / alpha
+                preload[a:a + PROFILE_CHUNK] = drift.factor(tc, FIRMWARE_FSR) - 1.0
         out["fsr_temp_offset_k"] = ("set", offset)
+        if preload is not None:
+            out["est_creep_preload"] = ("set", preload)
     return out
 
 
