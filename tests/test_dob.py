@@ -119,7 +119,7 @@ def test_registered_and_a_controller():
     assert "pid_dob" in controllers.available()
     c = controllers.make("pid_dob", kp_v_per_n=1.5)
     assert isinstance(c, DOBPID) and isinstance(c, controllers.Controller)
-    assert c.config.kp_v_per_n == 1.5 and c.config.ki_v_per_ns == DEFAULT_DOB.ki_v_per_ns == 2.8
+    assert c.config.kp_v_per_n == 1.5 and c.config.ki_v_per_ns == DEFAULT_DOB.ki_v_per_ns == 2.5
 
 
 def test_deterministic():
