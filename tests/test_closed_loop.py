@@ -149,9 +149,9 @@ def test_setpoint_below_the_tactile_range_warns_not_fails():
 
 
 @pytest.mark.parametrize("doc,match", [
-    # 3600 s at 1 MHz: 3.6e9 control periods x 256 B = 921.6 GB
+    # 3600 s at 1 MHz: 3.6e9 control periods x 264 B (8 B x (14 + 12 inputs + 7)) = 950.4 GB
     ({"duration_s": 3600, "rates": {"control_hz": 1e6, "sensor_hz": 1e6, "physics_hz": 1e6}},
-     r"duration_s = 3600 s; at control_hz = 1e\+06 that is 3.6e\+09 control periods x 256 B .* = 921.6 GB, "
+     r"duration_s = 3600 s; at control_hz = 1e\+06 that is 3.6e\+09 control periods x 264 B .* = 950.4 GB, "
      r"above the 2 GB bound"),
     # 0.001 wpm: 12000 s per cell, the default passage's cells end after ~6e6 s
     ({"reading": {"wpm": 0.001}}, r"the reading of \d+ cells at 0.001 wpm ends at .* GB, above the 2 GB bound"),
