@@ -181,6 +181,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from ebraille_sim.base.compiled import entry_point, njit
+from ebraille_sim.base.seeds import SeedNode
 from ebraille_sim.base.validation import check_bool, check_choice, check_number, check_pair, check_range
 
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
@@ -623,8 +624,9 @@ def episode_from_spec(spec) -> Episode:
                    char_index=run.schedule.index_at(run.t_s))
 
 
-def draw_episode(ss: np.random.SeedSequence, cfg: EnvConfig, options: dict | None = None) -> Episode:
-    """Draw one episode from the episode seed ``ss``: a spec from the config's
+def draw_episode(ss, cfg: EnvConfig, options: dict | None = None) -> Episode:
+    """Draw one episode from the episode seed ``ss`` (a NumPy ``SeedSequence`` or a
+    :class:`~ebraille_sim.base.seeds.SeedNode`): a spec from the config's
     :meth:`~EnvConfig.distribution` (``options``, validated by :func:`validate_options`,
     fix components), then its inputs (:func:`episode_from_spec`)."""
     return episode_from_spec(cfg.distribution().draw(ss, options))
@@ -698,7 +700,7 @@ class ContactForceEnv(gym.Env):
             raise ValueError(f"unknown backend {backend!r}; available: {', '.join(sorted(PLANT_BACKENDS))}")
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         self.observation_space = spaces.Box(OBS_LOW.copy(), OBS_HIGH.copy(), dtype=np.float32)
-        self._master: np.random.SeedSequence | None = None
+        self._master: SeedNode | None = None
         self.plant = None
         self.episode: Episode | None = None
         self._z = np.zeros(N_Z)
@@ -717,12 +719,14 @@ class ContactForceEnv(gym.Env):
         self._sv = self._svcfg = _NO_ARRAY
 
     # -- episode ---------------------------------------------------------------------------
-    def next_episode_seed(self, seed=None) -> np.random.SeedSequence:
-        """The episode's ``SeedSequence``: a child of the master seed (``seed`` re-seeds it)."""
+    def next_episode_seed(self, seed=None) -> SeedNode:
+        """The episode's seed sequence: a child of the master seed (``seed`` re-seeds it), a
+        :class:`~ebraille_sim.base.seeds.SeedNode` (NumPy's ``SeedSequence`` of the same
+        entropy and key, hashed by compiled code)."""
         if seed is not None:
-            self._master = np.random.SeedSequence(int(seed))
+            self._master = SeedNode(int(seed))
         elif self._master is None:
-            self._master = np.random.SeedSequence(int(self.np_random.integers(0, 2**63)))
+            self._master = SeedNode(int(self.np_random.integers(0, 2**63)))
         return self._master.spawn(1)[0]
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):

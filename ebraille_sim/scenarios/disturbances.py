@@ -76,6 +76,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ebraille_sim.base.fields import sourced
+from ebraille_sim.base.seeds import child_seed
 from ebraille_sim.base.validation import check_keys, check_number, check_pair
 from ebraille_sim.physics.fsr import held_resistance_factor
 from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2
@@ -511,8 +512,7 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
         obj = section.get(name)
         if obj is None or not hasattr(obj, "inputs"):
             continue
-        seed = np.random.SeedSequence(parent.entropy, spawn_key=parent.spawn_key + (parent.n_children_spawned + k,),
-                                      pool_size=parent.pool_size)
+        seed = child_seed(parent, parent.n_children_spawned + k)
         child = type(rng)(type(bits)(seed=seed))
         for inp, (mode, arr) in obj.inputs(t_s, child, device).items():
             if inp in out and mode == "add" and out[inp][0] == "add":

@@ -41,6 +41,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from numpy.random.bit_generator import ISpawnableSeedSequence
+
+from ebraille_sim.base.seeds import SeedNode
 from ebraille_sim.base.validation import check_bool, check_number, check_pair
 from ebraille_sim.estimation.calibration import calibrate_device
 from ebraille_sim.physics.params import FINGERS, DeviceParams, replace_checked
@@ -136,15 +139,16 @@ def sample_device(rng_or_seed, spec: PopulationSpec = PopulationSpec(), base: De
                   ) -> DeviceParams:
     """One device (reader + FSR unit + motor + drive train) drawn from ``spec``.
 
-    ``rng_or_seed`` is an int, a ``SeedSequence`` or a ``Generator``; components draw from
+    ``rng_or_seed`` is an int, a ``SeedSequence`` (NumPy's or a
+    :class:`~ebraille_sim.base.seeds.SeedNode`) or a ``Generator``; components draw from
     child seeds so that each component's draw is independent of the others' distributions.
     """
     if isinstance(rng_or_seed, np.random.Generator):
-        ss = np.random.SeedSequence(int(rng_or_seed.integers(0, 2**63)))
-    elif isinstance(rng_or_seed, np.random.SeedSequence):
+        ss = SeedNode(int(rng_or_seed.integers(0, 2**63)))
+    elif isinstance(rng_or_seed, ISpawnableSeedSequence):
         ss = rng_or_seed
     else:
-        ss = np.random.SeedSequence(int(rng_or_seed))
+        ss = SeedNode(int(rng_or_seed))
     r_f, r_s, r_m, r_d = (np.random.default_rng(c) for c in ss.spawn(4))
     dev = dataclasses.replace(base, finger=sample_finger(r_f, spec, base.finger),
                               fsr=sample_fsr(r_s, spec, base.fsr), motor=sample_motor(r_m, spec, base.motor),
@@ -156,4 +160,4 @@ def sample_devices(seed: int, n: int, spec: PopulationSpec = PopulationSpec(),
                    base: DeviceParams = DeviceParams()) -> list[DeviceParams]:
     """``n`` devices from one master seed (child ``k`` of ``SeedSequence(seed)`` for device k)."""
     check_number("n", n, lo=0, integer=True)
-    return [sample_device(c, spec, base) for c in np.random.SeedSequence(seed).spawn(n)]
+    return [sample_device(c, spec, base) for c in SeedNode(seed).spawn(n)]
