@@ -1301,12 +1301,15 @@ def _envelope_into(out, v_max, pinion_mass_kg, board_mass_kg, gear_efficiency, e
     the laws of :meth:`SupervisorConfig.drive_force_limit_n` and :meth:`SupervisorConfig.current_for_force_a`
     (:mod:`ebraille_sim.physics.limits`) in one compiled loop."""
     n = ENVELOPE_POINTS
+    energies = np.empty(n - 1)
     for k in range(n - 1):
         v = v_max * k / 32
-        e = _impact_energy_j(_pymax(v, 0.0), pinion_mass_kg, board_mass_kg, gear_efficiency)
-        f = limits.drive_force_for_impact_n(e, envelope_force_n, reader_b_n_per_m, reader_m_per_m)
         out[k] = v
-        out[n + k] = _current_for_push_force_a(_pymax(f, 0.0), push_force_per_a_n, 1.0, 1.0,
+        energies[k] = _impact_energy_j(_pymax(v, 0.0), pinion_mass_kg, board_mass_kg, gear_efficiency)
+    forces = np.empty(n - 1)
+    limits.drive_forces_for_impacts_n(energies, envelope_force_n, reader_b_n_per_m, reader_m_per_m, forces)
+    for k in range(n - 1):
+        out[n + k] = _current_for_push_force_a(_pymax(forces[k], 0.0), push_force_per_a_n, 1.0, 1.0,
                                                friction_current_a * push_force_per_a_n, weight_n)
     out[n - 1] = 1.05 * v_max
     out[2 * n - 1] = -friction_current_a
