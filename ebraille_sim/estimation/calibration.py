@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ebraille_sim.base.validation import replace_fields
 from ebraille_sim.estimation.models import cached_model
 from ebraille_sim.physics.fsr import adc_code, adc_voltage, divider_voltage, play_widths, static_conductance
 
@@ -224,7 +225,7 @@ def calibrate_device(device: DeviceParams, force_n: float = 1.0, hold_s: float =
     r2 = _calibrated_r2(device.estimator.model, device.fsr, device.circuit, float(force_n), float(hold_s))
     if r2 is None:
         return device
-    return dataclasses.replace(device, circuit=dataclasses.replace(device.circuit, r2_ohm=r2))
+    return replace_fields(device, circuit=replace_fields(device.circuit, r2_ohm=r2))
 
 
 def calibrate_device_reference(device: DeviceParams, force_n: float = 1.0, hold_s: float = 20.0) -> DeviceParams:

@@ -44,7 +44,7 @@ import numpy as np
 from numpy.random.bit_generator import ISpawnableSeedSequence
 
 from ebraille_sim.base.seeds import SeedNode
-from ebraille_sim.base.validation import check_bool, check_number, check_pair
+from ebraille_sim.base.validation import check_bool, check_number, check_pair, replace_fields
 from ebraille_sim.estimation.calibration import calibrate_device
 from ebraille_sim.physics.params import FINGERS, DeviceParams, replace_checked
 
@@ -150,7 +150,7 @@ def sample_device(rng_or_seed, spec: PopulationSpec = PopulationSpec(), base: De
     else:
         ss = SeedNode(int(rng_or_seed))
     r_f, r_s, r_m, r_d = (np.random.default_rng(c) for c in ss.spawn(4))
-    dev = dataclasses.replace(base, finger=sample_finger(r_f, spec, base.finger),
+    dev = replace_fields(base, finger=sample_finger(r_f, spec, base.finger),
                               fsr=sample_fsr(r_s, spec, base.fsr), motor=sample_motor(r_m, spec, base.motor),
                               drivetrain=sample_drivetrain(r_d, spec, base.drivetrain))
     return calibrate_device(dev) if spec.calibrate else dev
