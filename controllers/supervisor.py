@@ -220,6 +220,13 @@ def rated_current_a(device: DeviceParams) -> float:
 
 
 _NOMINAL_LIMITS: dict = {}
+_NUMERIC_FIELD_NAMES: list = []
+
+
+def _numeric_field_names() -> list:
+    """The names of :class:`SupervisorConfig`'s numeric fields (every field but ``enabled``), read once."""
+    _NUMERIC_FIELD_NAMES.extend(f.name for f in dataclasses.fields(SupervisorConfig) if f.name != "enabled")
+    return _NUMERIC_FIELD_NAMES
 
 
 @dataclass(frozen=True)
@@ -327,14 +334,15 @@ class SupervisorConfig:
     enabled: bool = True
 
     def __post_init__(self):
-        for f in dataclasses.fields(self):
-            if f.name == "enabled":
-                check_bool(f.name, self.enabled)
-                continue
-            v = getattr(self, f.name)
+        check_bool("enabled", self.enabled)
+        d = self.__dict__
+        for name in _NUMERIC_FIELD_NAMES or _numeric_field_names():
+            v = d[name]
             if v is None:
-                v = _NOMINAL_LIMITS[f.name]
-            object.__setattr__(self, f.name, check_number(f.name, v, lo=0.0, lo_open=True))
+                v = _NOMINAL_LIMITS[name]
+            elif type(v) is float and 0.0 < v < math.inf:
+                continue                            # what check_number returns unchanged
+            object.__setattr__(self, name, check_number(name, v, lo=0.0, lo_open=True))
         if self.force_cap_n > FORCE_CAP_LIMIT_N:
             raise ValueError(f"force_cap_n = {self.force_cap_n:g} N is above the {FORCE_CAP_LIMIT_N:g} N safe limit "
                              f"(the {TACTILE_FORCE_MAX_N:g} N top of the tactile range, [R] seed paper, plus "
