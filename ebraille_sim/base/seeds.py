@@ -116,7 +116,7 @@ class SeedNode(ISpawnableSeedSequence):
     first needed.
     """
 
-    __slots__ = ("entropy", "spawn_key", "pool_size", "n_children_spawned", "_pool")
+    __slots__ = ("entropy", "spawn_key", "pool_size", "n_children_spawned", "_pool", "_padded")
 
     def __init__(self, entropy: int, *, spawn_key: tuple = (), pool_size: int = 4, n_children_spawned: int = 0):
         if type(entropy) is not int:
@@ -129,6 +129,7 @@ class SeedNode(ISpawnableSeedSequence):
         self.pool_size = pool_size
         self.n_children_spawned = n_children_spawned
         self._pool = None
+        self._padded = None
 
     @classmethod
     def of(cls, seed_sequence) -> SeedNode:
@@ -136,33 +137,59 @@ class SeedNode(ISpawnableSeedSequence):
         return cls(seed_sequence.entropy, spawn_key=seed_sequence.spawn_key, pool_size=seed_sequence.pool_size,
                    n_children_spawned=seed_sequence.n_children_spawned)
 
+    def _assembled(self) -> np.ndarray:
+        """The entropy words and then the spawn key's, the entropy padded to the pool size
+        when there is a key (``SeedSequence.get_assembled_entropy``)."""
+        key = self.spawn_key
+        if not key:
+            words: list = []
+            _words(self.entropy, words)
+            return np.array(words, dtype=np.uint64)
+        padded = self._padded
+        if padded is None:
+            padded = []
+            _words(self.entropy, padded)
+            padded.extend([0] * (self.pool_size - len(padded)))
+            self._padded = padded
+        if max(key) <= _M32:                           # one word each
+            return np.array(padded + list(key), dtype=np.uint64)
+        words = list(padded)
+        for k in key:
+            _words(k, words)
+        return np.array(words, dtype=np.uint64)
+
     @property
     def pool(self) -> np.ndarray:
         """The hashed entropy, uint32 (``SeedSequence.pool``)."""
         if self._pool is None:
-            words: list = []
-            _words(self.entropy, words)
-            if self.spawn_key:
-                words.extend([0] * (self.pool_size - len(words)))
-                for k in self.spawn_key:
-                    _words(k, words)
-            self._pool = _pool_of(np.array(words, dtype=np.uint64), self.pool_size)
+            self._pool = _pool_of(self._assembled(), self.pool_size)
         return self._pool
 
     def generate_state(self, n_words: int, dtype=np.uint32) -> np.ndarray:
         """``n_words`` words of ``dtype`` (uint32 or uint64), as ``SeedSequence.generate_state``."""
-        dt = np.dtype(dtype)
-        if dt == np.uint32:
-            return _state_of(self.pool, n_words)
-        if dt == np.uint64:
+        if dtype is np.uint64 or np.dtype(dtype) == np.uint64:
             return _state64_of(self.pool, n_words)
+        if np.dtype(dtype) == np.uint32:
+            return _state_of(self.pool, n_words)
         raise ValueError("only uint32 and uint64 are supported")
 
     def spawn(self, n_children: int) -> list[SeedNode]:
         """The next ``n_children`` children (spawn keys extended by their index), as ``SeedSequence.spawn``."""
         k0 = self.n_children_spawned
-        out = [SeedNode(self.entropy, spawn_key=self.spawn_key + (i,), pool_size=self.pool_size)
-               for i in range(k0, k0 + n_children)]
+        if self._padded is None:
+            self._padded = []
+            _words(self.entropy, self._padded)
+            self._padded.extend([0] * (self.pool_size - len(self._padded)))
+        out = []
+        for i in range(k0, k0 + n_children):
+            child = object.__new__(SeedNode)            # the parent's checked values, a new index
+            child.entropy = self.entropy
+            child.spawn_key = self.spawn_key + (i,)
+            child.pool_size = self.pool_size
+            child.n_children_spawned = 0
+            child._pool = None
+            child._padded = self._padded                 # the same entropy words, shared read-only
+            out.append(child)
         self.n_children_spawned = k0 + n_children
         return out
 
