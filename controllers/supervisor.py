@@ -1302,12 +1302,25 @@ _impact_energy_j = njit(cache=True)(limits.impact_energy_j)
 _current_for_push_force_a = njit(cache=True)(limits.current_for_push_force_a)
 
 
+ENVELOPE_MEMO_NODES = 1 << 14
+"""Midpoints one of the envelope's bisection memos keeps (0.4 MB; :func:`_envelope_memo`)."""
+
+
+@functools.lru_cache(maxsize=8)
+def _envelope_memo(envelope_force_n: float, reader_b_n_per_m: float, reader_m_per_m: float) -> np.ndarray:
+    """The bisection memo of the envelopes with this force and design reader, the most recently
+    used eight kept: the design reader is the stiffer of the device's and the stiff preset, so
+    most devices of a population share one (and their envelopes one tree of midpoints)."""
+    return limits.new_bisection_memo(ENVELOPE_MEMO_NODES)
+
+
 @njit(cache=True)
 def _envelope_into(out, v_max, pinion_mass_kg, board_mass_kg, gear_efficiency, envelope_force_n, reader_b_n_per_m,
-                   reader_m_per_m, push_force_per_a_n, friction_current_a, weight_n):
+                   reader_m_per_m, push_force_per_a_n, friction_current_a, weight_n, memo):
     """:func:`_envelope` of a configuration's constants written into ``out`` (speeds, then currents):
     the laws of :meth:`SupervisorConfig.drive_force_limit_n` and :meth:`SupervisorConfig.current_for_force_a`
-    (:mod:`ebraille_sim.physics.limits`) in one compiled loop."""
+    (:mod:`ebraille_sim.physics.limits`) in one compiled loop; ``memo`` keeps the bisections'
+    midpoints (:func:`ebraille_sim.physics.limits.drive_forces_for_impacts_n`)."""
     n = ENVELOPE_POINTS
     energies = np.empty(n - 1)
     for k in range(n - 1):
@@ -1315,7 +1328,7 @@ def _envelope_into(out, v_max, pinion_mass_kg, board_mass_kg, gear_efficiency, e
         out[k] = v
         energies[k] = _impact_energy_j(_pymax(v, 0.0), pinion_mass_kg, board_mass_kg, gear_efficiency)
     forces = np.empty(n - 1)
-    limits.drive_forces_for_impacts_n(energies, envelope_force_n, reader_b_n_per_m, reader_m_per_m, forces)
+    limits.drive_forces_for_impacts_n(energies, envelope_force_n, reader_b_n_per_m, reader_m_per_m, forces, memo)
     for k in range(n - 1):
         out[n + k] = _current_for_push_force_a(_pymax(forces[k], 0.0), push_force_per_a_n, 1.0, 1.0,
                                                friction_current_a * push_force_per_a_n, weight_n)
@@ -1327,7 +1340,8 @@ def _envelope_table(c: SupervisorConfig, out: np.ndarray) -> None:
     """Write :func:`_envelope` of ``c`` into ``out`` (length ``2 * ENVELOPE_POINTS``) in one compiled call."""
     _envelope_into(out, c.speed_limit_m_per_s, c.pinion_mass_kg, c.board_mass_kg, c.gear_efficiency,
                    c.envelope_force_n, c.reader_b_n_per_m, c.reader_m_per_m, c.push_force_per_a_n,
-                   c.friction_current_a, c.weight_n)
+                   c.friction_current_a, c.weight_n,
+                   _envelope_memo(c.envelope_force_n, c.reader_b_n_per_m, c.reader_m_per_m))
 
 
 @njit(cache=True)
