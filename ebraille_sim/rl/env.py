@@ -433,12 +433,14 @@ class EnvConfig:
             raise ValueError(f"control_rate_hz {self.control_rate_hz:g}: {exc}") from None
         object.__setattr__(self, "base_device", dataclasses.replace(base, rates=rates))
         object.__setattr__(self, "control_rate_hz", float(self.control_rate_hz))
-        self.distribution()                     # validates the episode ranges at this rate
+        # validates the episode ranges at this rate; kept on the instance (not a field), so a
+        # reset does not hash the config to find it
+        object.__setattr__(self, "_distribution", _distribution(self))
 
     def distribution(self):
         """The :class:`~ebraille_sim.scenarios.episodes.EpisodeDistribution` of this config's
         episodes (built once per config)."""
-        return _distribution(self)
+        return self._distribution
     @property
     def dt_s(self) -> float:
         return 1.0 / self.control_rate_hz
