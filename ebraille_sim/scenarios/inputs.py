@@ -194,8 +194,10 @@ def _cells_of(text: str) -> tuple:
     return tuple(text_to_cells(text))
 
 
-def build_schedule_for(spec: ScenarioSpec, rng: np.random.Generator):
+def build_schedule_for(spec: ScenarioSpec, rng: np.random.Generator | None):
     """Reading schedule of a scenario, repeating the text to fill ``duration_s``.
+
+    ``rng`` draws the dwell jitter (None: a schedule without jitter needs none).
 
     The number of cells is :data:`SCHEDULE_CELL_MARGIN` times the nominal count for the
     duration (see there).  Transcriptions are cached per text.
@@ -419,7 +421,9 @@ def build_run_inputs(spec: ScenarioSpec, seed: int | None = None) -> RunInputs:
     if seed < 0:
         raise ScenarioError(f"seed must be >= 0, got {seed}")
     ss_sensor, ss_reading, ss_inputs = SeedNode(seed).spawn(3)
-    schedule = build_schedule_for(spec, np.random.default_rng(ss_reading))
+    # the reading generator draws only the dwell jitter (made only for a jittered schedule)
+    jittered = spec.reading.jitter_fraction > 0
+    schedule = build_schedule_for(spec, np.random.default_rng(ss_reading) if jittered else None)
     dt, n = run_length(spec, schedule)
     # the period starts (k + 1) dt - dt, in one array: a one-hour run holds 3.6 million periods
     t_start = period_starts(n + 1, dt)
