@@ -89,6 +89,15 @@ class PopulationSpec:
         return replace_checked(cls() if base is None else base, **d)
 
 
+_DRAWN = "drawn from PopulationSpec (ebraille_sim/scenarios/population.py)"
+_FINGER_SOURCES = tuple((k, _DRAWN) for k in ("stiffness_b_n_per_m", "exponent_m_per_m", "relax_weight_inf",
+                                              "relax_weight_1", "relax_weight_2", "relax_weight_3"))
+"""The ``sources`` of a drawn pulp: the fields the draw sets."""
+_FSR_SOURCES = tuple((f, _DRAWN) for f in ("resistance_at_1n_ohm", "exponent", "hysteresis_fraction",
+                                           "creep_per_decade"))
+"""The ``sources`` of a drawn FSR unit."""
+
+
 def _log_uniform(rng, lo, hi):
     return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
 
@@ -100,10 +109,7 @@ def sample_finger(rng: np.random.Generator, spec: PopulationSpec, base=FINGERS["
     c0 = float(rng.uniform(*spec.relax_c0))
     rest = base.relax_weight_1 + base.relax_weight_2 + base.relax_weight_3
     k = (1.0 - c0) / rest
-    src = tuple((k, "drawn from PopulationSpec (ebraille_sim/scenarios/population.py)") for k in (
-        "stiffness_b_n_per_m", "exponent_m_per_m", "relax_weight_inf", "relax_weight_1", "relax_weight_2",
-        "relax_weight_3"))
-    return replace_checked(base, name="drawn", sources=src, stiffness_b_n_per_m=b, exponent_m_per_m=m, relax_weight_inf=c0,
+    return replace_checked(base, name="drawn", sources=_FINGER_SOURCES, stiffness_b_n_per_m=b, exponent_m_per_m=m, relax_weight_inf=c0,
                            relax_weight_1=base.relax_weight_1 * k, relax_weight_2=base.relax_weight_2 * k,
                            relax_weight_3=1.0 - c0 - base.relax_weight_1 * k - base.relax_weight_2 * k)
 
@@ -111,9 +117,7 @@ def sample_finger(rng: np.random.Generator, spec: PopulationSpec, base=FINGERS["
 def sample_fsr(rng: np.random.Generator, spec: PopulationSpec, base):
     """An FSR unit drawn around ``base``."""
     k = base.resistance_at_1n_ohm * float(math.exp(rng.normal(0.0, spec.fsr_k_sigma_ln)))
-    src = tuple((f, "drawn from PopulationSpec (ebraille_sim/scenarios/population.py)") for f in (
-        "resistance_at_1n_ohm", "exponent", "hysteresis_fraction", "creep_per_decade"))
-    return replace_checked(base, name="drawn", sources=src, resistance_at_1n_ohm=k,
+    return replace_checked(base, name="drawn", sources=_FSR_SOURCES, resistance_at_1n_ohm=k,
                            exponent=float(rng.uniform(*spec.fsr_exponent)),
                            hysteresis_fraction=float(rng.uniform(*spec.fsr_hysteresis)),
                            creep_per_decade=float(rng.uniform(*spec.fsr_creep_per_decade)))
