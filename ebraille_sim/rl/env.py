@@ -189,6 +189,7 @@ from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import S, U
 from ebraille_sim.plant.loop import loop_step
 from ebraille_sim.rl.registration import ENV_ID, register_envs
+from ebraille_sim.scenarios.inputs import profile_table
 from controllers import features
 from controllers.supervisor import FAULTS, MODES, SV, supervise_begin, supervise_end
 from controllers.features import (C_CMD_SCALE, C_DT, C_SAFE, C_WARN, C_WU, C_WV, ERROR_SCALE_N, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, Z_STEP, _clip,
@@ -773,7 +774,9 @@ class ContactForceEnv(gym.Env):
         plant's parameter row, the supervisor's arrays, the features and the observation views
         of it."""
         plant = self.plant
-        prof = (np.stack([arr for _, arr in self._varying]) if self._varying else np.zeros((0, ep.n_steps)))
+        prof = profile_table(ep.run.profiles, ep.n_steps) if self._varying else np.zeros((0, ep.n_steps))
+        if prof is None:
+            prof = np.stack([arr for _, arr in self._varying])
         rows = np.array([j for j, _ in self._varying], dtype=np.float64)
         parts = (plant.params, self._sv.size, self._svcfg.size, self._z, N_OBS_SLOTS, self._c, ep.setpoint_n, prof,
                  rows)                                    # the supervisor's parts are filled by bind

@@ -70,6 +70,7 @@ ebraille_sim.scenarios.spec.ScenarioError: inline: unknown key 'rms' in [disturb
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
@@ -445,14 +446,21 @@ def _fmt(x):
     return f"{x:g}"
 
 
+@functools.lru_cache(maxsize=None)
+def _kind_fields(cls) -> tuple[dict, tuple]:
+    """The fields of a disturbance class by name, and their names sorted (read once per class)."""
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    return fields, tuple(sorted(fields))
+
+
 def _check_kind(src, name, cls, table):
     where0 = f"[disturbances.{name}]"
     if not isinstance(table, dict):
         raise ScenarioError(f"{src}: {where0} must be a table")
-    fields = {f.name: f for f in dataclasses.fields(cls)}
+    fields, names = _kind_fields(cls)
     out = {}
     try:
-        check_keys(where0, table, sorted(fields))
+        check_keys(where0, table, names)
         for key, value in table.items():
             meta = fields[key].metadata
             where = f"{where0} {key}"
