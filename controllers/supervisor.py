@@ -1124,14 +1124,30 @@ class Supervisor:
         Time since reset (s) and a short description of every mode change.
     """
 
-    def __init__(self, inner, config: SupervisorConfig = SupervisorConfig()):
+    def __init__(self, inner, config: SupervisorConfig = SupervisorConfig(), *, state_out: np.ndarray | None = None,
+                 config_out: np.ndarray | None = None):
+        """``state_out`` and ``config_out`` (both or neither): arrays to hold the state and the
+        configuration from the start, as :meth:`bind` would move them there (the state is
+        zeroed, the configuration copied in)."""
         if not isinstance(config, SupervisorConfig):
             raise TypeError(f"config must be a SupervisorConfig, got {type(config).__name__}")
         self.inner = inner
         self.config = config
         self.name = f"supervised({getattr(inner, 'name', type(inner).__name__)})"
-        self._cfg = config.pack().copy()
-        self._sv = np.zeros(int(self._cfg[CF.state_len]))
+        packed = config.pack()
+        if (state_out is None) != (config_out is None):
+            raise ValueError("state_out and config_out go together")
+        if state_out is None:
+            self._cfg = packed.copy()
+            self._sv = np.zeros(int(self._cfg[CF.state_len]))
+        else:
+            n = int(packed[CF.state_len])
+            if np.shape(state_out) != (n,) or np.shape(config_out) != packed.shape:
+                raise ValueError(f"the supervisor needs arrays of lengths {n} and {packed.size}, got "
+                                 f"{np.shape(state_out)} and {np.shape(config_out)}")
+            config_out[:] = packed
+            state_out[:] = 0.0
+            self._cfg, self._sv = config_out, state_out
         self._sv0 = _initial_state(config)
         self._min_dt = float(self._cfg[CF.min_dt_s])
         self._clear()

@@ -191,7 +191,7 @@ from ebraille_sim.plant.loop import loop_step
 from ebraille_sim.rl.registration import ENV_ID, register_envs
 from ebraille_sim.scenarios.inputs import profile_table
 from controllers import features
-from controllers.supervisor import FAULTS, MODES, SV, supervise_begin, supervise_end
+from controllers.supervisor import CF, FAULTS, MODES, SV, supervise_begin, supervise_end
 from controllers.features import (C_CMD_SCALE, C_DT, C_SAFE, C_WARN, C_WU, C_WV, ERROR_SCALE_N, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, Z_STEP, _clip,
                                   observe, reset_features, write_observation)
 
@@ -262,12 +262,27 @@ N_OBS_SLOTS = (N_OBS + 1) // 2
 """Slots of the observation's part: the float32 observation is a view of its bytes."""
 
 
-def pack_workspace(parts, safety: bool, substeps: int, dt_s: float, prof_stride: int) -> np.ndarray:
+def pack_workspace(parts, safety: bool, substeps: int, dt_s: float, prof_stride: int,
+                   buffer: np.ndarray | None = None) -> np.ndarray:
     """The workspace of :func:`scalar_step`: the header, then ``parts`` in the order of the
-    ``P_*`` indices (an array is copied as float64, an int ``n`` reserves ``n`` zeros)."""
+    ``P_*`` indices (an array is copied as float64, an int ``n`` reserves ``n`` zeros).
+
+    With ``buffer`` (float64, 1-D) long enough, the workspace is its first slots (the header
+    and the reserved parts cleared, the others overwritten), not a new array: an env keeps one
+    buffer over its episodes, so that a reset does not map and clear the supervisor's ring
+    buffers afresh.
+    """
     sizes = [x if isinstance(x, int) else int(np.size(x)) for x in parts]
     offsets = np.cumsum([W_HEADER] + sizes)
-    ws = np.zeros(int(offsets[-1]))
+    total = int(offsets[-1])
+    if buffer is not None and buffer.shape[0] >= total:
+        ws = buffer[:total]
+        ws[:W_HEADER] = 0.0
+        for i, x in enumerate(parts):
+            if isinstance(x, int):
+                ws[offsets[i]:offsets[i + 1]] = 0.0
+    else:
+        ws = np.zeros(total)
     ws[W_SAFETY] = 1.0 if safety else 0.0
     ws[W_SUBSTEPS] = substeps
     ws[W_DT] = dt_s
@@ -364,10 +379,17 @@ class ActionCommand:
         return self.command_v
 
 
-def make_supervisor(device):
-    """The safety layer of one env: a supervisor for ``device`` around an :class:`ActionCommand`."""
+def make_supervisor(device, config=None, state_out=None, config_out=None):
+    """The safety layer of one env: a supervisor for ``device`` around an :class:`ActionCommand`.
+
+    ``config`` is its configuration when already made (default
+    ``SupervisorConfig.for_device(device)``); ``state_out`` and ``config_out`` hold its
+    arrays (:class:`~controllers.supervisor.Supervisor`).
+    """
     from controllers.supervisor import Supervisor, SupervisorConfig
-    return Supervisor(ActionCommand(), SupervisorConfig.for_device(device))
+    if config is None:
+        config = SupervisorConfig.for_device(device)
+    return Supervisor(ActionCommand(), config, state_out=state_out, config_out=config_out)
 
 
 def supervised_action(sup, action: float, cmd_scale_v: float, force_est_n: float, setpoint_n: float,
@@ -716,6 +738,7 @@ class ContactForceEnv(gym.Env):
         self._sup = None
         self._compiled = False
         self._ws = None
+        self._buffer = None
         self._step_fn = None
         self._n_steps = 0
         self._dt = self.config.dt_s
@@ -751,17 +774,21 @@ class ContactForceEnv(gym.Env):
         self._n_steps = ep.n_steps
         fe = float(self._st[S.force_est_n])
         self._sup = None
+        self._sv = self._svcfg = _NO_ARRAY
+        svc = None
         if self.config.safety:
-            self._sup = make_supervisor(dev)
+            from controllers.supervisor import SupervisorConfig
+            svc = SupervisorConfig.for_device(dev)
+        if self._compiled:
+            self._bind_workspace(ep, svc)                     # makes the supervisor in the workspace
+        elif svc is not None:
+            self._sup = make_supervisor(dev, svc)
+        if self._sup is not None:
             self._sup.reset(force_est_n=fe, setpoint_n=float(ep.setpoint_n[0]), command_v=0.0)
             if self.config.dt_s < self._sup.min_control_period_s:
                 raise ValueError(f"control period {self.config.dt_s:g} s is below the "
                                  f"{self._sup.min_control_period_s:g} s the safety supervisor is sized for")
             self._sv, self._svcfg = self._sup.compiled()
-        else:
-            self._sv = self._svcfg = _NO_ARRAY
-        if self._compiled:
-            self._bind_workspace(ep)
         reset_features(self._z, fe)
         write_observation(self._z, self._c, fe, ep.setpoint_n[0], float(self._st[S.current_a]), self._obs)
         if self.render_mode is not None:
@@ -769,22 +796,27 @@ class ContactForceEnv(gym.Env):
                              "force_est_n": [fe], "setpoint_n": [float(ep.setpoint_n[0])]}
         return self._obs.copy(), self._info(0.0)
 
-    def _bind_workspace(self, ep: Episode) -> None:
-        """Pack the episode's arrays into one workspace (:func:`pack_workspace`) and make the
-        plant's parameter row, the supervisor's arrays, the features and the observation views
-        of it."""
+    def _bind_workspace(self, ep: Episode, svc) -> None:
+        """Pack the episode's arrays into one workspace (:func:`pack_workspace`, in the env's
+        buffer) and make the plant's parameter row, the features and the observation views of
+        it; with a supervisor configuration ``svc``, make the supervisor with its arrays in it."""
         plant = self.plant
         prof = profile_table(ep.run.profiles, ep.n_steps) if self._varying else np.zeros((0, ep.n_steps))
         if prof is None:
             prof = np.stack([arr for _, arr in self._varying])
         rows = np.array([j for j, _ in self._varying], dtype=np.float64)
-        parts = (plant.params, self._sv.size, self._svcfg.size, self._z, N_OBS_SLOTS, self._c, ep.setpoint_n, prof,
-                 rows)                                    # the supervisor's parts are filled by bind
-        ws = pack_workspace(parts, self._sup is not None, plant.substeps, self._dt, prof.shape[1])
+        sv_n = cfg_n = 0
+        if svc is not None:
+            packed = svc.pack()
+            sv_n, cfg_n = int(packed[CF.state_len]), packed.size
+        parts = (plant.params, sv_n, cfg_n, self._z.copy(), N_OBS_SLOTS, self._c, ep.setpoint_n, prof,
+                 rows)                                    # the supervisor's parts are filled by it
+        ws = pack_workspace(parts, svc is not None, plant.substeps, self._dt, prof.shape[1], self._buffer)
+        if self._buffer is None or ws.base is not self._buffer:
+            self._buffer = np.empty(ws.size + ws.size // 4)   # for the next episodes (a quarter to spare)
         plant.params = workspace_part(ws, P_PARAMS).reshape(plant.params.shape)
-        if self._sup is not None:
-            self._sup.bind(workspace_part(ws, P_SV), workspace_part(ws, P_CFG))
-            self._sv, self._svcfg = self._sup.compiled()
+        if svc is not None:
+            self._sup = make_supervisor(ep.device, svc, workspace_part(ws, P_SV), workspace_part(ws, P_CFG))
         self._z = workspace_part(ws, P_Z)
         self._obs = workspace_part(ws, P_OBS).view(np.float32)[:N_OBS]
         self._chars = ep.char_index.tolist()
