@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.random.bit_generator import ISpawnableSeedSequence
 
-from ebraille_sim.base.compiled import njit
+from ebraille_sim.base.compiled import entry_point, njit
 
 __all__ = ["SeedNode", "child_seed"]
 
@@ -99,6 +99,29 @@ def _state64_of(pool, n_words):
     return out
 
 
+@njit(cache=True)
+def _state_into(entropy, pool, out):
+    """With ``entropy`` words, hash them into ``pool`` (its length the pool size; an empty
+    ``entropy``: ``pool`` is already hashed); then :func:`_state64_of` of the pool into ``out``
+    (none for an empty ``out``).  One compiled call for a new seed's generator state."""
+    if entropy.shape[0] > 0:
+        pool[:] = _pool_of(entropy, pool.shape[0])
+    if out.shape[0] > 0:
+        out[:] = _state64_of(pool, out.shape[0])
+
+
+_NO_WORDS = np.zeros(0, dtype=np.uint64)
+_ENTRY: list = []
+
+
+def _hash_into(entropy, pool, out) -> None:
+    """:func:`_state_into` through its machine code for these argument types (compiled or
+    loaded at the first call; no dispatch on each call)."""
+    if not _ENTRY:
+        _ENTRY.append(entry_point(_state_into, _NO_WORDS, np.zeros(4, dtype=np.uint32), _NO_WORDS))
+    _ENTRY[0](entropy, pool, out)
+
+
 def _words(n: int, out: list) -> None:
     """Append the little-endian 32-bit words of the non-negative int ``n`` (one word for 0)."""
     if n == 0:
@@ -162,13 +185,20 @@ class SeedNode(ISpawnableSeedSequence):
     def pool(self) -> np.ndarray:
         """The hashed entropy, uint32 (``SeedSequence.pool``)."""
         if self._pool is None:
-            self._pool = _pool_of(self._assembled(), self.pool_size)
+            self._pool = np.empty(self.pool_size, dtype=np.uint32)
+            _hash_into(self._assembled(), self._pool, _NO_WORDS)
         return self._pool
 
     def generate_state(self, n_words: int, dtype=np.uint32) -> np.ndarray:
         """``n_words`` words of ``dtype`` (uint32 or uint64), as ``SeedSequence.generate_state``."""
         if dtype is np.uint64 or np.dtype(dtype) == np.uint64:
-            return _state64_of(self.pool, n_words)
+            out = np.empty(n_words, dtype=np.uint64)
+            if self._pool is None:                      # the pool and the state in one call
+                self._pool = np.empty(self.pool_size, dtype=np.uint32)
+                _hash_into(self._assembled(), self._pool, out)
+            else:
+                _hash_into(_NO_WORDS, self._pool, out)
+            return out
         if np.dtype(dtype) == np.uint32:
             return _state_of(self.pool, n_words)
         raise ValueError("only uint32 and uint64 are supported")
