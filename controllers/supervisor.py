@@ -220,6 +220,13 @@ def rated_current_a(device: DeviceParams) -> float:
 
 
 _NOMINAL_LIMITS: dict = {}
+_NUMERIC_FIELD_NAMES: list = []
+
+
+def _numeric_field_names() -> list:
+    """The names of :class:`SupervisorConfig`'s numeric fields (every field but ``enabled``), read once."""
+    _NUMERIC_FIELD_NAMES.extend(f.name for f in dataclasses.fields(SupervisorConfig) if f.name != "enabled")
+    return _NUMERIC_FIELD_NAMES
 
 
 @dataclass(frozen=True)
@@ -327,14 +334,15 @@ class SupervisorConfig:
     enabled: bool = True
 
     def __post_init__(self):
-        for f in dataclasses.fields(self):
-            if f.name == "enabled":
-                check_bool(f.name, self.enabled)
-                continue
-            v = getattr(self, f.name)
+        check_bool("enabled", self.enabled)
+        d = self.__dict__
+        for name in _NUMERIC_FIELD_NAMES or _numeric_field_names():
+            v = d[name]
             if v is None:
-                v = _NOMINAL_LIMITS[f.name]
-            object.__setattr__(self, f.name, check_number(f.name, v, lo=0.0, lo_open=True))
+                v = _NOMINAL_LIMITS[name]
+            elif type(v) is float and 0.0 < v < math.inf:
+                continue                            # what check_number returns unchanged
+            object.__setattr__(self, name, check_number(name, v, lo=0.0, lo_open=True))
         if self.force_cap_n > FORCE_CAP_LIMIT_N:
             raise ValueError(f"force_cap_n = {self.force_cap_n:g} N is above the {FORCE_CAP_LIMIT_N:g} N safe limit "
                              f"(the {TACTILE_FORCE_MAX_N:g} N top of the tactile range, [R] seed paper, plus "
@@ -1116,14 +1124,30 @@ class Supervisor:
         Time since reset (s) and a short description of every mode change.
     """
 
-    def __init__(self, inner, config: SupervisorConfig = SupervisorConfig()):
+    def __init__(self, inner, config: SupervisorConfig = SupervisorConfig(), *, state_out: np.ndarray | None = None,
+                 config_out: np.ndarray | None = None):
+        """``state_out`` and ``config_out`` (both or neither): arrays to hold the state and the
+        configuration from the start, as :meth:`bind` would move them there (the state is
+        zeroed, the configuration copied in)."""
         if not isinstance(config, SupervisorConfig):
             raise TypeError(f"config must be a SupervisorConfig, got {type(config).__name__}")
         self.inner = inner
         self.config = config
         self.name = f"supervised({getattr(inner, 'name', type(inner).__name__)})"
-        self._cfg = config.pack().copy()
-        self._sv = np.zeros(int(self._cfg[CF.state_len]))
+        packed = config.pack()
+        if (state_out is None) != (config_out is None):
+            raise ValueError("state_out and config_out go together")
+        if state_out is None:
+            self._cfg = packed.copy()
+            self._sv = np.zeros(int(self._cfg[CF.state_len]))
+        else:
+            n = int(packed[CF.state_len])
+            if np.shape(state_out) != (n,) or np.shape(config_out) != packed.shape:
+                raise ValueError(f"the supervisor needs arrays of lengths {n} and {packed.size}, got "
+                                 f"{np.shape(state_out)} and {np.shape(config_out)}")
+            config_out[:] = packed
+            state_out[:] = 0.0
+            self._cfg, self._sv = config_out, state_out
         self._sv0 = _initial_state(config)
         self._min_dt = float(self._cfg[CF.min_dt_s])
         self._clear()
@@ -1294,19 +1318,35 @@ _impact_energy_j = njit(cache=True)(limits.impact_energy_j)
 _current_for_push_force_a = njit(cache=True)(limits.current_for_push_force_a)
 
 
+ENVELOPE_MEMO_NODES = 1 << 14
+"""Midpoints one of the envelope's bisection memos keeps (0.4 MB; :func:`_envelope_memo`)."""
+
+
+@functools.lru_cache(maxsize=8)
+def _envelope_memo(envelope_force_n: float, reader_b_n_per_m: float, reader_m_per_m: float) -> np.ndarray:
+    """The bisection memo of the envelopes with this force and design reader, the most recently
+    used eight kept: the design reader is the stiffer of the device's and the stiff preset, so
+    most devices of a population share one (and their envelopes one tree of midpoints)."""
+    return limits.new_bisection_memo(ENVELOPE_MEMO_NODES)
+
+
 @njit(cache=True)
 def _envelope_into(out, v_max, pinion_mass_kg, board_mass_kg, gear_efficiency, envelope_force_n, reader_b_n_per_m,
-                   reader_m_per_m, push_force_per_a_n, friction_current_a, weight_n):
+                   reader_m_per_m, push_force_per_a_n, friction_current_a, weight_n, memo):
     """:func:`_envelope` of a configuration's constants written into ``out`` (speeds, then currents):
     the laws of :meth:`SupervisorConfig.drive_force_limit_n` and :meth:`SupervisorConfig.current_for_force_a`
-    (:mod:`ebraille_sim.physics.limits`) in one compiled loop."""
+    (:mod:`ebraille_sim.physics.limits`) in one compiled loop; ``memo`` keeps the bisections'
+    midpoints (:func:`ebraille_sim.physics.limits.drive_forces_for_impacts_n`)."""
     n = ENVELOPE_POINTS
+    energies = np.empty(n - 1)
     for k in range(n - 1):
         v = v_max * k / 32
-        e = _impact_energy_j(_pymax(v, 0.0), pinion_mass_kg, board_mass_kg, gear_efficiency)
-        f = limits.drive_force_for_impact_n(e, envelope_force_n, reader_b_n_per_m, reader_m_per_m)
         out[k] = v
-        out[n + k] = _current_for_push_force_a(_pymax(f, 0.0), push_force_per_a_n, 1.0, 1.0,
+        energies[k] = _impact_energy_j(_pymax(v, 0.0), pinion_mass_kg, board_mass_kg, gear_efficiency)
+    forces = np.empty(n - 1)
+    limits.drive_forces_for_impacts_n(energies, envelope_force_n, reader_b_n_per_m, reader_m_per_m, forces, memo)
+    for k in range(n - 1):
+        out[n + k] = _current_for_push_force_a(_pymax(forces[k], 0.0), push_force_per_a_n, 1.0, 1.0,
                                                friction_current_a * push_force_per_a_n, weight_n)
     out[n - 1] = 1.05 * v_max
     out[2 * n - 1] = -friction_current_a
@@ -1316,7 +1356,8 @@ def _envelope_table(c: SupervisorConfig, out: np.ndarray) -> None:
     """Write :func:`_envelope` of ``c`` into ``out`` (length ``2 * ENVELOPE_POINTS``) in one compiled call."""
     _envelope_into(out, c.speed_limit_m_per_s, c.pinion_mass_kg, c.board_mass_kg, c.gear_efficiency,
                    c.envelope_force_n, c.reader_b_n_per_m, c.reader_m_per_m, c.push_force_per_a_n,
-                   c.friction_current_a, c.weight_n)
+                   c.friction_current_a, c.weight_n,
+                   _envelope_memo(c.envelope_force_n, c.reader_b_n_per_m, c.reader_m_per_m))
 
 
 @njit(cache=True)

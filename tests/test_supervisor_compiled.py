@@ -368,3 +368,23 @@ def test_event_log_overflow_is_counted_not_a_crash():
     ev = sup.events
     assert len(ev) == EVENT_CAPACITY + 1 and sup.fault is None
     assert ev[-1][1].startswith("event log full: ") and int(ev[-1][1].split()[3]) > 100
+
+
+def test_bisection_memo_gives_the_bisections_numbers_and_serves_only_its_reader():
+    from ebraille_sim.physics import limits
+    rng = np.random.default_rng(4)
+    memo = limits.new_bisection_memo(4000)
+    for b, m in ((540.0, 1448.0), (700.0, 1500.0), (540.0, 1448.0)):
+        e_max = limits.absorbed_energy_j(0.0, 3.2, b, m)
+        energies = np.concatenate([[0.0, 2 * e_max], rng.uniform(0.0, e_max, 40)])
+        for _ in range(2):
+            got, plain = np.empty(energies.size), np.empty(energies.size)
+            limits.drive_forces_for_impacts_n(energies, 3.2, b, m, got, memo)
+            limits.drive_forces_for_impacts_n(energies, 3.2, b, m, plain, np.empty(0))
+            assert got.tolist() == plain.tolist()
+            assert got.tolist() == [limits.drive_force_for_impact_n(e, 3.2, b, m) for e in energies]
+    assert memo[:3].tolist() == [3.2, 540.0, 1448.0] and 0 < memo[3] <= memo[4]
+    small = limits.new_bisection_memo(10)                 # full: the rest is computed, not kept
+    out = np.empty(energies.size)
+    limits.drive_forces_for_impacts_n(energies, 3.2, b, m, out, small)
+    assert small[3] == 10 and out.tolist() == plain.tolist()

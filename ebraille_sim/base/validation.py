@@ -295,6 +295,50 @@ def replace_checked(obj, **changes):
     ValueError
         ``unknown key 'k' in TYPE; allowed: ...`` (fields sorted by name).
     """
-    import dataclasses
-    check_keys(type(obj).__name__, changes, sorted(f.name for f in dataclasses.fields(obj)))
-    return dataclasses.replace(obj, **changes)
+    names = _replace_plan(type(obj))[0]
+    for key in changes:
+        if key not in names:
+            check_keys(type(obj).__name__, changes, sorted(names))
+    return replace_fields(obj, **changes)
+
+
+def replace_fields(obj, **changes):
+    """``dataclasses.replace(obj, **changes)`` of a dataclass instance, without its generic
+    machinery where the class allows: for a class whose fields are all set by ``__init__``,
+    without ``InitVar``, ``ClassVar`` or ``__slots__``, the new instance gets the fields (changed or
+    copied) and then runs ``__post_init__``, as the generated ``__init__`` does; other
+    classes and unknown names go through ``dataclasses.replace``."""
+    names, post_init = _replace_plan(type(obj))
+    if post_init is None or not names.issuperset(changes):
+        import dataclasses
+        return dataclasses.replace(obj, **changes)
+    new = object.__new__(type(obj))
+    d, old = new.__dict__, obj.__dict__
+    for name in names:
+        d[name] = changes[name] if name in changes else old[name]
+    if post_init:
+        new.__post_init__()
+    return new
+
+
+_REPLACE_PLANS: dict = {}
+
+
+def _replace_plan(cls) -> tuple:
+    """``(field names, has __post_init__)`` of a dataclass (read once per class); the second is
+    None where :func:`replace_fields` must use ``dataclasses.replace``."""
+    plan = _REPLACE_PLANS.get(cls)
+    if plan is None:
+        import dataclasses
+        import inspect
+        fields = dataclasses.fields(cls)
+        names = frozenset(f.name for f in fields)
+        post = getattr(cls, "__post_init__", None)
+        params = getattr(cls, "__dataclass_params__", None)
+        simple = (params is not None and params.init and all(f.init for f in fields)
+                  and not any("__slots__" in k.__dict__ for k in cls.__mro__[:-1])
+                  and len(cls.__dataclass_fields__) == len(fields)
+                  and (post is None or len(inspect.signature(post).parameters) == 1))
+        plan = (names, (post is not None) if simple else None)
+        _REPLACE_PLANS[cls] = plan
+    return plan

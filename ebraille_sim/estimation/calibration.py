@@ -24,7 +24,6 @@ True
 """
 from __future__ import annotations
 
-import bisect
 import dataclasses
 import functools
 import math
@@ -32,6 +31,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ebraille_sim.base.compiled import njit
+from ebraille_sim.base.validation import replace_fields
 from ebraille_sim.estimation.models import cached_model
 from ebraille_sim.physics.fsr import adc_code, adc_voltage, divider_voltage, play_widths, static_conductance
 
@@ -132,15 +133,23 @@ def static_error_table(model, fsr, circuit, forces_n=(0.2, 0.3, 0.5, 0.75, 1.0, 
     return rows
 
 
-def _interp(x: float, xs: list, ys: list, last: int) -> float:
-    """``numpy.interp(x, xs, ys)`` of one float inside ``[xs[0], xs[-1]]`` (or NaN), in Python
-    floats: the segment and the operations of NumPy's ``arr_interp`` for one point (the last
-    breakpoint not above ``x``, the slope of its segment, ``slope (x - x_j) + y_j``, the other
-    end when that is NaN), so the same number without the call into NumPy."""
+@njit(cache=True)
+def _interp(x, xs, ys):
+    """``numpy.interp(x, xs, ys)`` of one float inside ``[xs[0], xs[-1]]`` (or NaN): the segment
+    and the operations of NumPy's ``arr_interp`` for one point (the last breakpoint not above
+    ``x``, the slope of its segment, ``slope (x - x_j) + y_j``, the other end when that is NaN),
+    so the same number without the call into NumPy."""
     if x != x:
         return x
-    j = bisect.bisect_right(xs, x) - 1
-    if j == last or xs[j] == x:
+    lo, hi = 0, xs.shape[0]
+    while lo < hi:                              # bisect_right
+        mid = (lo + hi) // 2
+        if x < xs[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    j = lo - 1
+    if j == xs.shape[0] - 1 or xs[j] == x:
         return ys[j]
     slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
     y = slope * (x - xs[j]) + ys[j]
@@ -151,38 +160,44 @@ def _interp(x: float, xs: list, ys: list, last: int) -> float:
     return y
 
 
+@njit(cache=True)
+def _pwl_at(x, xs, ys, s0, sn):
+    """A nonlinearity of :func:`_steady_map` at ``x``: the breakpoints ``xs``, ``ys`` (none: the
+    identity), extended beyond them with the end slopes ``s0`` and ``sn``."""
+    n = xs.shape[0]
+    if n == 0:
+        return x
+    if x < xs[0]:
+        return ys[0] + s0 * (x - xs[0])
+    if x > xs[n - 1]:
+        return ys[n - 1] + sn * (x - xs[n - 1])
+    return _interp(x, xs, ys)
+
+
+@njit(cache=True)
+def _steady_at(u, g, in_x, in_y, in_s0, in_sn, out_x, out_y, out_s0, out_sn):
+    """``model.steady_state(u)`` from :func:`_steady_map`'s table: ``output_nl(g input_nl(u))``."""
+    return _pwl_at(g * _pwl_at(u, in_x, in_y, in_s0, in_sn), out_x, out_y, out_s0, out_sn)
+
+
 def _steady_map(model):
-    """The scalar map ``u -> model.steady_state(u)``, with the linear block's gain and the
-    nonlinearities' breakpoints read once (the same floating-point operations, so the same
-    numbers)."""
+    """The table of the scalar map ``u -> model.steady_state(u)`` for :func:`_steady_at`: the
+    linear block's gain and the nonlinearities' breakpoints and end slopes, read once (the
+    same floating-point operations, so the same numbers); None where the gain is not finite
+    (the model's own map then raises)."""
     g = model.linear.steady_state_gain()
     if not math.isfinite(g):
-        return model.steady_state              # raises as the model does
+        return None
 
     def pwl(nl):
         if nl is None:
-            return None
-        xb = np.asarray(nl.x_bp, dtype=float)
-        yb = np.asarray(nl.y_bp, dtype=float)
+            return np.zeros(0), np.zeros(0), 0.0, 0.0
+        xb = np.ascontiguousarray(nl.x_bp, dtype=float)
+        yb = np.ascontiguousarray(nl.y_bp, dtype=float)
         slopes = nl.segment_slopes()
-        x0, xn, y0, yn, s0, sn = (float(v) for v in (xb[0], xb[-1], yb[0], yb[-1], slopes[0], slopes[-1]))
-        xs, ys = xb.tolist(), yb.tolist()
-        last = len(xs) - 1
+        return xb, yb, float(slopes[0]), float(slopes[-1])
 
-        def f(x):
-            if x < x0:
-                return y0 + s0 * (x - x0)
-            if x > xn:
-                return yn + sn * (x - xn)
-            return _interp(x, xs, ys, last)
-        return f
-
-    f_in, f_out = pwl(model.input_nl), pwl(model.output_nl)
-
-    def steady(u):
-        x = g * (u if f_in is None else f_in(u))
-        return x if f_out is None else f_out(x)
-    return steady
+    return (float(g),) + pwl(model.input_nl) + pwl(model.output_nl)
 
 
 @functools.lru_cache(maxsize=8)
@@ -190,27 +205,110 @@ def _steady_map_of(spec: str):
     return _steady_map(cached_model(spec))
 
 
+_BRENT_XTOL = 1e-6
+_BRENT_RTOL = 4 * float(np.finfo(float).eps)
+_BRENT_MAXITER = 100
+
+
+@njit(cache=True)
+def _r2_error(log_r2, g_zero, g_load, supply, lsb, max_code, force_n, table):
+    """Estimate minus ``force_n`` of the calibration protocol at ``R2 = exp(log_r2)``."""
+    r2 = math.exp(log_r2)
+    v0 = divider_voltage(g_zero, r2, supply)
+    tare = adc_voltage(adc_code(v0, lsb, max_code), lsb)
+    return _steady_at(divider_voltage(g_load, r2, supply) - tare, *table) - force_n
+
+
+@njit(cache=True)
+def _r2_root(lo, hi, g_zero, g_load, supply, lsb, max_code, force_n, table):
+    """The root in ``[lo, hi]`` of :func:`_r2_error` by Brent's method, the operations of SciPy's
+    ``brentq`` (its C routine, with ``xtol`` :data:`_BRENT_XTOL` and SciPy's default ``rtol``
+    and iteration bound), so the same iterates.
+
+    Returns ``(x, status)``: status 0 converged, 1 no sign change at the ends (no root in
+    the bracket), 2 a NaN error at ``x``, 3 not converged.
+    """
+    xtol, rtol = _BRENT_XTOL, _BRENT_RTOL
+    xpre, xcur = lo, hi
+    xblk = fblk = spre = scur = 0.0
+    fpre = _r2_error(xpre, g_zero, g_load, supply, lsb, max_code, force_n, table)
+    if fpre != fpre:
+        return xpre, 2
+    fcur = _r2_error(xcur, g_zero, g_load, supply, lsb, max_code, force_n, table)
+    if fcur != fcur:
+        return xcur, 2
+    if fpre * fcur > 0:
+        return 0.0, 1
+    if fpre == 0:
+        return xpre, 0
+    if fcur == 0:
+        return xcur, 0
+    for _ in range(_BRENT_MAXITER):
+        if fpre * fcur < 0:
+            xblk = xpre
+            fblk = fpre
+            spre = scur = xcur - xpre
+        if abs(fblk) < abs(fcur):
+            xpre = xcur
+            xcur = xblk
+            xblk = xpre
+            fpre = fcur
+            fcur = fblk
+            fblk = fpre
+        delta = (xtol + rtol * abs(xcur)) / 2
+        sbis = (xblk - xcur) / 2
+        if fcur == 0 or abs(sbis) < delta:
+            return xcur, 0
+        if abs(spre) > delta and abs(fcur) < abs(fpre):
+            if xpre == xblk:
+                stry = -fcur * (xcur - xpre) / (fcur - fpre)          # interpolate
+            else:
+                dpre = (fpre - fcur) / (xpre - xcur)                   # extrapolate
+                dblk = (fblk - fcur) / (xblk - xcur)
+                stry = -fcur * (fblk * dblk - fpre * dpre) / (dblk * dpre * (fblk - fpre))
+            bound = 3 * abs(sbis) - delta
+            if 2 * abs(stry) < (abs(spre) if abs(spre) < bound else bound):
+                spre = scur                                            # good short step
+                scur = stry
+            else:
+                spre = sbis                                            # bisect
+                scur = sbis
+        else:
+            spre = sbis                                                # bisect
+            scur = sbis
+        xpre = xcur
+        fpre = fcur
+        if abs(scur) > delta:
+            xcur += scur
+        else:
+            xcur += delta if sbis > 0 else -delta
+        fcur = _r2_error(xcur, g_zero, g_load, supply, lsb, max_code, force_n, table)
+        if fcur != fcur:
+            return xcur, 2
+    return xcur, 3
+
+
 @functools.lru_cache(maxsize=4096)
 def _calibrated_r2(spec: str, fsr, circuit, force_n: float, hold_s: float) -> float | None:
     """R2 (ohm) of :func:`calibrate_device` for one estimator, FSR unit and divider; None when
-    no R2 in [500, 50 000] ohm reads ``force_n`` exactly.  Cached: the parameters are frozen."""
-    import scipy.optimize
-    steady = _steady_map_of(spec)
+    no R2 in [500, 50 000] ohm reads ``force_n`` exactly.  Cached: the parameters are frozen.
+    The protocol's error and Brent's method run in one compiled call (:func:`_r2_root`)."""
+    table = _steady_map_of(spec)
+    if table is None:
+        cached_model(spec).steady_state(0.0)      # raises as the model does
     # the calibration protocol's voltages with every R2-independent factor computed once
     g_load = static_conductance(force_n * loading_branch_factor(fsr), fsr, load_time_s=hold_s)
     g_zero = static_conductance(0.0, fsr)
-    supply, lsb, max_code = circuit.supply_v, circuit.adc_lsb_v, circuit.adc_max_code
-
-    def err(log_r2):
-        r2 = math.exp(log_r2)
-        v0 = divider_voltage(g_zero, r2, supply)
-        tare = adc_voltage(adc_code(v0, lsb, max_code), lsb)
-        return float(steady(divider_voltage(g_load, r2, supply) - tare)) - force_n
-
     lo, hi = math.log(500.0), math.log(50000.0)
-    if err(lo) * err(hi) > 0:
+    x, status = _r2_root(lo, hi, g_zero, g_load, circuit.supply_v, circuit.adc_lsb_v, circuit.adc_max_code,
+                         force_n, table)
+    if status == 1:
         return None
-    return math.exp(scipy.optimize.brentq(err, lo, hi, xtol=1e-6))
+    if status == 2:
+        raise ValueError(f"The function value at x={x} is NaN; solver cannot continue.")
+    if status == 3:
+        raise RuntimeError(f"Failed to converge after {_BRENT_MAXITER} iterations, value is {x}.")
+    return math.exp(x)
 
 
 def calibrate_device(device: DeviceParams, force_n: float = 1.0, hold_s: float = 20.0) -> DeviceParams:
@@ -224,7 +322,7 @@ def calibrate_device(device: DeviceParams, force_n: float = 1.0, hold_s: float =
     r2 = _calibrated_r2(device.estimator.model, device.fsr, device.circuit, float(force_n), float(hold_s))
     if r2 is None:
         return device
-    return dataclasses.replace(device, circuit=dataclasses.replace(device.circuit, r2_ohm=r2))
+    return replace_fields(device, circuit=replace_fields(device.circuit, r2_ohm=r2))
 
 
 def calibrate_device_reference(device: DeviceParams, force_n: float = 1.0, hold_s: float = 20.0) -> DeviceParams:

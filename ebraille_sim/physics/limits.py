@@ -45,13 +45,16 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ebraille_sim.base.compiled import njit
 from ebraille_sim.physics.drivetrain import reflected_force_n, reflected_inertia_kg, shaft_to_rack_per_m
 from ebraille_sim.physics.fingertip import compression_at_force_m, elastic_force
 from ebraille_sim.physics.motor import rack_force_n
 
 __all__ = ["push_force_bound_n", "current_for_push_force_a", "rack_speed_from_emf_m_per_s", "impact_energy_j",
-           "elastic_energy_j", "absorbed_energy_j", "drive_force_for_impact_n", "speed_for_energy_m_per_s",
+           "elastic_energy_j", "absorbed_energy_j", "drive_force_for_impact_n", "drive_forces_for_impacts_n",
+           "speed_for_energy_m_per_s",
            "drive_bounds"]
 
 
@@ -94,10 +97,16 @@ def elastic_energy_j(d_m, b_n_per_m, m_per_m):
 @njit(cache=True)
 def absorbed_energy_j(drive_force_n, peak_force_n, b_n_per_m, m_per_m):
     """Energy (J) the pulp absorbs above a constant drive ``F_d`` from ``d(F_d)`` to ``d(F_pk)``: eq. (3)."""
-    d0 = compression_at_force_m(drive_force_n, b_n_per_m, m_per_m)
     d1 = compression_at_force_m(peak_force_n, b_n_per_m, m_per_m)
-    return (elastic_energy_j(d1, b_n_per_m, m_per_m) - elastic_energy_j(d0, b_n_per_m, m_per_m)
-            - drive_force_n * (d1 - d0))
+    return _absorbed_below_j(drive_force_n, d1, elastic_energy_j(d1, b_n_per_m, m_per_m), b_n_per_m, m_per_m)
+
+
+@njit(cache=True, inline="always")
+def _absorbed_below_j(drive_force_n, peak_d_m, peak_energy_j, b_n_per_m, m_per_m):
+    """:func:`absorbed_energy_j` given the peak's compression ``d(F_pk)`` and energy ``U(d(F_pk))``
+    (a bisection over the drive force computes them once)."""
+    d0 = compression_at_force_m(drive_force_n, b_n_per_m, m_per_m)
+    return peak_energy_j - elastic_energy_j(d0, b_n_per_m, m_per_m) - drive_force_n * (peak_d_m - d0)
 
 
 @njit(cache=True)
@@ -106,20 +115,89 @@ def drive_force_for_impact_n(energy_j, peak_force_n, b_n_per_m, m_per_m):
 
     Bisection on :func:`absorbed_energy_j`, which falls monotonically as the drive force rises
     (0 at ``F_d = F_pk``).  Returns a negative value when even a zero drive force lets the
-    impact exceed the peak: the board must then be braked.
+    impact exceed the peak: the board must then be braked.  (:func:`drive_forces_for_impacts_n`
+    with one energy.)
     """
-    if energy_j <= 0.0:
-        return peak_force_n
-    if absorbed_energy_j(0.0, peak_force_n, b_n_per_m, m_per_m) < energy_j:
-        return -1.0
-    lo, hi = 0.0, peak_force_n
-    for _ in range(50):
-        mid = 0.5 * (lo + hi)
-        if absorbed_energy_j(mid, peak_force_n, b_n_per_m, m_per_m) >= energy_j:
-            lo = mid
-        else:
-            hi = mid
-    return lo
+    energies = np.empty(1)
+    energies[0] = energy_j
+    out = np.empty(1)
+    drive_forces_for_impacts_n(energies, peak_force_n, b_n_per_m, m_per_m, out, np.empty(0))
+    return out[0]
+
+
+BISECTION_MEMO_HEADER = 5
+"""Slots before the nodes of a bisection memo (:func:`drive_forces_for_impacts_n`): the peak
+force, b and m it holds the absorbed energies of, the nodes used and the nodes it has room for."""
+
+
+def new_bisection_memo(nodes: int) -> np.ndarray:
+    """An empty memo for :func:`drive_forces_for_impacts_n` with room for ``nodes`` midpoints
+    (three slots each)."""
+    memo = np.zeros(BISECTION_MEMO_HEADER + 3 * nodes)
+    memo[4] = nodes
+    return memo
+
+
+@njit(cache=True)
+def drive_forces_for_impacts_n(energies_j, peak_force_n, b_n_per_m, m_per_m, out, memo):
+    """:func:`drive_force_for_impact_n` of every energy in ``energies_j``, written into ``out``.
+
+    Every bisection starts from ``[0, F_pk]`` and halves it 50 times, so its midpoints form a
+    binary tree shared by all energies and all calls with the same ``F_pk``, ``b`` and ``m``:
+    ``memo`` (:func:`new_bisection_memo`; an empty array for none) keeps the absorbed energy
+    at each midpoint a bisection has reached (three slots a node: the energy, then the nodes
+    of the lower and the upper half, -1 for none), and a later bisection that walks the same
+    path reads it instead of computing it again.  The memo is taken over by the first call
+    and serves only calls with its ``F_pk``, ``b`` and ``m`` (others compute every midpoint);
+    when it is full, new midpoints are computed and not kept.  Each midpoint's energy is the
+    number the bisection would compute, so the results are those of one bisection after the
+    other without a memo.
+    """
+    n = energies_j.shape[0]
+    d1 = compression_at_force_m(peak_force_n, b_n_per_m, m_per_m)
+    u1 = elastic_energy_j(d1, b_n_per_m, m_per_m)
+    at_zero = _absorbed_below_j(0.0, d1, u1, b_n_per_m, m_per_m)
+    h = BISECTION_MEMO_HEADER
+    usable = False
+    if memo.shape[0] > h:
+        if memo[3] == 0.0:
+            memo[0], memo[1], memo[2] = peak_force_n, b_n_per_m, m_per_m
+        usable = memo[0] == peak_force_n and memo[1] == b_n_per_m and memo[2] == m_per_m
+    for i in range(n):
+        e = energies_j[i]
+        if e <= 0.0:
+            out[i] = peak_force_n
+            continue
+        if at_zero < e:
+            out[i] = -1.0
+            continue
+        lo, hi = 0.0, peak_force_n
+        node = 0 if usable and memo[3] > 0.0 else -1
+        parent = -1
+        side = 0
+        for _ in range(50):
+            mid = 0.5 * (lo + hi)
+            if node >= 0:
+                g = memo[h + 3 * node]
+            else:
+                g = _absorbed_below_j(mid, d1, u1, b_n_per_m, m_per_m)
+                if usable and memo[3] < memo[4]:
+                    node = int(memo[3])
+                    memo[3] += 1.0
+                    memo[h + 3 * node] = g
+                    memo[h + 3 * node + 1] = -1.0
+                    memo[h + 3 * node + 2] = -1.0
+                    if parent >= 0:
+                        memo[h + 3 * parent + side] = node
+            if g >= e:
+                lo = mid
+                side = 2
+            else:
+                hi = mid
+                side = 1
+            parent = node
+            node = int(memo[h + 3 * parent + side]) if parent >= 0 else -1
+        out[i] = lo
 
 
 def drive_bounds(device) -> dict:

@@ -166,6 +166,9 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     return p
 
 
+_PLAY_STATE_SLOTS = np.array([S[f"play_{j}"] for j in range(N_PLAYS)], dtype=np.intp)
+_COMP_PLAY_STATE_SLOTS = np.array([S[f"comp_play_{j}"] for j in range(N_PLAYS)], dtype=np.intp)
+_COMP_MEDIAN_SLOTS = np.array([S[f"comp_med_{j}"] for j in range(HYSTERESIS_MEDIAN - 1)], dtype=np.intp)
 _RELAX_SLOTS = np.array([P[f"relax_{k}{j}"] for k in ("a", "beta") for j in (1, 2, 3)])
 _CREEP_SLOTS = np.array([P[f"creep_a{j}"] for j in range(N_CREEP)])
 _PLAY_W_SLOTS = np.array([P[f"play_w{j}"] for j in range(N_PLAYS)])
@@ -354,8 +357,7 @@ def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None
     s[S.board_pos_m] = xb
     s[S.pinion_pos_m] = xb
     lf = log_force(0.0)
-    for j in range(N_PLAYS):
-        s[S[f"play_{j}"]] = lf
+    s[_PLAY_STATE_SLOTS] = lf
     v0 = static_voltage(0.0, device.fsr, device.circuit)
     lsb = device.circuit.adc_lsb_v
     code0 = adc_code(v0, lsb, float(device.circuit.adc_max_code))
@@ -364,11 +366,9 @@ def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None
     s[S.fsr_voltage_v] = v_read
     s[S.tare_v] = v_read if device.estimator.tare_at_start else 0.0
     s[S.comp_hyst_v] = v_read
-    for j in range(HYSTERESIS_MEDIAN - 1):
-        s[S[f"comp_med_{j}"]] = v_read
+    s[_COMP_MEDIAN_SLOTS] = v_read
     s[S.comp_hyst_x] = lf
-    for j in range(N_PLAYS):
-        s[S[f"comp_play_{j}"]] = lf
+    s[_COMP_PLAY_STATE_SLOTS] = lf
     _estimator_steady_state(s, p, v_read - s[S.tare_v])
     return s
 

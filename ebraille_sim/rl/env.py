@@ -181,6 +181,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from ebraille_sim.base.compiled import entry_point, njit
+from ebraille_sim.base.seeds import SeedNode
 from ebraille_sim.base.validation import check_bool, check_choice, check_number, check_pair, check_range
 
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
@@ -188,8 +189,9 @@ from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import S, U
 from ebraille_sim.plant.loop import loop_step
 from ebraille_sim.rl.registration import ENV_ID, register_envs
+from ebraille_sim.scenarios.inputs import profile_table
 from controllers import features
-from controllers.supervisor import FAULTS, MODES, SV, supervise_begin, supervise_end
+from controllers.supervisor import CF, FAULTS, MODES, SV, supervise_begin, supervise_end
 from controllers.features import (C_CMD_SCALE, C_DT, C_SAFE, C_WARN, C_WU, C_WV, ERROR_SCALE_N, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, Z_STEP, _clip,
                                   observe, reset_features, write_observation)
 
@@ -260,12 +262,27 @@ N_OBS_SLOTS = (N_OBS + 1) // 2
 """Slots of the observation's part: the float32 observation is a view of its bytes."""
 
 
-def pack_workspace(parts, safety: bool, substeps: int, dt_s: float, prof_stride: int) -> np.ndarray:
+def pack_workspace(parts, safety: bool, substeps: int, dt_s: float, prof_stride: int,
+                   buffer: np.ndarray | None = None) -> np.ndarray:
     """The workspace of :func:`scalar_step`: the header, then ``parts`` in the order of the
-    ``P_*`` indices (an array is copied as float64, an int ``n`` reserves ``n`` zeros)."""
+    ``P_*`` indices (an array is copied as float64, an int ``n`` reserves ``n`` zeros).
+
+    With ``buffer`` (float64, 1-D) long enough, the workspace is its first slots (the header
+    and the reserved parts cleared, the others overwritten), not a new array: an env keeps one
+    buffer over its episodes, so that a reset does not map and clear the supervisor's ring
+    buffers afresh.
+    """
     sizes = [x if isinstance(x, int) else int(np.size(x)) for x in parts]
     offsets = np.cumsum([W_HEADER] + sizes)
-    ws = np.zeros(int(offsets[-1]))
+    total = int(offsets[-1])
+    if buffer is not None and buffer.shape[0] >= total:
+        ws = buffer[:total]
+        ws[:W_HEADER] = 0.0
+        for i, x in enumerate(parts):
+            if isinstance(x, int):
+                ws[offsets[i]:offsets[i + 1]] = 0.0
+    else:
+        ws = np.zeros(total)
     ws[W_SAFETY] = 1.0 if safety else 0.0
     ws[W_SUBSTEPS] = substeps
     ws[W_DT] = dt_s
@@ -362,10 +379,17 @@ class ActionCommand:
         return self.command_v
 
 
-def make_supervisor(device):
-    """The safety layer of one env: a supervisor for ``device`` around an :class:`ActionCommand`."""
+def make_supervisor(device, config=None, state_out=None, config_out=None):
+    """The safety layer of one env: a supervisor for ``device`` around an :class:`ActionCommand`.
+
+    ``config`` is its configuration when already made (default
+    ``SupervisorConfig.for_device(device)``); ``state_out`` and ``config_out`` hold its
+    arrays (:class:`~controllers.supervisor.Supervisor`).
+    """
     from controllers.supervisor import Supervisor, SupervisorConfig
-    return Supervisor(ActionCommand(), SupervisorConfig.for_device(device))
+    if config is None:
+        config = SupervisorConfig.for_device(device)
+    return Supervisor(ActionCommand(), config, state_out=state_out, config_out=config_out)
 
 
 def supervised_action(sup, action: float, cmd_scale_v: float, force_est_n: float, setpoint_n: float,
@@ -432,12 +456,14 @@ class EnvConfig:
             raise ValueError(f"control_rate_hz {self.control_rate_hz:g}: {exc}") from None
         object.__setattr__(self, "base_device", dataclasses.replace(base, rates=rates))
         object.__setattr__(self, "control_rate_hz", float(self.control_rate_hz))
-        self.distribution()                     # validates the episode ranges at this rate
+        # validates the episode ranges at this rate; kept on the instance (not a field), so a
+        # reset does not hash the config to find it
+        object.__setattr__(self, "_distribution", _distribution(self))
 
     def distribution(self):
         """The :class:`~ebraille_sim.scenarios.episodes.EpisodeDistribution` of this config's
         episodes (built once per config)."""
-        return _distribution(self)
+        return self._distribution
     @property
     def dt_s(self) -> float:
         return 1.0 / self.control_rate_hz
@@ -623,8 +649,9 @@ def episode_from_spec(spec) -> Episode:
                    char_index=run.schedule.index_at(run.t_s))
 
 
-def draw_episode(ss: np.random.SeedSequence, cfg: EnvConfig, options: dict | None = None) -> Episode:
-    """Draw one episode from the episode seed ``ss``: a spec from the config's
+def draw_episode(ss, cfg: EnvConfig, options: dict | None = None) -> Episode:
+    """Draw one episode from the episode seed ``ss`` (a NumPy ``SeedSequence`` or a
+    :class:`~ebraille_sim.base.seeds.SeedNode`): a spec from the config's
     :meth:`~EnvConfig.distribution` (``options``, validated by :func:`validate_options`,
     fix components), then its inputs (:func:`episode_from_spec`)."""
     return episode_from_spec(cfg.distribution().draw(ss, options))
@@ -698,7 +725,7 @@ class ContactForceEnv(gym.Env):
             raise ValueError(f"unknown backend {backend!r}; available: {', '.join(sorted(PLANT_BACKENDS))}")
         self.action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
         self.observation_space = spaces.Box(OBS_LOW.copy(), OBS_HIGH.copy(), dtype=np.float32)
-        self._master: np.random.SeedSequence | None = None
+        self._master: SeedNode | None = None
         self.plant = None
         self.episode: Episode | None = None
         self._z = np.zeros(N_Z)
@@ -711,18 +738,21 @@ class ContactForceEnv(gym.Env):
         self._sup = None
         self._compiled = False
         self._ws = None
+        self._buffer = None
         self._step_fn = None
         self._n_steps = 0
         self._dt = self.config.dt_s
         self._sv = self._svcfg = _NO_ARRAY
 
     # -- episode ---------------------------------------------------------------------------
-    def next_episode_seed(self, seed=None) -> np.random.SeedSequence:
-        """The episode's ``SeedSequence``: a child of the master seed (``seed`` re-seeds it)."""
+    def next_episode_seed(self, seed=None) -> SeedNode:
+        """The episode's seed sequence: a child of the master seed (``seed`` re-seeds it), a
+        :class:`~ebraille_sim.base.seeds.SeedNode` (NumPy's ``SeedSequence`` of the same
+        entropy and key, hashed by compiled code)."""
         if seed is not None:
-            self._master = np.random.SeedSequence(int(seed))
+            self._master = SeedNode(int(seed))
         elif self._master is None:
-            self._master = np.random.SeedSequence(int(self.np_random.integers(0, 2**63)))
+            self._master = SeedNode(int(self.np_random.integers(0, 2**63)))
         return self._master.spawn(1)[0]
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -744,17 +774,21 @@ class ContactForceEnv(gym.Env):
         self._n_steps = ep.n_steps
         fe = float(self._st[S.force_est_n])
         self._sup = None
+        self._sv = self._svcfg = _NO_ARRAY
+        svc = None
         if self.config.safety:
-            self._sup = make_supervisor(dev)
+            from controllers.supervisor import SupervisorConfig
+            svc = SupervisorConfig.for_device(dev)
+        if self._compiled:
+            self._bind_workspace(ep, svc)                     # makes the supervisor in the workspace
+        elif svc is not None:
+            self._sup = make_supervisor(dev, svc)
+        if self._sup is not None:
             self._sup.reset(force_est_n=fe, setpoint_n=float(ep.setpoint_n[0]), command_v=0.0)
             if self.config.dt_s < self._sup.min_control_period_s:
                 raise ValueError(f"control period {self.config.dt_s:g} s is below the "
                                  f"{self._sup.min_control_period_s:g} s the safety supervisor is sized for")
             self._sv, self._svcfg = self._sup.compiled()
-        else:
-            self._sv = self._svcfg = _NO_ARRAY
-        if self._compiled:
-            self._bind_workspace(ep)
         reset_features(self._z, fe)
         write_observation(self._z, self._c, fe, ep.setpoint_n[0], float(self._st[S.current_a]), self._obs)
         if self.render_mode is not None:
@@ -762,20 +796,27 @@ class ContactForceEnv(gym.Env):
                              "force_est_n": [fe], "setpoint_n": [float(ep.setpoint_n[0])]}
         return self._obs.copy(), self._info(0.0)
 
-    def _bind_workspace(self, ep: Episode) -> None:
-        """Pack the episode's arrays into one workspace (:func:`pack_workspace`) and make the
-        plant's parameter row, the supervisor's arrays, the features and the observation views
-        of it."""
+    def _bind_workspace(self, ep: Episode, svc) -> None:
+        """Pack the episode's arrays into one workspace (:func:`pack_workspace`, in the env's
+        buffer) and make the plant's parameter row, the features and the observation views of
+        it; with a supervisor configuration ``svc``, make the supervisor with its arrays in it."""
         plant = self.plant
-        prof = (np.stack([arr for _, arr in self._varying]) if self._varying else np.zeros((0, ep.n_steps)))
+        prof = profile_table(ep.run.profiles, ep.n_steps) if self._varying else np.zeros((0, ep.n_steps))
+        if prof is None:
+            prof = np.stack([arr for _, arr in self._varying])
         rows = np.array([j for j, _ in self._varying], dtype=np.float64)
-        parts = (plant.params, self._sv.size, self._svcfg.size, self._z, N_OBS_SLOTS, self._c, ep.setpoint_n, prof,
-                 rows)                                    # the supervisor's parts are filled by bind
-        ws = pack_workspace(parts, self._sup is not None, plant.substeps, self._dt, prof.shape[1])
+        sv_n = cfg_n = 0
+        if svc is not None:
+            packed = svc.pack()
+            sv_n, cfg_n = int(packed[CF.state_len]), packed.size
+        parts = (plant.params, sv_n, cfg_n, self._z.copy(), N_OBS_SLOTS, self._c, ep.setpoint_n, prof,
+                 rows)                                    # the supervisor's parts are filled by it
+        ws = pack_workspace(parts, svc is not None, plant.substeps, self._dt, prof.shape[1], self._buffer)
+        if self._buffer is None or ws.base is not self._buffer:
+            self._buffer = np.empty(ws.size + ws.size // 4)   # for the next episodes (a quarter to spare)
         plant.params = workspace_part(ws, P_PARAMS).reshape(plant.params.shape)
-        if self._sup is not None:
-            self._sup.bind(workspace_part(ws, P_SV), workspace_part(ws, P_CFG))
-            self._sv, self._svcfg = self._sup.compiled()
+        if svc is not None:
+            self._sup = make_supervisor(ep.device, svc, workspace_part(ws, P_SV), workspace_part(ws, P_CFG))
         self._z = workspace_part(ws, P_Z)
         self._obs = workspace_part(ws, P_OBS).view(np.float32)[:N_OBS]
         self._chars = ep.char_index.tolist()

@@ -57,6 +57,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from ebraille_sim.base.compiled import njit, prange
+from ebraille_sim.base.seeds import SeedNode
 
 from controllers.supervisor import supervise_begin, supervise_end
 from ebraille_sim.plant import kernel
@@ -306,7 +307,7 @@ class ContactForceVectorEnv(VectorEnv):
         eps = []
         for i in rows:
             if self._masters[i] is None:
-                self._masters[i] = np.random.SeedSequence(int(self._rngs[i].integers(0, 2**63)))
+                self._masters[i] = SeedNode(int(self._rngs[i].integers(0, 2**63)))
             eps.append(draw_episode(self._masters[i].spawn(1)[0], self.config, options))
         longest = max(ep.n_steps for ep in eps)
         if longest + 1 > self._setpoint.shape[1]:
@@ -386,7 +387,7 @@ class ContactForceVectorEnv(VectorEnv):
         for i, s in enumerate(seeds):
             if s is not None:
                 self._rngs[i], _ = seeding.np_random(int(s))
-                self._masters[i] = np.random.SeedSequence(int(s))
+                self._masters[i] = SeedNode(int(s))
             elif self._rngs[i] is None:
                 self._rngs[i], _ = seeding.np_random(None)
         self._load_rows(range(n), opt)

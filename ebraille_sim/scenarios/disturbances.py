@@ -70,12 +70,14 @@ ebraille_sim.scenarios.spec.ScenarioError: inline: unknown key 'rms' in [disturb
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ebraille_sim.base.fields import sourced
+from ebraille_sim.base.seeds import child_seed
 from ebraille_sim.base.validation import check_keys, check_number, check_pair
 from ebraille_sim.estimation.blockmodels import FIRMWARE_FSR
 from ebraille_sim.physics.fsr import held_resistance_factor
@@ -140,18 +142,32 @@ def band_limited_noise(t_s: np.ndarray, f_lo_hz: float, f_hi_hz: float, rms: flo
                          f"above the bound of {MAX_NOISE_RECORD_SAMPLES:.4g} samples "
                          f"(~{MAX_NOISE_RECORD_SAMPLES * 40 / 1e9:.2g} GB); widen the band or lower the control rate")
     n_rec = max(n, int(math.ceil(4.0 / (max(f_lo_hz, 1e-3) * dt))), int(math.ceil(4.0 / ((f_hi_hz - f_lo_hz) * dt))))
-    freqs = np.fft.rfftfreq(n_rec, dt)
-    band = (freqs >= f_lo_hz) & (freqs <= f_hi_hz) & (freqs > 0)
-    spec = np.zeros(len(freqs), dtype=complex)
-    k = int(np.count_nonzero(band))
-    spec[band] = rng.standard_normal(k) + 1j * rng.standard_normal(k)
+    i0, i1 = _band_bins(n_rec, dt, f_lo_hz, f_hi_hz)
+    spec = np.zeros(n_rec // 2 + 1, dtype=complex)
+    k = max(i1 - i0, 0)
+    spec[i0:i0 + k] = rng.standard_normal(k) + 1j * rng.standard_normal(k)
     x = np.fft.irfft(spec, n_rec)
     del spec                                   # a long run's spectrum is as large as its record
     s = float(np.std(x))
     if not s > 0:
         return np.zeros(n)
-    x *= rms / s
-    return x[:n]
+    return x[:n] * (rms / s)
+
+
+def _band_bins(n_rec: int, dt: float, f_lo_hz: float, f_hi_hz: float) -> tuple[int, int]:
+    """The bins ``[i0, i1)`` of ``numpy.fft.rfftfreq(n_rec, dt)`` (bin ``i`` at ``i * (1 / (n_rec dt))``,
+    NumPy's product) with ``f_lo_hz <= f <= f_hi_hz`` and ``f > 0``: the frequencies rise with
+    ``i``, so the band is one run of bins, found from the edges over / the bin width and a
+    step or two of the same products."""
+    val = 1.0 / (n_rec * dt)
+    n_bins = n_rec // 2 + 1
+    i0 = min(max(1, int(f_lo_hz / val) - 2), n_bins)
+    while i0 < n_bins and not (i0 * val >= f_lo_hz and i0 * val > 0):
+        i0 += 1
+    i1 = min(max(int(f_hi_hz / val) + 2, 0), n_bins - 1)
+    while i1 >= i0 and not i1 * val <= f_hi_hz:
+        i1 -= 1
+    return i0, i1 + 1
 
 
 def minimum_jerk(u) -> np.ndarray:
@@ -434,14 +450,21 @@ def _fmt(x):
     return f"{x:g}"
 
 
+@functools.lru_cache(maxsize=None)
+def _kind_fields(cls) -> tuple[dict, tuple]:
+    """The fields of a disturbance class by name, and their names sorted (read once per class)."""
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    return fields, tuple(sorted(fields))
+
+
 def _check_kind(src, name, cls, table):
     where0 = f"[disturbances.{name}]"
     if not isinstance(table, dict):
         raise ScenarioError(f"{src}: {where0} must be a table")
-    fields = {f.name: f for f in dataclasses.fields(cls)}
+    fields, names = _kind_fields(cls)
     out = {}
     try:
-        check_keys(where0, table, sorted(fields))
+        check_keys(where0, table, names)
         for key, value in table.items():
             meta = fields[key].metadata
             where = f"{where0} {key}"
@@ -515,8 +538,7 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
         obj = section.get(name)
         if obj is None or not hasattr(obj, "inputs"):
             continue
-        seed = np.random.SeedSequence(parent.entropy, spawn_key=parent.spawn_key + (parent.n_children_spawned + k,),
-                                      pool_size=parent.pool_size)
+        seed = child_seed(parent, parent.n_children_spawned + k)
         child = type(rng)(type(bits)(seed=seed))
         for inp, (mode, arr) in obj.inputs(t_s, child, device).items():
             if inp in out and mode == "add" and out[inp][0] == "add":

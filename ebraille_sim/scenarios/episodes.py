@@ -58,6 +58,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ebraille_sim.base.validation import replace_fields
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, DeviceParams
 from ebraille_sim.scenarios.population import PopulationSpec
 from ebraille_sim.scenarios.spec import ControllerSpec, FingerSpec, ReadingSpec, ScenarioSpec, SetpointSpec
@@ -313,7 +314,7 @@ class EpisodeDistribution:
         if "supply_fraction" in opt:
             supply_fraction, on_battery = float(opt["supply_fraction"]), False
         if supply_fraction != 1.0:
-            dev = dataclasses.replace(dev, driver_supply_v=dev.driver_supply_v * supply_fraction)
+            dev = replace_fields(dev, driver_supply_v=dev.driver_supply_v * supply_fraction)
 
         table = {}
         if tremor_rms > 0:

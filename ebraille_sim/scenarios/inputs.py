@@ -9,7 +9,8 @@ per episode from :class:`ebraille_sim.scenarios.episodes.EpisodeDistribution`) b
 it, so a policy trains on the disturbance models it is evaluated on.
 
 Seeds: the run's seed gives ``SeedSequence(seed).spawn(3)``, children in the order
-sensor noise, reading schedule (dwell jitter), plant inputs (disturbance draws).
+sensor noise, reading schedule (dwell jitter), plant inputs (disturbance draws); they are
+hashed by :class:`~ebraille_sim.base.seeds.SeedNode` (the same words).
 
 Times: control period ``k`` (``k = 0 .. n - 1``) starts at ``t_k = (k + 1) dt - dt`` (the
 runner's sample time minus one period, written so that the runner's historic arrays are
@@ -35,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ebraille_sim.base.seeds import SeedNode
 from ebraille_sim.physics.noise import seed_from
 from ebraille_sim.plant.layout import N_INPUT, U
 from ebraille_sim.scenarios.spec import DELEGATES, ScenarioError, ScenarioSpec
@@ -192,8 +194,10 @@ def _cells_of(text: str) -> tuple:
     return tuple(text_to_cells(text))
 
 
-def build_schedule_for(spec: ScenarioSpec, rng: np.random.Generator):
+def build_schedule_for(spec: ScenarioSpec, rng: np.random.Generator | None):
     """Reading schedule of a scenario, repeating the text to fill ``duration_s``.
+
+    ``rng`` draws the dwell jitter (None: a schedule without jitter needs none).
 
     The number of cells is :data:`SCHEDULE_CELL_MARGIN` times the nominal count for the
     duration (see there).  Transcriptions are cached per text.
@@ -416,8 +420,10 @@ def build_run_inputs(spec: ScenarioSpec, seed: int | None = None) -> RunInputs:
     seed = spec.seed if seed is None else int(seed)
     if seed < 0:
         raise ScenarioError(f"seed must be >= 0, got {seed}")
-    ss_sensor, ss_reading, ss_inputs = np.random.SeedSequence(seed).spawn(3)
-    schedule = build_schedule_for(spec, np.random.default_rng(ss_reading))
+    ss_sensor, ss_reading, ss_inputs = SeedNode(seed).spawn(3)
+    # the reading generator draws only the dwell jitter (made only for a jittered schedule)
+    jittered = spec.reading.jitter_fraction > 0
+    schedule = build_schedule_for(spec, np.random.default_rng(ss_reading) if jittered else None)
     dt, n = run_length(spec, schedule)
     # the period starts (k + 1) dt - dt, in one array: a one-hour run holds 3.6 million periods
     t_start = period_starts(n + 1, dt)

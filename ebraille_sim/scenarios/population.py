@@ -41,7 +41,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ebraille_sim.base.validation import check_bool, check_number, check_pair
+from numpy.random.bit_generator import ISpawnableSeedSequence
+
+from ebraille_sim.base.seeds import SeedNode
+from ebraille_sim.base.validation import check_bool, check_number, check_pair, replace_fields
 from ebraille_sim.estimation.calibration import calibrate_device
 from ebraille_sim.physics.params import FINGERS, DeviceParams, replace_checked
 
@@ -86,6 +89,15 @@ class PopulationSpec:
         return replace_checked(cls() if base is None else base, **d)
 
 
+_DRAWN = "drawn from PopulationSpec (ebraille_sim/scenarios/population.py)"
+_FINGER_SOURCES = tuple((k, _DRAWN) for k in ("stiffness_b_n_per_m", "exponent_m_per_m", "relax_weight_inf",
+                                              "relax_weight_1", "relax_weight_2", "relax_weight_3"))
+"""The ``sources`` of a drawn pulp: the fields the draw sets."""
+_FSR_SOURCES = tuple((f, _DRAWN) for f in ("resistance_at_1n_ohm", "exponent", "hysteresis_fraction",
+                                           "creep_per_decade"))
+"""The ``sources`` of a drawn FSR unit."""
+
+
 def _log_uniform(rng, lo, hi):
     return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
 
@@ -97,10 +109,7 @@ def sample_finger(rng: np.random.Generator, spec: PopulationSpec, base=FINGERS["
     c0 = float(rng.uniform(*spec.relax_c0))
     rest = base.relax_weight_1 + base.relax_weight_2 + base.relax_weight_3
     k = (1.0 - c0) / rest
-    src = tuple((k, "drawn from PopulationSpec (ebraille_sim/scenarios/population.py)") for k in (
-        "stiffness_b_n_per_m", "exponent_m_per_m", "relax_weight_inf", "relax_weight_1", "relax_weight_2",
-        "relax_weight_3"))
-    return replace_checked(base, name="drawn", sources=src, stiffness_b_n_per_m=b, exponent_m_per_m=m, relax_weight_inf=c0,
+    return replace_checked(base, name="drawn", sources=_FINGER_SOURCES, stiffness_b_n_per_m=b, exponent_m_per_m=m, relax_weight_inf=c0,
                            relax_weight_1=base.relax_weight_1 * k, relax_weight_2=base.relax_weight_2 * k,
                            relax_weight_3=1.0 - c0 - base.relax_weight_1 * k - base.relax_weight_2 * k)
 
@@ -108,9 +117,7 @@ def sample_finger(rng: np.random.Generator, spec: PopulationSpec, base=FINGERS["
 def sample_fsr(rng: np.random.Generator, spec: PopulationSpec, base):
     """An FSR unit drawn around ``base``."""
     k = base.resistance_at_1n_ohm * float(math.exp(rng.normal(0.0, spec.fsr_k_sigma_ln)))
-    src = tuple((f, "drawn from PopulationSpec (ebraille_sim/scenarios/population.py)") for f in (
-        "resistance_at_1n_ohm", "exponent", "hysteresis_fraction", "creep_per_decade"))
-    return replace_checked(base, name="drawn", sources=src, resistance_at_1n_ohm=k,
+    return replace_checked(base, name="drawn", sources=_FSR_SOURCES, resistance_at_1n_ohm=k,
                            exponent=float(rng.uniform(*spec.fsr_exponent)),
                            hysteresis_fraction=float(rng.uniform(*spec.fsr_hysteresis)),
                            creep_per_decade=float(rng.uniform(*spec.fsr_creep_per_decade)))
@@ -136,17 +143,18 @@ def sample_device(rng_or_seed, spec: PopulationSpec = PopulationSpec(), base: De
                   ) -> DeviceParams:
     """One device (reader + FSR unit + motor + drive train) drawn from ``spec``.
 
-    ``rng_or_seed`` is an int, a ``SeedSequence`` or a ``Generator``; components draw from
+    ``rng_or_seed`` is an int, a ``SeedSequence`` (NumPy's or a
+    :class:`~ebraille_sim.base.seeds.SeedNode`) or a ``Generator``; components draw from
     child seeds so that each component's draw is independent of the others' distributions.
     """
     if isinstance(rng_or_seed, np.random.Generator):
-        ss = np.random.SeedSequence(int(rng_or_seed.integers(0, 2**63)))
-    elif isinstance(rng_or_seed, np.random.SeedSequence):
+        ss = SeedNode(int(rng_or_seed.integers(0, 2**63)))
+    elif isinstance(rng_or_seed, ISpawnableSeedSequence):
         ss = rng_or_seed
     else:
-        ss = np.random.SeedSequence(int(rng_or_seed))
+        ss = SeedNode(int(rng_or_seed))
     r_f, r_s, r_m, r_d = (np.random.default_rng(c) for c in ss.spawn(4))
-    dev = dataclasses.replace(base, finger=sample_finger(r_f, spec, base.finger),
+    dev = replace_fields(base, finger=sample_finger(r_f, spec, base.finger),
                               fsr=sample_fsr(r_s, spec, base.fsr), motor=sample_motor(r_m, spec, base.motor),
                               drivetrain=sample_drivetrain(r_d, spec, base.drivetrain))
     return calibrate_device(dev) if spec.calibrate else dev
@@ -156,4 +164,4 @@ def sample_devices(seed: int, n: int, spec: PopulationSpec = PopulationSpec(),
                    base: DeviceParams = DeviceParams()) -> list[DeviceParams]:
     """``n`` devices from one master seed (child ``k`` of ``SeedSequence(seed)`` for device k)."""
     check_number("n", n, lo=0, integer=True)
-    return [sample_device(c, spec, base) for c in np.random.SeedSequence(seed).spawn(n)]
+    return [sample_device(c, spec, base) for c in SeedNode(seed).spawn(n)]

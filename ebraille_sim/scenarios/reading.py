@@ -296,9 +296,10 @@ def build_schedule(
         z = rng.standard_normal(n)
         dwell = np.clip(mean * (1.0 + jitter * z), 0.5 * mean, 1.5 * mean)
 
-    line_end = np.fromiter((c.line_end for c in cells), dtype=bool, count=n)
-    space = np.fromiter((c.kind == "space" for c in cells), dtype=bool, count=n)
-    dwell = dwell + np.where(line_end, line_pause, np.where(space, word_pause, 0.0))
+    if word_pause or line_pause:               # (without pauses every dwell stays as it is)
+        line_end = np.fromiter((c.line_end for c in cells), dtype=bool, count=n)
+        space = np.fromiter((c.kind == "space" for c in cells), dtype=bool, count=n)
+        dwell = dwell + np.where(line_end, line_pause, np.where(space, word_pause, 0.0))
 
     ends = t0 + np.cumsum(dwell)
     starts = np.empty(n, dtype=float)
