@@ -40,6 +40,14 @@ samples above and below the band, the unit's film hysteresis and creep, and the 
 same true force is replayed through the unit's sensor chain (zero-order hold at the control
 rate) with the estimator as in the loop and with its creep compensation off.
 
+``--fast --both-refresh N`` searches N candidates (seed 11) on the 1 kHz path for gains that
+hold both refresh speeds: the seven scenarios, refresh_60wpm and refresh_120wpm on 8 training
+readers, the setpoint weight of the proportional term searched too (log-uniform kp in
+[1.2, 4] V/N, ki in [1.5, 10] V/(N s), tau in [2, 20] ms, uniform f in [0.45, 0.69] and
+setpoint weight in [0.3, 1]; the first four candidates are `pid_dob_fast_16.json`, `pid_dob`'s
+gains and two with a setpoint weight; after them 65 % of the draws perturb the best so far),
+and writes ``dob_search_both_refresh.json``.
+
 ``--nominal-calibration`` runs ``pid_dob_fast_16.json`` on the benchmark's reader 0 (the
 scenarios' nominal device, its divider as shipped) and on the same device with the one-point
 assembly calibration of the drawn readers
@@ -222,15 +230,67 @@ def nominal_calibration(task) -> dict:
             "char_in_band": round(m["char_in_band_fraction"] or 0.0, 3)}
 
 
+OUT_BOTH = ROOT / "docs" / "figures" / "benchmark" / "dob_search_both_refresh.json"
+BOTH_START = (
+    {"kp_v_per_n": 3.0, "ki_v_per_ns": 7.0, "compensation_fraction": 0.55, "q_time_constant_s": 0.01},
+    {"kp_v_per_n": 1.75, "ki_v_per_ns": 2.5, "compensation_fraction": 0.66, "q_time_constant_s": 0.003},
+    {"kp_v_per_n": 3.0, "ki_v_per_ns": 7.0, "compensation_fraction": 0.55, "q_time_constant_s": 0.01,
+     "setpoint_weight_p": 0.6},
+    {"kp_v_per_n": 2.4, "ki_v_per_ns": 4.0, "compensation_fraction": 0.6, "q_time_constant_s": 0.006,
+     "setpoint_weight_p": 0.8},
+)
+
+
+def search_both_refresh(ex, n: int, folder: pathlib.Path) -> list:
+    """``--fast --both-refresh N``: the candidates' rows (module docstring)."""
+    scenarios = SCENARIOS + ("refresh_60wpm", "refresh_120wpm")
+    extra = tuple(FAST_ESTIMATOR.items())
+    rng = np.random.default_rng(11)
+    rows, best = [], None
+    for i in range(n):
+        if i < len(BOTH_START):
+            g = dict(BOTH_START[i])
+        elif best is None or rng.random() < 0.35:
+            g = {"kp_v_per_n": float(np.exp(rng.uniform(np.log(1.2), np.log(4.0)))),
+                 "ki_v_per_ns": float(np.exp(rng.uniform(np.log(1.5), np.log(10.0)))),
+                 "compensation_fraction": float(rng.uniform(0.45, 0.69)),
+                 "q_time_constant_s": float(np.exp(rng.uniform(np.log(0.002), np.log(0.02)))),
+                 "setpoint_weight_p": float(rng.uniform(0.3, 1.0))}
+        else:
+            g = dict(best["gains"])
+            for k in ("kp_v_per_n", "ki_v_per_ns", "q_time_constant_s"):
+                g[k] = float(g[k] * np.exp(rng.normal(0.0, 0.2)))
+            g["compensation_fraction"] = float(min(0.69, max(0.4, g["compensation_fraction"] + rng.normal(0.0, 0.04))))
+            g["setpoint_weight_p"] = float(min(1.0, max(0.2, g.get("setpoint_weight_p", 1.0) + rng.normal(0.0, 0.1))))
+        row = evaluate(ex, g, 8, folder, scenarios, extra)
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+        if best is None or row["score"] > best["score"]:
+            best = row
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--search", type=int, default=0, metavar="N", help="run the random search of N candidates")
     ap.add_argument("--fast", action="store_true", help="rank the 1 kHz estimator path's finalists")
     ap.add_argument("--hold-bias", action="store_true", help="the estimate's bias in refresh hold windows")
+    ap.add_argument("--both-refresh", type=int, default=0, metavar="N",
+                    help="with --fast: search N candidates for gains that hold both refresh speeds")
     ap.add_argument("--nominal-calibration", action="store_true",
                     help="reader 0 with its divider as shipped and calibrated like a drawn unit")
     ap.add_argument("-j", "--jobs", type=int, default=2)
     args = ap.parse_args(argv)
+    if args.both_refresh:
+        if not args.fast:
+            ap.error("--both-refresh searches the 1 kHz path: give --fast too")
+        with tempfile.TemporaryDirectory() as tmp, ProcessPoolExecutor(args.jobs) as ex:
+            rows = search_both_refresh(ex, args.both_refresh, pathlib.Path(tmp))
+        OUT_BOTH.write_text(json.dumps({"training_population_seed": TRAIN_SEED, "readers": 8,
+                                        "estimator": {"hysteresis_compensation": True, **FAST_ESTIMATOR},
+                                        "candidates": rows}, indent=1) + "\n")
+        print(f"wrote {OUT_BOTH.relative_to(ROOT)}")
+        return 0
     if args.nominal_calibration:
         with ProcessPoolExecutor(args.jobs) as ex:
             rows = list(ex.map(nominal_calibration, [(k, c) for k in NOMINAL_SCENARIOS for c in (False, True)]))
