@@ -18,7 +18,11 @@ gains (``pid_dob_high_gain.json``) on ``pressing_90wpm`` with each reader's FSR 
 with its hysteresis removed.  Last, ``pid_dob`` and two gains files of it
 (``docs/figures/benchmark_fast``) run beside the bounds on the firmware variant with the 1 kHz
 estimator path and the hysteresis compensation (``--out docs/figures/benchmark_fast``).  Every number quoted in docs/benchmark.md comes
-from those files.
+from those files; the tables of docs/benchmark.md that copy them (the leaderboards, the
+learned policies', `ppo_hc`'s, `pid_dob`'s, the 1 kHz firmware's and the nominal reader's
+calibration) are rewritten from them at the end of every run (:func:`write_tables`; the
+`ppo_hc` results come from the two commands in docs/benchmark.md and the calibration study
+from ``python docs/make_dob_tuning.py --nominal-calibration``).
 """
 from __future__ import annotations
 
@@ -141,6 +145,104 @@ def hysteresis_free(path: pathlib.Path, controllers=("pid", "pid_dob", HIGH_GAIN
     return doc
 
 
+DOC = ROOT / "docs" / "benchmark.md"
+SUITE_ORDER = ("reading_60wpm", "reading_120wpm", "reading_200wpm", "setpoint_steps", "contact_onset",
+               "tremor_90wpm", "pressing_90wpm", "strap_slip", "battery_sag", "everyday_session",
+               "refresh_60wpm", "refresh_120wpm", "fault_fsr_open", "fault_motor_stall")
+FAST_FILES = ("docs/figures/benchmark_fast/pid_dob_fast_8.json", "docs/figures/benchmark_fast/pid_dob_fast_16.json",
+              "pid_dob")
+
+
+def _summary(folder: str) -> dict:
+    return json.loads((ROOT / "docs" / "figures" / folder / "benchmark.json").read_text())["summary"]
+
+
+def _cell(summary: dict, controller: str, scenario: str) -> str:
+    """Worst reader (CVaR10) in_band / char_in_band and the median in_band in brackets, or "-"."""
+    e = summary.get(controller, {}).get("scenarios", {}).get(scenario)
+    if e is None or e.get("in_band_fraction_cvar10") is None:
+        return "-"
+    return "%.2f/%.2f (%.2f)" % (e["in_band_fraction_cvar10"], e["char_in_band_fraction_cvar10"],
+                                 e["in_band_fraction_median"])
+
+
+def _worst_reading(summary: dict, controller: str) -> str:
+    """:func:`_cell` of the reading speed with the lowest worst-reader in_band."""
+    k = min(SUITE_ORDER[:3], key=lambda s: summary[controller]["scenarios"][s]["in_band_fraction_cvar10"])
+    return _cell(summary, controller, k)
+
+
+def _row(label: str, cells) -> str:
+    return "| %s | %s |" % (label, " | ".join(cells))
+
+
+def _replace_table(text: str, header: str, body: list) -> str:
+    """``text`` with the rows of the table whose header line starts with ``header`` replaced."""
+    lines = text.split("\n")
+    i = next(k for k, line in enumerate(lines) if line.startswith(header))
+    j = i + 2
+    while j < len(lines) and lines[j].startswith("|"):
+        j += 1
+    lines[i + 2:j] = body
+    return "\n".join(lines)
+
+
+def write_tables(doc_path: pathlib.Path = DOC) -> None:
+    """Rewrite the tables of docs/benchmark.md that copy the results files (module docstring)."""
+    t = doc_path.read_text()
+    sd, sh, sf = _summary("benchmark"), _summary("benchmark_hysteresis"), _summary("benchmark_fast")
+    ppo, sac = "policy:docs/figures/rl/ppo", "policy:docs/figures/rl/sac"
+    lb = (OUT / "leaderboard.md").read_text().split("\n")
+    i = next(k for k, line in enumerate(lb) if line.startswith("| controller | score"))
+    rows = []
+    for line in lb[i + 2:]:
+        if not line.startswith("|"):
+            break
+        rows.append(line.replace(f"`{ppo}` |", f"`{ppo}` (PPO, learned) |").replace(f"`{sac}` |",
+                                                                                  f"`{sac}` (SAC, learned) |"))
+    t = _replace_table(t, "| controller | score | max peak force (N) | share of episodes > 3 N |", rows)
+    cols = ("actuator_bound", "hysteresis_bound", "sensor_bound", "pid_dob", "pid_friction", "pid_feedforward",
+            "pid_scheduled", "pid", "lqg")
+    t = _replace_table(t, "| scenario | actuator_bound | hysteresis_bound | sensor_bound | `pid_dob` |",
+                       [_row(s, [_cell(sd, c, s) for c in cols]) for s in SUITE_ORDER])
+    t = _replace_table(t, "| scenario | PPO | SAC |",
+                       [_row("reading_60/120/200wpm", [_worst_reading(sd, c) for c in (ppo, sac)])]
+                       + [_row(s, [_cell(sd, c, s) for c in (ppo, sac)]) for s in SUITE_ORDER[3:12]])
+    ph, pdf = _summary("benchmark_ppo_hc/hysteresis"), _summary("benchmark_ppo_hc/default")
+    src = ((ph, "policy:docs/figures/rl/ppo_hc"), (pdf, "policy:docs/figures/rl/ppo_hc"), (sh, ppo), (sh, "pid_dob"))
+    rows = [_row("score", ["%.2f" % s[c]["score"] for s, c in src])]
+    rows += [_row(k, [_cell(s, c, k) for s, c in src]) for k in
+             ("reading_60wpm", "setpoint_steps", "contact_onset", "pressing_90wpm", "battery_sag",
+              "everyday_session", "refresh_120wpm")]
+    rows.append(_row("max peak force, N", ["%.2f" % max(e["peak_force_n_max"] for e in s[c]["scenarios"].values()
+                                                       if e.get("peak_force_n_max") is not None) for s, c in src]))
+    t = _replace_table(t, "| | `ppo_hc`, compensated |", rows)
+    src = ((sd, "pid"), (sd, "pid_friction"), (sd, "pid_dob"), (sh, "pid"), (sh, "pid_dob"))
+    t = _replace_table(t, "| scenario | pid | pid_friction | pid_dob | pid, compensated |",
+                       [_row("reading_60/120/200wpm", [_worst_reading(s, c) for s, c in src])]
+                       + [_row(k, [_cell(s, c, k) for s, c in src]) for k in SUITE_ORDER[3:]])
+    ctrls = sorted(("pid_dob", "pid", "lqg", "pid_friction", "pid_feedforward", "pid_scheduled"),
+                   key=lambda c: -sh[c]["score"])
+    names = [("*actuator_bound* (bound)", "actuator_bound"), ("*hysteresis_bound* (bound)", "hysteresis_bound"),
+             ("*sensor_bound* (bound)", "sensor_bound")] + [(f"`{c}`", c) for c in ctrls] \
+        + [("PPO (learned)", ppo), ("SAC (learned)", sac)]
+    rows = [_row(lab, ["%.2f" % sd[c]["score"], ("**%.2f**" if c == ctrls[0] else "%.2f") % sh[c]["score"]])
+            for lab, c in names]
+    rows += [line for line in t.split("\n") if line.startswith("| `pid_dob`, first design")]
+    t = _replace_table(t, "| controller | score, default estimator | score, hysteresis compensated |", rows)
+    t = _replace_table(t, "| worst reader in_band / char_in_band (median in_band) | `pid_dob_fast_8.json` |",
+                       [_row("score", ["%.2f" % sf[c]["score"] for c in FAST_FILES])]
+                       + [_row(k, [_cell(sf, c, k) for c in FAST_FILES]) for k in SUITE_ORDER[1:12]])
+    nc = json.loads((OUT_FAST / "nominal_calibration.json").read_text())["rows"]
+    rows = []
+    for k in ("pressing_90wpm", "everyday_session", "battery_sag", "tremor_90wpm", "refresh_60wpm", "refresh_120wpm"):
+        a, b = (next(r for r in nc if r["scenario"] == k and r["one_point_calibration"] is cal) for cal in (False, True))
+        rows.append(_row(k, ["%.3f / %.3f" % (a["in_band"], a["char_in_band"]),
+                             "%.3f / %.3f" % (b["in_band"], b["char_in_band"])]))
+    t = _replace_table(t, "| reader 0, in_band / char_in_band |", rows)
+    doc_path.write_text(t)
+
+
 def main(argv=None) -> int:
     import os
     argv = sys.argv[1:] if argv is None else argv
@@ -163,7 +265,9 @@ def main(argv=None) -> int:
     figure(doc, OUT / "cvar_by_scenario.png")
     figure(json.loads((OUT_HC / "benchmark.json").read_text()), OUT_HC / "cvar_by_scenario.png")
     fast_estimator(OUT / "fast_estimator.json")
-    print(f"wrote {OUT / 'cvar_by_scenario.png'}, {OUT_HC / 'cvar_by_scenario.png'}, {OUT / 'fast_estimator.json'}")
+    write_tables()
+    print(f"wrote {OUT / 'cvar_by_scenario.png'}, {OUT_HC / 'cvar_by_scenario.png'}, {OUT / 'fast_estimator.json'}, "
+          f"the tables of {DOC.relative_to(ROOT)}")
     return 0
 
 
