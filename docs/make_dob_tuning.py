@@ -134,27 +134,45 @@ def evaluate(ex, gains: dict, readers: int, folder: pathlib.Path, scenarios=SCEN
             "worst_in_band_char": {k: [round(a, 3), round(b, 3)] for k, (a, b) in worst.items()}}
 
 
-def search(ex, n: int, folder: pathlib.Path, scenarios=SCENARIOS, extra=()) -> list:
-    rng = np.random.default_rng(1)
+def random_search(ex, n: int, folder: pathlib.Path, scenarios, extra, rng, draw, perturb, p_draw: float,
+                  start=()) -> list:
+    """``n`` candidates scored on 8 readers: the ``start`` gains first, then a fresh ``draw(rng)``
+    with probability ``p_draw`` (always before the first score) and otherwise ``perturb(rng,
+    gains)`` of the best so far; the rows, printed as they come."""
     rows, best = [], None
-    for _ in range(n):
-        if best is None or rng.random() < 0.4:
-            g = {"kp_v_per_n": float(np.exp(rng.uniform(np.log(0.3), np.log(4.0)))),
-                 "ki_v_per_ns": float(np.exp(rng.uniform(np.log(2.0), np.log(40.0)))),
-                 "compensation_fraction": float(rng.uniform(0.5, 0.85)),
-                 "q_time_constant_s": float(np.exp(rng.uniform(np.log(0.001), np.log(0.03)))),
-                 "kd_vs_per_n": float(rng.choice([0.0, 0.0, rng.uniform(0.0, 0.03)]))}
+    for i in range(n):
+        if i < len(start):
+            g = dict(start[i])
+        elif best is None or rng.random() < p_draw:
+            g = draw(rng)
         else:
-            g = dict(best["gains"])
-            for k in ("kp_v_per_n", "ki_v_per_ns", "q_time_constant_s"):
-                g[k] = float(g[k] * np.exp(rng.normal(0.0, 0.25)))
-            g["compensation_fraction"] = float(min(0.85, max(0.3, g["compensation_fraction"] + rng.normal(0.0, 0.05))))
+            g = perturb(rng, dict(best["gains"]))
         row = evaluate(ex, g, 8, folder, scenarios, extra)
         rows.append(row)
         print(json.dumps(row), flush=True)
         if best is None or row["score"] > best["score"]:
             best = row
     return rows
+
+
+def _draw(rng) -> dict:
+    return {"kp_v_per_n": float(np.exp(rng.uniform(np.log(0.3), np.log(4.0)))),
+            "ki_v_per_ns": float(np.exp(rng.uniform(np.log(2.0), np.log(40.0)))),
+            "compensation_fraction": float(rng.uniform(0.5, 0.85)),
+            "q_time_constant_s": float(np.exp(rng.uniform(np.log(0.001), np.log(0.03)))),
+            "kd_vs_per_n": float(rng.choice([0.0, 0.0, rng.uniform(0.0, 0.03)]))}
+
+
+def _perturb(rng, g: dict) -> dict:
+    for k in ("kp_v_per_n", "ki_v_per_ns", "q_time_constant_s"):
+        g[k] = float(g[k] * np.exp(rng.normal(0.0, 0.25)))
+    g["compensation_fraction"] = float(min(0.85, max(0.3, g["compensation_fraction"] + rng.normal(0.0, 0.05))))
+    return g
+
+
+def search(ex, n: int, folder: pathlib.Path, scenarios=SCENARIOS, extra=()) -> list:
+    """``--search N``: the candidates' rows (module docstring)."""
+    return random_search(ex, n, folder, scenarios, extra, np.random.default_rng(1), _draw, _perturb, 0.4)
 
 
 OUT_BIAS = ROOT / "docs" / "figures" / "benchmark" / "refresh_hold_bias.json"
@@ -241,33 +259,27 @@ BOTH_START = (
 )
 
 
+def _draw_both(rng) -> dict:
+    return {"kp_v_per_n": float(np.exp(rng.uniform(np.log(1.2), np.log(4.0)))),
+            "ki_v_per_ns": float(np.exp(rng.uniform(np.log(1.5), np.log(10.0)))),
+            "compensation_fraction": float(rng.uniform(0.45, 0.69)),
+            "q_time_constant_s": float(np.exp(rng.uniform(np.log(0.002), np.log(0.02)))),
+            "setpoint_weight_p": float(rng.uniform(0.3, 1.0))}
+
+
+def _perturb_both(rng, g: dict) -> dict:
+    for k in ("kp_v_per_n", "ki_v_per_ns", "q_time_constant_s"):
+        g[k] = float(g[k] * np.exp(rng.normal(0.0, 0.2)))
+    g["compensation_fraction"] = float(min(0.69, max(0.4, g["compensation_fraction"] + rng.normal(0.0, 0.04))))
+    g["setpoint_weight_p"] = float(min(1.0, max(0.2, g.get("setpoint_weight_p", 1.0) + rng.normal(0.0, 0.1))))
+    return g
+
+
 def search_both_refresh(ex, n: int, folder: pathlib.Path) -> list:
     """``--fast --both-refresh N``: the candidates' rows (module docstring)."""
-    scenarios = SCENARIOS + ("refresh_60wpm", "refresh_120wpm")
-    extra = tuple(FAST_ESTIMATOR.items())
-    rng = np.random.default_rng(11)
-    rows, best = [], None
-    for i in range(n):
-        if i < len(BOTH_START):
-            g = dict(BOTH_START[i])
-        elif best is None or rng.random() < 0.35:
-            g = {"kp_v_per_n": float(np.exp(rng.uniform(np.log(1.2), np.log(4.0)))),
-                 "ki_v_per_ns": float(np.exp(rng.uniform(np.log(1.5), np.log(10.0)))),
-                 "compensation_fraction": float(rng.uniform(0.45, 0.69)),
-                 "q_time_constant_s": float(np.exp(rng.uniform(np.log(0.002), np.log(0.02)))),
-                 "setpoint_weight_p": float(rng.uniform(0.3, 1.0))}
-        else:
-            g = dict(best["gains"])
-            for k in ("kp_v_per_n", "ki_v_per_ns", "q_time_constant_s"):
-                g[k] = float(g[k] * np.exp(rng.normal(0.0, 0.2)))
-            g["compensation_fraction"] = float(min(0.69, max(0.4, g["compensation_fraction"] + rng.normal(0.0, 0.04))))
-            g["setpoint_weight_p"] = float(min(1.0, max(0.2, g.get("setpoint_weight_p", 1.0) + rng.normal(0.0, 0.1))))
-        row = evaluate(ex, g, 8, folder, scenarios, extra)
-        rows.append(row)
-        print(json.dumps(row), flush=True)
-        if best is None or row["score"] > best["score"]:
-            best = row
-    return rows
+    return random_search(ex, n, folder, SCENARIOS + ("refresh_60wpm", "refresh_120wpm"),
+                         tuple(FAST_ESTIMATOR.items()), np.random.default_rng(11), _draw_both, _perturb_both, 0.35,
+                         BOTH_START)
 
 
 def main(argv=None) -> int:
