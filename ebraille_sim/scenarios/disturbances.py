@@ -376,8 +376,9 @@ class FSRDrift:
     docstring).  The firmware has followed the same session: its creep compensation predicts
     with its own law (:data:`ebraille_sim.estimation.blockmodels.FIRMWARE_FSR`) advanced by
     the same offset, the ``est_creep_preload`` input (``factor - 1`` of that law,
-    :func:`ebraille_sim.estimation.blockmodels.creep_compensated_v`).  A reading session of 30 min to 2 h [E] gives offsets of 1800-7200 s;
-    standard FSR ink drifts about 12 % in conductance over 48 h ([R] Sensitronics).
+    :func:`ebraille_sim.estimation.blockmodels.creep_compensated_v`).  A reading session of
+    30 min to 2 h [E] gives offsets of 1800-7200 s; standard FSR ink drifts about 12 % in
+    conductance over 48 h ([R] Sensitronics).
     """
     session_offset_s: float = sourced(1800.0, "s", "[E] 30 min into a session; creep law of "
                                  "the FSR model (hereditary creep, conductance rising under load)",
