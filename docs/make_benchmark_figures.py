@@ -17,7 +17,9 @@ hysteresis_compensation=true --out docs/figures/benchmark_hysteresis``), and
 gains (``pid_dob_high_gain.json``) on ``pressing_90wpm`` with each reader's FSR as drawn and
 with its hysteresis removed.  Last, ``pid_dob`` and two gains files of it
 (``docs/figures/benchmark_fast``) run beside the bounds on the firmware variant with the 1 kHz
-estimator path and the hysteresis compensation (``--out docs/figures/benchmark_fast``).  Every number quoted in docs/benchmark.md comes
+estimator path and the hysteresis compensation (``--out docs/figures/benchmark_fast``), and
+``pid_dob``'s first design (``pid_dob_high_gain.json``) runs without bounds on both estimators
+(``docs/figures/benchmark_first_design/default`` and ``.../hysteresis``).  Every number quoted in docs/benchmark.md comes
 from those files; the tables of docs/benchmark.md that copy them (the leaderboards, the
 learned policies', `ppo_hc`'s, `pid_dob`'s, the 1 kHz firmware's and the nominal reader's
 calibration) are rewritten from them at the end of every run (:func:`write_tables`; the
@@ -228,7 +230,8 @@ def write_tables(doc_path: pathlib.Path = DOC) -> None:
         + [("PPO (learned)", ppo), ("SAC (learned)", sac)]
     rows = [_row(lab, ["%.2f" % sd[c]["score"], ("**%.2f**" if c == ctrls[0] else "%.2f") % sh[c]["score"]])
             for lab, c in names]
-    rows += [line for line in t.split("\n") if line.startswith("| `pid_dob`, first design")]
+    first = [_summary(f"benchmark_first_design/{e}")[HIGH_GAIN_DOB]["score"] for e in ("default", "hysteresis")]
+    rows.append(_row("`pid_dob`, first design (kp 2, ki 8, f 0.9)", ["%.2f" % v for v in first]))
     t = _replace_table(t, "| controller | score, default estimator | score, hysteresis compensated |", rows)
     t = _replace_table(t, "| worst reader in_band / char_in_band (median in_band) | `pid_dob_fast_8.json` |",
                        [_row("score", ["%.2f" % sf[c]["score"] for c in FAST_FILES])]
@@ -261,6 +264,11 @@ def main(argv=None) -> int:
         code = cli(["benchmark", *FAST_CONTROLLERS, *FAST_FIRMWARE, "-j", "2", "--out", str(OUT_FAST)])
         if code:
             return code
+        for est, extra in (("default", []), ("hysteresis", ["--estimator", "hysteresis_compensation=true"])):
+            code = cli(["benchmark", HIGH_GAIN_DOB, *extra, "--no-bounds", "-j", "2",
+                        "--out", str(ROOT / "docs" / "figures" / "benchmark_first_design" / est)])
+            if code:
+                return code
     doc = json.loads((OUT / "benchmark.json").read_text())
     figure(doc, OUT / "cvar_by_scenario.png")
     figure(json.loads((OUT_HC / "benchmark.json").read_text()), OUT_HC / "cvar_by_scenario.png")
