@@ -331,6 +331,13 @@ class SupervisorConfig:
     implausible_n: float = 0.5
     """Margin by which the force the current implies may exceed the estimate [E]."""
     implausible_s: float = 0.2
+    powered_current_a: float = 0.5e-3
+    """Smallest motor current that shows the driver powers the motor [E] (a few counts of a
+    current sense that resolves tens of microamperes): the back-EMF speed counts as travel only
+    above it.  A cut supply draws no current, and its command would read as speed; a motor
+    that moves while drawing less than its friction current (the finger pushing the board back
+    as the drive retracts) is counted, so the travel integral follows a force loop that
+    hunts back and forth."""
     enabled: bool = True
 
     def __post_init__(self):
@@ -508,7 +515,7 @@ _STATE_SCALARS = ("mode", "fault", "t", "u_prev", "theta", "nan_s", "in_contact"
                   "contact_travel_set", "cut_t", "sp_last", "fall_t", "stall_s", "implausible_s", "current_limit_a",
                   "last_f", "event_count", "events_dropped", "first_dropped_t")
 _CFG_SCALARS = ("force_cap_n", "cap_margin_n", "sp_max_n", "slew_v_per_s", "rated_current_sq_a2", "i2t_limit_a2s",
-                "motor_resistance_ohm", "driver_supply_v", "back_emf_v_s_per_m", "half_friction_current_a",
+                "motor_resistance_ohm", "driver_supply_v", "back_emf_v_s_per_m", "half_friction_current_a", "powered_current_a",
                 "moving_speed_m_per_s", "stuck_tolerance_n", "contact_lost_n", "contact_on_n", "stuck_travel_m",
                 "soft_b_n_per_m", "soft_m_per_m", "release_window_s", "travel_follow_s", "implausible_n",
                 "first_contact_travel_m", "contact_current_a", "stall_fraction", "current_limit_a", "stall_time_s",
@@ -557,7 +564,8 @@ def _pack(c: SupervisorConfig) -> np.ndarray:
         "slew_v_per_s": c.slew_v_per_s, "rated_current_sq_a2": c.rated_current_a ** 2,
         "i2t_limit_a2s": c.i2t_limit_a2s, "motor_resistance_ohm": c.motor_resistance_ohm,
         "driver_supply_v": c.driver_supply_v, "back_emf_v_s_per_m": c.back_emf_v_s_per_m,
-        "half_friction_current_a": 0.5 * c.friction_current_a, "moving_speed_m_per_s": c.moving_speed_m_per_s,
+        "half_friction_current_a": 0.5 * c.friction_current_a,
+        "powered_current_a": c.powered_current_a, "moving_speed_m_per_s": c.moving_speed_m_per_s,
         "stuck_tolerance_n": c.stuck_tolerance_n, "contact_lost_n": c.contact_lost_n,
         "contact_on_n": c.contact_on_n, "stuck_travel_m": c.stuck_travel_m, "soft_b_n_per_m": c.soft_b_n_per_m,
         "soft_m_per_m": c.soft_m_per_m, "release_window_s": c.release_window_s,
@@ -782,7 +790,7 @@ def _motion(sv, cfg, cur, dt):
     v = limits.rack_speed_from_emf_m_per_s(u, cur, cfg[CF.motor_resistance_ohm], cfg[CF.back_emf_v_s_per_m], 1.0)
     sv[SV.accel] = (v - sv[SV.speed]) / dt
     sv[SV.speed] = v
-    if abs(cur) > cfg[CF.half_friction_current_a]:     # an unpowered motor (a cut supply) reads its command as speed
+    if abs(cur) > cfg[CF.powered_current_a]:     # an unpowered motor (a cut supply) reads its command as speed
         sv[SV.travel_m] = _pymax(0.0, sv[SV.travel_m] + v * dt)
     _win_push(sv, cfg, SV.speed_win_t0, CF.speed_win_span, sv[SV.t], v, False)
 

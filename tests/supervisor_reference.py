@@ -141,7 +141,7 @@ class Supervisor:
         v = limits.rack_speed_from_emf_m_per_s(u, cur, c.motor_resistance_ohm, c.back_emf_v_s_per_m, 1.0)
         self.accel = (v - self.speed) / dt_s
         self.speed = v
-        if abs(cur) > 0.5 * c.friction_current_a:     # an unpowered motor (a cut supply) reads its command as speed
+        if abs(cur) > c.powered_current_a:     # an unpowered motor (a cut supply) reads its command as speed
             self.travel_m = max(0.0, self.travel_m + v * dt_s)
         self.speed_win.push(self.t, v)
 

@@ -149,3 +149,29 @@ def test_observer_loop_through_a_stuck_drive_stays_below_one_for_the_population(
     loop = f * R_OHM / r_mid
     assert u == pytest.approx(DEFAULT_DOB.kp_v_per_n * 0.1 / (1.0 - loop), rel=1e-3)
     assert u < DEFAULT_DOB.u_max_v
+
+
+def test_a_loop_hunting_in_the_films_blind_stretch_keeps_its_reader(tmp_path):
+    """On the 1 kHz estimator path with the hysteresis compensation, the faster gains of
+    ``pid_dob`` hunt on some readers: the estimate stays flat over the film's play after each
+    reversal, the board goes 0.1-0.2 mm back and forth, and on the way back the finger pushes
+    it at less than the motor's friction current.  The supervisor's travel integral must
+    follow (it once counted only the forward legs and, on this reader of a drawn population,
+    latched ``fsr_implausible`` 17.8 s into the session and dropped in_band to 0.56)."""
+    import dataclasses
+
+    from ebraille_sim.base.validation import replace_checked
+    from ebraille_sim.scenarios.population import sample_devices
+    from ebraille_sim.scenarios.runner import run_scenario
+    from ebraille_sim.scenarios.spec import load_scenario
+
+    spec = dataclasses.replace(load_scenario("everyday_session"), duration_s=30.0)
+    dev = sample_devices(7, 16, base=spec.device)[10]
+    dev = dataclasses.replace(dev, estimator=replace_checked(
+        dev.estimator, hysteresis_compensation=True, model="paper:wiener:5@1000", antialias_cutoff_hz=50.0))
+    gains = tmp_path / "fast.json"
+    gains.write_text('{"controller": "pid_dob", "gains": {"kp_v_per_n": 3.0, "ki_v_per_ns": 7.0, '
+                     '"compensation_fraction": 0.55, "q_time_constant_s": 0.01}}')
+    res = run_scenario(spec, controller=str(gains), seed=spec.seed + 101 * 60, device=dev, trace_every=None)
+    assert res.supervisor["fault"] is None
+    assert res.metrics["in_band_fraction"] > 0.95

@@ -355,6 +355,38 @@ def test_current_implying_more_force_than_the_estimate_latches():
     assert sup.fault == "fsr_implausible"
 
 
+def test_travel_follows_a_force_loop_that_hunts_back_and_forth():
+    """A loop hunting around its setpoint pushes the board forward at the current a push takes,
+    and the finger pushes it back while the drive retracts at less than the motor's friction
+    current: the travel integral comes back with the board.  Counting only the forward legs
+    ratchets it by each leg's travel, into a false ``fsr_implausible`` within seconds.  A motor
+    that draws no current (a cut supply) reads no travel, whatever its command."""
+    sup = Supervisor(Const(0.0))
+    sup.reset(force_est_n=1.0, setpoint_n=1.0)
+    c = sup.config
+    v, leg = 2e-3, 40                                   # 2 mm/s for 40 ms: 0.08 mm a leg
+    legs = ((v, 0.024), (-v, -0.004))                   # forward at 24 mA, back at -4 mA
+    assert c.powered_current_a < 0.004 < 0.5 * c.friction_current_a
+    k = 0
+    start = None
+    for cycle in range(60):                             # 4.8 s of hunting
+        for speed, i in legs:
+            for _ in range(leg):
+                sup.u_prev = c.motor_resistance_ohm * i + c.back_emf_v_s_per_m * speed
+                sup.update(1.0 + (3e-3 if k % 2 else 0.0), 1.0, 1e-3, i)
+                k += 1
+        if cycle == 0:
+            start = sup.travel_m
+    assert sup.fault is None
+    assert abs(sup.travel_m - start) < 0.05 * v * leg * 1e-3
+    before = sup.travel_m
+    for _ in range(100):                                # a cut supply: 0.6 V commanded, no current
+        sup.u_prev = 0.6
+        sup.update(1.0 + (3e-3 if k % 2 else 0.0), 1.0, 1e-3, 0.0)
+        k += 1
+    assert sup.travel_m == before
+
+
 def test_supervisor_is_deterministic():
     def trace():
         sup = Supervisor(Const(6.0))
