@@ -247,11 +247,14 @@ def write_tables(doc_path: pathlib.Path = DOC) -> None:
 
 
 def main(argv=None) -> int:
+    import argparse
     import os
-    argv = sys.argv[1:] if argv is None else argv
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--reuse", action="store_true", help="redraw the figures and tables from the results files")
+    args = ap.parse_args(argv)
     os.chdir(ROOT)                      # the learned policies are named by paths from the root
     OUT.mkdir(parents=True, exist_ok=True)
-    if "--reuse" not in argv:
+    if not args.reuse:
         code = cli(["benchmark", *CONTROLLERS, "-j", "2", "--out", str(OUT)])
         if code:
             return code
