@@ -47,7 +47,9 @@ contact_lost       after contact (estimate > ``contact_on_n``), a loss of contac
                    latched (an open FSR reads 0 V, i.e. no force, for good)
 controller_nonfinite non-finite commands for longer than ``watchdog_timeout_s``
 fsr_stuck          (travel) in contact, the estimate stays within ``stuck_tolerance_n`` while
-                   the driven motor travels ``stuck_travel_m``
+                   the powered motor moves the board ``stuck_travel_m`` net (back and forth
+                   cancels: the hysteresis compensation holds its estimate still while a
+                   loop hunts inside the film's blind stretch)
 fsr_implausible    moving forward, the force the current implies (lower edge of the friction
                    band) exceeds the recent estimate by ``implausible_n`` for
                    ``implausible_s``; or the travel since contact exceeds the soft reader's
@@ -279,8 +281,8 @@ class SupervisorConfig:
     """How long the highest recent speed sets the current limit: a quarter period of the impact
     mass on the design reader's stiffness at the contact threshold [D]."""
     stuck_travel_m: float = None  # type: ignore[assignment]
-    """Travel with an unchanged estimate that makes it stuck: twice the backlash plus the travel
-    at the impact speed limit within one estimator period [D]."""
+    """Net travel with an unchanged estimate that makes it stuck: twice the backlash plus the
+    travel at the impact speed limit within one estimator period [D]."""
     first_contact_travel_m: float = None  # type: ignore[assignment]
     """Travel from the start within which the first contact must show: the design gap plus the
     soft reader's compression at the safe force [D]."""
@@ -515,7 +517,7 @@ _STATE_SCALARS = ("mode", "fault", "t", "u_prev", "theta", "nan_s", "in_contact"
                   "contact_travel_set", "cut_t", "sp_last", "fall_t", "stall_s", "implausible_s", "current_limit_a",
                   "last_f", "event_count", "events_dropped", "first_dropped_t")
 _CFG_SCALARS = ("force_cap_n", "cap_margin_n", "sp_max_n", "slew_v_per_s", "rated_current_sq_a2", "i2t_limit_a2s",
-                "motor_resistance_ohm", "driver_supply_v", "back_emf_v_s_per_m", "half_friction_current_a", "powered_current_a",
+                "motor_resistance_ohm", "driver_supply_v", "back_emf_v_s_per_m", "powered_current_a",
                 "moving_speed_m_per_s", "stuck_tolerance_n", "contact_lost_n", "contact_on_n", "stuck_travel_m",
                 "soft_b_n_per_m", "soft_m_per_m", "release_window_s", "travel_follow_s", "implausible_n",
                 "first_contact_travel_m", "contact_current_a", "stall_fraction", "current_limit_a", "stall_time_s",
@@ -564,7 +566,6 @@ def _pack(c: SupervisorConfig) -> np.ndarray:
         "slew_v_per_s": c.slew_v_per_s, "rated_current_sq_a2": c.rated_current_a ** 2,
         "i2t_limit_a2s": c.i2t_limit_a2s, "motor_resistance_ohm": c.motor_resistance_ohm,
         "driver_supply_v": c.driver_supply_v, "back_emf_v_s_per_m": c.back_emf_v_s_per_m,
-        "half_friction_current_a": 0.5 * c.friction_current_a,
         "powered_current_a": c.powered_current_a, "moving_speed_m_per_s": c.moving_speed_m_per_s,
         "stuck_tolerance_n": c.stuck_tolerance_n, "contact_lost_n": c.contact_lost_n,
         "contact_on_n": c.contact_on_n, "stuck_travel_m": c.stuck_travel_m, "soft_b_n_per_m": c.soft_b_n_per_m,
@@ -867,10 +868,10 @@ def _detect(sv, cfg, f, cur, dt):
         if not abs(f - sv[SV.stuck_ref_n]) <= cfg[CF.stuck_tolerance_n]:
             sv[SV.stuck_ref_n] = f
             sv[SV.stuck_travel_m] = 0.0
-        elif abs(cur) > cfg[CF.half_friction_current_a]:    # a driven motor: an unpowered one (a cut supply)
+        elif abs(cur) > cfg[CF.powered_current_a]:    # a powered motor: an unpowered one (a cut supply)
             # draws no current and its command reads as speed
-            sv[SV.stuck_travel_m] += abs(v) * dt
-            if sv[SV.stuck_travel_m] > cfg[CF.stuck_travel_m]:
+            sv[SV.stuck_travel_m] += v * dt
+            if abs(sv[SV.stuck_travel_m]) > cfg[CF.stuck_travel_m]:
                 return FAULT.fsr_stuck
     else:
         sv[SV.stuck_ref_n] = math.nan

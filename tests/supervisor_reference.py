@@ -164,10 +164,10 @@ class Supervisor:
             if not abs(f - self.stuck_ref_n) <= c.stuck_tolerance_n:
                 self.stuck_ref_n = f
                 self.stuck_travel_m = 0.0
-            elif abs(cur) > 0.5 * c.friction_current_a:     # a driven motor: an unpowered one (a cut supply)
+            elif abs(cur) > c.powered_current_a:     # a powered motor: an unpowered one (a cut supply)
                 # draws no current and its command reads as speed
-                self.stuck_travel_m += abs(v) * dt_s
-                if self.stuck_travel_m > c.stuck_travel_m:
+                self.stuck_travel_m += v * dt_s
+                if abs(self.stuck_travel_m) > c.stuck_travel_m:
                     return "fsr_stuck"
         else:
             self.stuck_ref_n = math.nan

@@ -8,8 +8,8 @@ disturbances and reset options, and of the vector env with autoresets): the same
 give the same bits.  The hashes of packed parameters, specs and plant states were recorded again
 when the estimator's hysteresis compensation added parameters and state slots (off by
 default: observations, rewards, ends and infos kept their hashes, and the states' earlier
-slots theirs), and the supervisor's configuration arrays when they got the slot
-``powered_current_a`` (every trajectory kept its hashes).
+slots theirs), and the supervisor's configuration arrays when the slot ``powered_current_a``
+replaced ``half_friction_current_a`` (every trajectory kept its hashes).
 """
 import dataclasses
 import hashlib
@@ -174,13 +174,13 @@ REFERENCE = {
     'vec1k_params': 'bb54287165314b4d',
     'vec1k_rew': 'e43d4131ab353b63',
     'vec1k_state': '4db0a21e40b518b0',
-    'vec1k_svcfg': '6b10f547cb1eb4f4',
+    'vec1k_svcfg': 'fba240eeb34e9918',
     'vec_flags': '5f892664e193d856',
     'vec_obs': '1f2f090425c662d9',
     'vec_params': 'b496492ff776bc7c',
     'vec_rew': '0b68ffcf8f675ff8',
     'vec_state': '4db0a21e40b518b0',
-    'vec_svcfg': 'ce15e12c9710da1d',
+    'vec_svcfg': 'a0d5f8eb60bf7877',
 }
 
 

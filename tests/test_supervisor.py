@@ -387,6 +387,32 @@ def test_travel_follows_a_force_loop_that_hunts_back_and_forth():
     assert sup.travel_m == before
 
 
+def test_a_board_hunting_inside_the_films_blind_stretch_is_not_a_stuck_sensor():
+    """The hysteresis compensation holds its estimate still, to the bit, until the force has
+    crossed the film's blind stretch after a reversal: a loop hunting inside it moves the board
+    back and forth under an estimate that does not change.  The stuck rule counts the board's
+    net travel, so that is not a stuck code; the same estimate while the board keeps moving one
+    way is."""
+    c = SupervisorConfig()
+    v, leg = 2e-3, 40                                   # 0.08 mm a leg, 60 cycles: 9.6 mm back and forth
+    legs = ((v, 0.024), (-v, -0.004))
+    sup = Supervisor(Const(0.0))
+    sup.reset(force_est_n=1.0, setpoint_n=1.0)
+    for _ in range(60):
+        for speed, i in legs:
+            for _ in range(leg):
+                sup.u_prev = c.motor_resistance_ohm * i + c.back_emf_v_s_per_m * speed
+                sup.update(1.0, 1.0, 1e-3, i)
+    assert sup.fault is None
+    for k in range(1000):                               # then one way only: 2 mm/s
+        sup.u_prev = c.motor_resistance_ohm * 0.024 + c.back_emf_v_s_per_m * v
+        sup.update(1.0, 1.0, 1e-3, 0.024)
+        if sup.fault:
+            break
+    assert sup.fault == "fsr_stuck"
+    assert k * 1e-3 * v == pytest.approx(c.stuck_travel_m, abs=2 * v * 1e-3)
+
+
 def test_supervisor_is_deterministic():
     def trace():
         sup = Supervisor(Const(6.0))
