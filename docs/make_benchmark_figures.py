@@ -202,7 +202,7 @@ def write_tables(doc_path: pathlib.Path = DOC) -> None:
             break
         rows.append(line.replace(f"`{ppo}` |", f"`{ppo}` (PPO, learned) |").replace(f"`{sac}` |",
                                                                                   f"`{sac}` (SAC, learned) |"))
-    t = _replace_table(t, "| controller | score | max peak force (N) | share of episodes > 3 N |", rows)
+    t = _replace_table(t, "| controller | score | max peak force (N) | share of episodes > 3 N | latched faults", rows)
     cols = ("actuator_bound", "hysteresis_bound", "sensor_bound", "pid_dob", "pid_friction", "pid_feedforward",
             "pid_scheduled", "pid", "lqg")
     t = _replace_table(t, "| scenario | actuator_bound | hysteresis_bound | sensor_bound | `pid_dob` |",

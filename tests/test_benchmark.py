@@ -82,6 +82,36 @@ def test_quick_suite_ranks_the_bounds_beside_the_controller(quick):
     assert md.count("| pressing_90wpm |") == 7
 
 
+def test_latched_supervisor_faults_are_counted_in_tracking_scenarios_only(quick):
+    res, s = quick
+    # every row records the latched fault; the quick suite's tracking runs latch none, and
+    # the open FSR of its fault scenario is caught (a true alarm, not counted)
+    assert all("supervisor_fault" in r for r in res.rows if not r.get("error"))
+    assert all(s[c]["tracking_faults"] == 0 for c in s)
+    tracking = next(sc.key for sc in res.suite.scenarios if not sc.fault)
+    fault = next(sc.key for sc in res.suite.scenarios if sc.fault)
+    caught = s["pid"]["scenarios"][fault]["supervisor_faults"]
+    assert caught >= 1
+    # a latched fault in a tracking scenario is counted, one more in a fault scenario is not
+    rows = [dict(r) for r in res.rows]
+    for r in rows:
+        if r["controller"] == "pid" and r["scenario"] in (tracking, fault) and r["reader"] == 0:
+            r["supervisor_fault"] = "fsr_stuck"
+    s2 = B.summarise(B.BenchmarkResult(res.suite, res.controllers, res.readers, rows, 0.0, 1))
+    assert s2["pid"]["tracking_faults"] == 1
+    assert s2["pid"]["scenarios"][tracking]["supervisor_faults"] == 1
+    assert s2["pid"]["scenarios"][fault]["supervisor_faults"] == sum(
+        1 for r in rows if r["controller"] == "pid" and r["scenario"] == fault and r["supervisor_fault"])
+    assert s2["pid"]["score"] == s["pid"]["score"]            # the count informs, it does not score
+    line = next(x for x in B.format_leaderboard(res, s2).splitlines() if x.startswith("pid "))
+    assert line.split()[4] == "1"
+    assert "| `pid` |" in B.format_markdown(res, s2) and " | 1 |" in B.format_markdown(res, s2)
+    # a results file written before the count was kept shows "-"
+    old = {c: {k: v for k, v in e.items() if k != "tracking_faults"} for c, e in s2.items()}
+    line = next(x for x in B.format_leaderboard(res, old).splitlines() if x.startswith("pid "))
+    assert line.split()[4] == "-"
+
+
 def test_true_force_controllers_get_the_true_force_others_the_estimate():
     seen = []
 

@@ -37,6 +37,12 @@ force through the unit's FSR hysteresis and its exact inverse
 other sensor error, so it shows what the film's blind stretch after a reversal costs.  Both
 derived bounds are left out of the fault scenarios.
 
+Latched faults.  Every episode row records the fault the safety supervisor latched
+(``supervisor_fault``, None when it never retracted).  No tracking scenario has a fault in
+it, so a latched fault there is a false alarm that retracted the board for the rest of the
+run: the leaderboard counts those episodes per controller (``tracking_faults``), to tell a
+controller that loses the force from one whose loop misleads the detectors.
+
 Examples
 --------
 >>> res = run_benchmark(["pid"], suite="quick", jobs=1)            # doctest: +SKIP
@@ -262,10 +268,12 @@ def run_episode(task) -> list[dict]:
         res = run_scenario(spec, controller=controller, seed=seed, device=device)
     except (ValueError, FloatingPointError) as exc:
         return [dict(base, controller=ctrl, error=str(exc).splitlines()[0])]
-    rows = [dict(base, controller=ctrl, **{k: _num(res.metrics.get(k)) for k in KEPT})]
+    rows = [dict(base, controller=ctrl, **{k: _num(res.metrics.get(k)) for k in KEPT},
+                 supervisor_fault=(res.supervisor or {}).get("fault"))]
     if ctrl == "actuator_bound" and not sc.fault:
         m = _sensor_bound_metrics(res)
-        rows.append(dict(base, controller="sensor_bound", **{k: _num(m.get(k)) for k in KEPT}))
+        rows.append(dict(base, controller="sensor_bound", **{k: _num(m.get(k)) for k in KEPT},
+                         supervisor_fault=None))
     return rows
 
 
@@ -346,12 +354,13 @@ def summarise(result: BenchmarkResult) -> dict:
     """``{controller: {"score", "scenarios": {key: stats}, ...}}`` (module docstring)."""
     out = {}
     for c in result.controllers:
-        per, tracking, over, total, errors = {}, [], 0, 0, 0
+        per, tracking, over, total, errors, faults = {}, [], 0, 0, 0, 0
         for sc in result.suite.scenarios:
             rows = [r for r in result.rows if r["controller"] == c and r["scenario"] == sc.key]
             ok = [r for r in rows if not r.get("error")]
             errors += len(rows) - len(ok)
-            st = {"episodes": len(rows), "errors": len(rows) - len(ok), "fault": sc.fault}
+            st = {"episodes": len(rows), "errors": len(rows) - len(ok), "fault": sc.fault,
+                  "supervisor_faults": sum(1 for r in ok if r.get("supervisor_fault"))}
             for m in FRACTIONS:
                 vals = [r[m] for r in ok if r[m] is not None]
                 st[f"{m}_median"] = float(np.median(vals)) if vals else None
@@ -364,12 +373,14 @@ def summarise(result: BenchmarkResult) -> dict:
             over += sum(1 for p in peaks if p > TACTILE_FORCE_MAX_N) + (len(rows) - len(ok))
             total += len(rows)
             if not sc.fault:
+                faults += st["supervisor_faults"]
                 a, b = st["in_band_fraction_cvar10"], st["char_in_band_fraction_cvar10"]
                 tracking.append(0.5 * ((a or 0.0) + (b or 0.0)))
             per[sc.key] = st
         score = 100.0 * float(np.mean(tracking)) - 100.0 * (over / total if total else 0.0)
         out[c] = {"score": round(score, 3), "bound": c in BOUNDS, "errors": errors,
-                  "over_force_fraction": over / total if total else 0.0, "scenarios": per}
+                  "over_force_fraction": over / total if total else 0.0, "tracking_faults": faults,
+                  "scenarios": per}
     return out
 
 
@@ -389,18 +400,27 @@ def _firmware(result: BenchmarkResult) -> str:
                                       for k, v in result.estimator.items())
 
 
+def _faults(entry: dict) -> str:
+    """Episodes of the tracking scenarios that ended in a latched supervisor fault ("-" in a
+    results file written before the count was kept)."""
+    n = entry.get("tracking_faults")
+    return "-" if n is None else str(n)
+
+
 def format_leaderboard(result: BenchmarkResult, summary: dict | None = None) -> str:
-    """The leaderboard and the per-scenario worst-case table as terminal text."""
+    """The leaderboard and the per-scenario worst-case table as terminal text (the column
+    ``faults`` counts the tracking scenarios' episodes that ended in a latched supervisor fault)."""
     s = summarise(result) if summary is None else summary
     order = _ranked(s)
     w = max(14, *(len(c) for c in order))
     lines = [f"suite {result.suite.name} v{SUITE_VERSION}: {len(result.suite.scenarios)} scenarios x "
              f"{result.readers} readers{_firmware(result)}", score_formula(), "",
-             f"{'controller':<{w}}  {'score':>7}  {'peak N':>6}  {'>3N':>5}"]
+             f"{'controller':<{w}}  {'score':>7}  {'peak N':>6}  {'>3N':>5}  {'faults':>6}"]
     for c in order:
         peak = max((v["peak_force_n_max"] or 0.0) for v in s[c]["scenarios"].values())
         tag = "  (bound)" if s[c]["bound"] else ""
-        lines.append(f"{c:<{w}}  {s[c]['score']:7.2f}  {peak:6.2f}  {s[c]['over_force_fraction']:5.2f}{tag}")
+        lines.append(f"{c:<{w}}  {s[c]['score']:7.2f}  {peak:6.2f}  {s[c]['over_force_fraction']:5.2f}"
+                     f"  {_faults(s[c]):>6}{tag}")
     lines += ["", "CVaR10 in_band / char_in_band per scenario (median in_band in brackets):"]
     cw = max(17, *(len(c) for c in order))
     lines.append(f"{'scenario':<18}" + "".join(f"  {c:>{cw}}" for c in order))
@@ -421,11 +441,13 @@ def format_markdown(result: BenchmarkResult, summary: dict | None = None) -> str
     order = _ranked(s)
     out = [f"Suite `{result.suite.name}` v{SUITE_VERSION}: {len(result.suite.scenarios)} scenarios x "
            f"{result.readers} readers{_firmware(result)}.  `{score_formula()}`", "",
-           "| controller | score | max peak force (N) | share of episodes > 3 N |", "|---|---:|---:|---:|"]
+           "| controller | score | max peak force (N) | share of episodes > 3 N | latched faults, tracking scenarios |",
+           "|---|---:|---:|---:|---:|"]
     for c in order:
         peak = max((v["peak_force_n_max"] or 0.0) for v in s[c]["scenarios"].values())
         name = f"*{c}* (bound)" if s[c]["bound"] else f"`{c}`"
-        out.append(f"| {name} | {s[c]['score']:.2f} | {peak:.2f} | {s[c]['over_force_fraction']:.2f} |")
+        out.append(f"| {name} | {s[c]['score']:.2f} | {peak:.2f} | {s[c]['over_force_fraction']:.2f} | "
+                   f"{_faults(s[c])} |")
     for title, key, fmt in (("CVaR10 in_band_fraction", "in_band_fraction_cvar10", "{:.3f}"),
                             ("median in_band_fraction", "in_band_fraction_median", "{:.3f}"),
                             ("CVaR10 char_in_band_fraction", "char_in_band_fraction_cvar10", "{:.3f}"),
