@@ -302,3 +302,17 @@ def test_parameter_checks_still_reject_bad_values(value, message):
     with pytest.raises(ValueError, match="must be finite"):
         check_number("x", value if not math.isfinite(value) else math.nan)
     check_finite(FSRParams())
+
+
+def test_compiled_std_equals_numpy_std_bit_for_bit():
+    from ebraille_sim.base.reductions import pairwise_sum, std
+    rng = np.random.default_rng(5)
+    lengths = list(range(1, 300)) + [1000, 1023, 1024, 1025, 8000, 8191, 8192, 8193, 40000] + \
+        rng.integers(300, 20000, 40).tolist()
+    for n in lengths:
+        for scale, offset in ((1.0, 0.0), (1e-5, 3e-5), (1e3, -2e4)):
+            x = rng.standard_normal(n) * scale + offset
+            assert pairwise_sum(x, 0, n) == np.add.reduce(x), n
+            assert std(x) == np.std(x), n
+    x = np.fft.irfft(np.r_[0, rng.standard_normal(40) + 1j * rng.standard_normal(40), np.zeros(3960)], 8000)
+    assert std(x) == np.std(x)
