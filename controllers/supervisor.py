@@ -604,14 +604,24 @@ def _pack(c: SupervisorConfig) -> np.ndarray:
 
 
 def _initial_state(c: SupervisorConfig) -> np.ndarray:
-    """The header of the state array after a reset (the ring buffers are empty by their counts)."""
+    """The header of the state array after a reset (the ring buffers are empty by their counts):
+    :func:`_reset_header` with the configuration's current limit."""
+    h = _reset_header().copy()
+    h[SV.current_limit_a] = c.current_limit_a
+    return h
+
+
+@functools.lru_cache(maxsize=1)
+def _reset_header() -> np.ndarray:
+    """The slots of a reset state header that no configuration changes (read-only, made once:
+    every supervisor a reset makes starts from a copy)."""
     h = np.zeros(_N_HEADER)
     for name in ("stuck_ref_n", "contact_travel_m", "first_dropped_t") + tuple(f"{w}_t0" for w in _WINDOWS):
         h[getattr(SV, name)] = math.nan
     h[SV.cut_t] = -math.inf
     h[SV.sp_last] = math.inf
     h[SV.fall_t] = -math.inf
-    h[SV.current_limit_a] = c.current_limit_a
+    h.flags.writeable = False
     return h
 
 

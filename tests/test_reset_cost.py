@@ -316,3 +316,39 @@ def test_compiled_std_equals_numpy_std_bit_for_bit():
             assert std(x) == np.std(x), n
     x = np.fft.irfft(np.r_[0, rng.standard_normal(40) + 1j * rng.standard_normal(40), np.zeros(3960)], 8000)
     assert std(x) == np.std(x)
+
+
+def test_reset_header_is_shared_read_only_and_each_supervisor_gets_a_copy():
+    from controllers.supervisor import SV, _initial_state, _reset_header
+    _reset_header.cache_clear()
+    a = SupervisorConfig()
+    b = SupervisorConfig.for_device(dataclasses.replace(DeviceParams(), motor=MotorParams(resistance_ohm=25.0)))
+    ha, hb = _initial_state(a), _initial_state(b)
+    assert _reset_header.cache_info().misses == 1 and _reset_header.cache_info().hits == 1
+    template = _reset_header()
+    assert not template.flags.writeable
+    with pytest.raises(ValueError):
+        template[SV.cut_t] = 0.0
+    assert ha is not template and ha.flags.writeable
+    assert ha[SV.current_limit_a] == a.current_limit_a and hb[SV.current_limit_a] == b.current_limit_a
+    assert ha[SV.cut_t] == -math.inf and math.isnan(ha[SV.stuck_ref_n])
+    ha[:] = 7.0                                               # a caller's copy, not the template
+    assert _initial_state(a)[SV.cut_t] == -math.inf
+
+
+def test_a_reused_workspace_starts_each_episode_with_a_clear_supervisor_state():
+    from controllers.supervisor import _initial_state
+    env = ContactForceEnv()
+    env.reset(seed=4)
+    for _ in range(400):                                      # fill the supervisor's ring buffers
+        _, _, te, tr, _ = env.step(np.array([0.8], np.float32))
+        if te or tr:
+            break
+    buffer = env._buffer
+    env.reset()
+    assert env._ws.base is buffer                              # the same buffer, reused
+    sv, cfg = env._sup.compiled()
+    header = _initial_state(env._sup.config)
+    np.testing.assert_array_equal(sv[:header.size], header)
+    assert not np.any(sv[header.size:])
+    np.testing.assert_array_equal(cfg, env._sup.config.pack())

@@ -328,7 +328,8 @@ def input_profiles(spec: ScenarioSpec, t_s: np.ndarray, rng: np.random.Generator
     """
     row = base_inputs.inputs[0] if hasattr(base_inputs, "inputs") else np.asarray(base_inputs, dtype=float)
     # constants stay scalars: only the inputs a section drives become arrays
-    base = {name: float(row[j]) for name, j in U.items() if name != "command_v"}
+    values = row.tolist()
+    base = {name: values[j] for name, j in U.items() if name != "command_v"}
     touched = set()
     for key, section in spec.sections.items():
         mod = importlib.import_module(DELEGATES[key])
