@@ -380,3 +380,19 @@ def test_estimator_steady_state_is_cached_per_parameters_and_input_and_read_only
     loop._fill_estimator_steady_state(b, other, 0.37)
     assert a.tobytes() == b.tobytes()
     assert loop._steady_state_slots.cache_info().misses == 4
+
+
+def test_compiled_cell_index_equals_the_searchsorted_lookup():
+    from ebraille_sim.scenarios.reading import build_schedule
+    rng = np.random.default_rng(2)
+    for text, wpm, jitter in (("hello world, a line\nand more", 90.0, 0.0), ("abc def", 300.0, 0.3), ("x", 60.0, 0.0)):
+        sched = build_schedule(text, wpm, start_s=0.7, jitter_fraction=jitter, word_pause_s=0.05,
+                               rng=np.random.default_rng(1))
+        t = np.concatenate([np.arange(0.0, sched.t_end_s + 0.5, 0.005), sched.start_s, [sched.t_end_s, math.nan,
+                            -math.inf, math.inf], rng.uniform(-1, sched.t_end_s + 1, 500)])
+        want = np.searchsorted(sched.start_s, t, side="right") - 1
+        want = np.where((t >= sched.start_s[0]) & (t < sched.t_end_s), want, -1).astype(np.int64)
+        got = sched.index_at(t)
+        assert got.dtype == np.int64 and got.tolist() == want.tolist()
+        assert [sched.index_at(float(x)) for x in t[:50]] == want[:50].tolist()
+        np.testing.assert_array_equal(sched.index_at(t[:40].reshape(8, 5)), want[:40].reshape(8, 5))
