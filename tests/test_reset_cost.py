@@ -396,3 +396,22 @@ def test_compiled_cell_index_equals_the_searchsorted_lookup():
         assert got.dtype == np.int64 and got.tolist() == want.tolist()
         assert [sched.index_at(float(x)) for x in t[:50]] == want[:50].tolist()
         np.testing.assert_array_equal(sched.index_at(t[:40].reshape(8, 5)), want[:40].reshape(8, 5))
+
+
+def test_replaced_dataclass_does_not_inherit_what_was_cached_on_the_original():
+    from ebraille_sim.base.validation import replace_checked, replace_fields
+    cfg = SupervisorConfig()
+    packed = cfg.pack()
+    assert cfg.envelope_force_n > 0 and "_packed" in cfg.__dict__ and "envelope_force_n" in cfg.__dict__
+    for new in (replace_fields(cfg, finger_motion_m=30e-6), replace_checked(cfg, finger_motion_m=30e-6)):
+        fresh = dataclasses.replace(cfg, finger_motion_m=30e-6)
+        assert "_packed" not in new.__dict__ and new == fresh
+        assert new.envelope_force_n == fresh.envelope_force_n != cfg.envelope_force_n     # found anew
+        assert not np.array_equal(new.pack(), packed)
+    fsr = FSRParams()
+    new = replace_fields(fsr, exponent=0.9)
+    assert new == dataclasses.replace(fsr, exponent=0.9) and new.__dict__.keys() == fsr.__dict__.keys()
+    with pytest.raises(ValueError, match="^unknown key 'exponnt' in FSRParams; allowed: "):
+        replace_checked(fsr, exponnt=0.9)
+    with pytest.raises(ValueError, match="^FSRParams.exponent must be finite"):
+        replace_checked(fsr, exponent=math.nan)
