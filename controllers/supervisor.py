@@ -115,6 +115,7 @@ import collections
 import dataclasses
 import functools
 import math
+import operator
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -122,7 +123,7 @@ from typing import Any
 import numpy as np
 
 from ebraille_sim.base.compiled import njit
-from ebraille_sim.base.validation import check_bool, check_keys, check_number
+from ebraille_sim.base.validation import check_bool, check_keys, check_number, replace_fields
 from ebraille_sim.physics import limits
 from ebraille_sim.physics.fingertip import compression_at_force_m, tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import FINGERS, TACTILE_FORCE_MAX_N, DeviceParams
@@ -221,12 +222,17 @@ def rated_current_a(device: DeviceParams) -> float:
 
 _NOMINAL_LIMITS: dict = {}
 _NUMERIC_FIELD_NAMES: list = []
+_numeric_values = None
+_FLOAT_ONLY = {float}
 
 
-def _numeric_field_names() -> list:
-    """The names of :class:`SupervisorConfig`'s numeric fields (every field but ``enabled``), read once."""
+def _numeric_field_names() -> tuple:
+    """The names of :class:`SupervisorConfig`'s numeric fields (every field but ``enabled``) and
+    a getter of their values from an instance's ``__dict__`` (a tuple), made once."""
+    global _numeric_values
     _NUMERIC_FIELD_NAMES.extend(f.name for f in dataclasses.fields(SupervisorConfig) if f.name != "enabled")
-    return _NUMERIC_FIELD_NAMES
+    _numeric_values = operator.itemgetter(*_NUMERIC_FIELD_NAMES)
+    return _NUMERIC_FIELD_NAMES, _numeric_values
 
 
 @dataclass(frozen=True)
@@ -343,13 +349,15 @@ class SupervisorConfig:
     def __post_init__(self):
         check_bool("enabled", self.enabled)
         d = self.__dict__
-        for name in _NUMERIC_FIELD_NAMES or _numeric_field_names():
-            v = d[name]
-            if v is None:
-                v = _NOMINAL_LIMITS[name]
-            elif type(v) is float and 0.0 < v < math.inf:
-                continue                            # what check_number returns unchanged
-            object.__setattr__(self, name, check_number(name, v, lo=0.0, lo_open=True))
+        values = (_numeric_values or _numeric_field_names()[1])(d)
+        if not (set(map(type, values)) == _FLOAT_ONLY and min(values) > 0.0 and sum(values) < math.inf):
+            for name in _NUMERIC_FIELD_NAMES:       # positive floats whose sum is finite pass unchanged
+                v = d[name]
+                if v is None:
+                    v = _NOMINAL_LIMITS[name]
+                elif type(v) is float and 0.0 < v < math.inf:
+                    continue                        # what check_number returns unchanged
+                object.__setattr__(self, name, check_number(name, v, lo=0.0, lo_open=True))
         if self.force_cap_n > FORCE_CAP_LIMIT_N:
             raise ValueError(f"force_cap_n = {self.force_cap_n:g} N is above the {FORCE_CAP_LIMIT_N:g} N safe limit "
                              f"(the {TACTILE_FORCE_MAX_N:g} N top of the tactile range, [R] seed paper, plus "
@@ -398,6 +406,8 @@ class SupervisorConfig:
         True
         """
         check_keys("SupervisorConfig", overrides, _FIELD_NAMES)
+        if cls is SupervisorConfig:                 # the defaults' fields replaced, then checked
+            return replace_fields(_default_config(), **{**device_limits(device), **overrides})
         return cls(**{**device_limits(device), **overrides})
 
     @property
@@ -474,6 +484,14 @@ def _packed_config(c: SupervisorConfig) -> np.ndarray:
 
 _FIELD_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(SupervisorConfig))
 _NOMINAL_LIMITS.update(device_limits(_NOMINAL))
+
+
+@functools.lru_cache(maxsize=1)
+def _default_config() -> SupervisorConfig:
+    """``SupervisorConfig()``, made once: :meth:`SupervisorConfig.for_device` replaces its fields
+    (``replace_fields`` runs the checks of ``__post_init__`` on the result, as the constructor
+    does, and copies no attribute cached on it)."""
+    return SupervisorConfig()
 
 
 MIN_CONTROL_PERIOD_S = 1e-4

@@ -415,3 +415,25 @@ def test_replaced_dataclass_does_not_inherit_what_was_cached_on_the_original():
         replace_checked(fsr, exponnt=0.9)
     with pytest.raises(ValueError, match="^FSRParams.exponent must be finite"):
         replace_checked(fsr, exponent=math.nan)
+
+
+def test_config_for_a_device_is_the_constructors_and_leaves_the_shared_defaults_alone():
+    from controllers.supervisor import _default_config, device_limits
+    defaults = _default_config()
+    before = dataclasses.asdict(defaults)
+    devices = sample_devices(4, 20) + [DeviceParams()]
+    for i, dev in enumerate(devices):
+        overrides = {"finger_motion_m": 25e-6} if i % 3 == 0 else {}
+        got = SupervisorConfig.for_device(dev, **overrides)
+        want = SupervisorConfig(**{**device_limits(dev), **overrides})
+        assert repr(got) == repr(want) and got == want
+        assert got.envelope_force_n == want.envelope_force_n
+        np.testing.assert_array_equal(_pack(got), _pack(want))
+    assert _default_config() is defaults and dataclasses.asdict(defaults) == before
+    for bad, message in (({"finger_motion_m": math.nan}, "^finger_motion_m must be finite"),
+                         ({"slew_v_per_s": -1.0}, "^slew_v_per_s must be > 0"),
+                         ({"stall_time_s": True}, "^stall_time_s must be a number"),
+                         ({"finger_motoin_m": 1e-5}, "^unknown key 'finger_motoin_m' in SupervisorConfig")):
+        with pytest.raises(ValueError, match=message):
+            SupervisorConfig.for_device(devices[0], **bad)
+    assert SupervisorConfig.for_device(devices[0], stall_time_s=2).stall_time_s == 2.0

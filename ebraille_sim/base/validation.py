@@ -238,6 +238,8 @@ def check_keys(where: str, given: Iterable[str] | Mapping[str, Any], allowed: It
     ValueError
         ``unknown key 'k' in WHERE; allowed: a, b``.
     """
+    if not given:
+        return
     allowed = list(allowed)
     names = set(allowed)
     for key in given:
