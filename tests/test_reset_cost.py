@@ -437,3 +437,36 @@ def test_config_for_a_device_is_the_constructors_and_leaves_the_shared_defaults_
         with pytest.raises(ValueError, match=message):
             SupervisorConfig.for_device(devices[0], **bad)
     assert SupervisorConfig.for_device(devices[0], stall_time_s=2).stall_time_s == 2.0
+
+
+def test_drawn_disturbance_sections_equal_validate_section_and_share_only_their_constant_part():
+    from ebraille_sim.scenarios import episodes
+    from ebraille_sim.scenarios.disturbances import validate_section
+    from ebraille_sim.scenarios.spec import ScenarioError
+    episodes._validated_kind.cache_clear()
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        table = {}
+        if rng.random() < 0.8:
+            table["tremor"] = {"rms_m": float(rng.uniform(0, 2e-5)) + 1e-9, "band_hz": [8.0, 12.0]}
+        if rng.random() < 0.8:
+            table["pressing"] = {"rms_m": float(rng.uniform(0, 1e-4)) + 1e-9, "band_hz": [0.1, 1.0]}
+        if rng.random() < 0.3:
+            table["battery"] = {"cells_series": 1, "soc_start": float(rng.uniform(0.05, 1.0))}
+        got, want = episodes._validated_section(table), validate_section("episode", table)
+        assert got == want and repr(got) == repr(want) and list(got) == list(want)
+    info = episodes._validated_kind.cache_info()
+    assert info.misses == 3 and info.hits > 300                # one validation per kind and band
+    for bad in ({"tremor": {"rms_m": 2e-3, "band_hz": [8.0, 12.0]}},
+                {"tremor": {"rms_m": math.nan, "band_hz": [8.0, 12.0]}},
+                {"tremor": {"rms_m": 1e-5, "band_hz": [8.0, 8.001]}},
+                {"tremor": {"rms_m": 1e-5, "band_hz": [8.0, 12.0]}, "pressing": {"rms_m": 1e-5, "band_hz": [0.1, 30.0]}},
+                {"battery": {"cells_series": 1, "soc_start": 1.5}}):
+        with pytest.raises(ScenarioError) as want:
+            validate_section("episode", bad)
+        with pytest.raises(ScenarioError) as got:
+            episodes._validated_section(bad)
+        assert str(got.value) == str(want.value)
+    shared = episodes._validated_kind("tremor", (("band_hz", (8.0, 12.0)),))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        shared.rms_m = 1.0
