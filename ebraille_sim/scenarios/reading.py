@@ -59,6 +59,8 @@ MAX_WPM: float = 1000.0
 
 
 def _check_wpm(wpm: object) -> float:
+    if type(wpm) is float and 0.0 < wpm <= MAX_WPM:
+        return wpm                              # the common case, without the checks of numbers.Real
     if isinstance(wpm, bool) or not isinstance(wpm, numbers.Real):
         raise ValueError(f"wpm must be a positive finite number, got {wpm!r}")
     value = float(wpm)
@@ -70,6 +72,8 @@ def _check_wpm(wpm: object) -> float:
 
 
 def _check_real(name: str, value: object, *, non_negative: bool) -> float:
+    if type(value) is float and (0.0 if non_negative else -math.inf) <= value < math.inf and value != -math.inf:
+        return value                            # the common case, without the checks of numbers.Real
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
     out = float(value)
