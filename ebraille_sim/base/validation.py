@@ -313,21 +313,20 @@ def replace_fields(obj, **changes):
 
 
 def _replaced(obj, changes: dict):
-    """:func:`replace_fields` with the changes as a dict.  An instance whose attributes are
-    exactly its fields (nothing cached on it) is copied with two dict updates, else field by
-    field."""
+    """:func:`replace_fields` with the changes as a dict.  The instance's attributes are copied
+    with dict updates; what is cached on it besides its fields (attributes that are not fields)
+    is left out."""
     names, post_init = _replace_plan(type(obj))
     if post_init is None or not names.issuperset(changes):
         import dataclasses
         return dataclasses.replace(obj, **changes)
     new = object.__new__(type(obj))
     d, old = new.__dict__, obj.__dict__
-    if len(old) == len(names):                  # every field is in old, so these are all it holds
-        d.update(old)
-        d.update(changes)
-    else:
-        for name in names:
-            d[name] = changes[name] if name in changes else old[name]
+    d.update(old)
+    if len(old) != len(names):                  # every field is in old: more means cached attributes
+        for name in old.keys() - names:
+            del d[name]
+    d.update(changes)
     if post_init:
         new.__post_init__()
     return new
