@@ -603,22 +603,30 @@ def _pack(c: SupervisorConfig) -> np.ndarray:
         "events_cap": EVENT_CAPACITY, "envelope_n": ENVELOPE_POINTS, "envelope_base": len(CF),
     }
     pos = _N_HEADER
-    for w in _WINDOWS:
+    for w, span_key, lo_base, lo_cap, hi_base, hi_cap in _WINDOW_KEYS:
         cap = _window_capacity(spans[w], min_dt)
-        vals[f"{w}_span"] = spans[w]
-        for side in ("lo", "hi"):
-            vals[f"{w}_{side}_base"], vals[f"{w}_{side}_cap"] = pos, cap
-            pos += 2 * cap
-    for q in _QUEUES:
+        vals[span_key] = spans[w]
+        vals[lo_base], vals[lo_cap] = pos, cap
+        pos += 2 * cap
+        vals[hi_base], vals[hi_cap] = pos, cap
+        pos += 2 * cap
+    for q, base_key, cap_key in _QUEUE_KEYS:
         cap = _window_capacity(spans[q], min_dt)
-        vals[f"{q}_base"], vals[f"{q}_cap"] = pos, cap
+        vals[base_key], vals[cap_key] = pos, cap
         pos += 2 * cap
     vals["events_base"] = pos
     vals["state_len"] = pos + 3 * EVENT_CAPACITY
     cfg = np.empty(len(CF) + 2 * ENVELOPE_POINTS)
-    cfg[:len(CF)] = [vals[name] for name in CF._fields]
+    cfg[:len(CF)] = _config_values(vals)
     _envelope_table(c, cfg[len(CF):])
     return cfg
+
+
+_WINDOW_KEYS = tuple((w, f"{w}_span", f"{w}_lo_base", f"{w}_lo_cap", f"{w}_hi_base", f"{w}_hi_cap") for w in _WINDOWS)
+_QUEUE_KEYS = tuple((q, f"{q}_base", f"{q}_cap") for q in _QUEUES)
+_config_values = operator.itemgetter(*CF._fields)
+"""The keys :func:`_pack` fills for the windows and queues, and the getter of its values in the
+order of :data:`CF` (made once)."""
 
 
 def _initial_state(c: SupervisorConfig) -> np.ndarray:
