@@ -352,6 +352,12 @@ def test_a_reused_workspace_starts_each_episode_with_a_clear_supervisor_state():
     np.testing.assert_array_equal(sv[:header.size], header)
     assert not np.any(sv[header.size:])
     np.testing.assert_array_equal(cfg, env._sup.config.pack())
+    from ebraille_sim.plant.layout import U
+    from ebraille_sim.rl.env import P_PROF, P_ROWS, workspace_part
+    profiles = env.episode.run.profiles
+    assert profiles                                           # the default episodes vary the finger
+    np.testing.assert_array_equal(workspace_part(env._ws, P_PROF), np.concatenate(list(profiles.values())))
+    assert workspace_part(env._ws, P_ROWS).tolist() == [U[name] for name in profiles]
 
 
 def test_estimator_steady_state_is_cached_per_parameters_and_input_and_read_only():

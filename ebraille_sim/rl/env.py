@@ -189,7 +189,6 @@ from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import S, U
 from ebraille_sim.plant.loop import loop_step
 from ebraille_sim.rl.registration import ENV_ID, register_envs
-from ebraille_sim.scenarios.inputs import profile_table
 from controllers import features
 from controllers.supervisor import CF, FAULTS, MODES, SV, supervise_begin, supervise_end
 from controllers.features import (C_CMD_SCALE, C_DT, C_SAFE, C_WARN, C_WU, C_WV, ERROR_SCALE_N, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, Z_STEP, _clip,
@@ -805,18 +804,20 @@ class ContactForceEnv(gym.Env):
         buffer) and make the plant's parameter row, the features and the observation views of
         it; with a supervisor configuration ``svc``, make the supervisor with its arrays in it."""
         plant = self.plant
-        prof = profile_table(ep.run.profiles, ep.n_steps) if self._varying else np.zeros((0, ep.n_steps))
-        if prof is None:
-            prof = np.stack([arr for _, arr in self._varying])
-        rows = np.array([j for j, _ in self._varying], dtype=np.float64)
+        n = ep.n_steps
+        varying = self._varying
+        rows = np.array([j for j, _ in varying], dtype=np.float64)
         sv_n = cfg_n = 0
         if svc is not None:
             packed = svc.pack()
             sv_n, cfg_n = int(packed[CF.state_len]), packed.size
-        parts = (plant.params, sv_n, cfg_n, self._z.copy(), N_OBS_SLOTS, self._c, ep.setpoint_n, prof,
-                 rows)                                    # the supervisor's parts are filled by it
-        ws = pack_workspace(parts, svc is not None, plant.substeps, self._dt, prof.shape[1], self._buffer,
-                            filled=(P_SV, P_CFG))
+        parts = (plant.params, sv_n, cfg_n, self._z.copy(), N_OBS_SLOTS, self._c, ep.setpoint_n, len(varying) * n,
+                 rows)                  # the supervisor fills its parts, the profiles are copied in below
+        ws = pack_workspace(parts, svc is not None, plant.substeps, self._dt, n, self._buffer,
+                            filled=(P_SV, P_CFG, P_PROF))
+        prof = workspace_part(ws, P_PROF)
+        for j, (_, arr) in enumerate(varying):
+            prof[j * n:(j + 1) * n] = arr
         if self._buffer is None or ws.base is not self._buffer:
             self._buffer = np.empty(ws.size + ws.size // 4)   # for the next episodes (a quarter to spare)
         plant.params = workspace_part(ws, P_PARAMS).reshape(plant.params.shape)
