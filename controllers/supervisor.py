@@ -350,8 +350,9 @@ class SupervisorConfig:
         check_bool("enabled", self.enabled)
         d = self.__dict__
         values = (_numeric_values or _numeric_field_names()[1])(d)
+        # floats, all positive, with a finite sum (no inf, no NaN) pass as check_number would return them
         if not (set(map(type, values)) == _FLOAT_ONLY and min(values) > 0.0 and sum(values) < math.inf):
-            for name in _NUMERIC_FIELD_NAMES:       # positive floats whose sum is finite pass unchanged
+            for name in _NUMERIC_FIELD_NAMES:
                 v = d[name]
                 if v is None:
                     v = _NOMINAL_LIMITS[name]

@@ -274,7 +274,6 @@ class EpisodeDistribution:
             Source ``"episode"``, ``duration_s`` None (the run ends with the excerpt).
         """
         from ebraille_sim.physics.noise import seed_from
-        from ebraille_sim.scenarios.disturbances import validate_section
         from ebraille_sim.scenarios.passages import list_passages
         from ebraille_sim.scenarios.population import sample_device
         from ebraille_sim.scenarios.reading import mean_dwell_s
