@@ -117,6 +117,7 @@ import collections
 import dataclasses
 import functools
 import math
+import operator
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -124,7 +125,7 @@ from typing import Any
 import numpy as np
 
 from ebraille_sim.base.compiled import njit
-from ebraille_sim.base.validation import check_bool, check_keys, check_number
+from ebraille_sim.base.validation import check_bool, check_keys, check_number, replace_fields
 from ebraille_sim.physics import limits
 from ebraille_sim.physics.fingertip import compression_at_force_m, tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import FINGERS, TACTILE_FORCE_MAX_N, DeviceParams
@@ -223,12 +224,17 @@ def rated_current_a(device: DeviceParams) -> float:
 
 _NOMINAL_LIMITS: dict = {}
 _NUMERIC_FIELD_NAMES: list = []
+_numeric_values = None
+_FLOAT_ONLY = {float}
 
 
-def _numeric_field_names() -> list:
-    """The names of :class:`SupervisorConfig`'s numeric fields (every field but ``enabled``), read once."""
+def _numeric_field_names() -> tuple:
+    """The names of :class:`SupervisorConfig`'s numeric fields (every field but ``enabled``) and
+    a getter of their values from an instance's ``__dict__`` (a tuple), made once."""
+    global _numeric_values
     _NUMERIC_FIELD_NAMES.extend(f.name for f in dataclasses.fields(SupervisorConfig) if f.name != "enabled")
-    return _NUMERIC_FIELD_NAMES
+    _numeric_values = operator.itemgetter(*_NUMERIC_FIELD_NAMES)
+    return _NUMERIC_FIELD_NAMES, _numeric_values
 
 
 @dataclass(frozen=True)
@@ -345,13 +351,16 @@ class SupervisorConfig:
     def __post_init__(self):
         check_bool("enabled", self.enabled)
         d = self.__dict__
-        for name in _NUMERIC_FIELD_NAMES or _numeric_field_names():
-            v = d[name]
-            if v is None:
-                v = _NOMINAL_LIMITS[name]
-            elif type(v) is float and 0.0 < v < math.inf:
-                continue                            # what check_number returns unchanged
-            object.__setattr__(self, name, check_number(name, v, lo=0.0, lo_open=True))
+        values = (_numeric_values or _numeric_field_names()[1])(d)
+        # floats, all positive, with a finite sum (no inf, no NaN) pass as check_number would return them
+        if not (set(map(type, values)) == _FLOAT_ONLY and min(values) > 0.0 and sum(values) < math.inf):
+            for name in _NUMERIC_FIELD_NAMES:
+                v = d[name]
+                if v is None:
+                    v = _NOMINAL_LIMITS[name]
+                elif type(v) is float and 0.0 < v < math.inf:
+                    continue                        # what check_number returns unchanged
+                object.__setattr__(self, name, check_number(name, v, lo=0.0, lo_open=True))
         if self.force_cap_n > FORCE_CAP_LIMIT_N:
             raise ValueError(f"force_cap_n = {self.force_cap_n:g} N is above the {FORCE_CAP_LIMIT_N:g} N safe limit "
                              f"(the {TACTILE_FORCE_MAX_N:g} N top of the tactile range, [R] seed paper, plus "
@@ -400,6 +409,8 @@ class SupervisorConfig:
         True
         """
         check_keys("SupervisorConfig", overrides, _FIELD_NAMES)
+        if cls is SupervisorConfig:                 # the defaults' fields replaced, then checked
+            return replace_fields(_default_config(), **{**device_limits(device), **overrides})
         return cls(**{**device_limits(device), **overrides})
 
     @property
@@ -476,6 +487,14 @@ def _packed_config(c: SupervisorConfig) -> np.ndarray:
 
 _FIELD_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(SupervisorConfig))
 _NOMINAL_LIMITS.update(device_limits(_NOMINAL))
+
+
+@functools.lru_cache(maxsize=1)
+def _default_config() -> SupervisorConfig:
+    """``SupervisorConfig()``, made once: :meth:`SupervisorConfig.for_device` replaces its fields
+    (``replace_fields`` runs the checks of ``__post_init__`` on the result, as the constructor
+    does, and copies no attribute cached on it)."""
+    return SupervisorConfig()
 
 
 MIN_CONTROL_PERIOD_S = 1e-4
@@ -586,33 +605,51 @@ def _pack(c: SupervisorConfig) -> np.ndarray:
         "events_cap": EVENT_CAPACITY, "envelope_n": ENVELOPE_POINTS, "envelope_base": len(CF),
     }
     pos = _N_HEADER
-    for w in _WINDOWS:
+    for w, span_key, lo_base, lo_cap, hi_base, hi_cap in _WINDOW_KEYS:
         cap = _window_capacity(spans[w], min_dt)
-        vals[f"{w}_span"] = spans[w]
-        for side in ("lo", "hi"):
-            vals[f"{w}_{side}_base"], vals[f"{w}_{side}_cap"] = pos, cap
-            pos += 2 * cap
-    for q in _QUEUES:
+        vals[span_key] = spans[w]
+        vals[lo_base], vals[lo_cap] = pos, cap
+        pos += 2 * cap
+        vals[hi_base], vals[hi_cap] = pos, cap
+        pos += 2 * cap
+    for q, base_key, cap_key in _QUEUE_KEYS:
         cap = _window_capacity(spans[q], min_dt)
-        vals[f"{q}_base"], vals[f"{q}_cap"] = pos, cap
+        vals[base_key], vals[cap_key] = pos, cap
         pos += 2 * cap
     vals["events_base"] = pos
     vals["state_len"] = pos + 3 * EVENT_CAPACITY
     cfg = np.empty(len(CF) + 2 * ENVELOPE_POINTS)
-    cfg[:len(CF)] = [vals[name] for name in CF._fields]
+    cfg[:len(CF)] = _config_values(vals)
     _envelope_table(c, cfg[len(CF):])
     return cfg
 
 
+_WINDOW_KEYS = tuple((w, f"{w}_span", f"{w}_lo_base", f"{w}_lo_cap", f"{w}_hi_base", f"{w}_hi_cap") for w in _WINDOWS)
+_QUEUE_KEYS = tuple((q, f"{q}_base", f"{q}_cap") for q in _QUEUES)
+_config_values = operator.itemgetter(*CF._fields)
+"""The keys :func:`_pack` fills for the windows and queues, and the getter of its values in the
+order of :data:`CF` (made once)."""
+
+
 def _initial_state(c: SupervisorConfig) -> np.ndarray:
-    """The header of the state array after a reset (the ring buffers are empty by their counts)."""
+    """The header of the state array after a reset (the ring buffers are empty by their counts):
+    :func:`_reset_header` with the configuration's current limit."""
+    h = _reset_header().copy()
+    h[SV.current_limit_a] = c.current_limit_a
+    return h
+
+
+@functools.lru_cache(maxsize=1)
+def _reset_header() -> np.ndarray:
+    """The slots of a reset state header that no configuration changes (read-only, made once:
+    every supervisor a reset makes starts from a copy)."""
     h = np.zeros(_N_HEADER)
     for name in ("stuck_ref_n", "contact_travel_m", "first_dropped_t") + tuple(f"{w}_t0" for w in _WINDOWS):
         h[getattr(SV, name)] = math.nan
     h[SV.cut_t] = -math.inf
     h[SV.sp_last] = math.inf
     h[SV.fall_t] = -math.inf
-    h[SV.current_limit_a] = c.current_limit_a
+    h.flags.writeable = False
     return h
 
 

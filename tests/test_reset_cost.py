@@ -302,3 +302,177 @@ def test_parameter_checks_still_reject_bad_values(value, message):
     with pytest.raises(ValueError, match="must be finite"):
         check_number("x", value if not math.isfinite(value) else math.nan)
     check_finite(FSRParams())
+
+
+def test_compiled_std_equals_numpy_std_bit_for_bit():
+    from ebraille_sim.base.reductions import pairwise_sum, std
+    rng = np.random.default_rng(5)
+    lengths = list(range(1, 300)) + [1000, 1023, 1024, 1025, 8000, 8191, 8192, 8193, 40000] + \
+        rng.integers(300, 20000, 40).tolist()
+    for n in lengths:
+        for scale, offset in ((1.0, 0.0), (1e-5, 3e-5), (1e3, -2e4)):
+            x = rng.standard_normal(n) * scale + offset
+            assert pairwise_sum(x, 0, n) == np.add.reduce(x), n
+            assert std(x) == np.std(x), n
+    x = np.fft.irfft(np.r_[0, rng.standard_normal(40) + 1j * rng.standard_normal(40), np.zeros(3960)], 8000)
+    assert std(x) == np.std(x)
+
+
+def test_reset_header_is_shared_read_only_and_each_supervisor_gets_a_copy():
+    from controllers.supervisor import SV, _initial_state, _reset_header
+    _reset_header.cache_clear()
+    a = SupervisorConfig()
+    b = SupervisorConfig.for_device(dataclasses.replace(DeviceParams(), motor=MotorParams(resistance_ohm=25.0)))
+    ha, hb = _initial_state(a), _initial_state(b)
+    assert _reset_header.cache_info().misses == 1 and _reset_header.cache_info().hits == 1
+    template = _reset_header()
+    assert not template.flags.writeable
+    with pytest.raises(ValueError):
+        template[SV.cut_t] = 0.0
+    assert ha is not template and ha.flags.writeable
+    assert ha[SV.current_limit_a] == a.current_limit_a and hb[SV.current_limit_a] == b.current_limit_a
+    assert ha[SV.cut_t] == -math.inf and math.isnan(ha[SV.stuck_ref_n])
+    ha[:] = 7.0                                               # a caller's copy, not the template
+    assert _initial_state(a)[SV.cut_t] == -math.inf
+
+
+def test_a_reused_workspace_starts_each_episode_with_a_clear_supervisor_state():
+    from controllers.supervisor import _initial_state
+    env = ContactForceEnv()
+    env.reset(seed=4)
+    for _ in range(400):                                      # fill the supervisor's ring buffers
+        _, _, te, tr, _ = env.step(np.array([0.8], np.float32))
+        if te or tr:
+            break
+    buffer = env._buffer
+    env.reset()
+    assert env._ws.base is buffer                              # the same buffer, reused
+    sv, cfg = env._sup.compiled()
+    header = _initial_state(env._sup.config)
+    np.testing.assert_array_equal(sv[:header.size], header)
+    assert not np.any(sv[header.size:])
+    np.testing.assert_array_equal(cfg, env._sup.config.pack())
+    from ebraille_sim.plant.layout import U
+    from ebraille_sim.rl.env import P_PROF, P_ROWS, workspace_part
+    profiles = env.episode.run.profiles
+    assert profiles                                           # the default episodes vary the finger
+    np.testing.assert_array_equal(workspace_part(env._ws, P_PROF), np.concatenate(list(profiles.values())))
+    assert workspace_part(env._ws, P_ROWS).tolist() == [U[name] for name in profiles]
+
+
+def test_estimator_steady_state_is_cached_per_parameters_and_input_and_read_only():
+    from ebraille_sim.plant import loop
+    from ebraille_sim.plant.layout import N_STATE, P
+    loop._steady_state_slots.cache_clear()
+    devices = sample_devices(8, 3)
+    params = [loop.pack_params(d, 1.0) for d in devices]
+    for p in params:
+        for u0 in (0.0, -0.0, 0.37):
+            want, got = np.full(N_STATE, 5.0), np.full(N_STATE, 5.0)
+            loop._fill_estimator_steady_state(want, p, u0)
+            loop._estimator_steady_state(got, p, u0)
+            assert want.tobytes() == got.tobytes()            # -0.0 kept apart from 0.0
+    info = loop._steady_state_slots.cache_info()
+    assert info.misses == 3 and info.hits == 6                # one estimator and filter for every unit
+    slots, values = loop._steady_state_slots(params[0][loop._STEADY_HEAD].tobytes(),
+                                             params[0][loop._STEADY_MODEL].tobytes(), (0.0).hex())
+    assert not slots.flags.writeable and not values.flags.writeable
+    with pytest.raises(ValueError):
+        values[0] = 1.0
+    other = params[0].copy()
+    other[P.aa_b0] *= 1.5                                     # another filter: computed afresh
+    a, b = np.zeros(N_STATE), np.zeros(N_STATE)
+    loop._estimator_steady_state(a, other, 0.37)
+    loop._fill_estimator_steady_state(b, other, 0.37)
+    assert a.tobytes() == b.tobytes()
+    assert loop._steady_state_slots.cache_info().misses == 4
+
+
+def test_compiled_cell_index_equals_the_searchsorted_lookup():
+    from ebraille_sim.scenarios.reading import build_schedule
+    rng = np.random.default_rng(2)
+    for text, wpm, jitter in (("hello world, a line\nand more", 90.0, 0.0), ("abc def", 300.0, 0.3), ("x", 60.0, 0.0)):
+        sched = build_schedule(text, wpm, start_s=0.7, jitter_fraction=jitter, word_pause_s=0.05,
+                               rng=np.random.default_rng(1))
+        t = np.concatenate([np.arange(0.0, sched.t_end_s + 0.5, 0.005), sched.start_s, [sched.t_end_s, math.nan,
+                            -math.inf, math.inf], rng.uniform(-1, sched.t_end_s + 1, 500)])
+        want = np.searchsorted(sched.start_s, t, side="right") - 1
+        want = np.where((t >= sched.start_s[0]) & (t < sched.t_end_s), want, -1).astype(np.int64)
+        got = sched.index_at(t)
+        assert got.dtype == np.int64 and got.tolist() == want.tolist()
+        assert [sched.index_at(float(x)) for x in t[:50]] == want[:50].tolist()
+        np.testing.assert_array_equal(sched.index_at(t[:40].reshape(8, 5)), want[:40].reshape(8, 5))
+
+
+def test_replaced_dataclass_does_not_inherit_what_was_cached_on_the_original():
+    from ebraille_sim.base.validation import replace_checked, replace_fields
+    cfg = SupervisorConfig()
+    packed = cfg.pack()
+    assert cfg.envelope_force_n > 0 and "_packed" in cfg.__dict__ and "envelope_force_n" in cfg.__dict__
+    for new in (replace_fields(cfg, finger_motion_m=30e-6), replace_checked(cfg, finger_motion_m=30e-6)):
+        fresh = dataclasses.replace(cfg, finger_motion_m=30e-6)
+        assert "_packed" not in new.__dict__ and new == fresh
+        assert new.envelope_force_n == fresh.envelope_force_n != cfg.envelope_force_n     # found anew
+        assert not np.array_equal(new.pack(), packed)
+    fsr = FSRParams()
+    new = replace_fields(fsr, exponent=0.9)
+    assert new == dataclasses.replace(fsr, exponent=0.9) and new.__dict__.keys() == fsr.__dict__.keys()
+    with pytest.raises(ValueError, match="^unknown key 'exponnt' in FSRParams; allowed: "):
+        replace_checked(fsr, exponnt=0.9)
+    with pytest.raises(ValueError, match="^FSRParams.exponent must be finite"):
+        replace_checked(fsr, exponent=math.nan)
+
+
+def test_config_for_a_device_is_the_constructors_and_leaves_the_shared_defaults_alone():
+    from controllers.supervisor import _default_config, device_limits
+    defaults = _default_config()
+    before = dataclasses.asdict(defaults)
+    devices = sample_devices(4, 20) + [DeviceParams()]
+    for i, dev in enumerate(devices):
+        overrides = {"finger_motion_m": 25e-6} if i % 3 == 0 else {}
+        got = SupervisorConfig.for_device(dev, **overrides)
+        want = SupervisorConfig(**{**device_limits(dev), **overrides})
+        assert repr(got) == repr(want) and got == want
+        assert got.envelope_force_n == want.envelope_force_n
+        np.testing.assert_array_equal(_pack(got), _pack(want))
+    assert _default_config() is defaults and dataclasses.asdict(defaults) == before
+    for bad, message in (({"finger_motion_m": math.nan}, "^finger_motion_m must be finite"),
+                         ({"slew_v_per_s": -1.0}, "^slew_v_per_s must be > 0"),
+                         ({"stall_time_s": True}, "^stall_time_s must be a number"),
+                         ({"finger_motoin_m": 1e-5}, "^unknown key 'finger_motoin_m' in SupervisorConfig")):
+        with pytest.raises(ValueError, match=message):
+            SupervisorConfig.for_device(devices[0], **bad)
+    assert SupervisorConfig.for_device(devices[0], stall_time_s=2).stall_time_s == 2.0
+
+
+def test_drawn_disturbance_sections_equal_validate_section_and_share_only_their_constant_part():
+    from ebraille_sim.scenarios import episodes
+    from ebraille_sim.scenarios.disturbances import validate_section
+    from ebraille_sim.scenarios.spec import ScenarioError
+    episodes._validated_kind.cache_clear()
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        table = {}
+        if rng.random() < 0.8:
+            table["tremor"] = {"rms_m": float(rng.uniform(0, 2e-5)) + 1e-9, "band_hz": [8.0, 12.0]}
+        if rng.random() < 0.8:
+            table["pressing"] = {"rms_m": float(rng.uniform(0, 1e-4)) + 1e-9, "band_hz": [0.1, 1.0]}
+        if rng.random() < 0.3:
+            table["battery"] = {"cells_series": 1, "soc_start": float(rng.uniform(0.05, 1.0))}
+        got, want = episodes._validated_section(table), validate_section("episode", table)
+        assert got == want and repr(got) == repr(want) and list(got) == list(want)
+    info = episodes._validated_kind.cache_info()
+    assert info.misses == 3 and info.hits > 300                # one validation per kind and band
+    for bad in ({"tremor": {"rms_m": 2e-3, "band_hz": [8.0, 12.0]}},
+                {"tremor": {"rms_m": math.nan, "band_hz": [8.0, 12.0]}},
+                {"tremor": {"rms_m": 1e-5, "band_hz": [8.0, 8.001]}},
+                {"tremor": {"rms_m": 1e-5, "band_hz": [8.0, 12.0]}, "pressing": {"rms_m": 1e-5, "band_hz": [0.1, 30.0]}},
+                {"battery": {"cells_series": 1, "soc_start": 1.5}}):
+        with pytest.raises(ScenarioError) as want:
+            validate_section("episode", bad)
+        with pytest.raises(ScenarioError) as got:
+            episodes._validated_section(bad)
+        assert str(got.value) == str(want.value)
+    shared = episodes._validated_kind("tremor", (("band_hz", (8.0, 12.0)),))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        shared.rms_m = 1.0

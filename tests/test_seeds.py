@@ -57,3 +57,19 @@ def test_bad_seed_nodes_are_one_line_errors(args):
     e, key, *pool = args
     with pytest.raises(ValueError, match="SeedNode needs"):
         SeedNode(e, spawn_key=key, pool_size=pool[0] if pool else 4)
+
+
+def test_spawned_children_hash_their_parents_words_and_index_as_numpy_does():
+    for e, key, pool_size, n in _cases(300):
+        a = np.random.SeedSequence(e, spawn_key=key, pool_size=pool_size)
+        b = SeedNode(e, spawn_key=key, pool_size=pool_size)
+        a.spawn(2), b.spawn(2)
+        for ca, cb in zip(a.spawn(3), b.spawn(3)):
+            assert (cb._prefix is not None) == (max(key + (5,)) <= 0xFFFFFFFF)
+            assert cb.generate_state(n, np.uint64).tolist() == ca.generate_state(n, np.uint64).tolist()
+            assert cb.pool.tolist() == ca.pool.tolist()
+            assert cb.generate_state(n).tolist() == ca.generate_state(n).tolist()
+    big = SeedNode(9, spawn_key=(2**40,)).spawn(2)              # a key word of two words: no shared prefix
+    ref = np.random.SeedSequence(9, spawn_key=(2**40,)).spawn(2)
+    assert all(c._prefix is None for c in big)
+    assert [c.generate_state(4, np.uint64).tolist() for c in big] == [c.generate_state(4, np.uint64).tolist() for c in ref]

@@ -110,8 +110,19 @@ def _state_into(entropy, pool, out):
         out[:] = _state64_of(pool, out.shape[0])
 
 
+@njit(cache=True)
+def _child_state_into(prefix, index, pool, out):
+    """:func:`_state_into` of the entropy words ``prefix`` followed by the word ``index``: the
+    words of a spawned child, whose prefix (its parent's padded entropy and key) its siblings share."""
+    entropy = np.empty(prefix.shape[0] + 1, dtype=np.uint64)
+    entropy[:-1] = prefix
+    entropy[-1] = np.uint64(index)
+    _state_into(entropy, pool, out)
+
+
 _NO_WORDS = np.zeros(0, dtype=np.uint64)
 _ENTRY: list = []
+_CHILD_ENTRY: list = []
 
 
 def _hash_into(entropy, pool, out) -> None:
@@ -120,6 +131,13 @@ def _hash_into(entropy, pool, out) -> None:
     if not _ENTRY:
         _ENTRY.append(entry_point(_state_into, _NO_WORDS, np.zeros(4, dtype=np.uint32), _NO_WORDS))
     _ENTRY[0](entropy, pool, out)
+
+
+def _child_hash_into(prefix, index: int, pool, out) -> None:
+    """:func:`_child_state_into` through its machine code (as :func:`_hash_into`)."""
+    if not _CHILD_ENTRY:
+        _CHILD_ENTRY.append(entry_point(_child_state_into, _NO_WORDS, 0, np.zeros(4, dtype=np.uint32), _NO_WORDS))
+    _CHILD_ENTRY[0](prefix, index, pool, out)
 
 
 def _words(n: int, out: list) -> None:
@@ -139,7 +157,7 @@ class SeedNode(ISpawnableSeedSequence):
     first needed.
     """
 
-    __slots__ = ("entropy", "spawn_key", "pool_size", "n_children_spawned", "_pool", "_padded")
+    __slots__ = ("entropy", "spawn_key", "pool_size", "n_children_spawned", "_pool", "_padded", "_prefix")
 
     def __init__(self, entropy: int, *, spawn_key: tuple = (), pool_size: int = 4, n_children_spawned: int = 0):
         if type(entropy) is not int:
@@ -153,6 +171,7 @@ class SeedNode(ISpawnableSeedSequence):
         self.n_children_spawned = n_children_spawned
         self._pool = None
         self._padded = None
+        self._prefix = None
 
     @classmethod
     def of(cls, seed_sequence) -> SeedNode:
@@ -195,7 +214,10 @@ class SeedNode(ISpawnableSeedSequence):
             out = np.empty(n_words, dtype=np.uint64)
             if self._pool is None:                      # the pool and the state in one call
                 self._pool = np.empty(self.pool_size, dtype=np.uint32)
-                _hash_into(self._assembled(), self._pool, out)
+                if self._prefix is not None:            # a spawned child: its parent's words and its index
+                    _child_hash_into(self._prefix, self.spawn_key[-1], self._pool, out)
+                else:
+                    _hash_into(self._assembled(), self._pool, out)
             else:
                 _hash_into(_NO_WORDS, self._pool, out)
             return out
@@ -210,6 +232,11 @@ class SeedNode(ISpawnableSeedSequence):
             self._padded = []
             _words(self.entropy, self._padded)
             self._padded.extend([0] * (self.pool_size - len(self._padded)))
+        # the children's entropy words are these and then their index, when every key word is one
+        # word: made once for all of them, shared (only the compiled hash reads it)
+        prefix = None
+        if max(self.spawn_key + (k0 + n_children,)) <= _M32:
+            prefix = np.array(self._padded + list(self.spawn_key), dtype=np.uint64)
         out = []
         for i in range(k0, k0 + n_children):
             child = object.__new__(SeedNode)            # the parent's checked values, a new index
@@ -219,6 +246,7 @@ class SeedNode(ISpawnableSeedSequence):
             child.n_children_spawned = 0
             child._pool = None
             child._padded = self._padded                 # the same entropy words, shared read-only
+            child._prefix = prefix
             out.append(child)
         self.n_children_spawned = k0 + n_children
         return out

@@ -238,6 +238,8 @@ def check_keys(where: str, given: Iterable[str] | Mapping[str, Any], allowed: It
     ValueError
         ``unknown key 'k' in WHERE; allowed: a, b``.
     """
+    if not given:
+        return
     allowed = list(allowed)
     names = set(allowed)
     for key in given:
@@ -296,10 +298,9 @@ def replace_checked(obj, **changes):
         ``unknown key 'k' in TYPE; allowed: ...`` (fields sorted by name).
     """
     names = _replace_plan(type(obj))[0]
-    for key in changes:
-        if key not in names:
-            check_keys(type(obj).__name__, changes, sorted(names))
-    return replace_fields(obj, **changes)
+    if not names.issuperset(changes):
+        check_keys(type(obj).__name__, changes, sorted(names))
+    return _replaced(obj, changes)
 
 
 def replace_fields(obj, **changes):
@@ -308,14 +309,24 @@ def replace_fields(obj, **changes):
     without ``InitVar``, ``ClassVar`` or ``__slots__``, the new instance gets the fields (changed or
     copied) and then runs ``__post_init__``, as the generated ``__init__`` does; other
     classes and unknown names go through ``dataclasses.replace``."""
+    return _replaced(obj, changes)
+
+
+def _replaced(obj, changes: dict):
+    """:func:`replace_fields` with the changes as a dict.  The instance's attributes are copied
+    with dict updates; what is cached on it besides its fields (attributes that are not fields)
+    is left out."""
     names, post_init = _replace_plan(type(obj))
     if post_init is None or not names.issuperset(changes):
         import dataclasses
         return dataclasses.replace(obj, **changes)
     new = object.__new__(type(obj))
     d, old = new.__dict__, obj.__dict__
-    for name in names:
-        d[name] = changes[name] if name in changes else old[name]
+    d.update(old)
+    if len(old) != len(names):                  # every field is in old: more means cached attributes
+        for name in old.keys() - names:
+            del d[name]
+    d.update(changes)
     if post_init:
         new.__post_init__()
     return new

@@ -373,8 +373,41 @@ def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None
     return s
 
 
+_STEADY_HEAD = slice(P.aa_b0, P.est_clamp + 1)
+_STEADY_MODEL = slice(P.est_num0, max(P.est_out_y0, P.est_in_y0, P.est_den0) + MAX_BREAKPOINTS)
+"""The parameter slots :func:`_estimator_steady_state` reads: the anti-alias filter, the model's
+sizes and clamp flag; the model's coefficients and breakpoints."""
+
+
 def _estimator_steady_state(s: np.ndarray, p: np.ndarray, u0: float) -> None:
-    """Fill the anti-alias and estimator states for a constant input ``u0``."""
+    """Fill the anti-alias and estimator states for a constant input ``u0``.
+
+    The states depend only on the slots of ``p`` it reads and on ``u0``, which for a tared
+    start is 0 in every episode: they are computed once per combination
+    (:func:`_steady_state_slots`) and written as slots."""
+    slots, values = _steady_state_slots(p[_STEADY_HEAD].tobytes(), p[_STEADY_MODEL].tobytes(), float(u0).hex())
+    s[slots] = values
+
+
+@functools.lru_cache(maxsize=256)
+def _steady_state_slots(head: bytes, model: bytes, u0_hex: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(slots, values)`` of the states :func:`_fill_estimator_steady_state` writes for the
+    parameter slots ``head`` and ``model`` (their bytes) and the input ``u0`` (its hex form, so
+    that -0.0 and 0.0 are told apart); both read-only."""
+    p = np.zeros(N_PARAM)
+    p[_STEADY_HEAD] = np.frombuffer(head)
+    p[_STEADY_MODEL] = np.frombuffer(model)
+    s = np.zeros(N_STATE)
+    _fill_estimator_steady_state(s, p, float.fromhex(u0_hex))
+    n = int(p[P.est_len])
+    slots = np.array([S.aa_z1, S.aa_z2] + list(range(S.est_z0, S.est_z0 + max(n - 1, 0)))
+                     + [S.est_raw_prev_n, S.force_est_n], dtype=np.intp)
+    values = s[slots]
+    slots.flags.writeable = values.flags.writeable = False
+    return slots, values
+
+
+def _fill_estimator_steady_state(s: np.ndarray, p: np.ndarray, u0: float) -> None:
     bb = (float(p[P.aa_b0]), float(p[P.aa_b1]), float(p[P.aa_b2]))
     aa = (1.0, float(p[P.aa_a1]), float(p[P.aa_a2]))
     zi = _unit_step_state(bb, aa) * u0

@@ -189,7 +189,6 @@ from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import S, U
 from ebraille_sim.plant.loop import loop_step
 from ebraille_sim.rl.registration import ENV_ID, register_envs
-from ebraille_sim.scenarios.inputs import profile_table
 from controllers import features
 from controllers.supervisor import CF, FAULTS, MODES, SV, supervise_begin, supervise_end
 from controllers.features import (C_CMD_SCALE, C_DT, C_SAFE, C_WARN, C_WU, C_WV, ERROR_SCALE_N, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, Z_STEP, _clip,
@@ -263,34 +262,38 @@ N_OBS_SLOTS = (N_OBS + 1) // 2
 
 
 def pack_workspace(parts, safety: bool, substeps: int, dt_s: float, prof_stride: int,
-                   buffer: np.ndarray | None = None) -> np.ndarray:
+                   buffer: np.ndarray | None = None, filled: tuple = ()) -> np.ndarray:
     """The workspace of :func:`scalar_step`: the header, then ``parts`` in the order of the
     ``P_*`` indices (an array is copied as float64, an int ``n`` reserves ``n`` zeros).
 
     With ``buffer`` (float64, 1-D) long enough, the workspace is its first slots (the header
     and the reserved parts cleared, the others overwritten), not a new array: an env keeps one
     buffer over its episodes, so that a reset does not map and clear the supervisor's ring
-    buffers afresh.
+    buffers afresh.  The reserved parts whose ``P_*`` indices are in ``filled`` are left as
+    they are in a reused buffer: the caller writes all of them (the supervisor clears its
+    state and copies its configuration), and clearing them first would only write them twice.
     """
-    sizes = [x if isinstance(x, int) else int(np.size(x)) for x in parts]
-    offsets = np.cumsum([W_HEADER] + sizes)
-    total = int(offsets[-1])
-    if buffer is not None and buffer.shape[0] >= total:
-        ws = buffer[:total]
+    offsets = [W_HEADER]
+    pos = W_HEADER
+    for x in parts:
+        pos += x if type(x) is int else x.size
+        offsets.append(pos)
+    if buffer is not None and buffer.shape[0] >= pos:
+        ws = buffer[:pos]
         ws[:W_HEADER] = 0.0
         for i, x in enumerate(parts):
-            if isinstance(x, int):
+            if type(x) is int and i not in filled:
                 ws[offsets[i]:offsets[i + 1]] = 0.0
     else:
-        ws = np.zeros(total)
+        ws = np.zeros(pos)
     ws[W_SAFETY] = 1.0 if safety else 0.0
     ws[W_SUBSTEPS] = substeps
     ws[W_DT] = dt_s
     ws[W_PROF_STRIDE] = prof_stride
     ws[W_OFFSETS:W_OFFSETS + N_PARTS + 1] = offsets
     for i, x in enumerate(parts):
-        if not isinstance(x, int):
-            ws[offsets[i]:offsets[i + 1]] = np.ravel(x)
+        if type(x) is not int:
+            ws[offsets[i]:offsets[i + 1]] = x.ravel()
     return ws
 
 
@@ -801,17 +804,20 @@ class ContactForceEnv(gym.Env):
         buffer) and make the plant's parameter row, the features and the observation views of
         it; with a supervisor configuration ``svc``, make the supervisor with its arrays in it."""
         plant = self.plant
-        prof = profile_table(ep.run.profiles, ep.n_steps) if self._varying else np.zeros((0, ep.n_steps))
-        if prof is None:
-            prof = np.stack([arr for _, arr in self._varying])
-        rows = np.array([j for j, _ in self._varying], dtype=np.float64)
+        n = ep.n_steps
+        varying = self._varying
+        rows = np.array([j for j, _ in varying], dtype=np.float64)
         sv_n = cfg_n = 0
         if svc is not None:
             packed = svc.pack()
             sv_n, cfg_n = int(packed[CF.state_len]), packed.size
-        parts = (plant.params, sv_n, cfg_n, self._z.copy(), N_OBS_SLOTS, self._c, ep.setpoint_n, prof,
-                 rows)                                    # the supervisor's parts are filled by it
-        ws = pack_workspace(parts, svc is not None, plant.substeps, self._dt, prof.shape[1], self._buffer)
+        parts = (plant.params, sv_n, cfg_n, self._z.copy(), N_OBS_SLOTS, self._c, ep.setpoint_n, len(varying) * n,
+                 rows)                  # the supervisor fills its parts, the profiles are copied in below
+        ws = pack_workspace(parts, svc is not None, plant.substeps, self._dt, n, self._buffer,
+                            filled=(P_SV, P_CFG, P_PROF))
+        prof = workspace_part(ws, P_PROF)
+        for j, (_, arr) in enumerate(varying):
+            prof[j * n:(j + 1) * n] = arr
         if self._buffer is None or ws.base is not self._buffer:
             self._buffer = np.empty(ws.size + ws.size // 4)   # for the next episodes (a quarter to spare)
         plant.params = workspace_part(ws, P_PARAMS).reshape(plant.params.shape)

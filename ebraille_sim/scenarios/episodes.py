@@ -118,6 +118,39 @@ def _excerpt(text: str, start: int, n_cells: int) -> str:
     return src[:end]
 
 
+_DRAWN_KEYS = {"tremor": "rms_m", "pressing": "rms_m", "battery": "soc_start"}
+"""The key of each drawn ``[disturbances]`` sub-table that changes from episode to episode."""
+
+
+def _validated_section(table: dict) -> dict:
+    """``validate_section(EPISODE_SOURCE, table)`` of a drawn table, cheaply: each sub-table's
+    constant keys (band, cells) are validated once (:func:`_validated_kind`) and its drawn value
+    (:data:`_DRAWN_KEYS`), a float inside its range, replaces the default of that object; a
+    table with any other value, or any other key, goes through ``validate_section`` whole, so
+    its errors are the same."""
+    from ebraille_sim.scenarios.disturbances import KINDS, validate_section
+    out = {}
+    for name, sub in table.items():
+        key = _DRAWN_KEYS.get(name)
+        value = sub.get(key) if key is not None else None
+        meta = KINDS[name].__dataclass_fields__[key].metadata if key is not None else None
+        if type(value) is not float or not meta["lo"] <= value <= meta["hi"]:
+            return validate_section(EPISODE_SOURCE, table)
+        fixed = tuple((k, tuple(v) if isinstance(v, list) else v) for k, v in sub.items() if k != key)
+        out[name] = replace_fields(_validated_kind(name, fixed), **{key: value})
+    return out
+
+
+@functools.lru_cache(maxsize=64)
+def _validated_kind(name: str, fixed: tuple):
+    """The validated parameter object of ``[disturbances.<name>]`` with the keys ``fixed``
+    (``(key, value)`` pairs, lists as tuples) and its defaults otherwise: the part of a drawn
+    sub-table that stays the same over a distribution's episodes (a frozen object, shared)."""
+    from ebraille_sim.scenarios.disturbances import validate_section
+    return validate_section(EPISODE_SOURCE, {name: {k: list(v) if isinstance(v, tuple) else v
+                                                    for k, v in fixed}})[name]
+
+
 @dataclass(frozen=True)
 class EpisodeDistribution:
     """Ranges of the episodes an environment trains on (module docstring: the draws).
@@ -241,7 +274,6 @@ class EpisodeDistribution:
             Source ``"episode"``, ``duration_s`` None (the run ends with the excerpt).
         """
         from ebraille_sim.physics.noise import seed_from
-        from ebraille_sim.scenarios.disturbances import validate_section
         from ebraille_sim.scenarios.passages import list_passages
         from ebraille_sim.scenarios.population import sample_device
         from ebraille_sim.scenarios.reading import mean_dwell_s
@@ -323,7 +355,7 @@ class EpisodeDistribution:
             table["pressing"] = {"rms_m": drift_rms, "band_hz": list(self.drift_band_hz)}
         if on_battery:
             table["battery"] = {"cells_series": 1, "soc_start": soc}
-        sections = {"disturbances": validate_section(EPISODE_SOURCE, table)} if table else {}
+        sections = {"disturbances": _validated_section(table)} if table else {}
         return ScenarioSpec(
             name="episode", seed=run_seed,
             description=f"passage {passage!r} from character {first}, {wpm:.1f} wpm",

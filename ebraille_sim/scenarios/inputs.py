@@ -230,7 +230,7 @@ def build_schedule_for(spec: ScenarioSpec, rng: np.random.Generator | None):
         pauses = sum(r.line_pause_s if c.line_end else (r.word_pause_s if c.kind == "space" else 0.0)
                      for c in cells) if (r.word_pause_s or r.line_pause_s) else 0.0
         t_end = r.start_s + len(cells) * mean + pauses
-        check_run_size(spec, t_end, f"the reading of {len(cells)} cells at {r.wpm:g} wpm ends at {t_end:.4g} s")
+        check_run_size(spec, t_end, lambda: f"the reading of {len(cells)} cells at {r.wpm:g} wpm ends at {t_end:.4g} s")
     return build_schedule(cells, r.wpm, start_s=r.start_s, jitter_fraction=r.jitter_fraction,
                           word_pause_s=r.word_pause_s, line_pause_s=r.line_pause_s,
                           rng=rng if r.jitter_fraction > 0 else None)
@@ -328,7 +328,8 @@ def input_profiles(spec: ScenarioSpec, t_s: np.ndarray, rng: np.random.Generator
     """
     row = base_inputs.inputs[0] if hasattr(base_inputs, "inputs") else np.asarray(base_inputs, dtype=float)
     # constants stay scalars: only the inputs a section drives become arrays
-    base = {name: float(row[j]) for name, j in U.items() if name != "command_v"}
+    values = row.tolist()
+    base = {name: values[j] for name, j in U.items() if name != "command_v"}
     touched = set()
     for key, section in spec.sections.items():
         mod = importlib.import_module(DELEGATES[key])
@@ -359,8 +360,9 @@ def check_run_size(spec: ScenarioSpec, t_end_s: float, why: str | None = None) -
     spec : ScenarioSpec
     t_end_s : float
         End of the run, s.
-    why : str, optional
-        Where ``t_end_s`` comes from, for the message (default: ``duration_s``).
+    why : str or callable, optional
+        Where ``t_end_s`` comes from, for the message (default: ``duration_s``); a callable
+        returns it, called only for the message.
 
     Raises
     ------
@@ -371,7 +373,7 @@ def check_run_size(spec: ScenarioSpec, t_end_s: float, why: str | None = None) -
     hz = spec.device.rates.control_rate_hz
     n = t_end_s * hz
     if not n <= MAX_CONTROL_SAMPLES:
-        why = why or f"duration_s = {t_end_s:g} s"
+        why = (why() if callable(why) else why) or f"duration_s = {t_end_s:g} s"
         raise ScenarioError(f"{spec.source}: {why}; at control_hz = {hz:g} that is {n:.4g} control periods x "
                             f"{BYTES_PER_CONTROL_SAMPLE} B of trace and input arrays = {n * BYTES_PER_CONTROL_SAMPLE / 1e9:.4g} GB, "
                             f"above the {MAX_RUN_BYTES / 1e9:g} GB bound of one run (at most {MAX_CONTROL_SAMPLES} "
@@ -388,7 +390,8 @@ def run_length(spec: ScenarioSpec, schedule) -> tuple[float, int]:
     dt = 1.0 / spec.device.rates.control_rate_hz
     t_end = spec.duration_s if spec.duration_s is not None else schedule.t_end_s
     check_run_size(spec, t_end, None if spec.duration_s is not None else
-                   f"the reading schedule of {len(schedule)} cells at {spec.reading.wpm:g} wpm ends at {t_end:.4g} s")
+                   lambda: f"the reading schedule of {len(schedule)} cells at {spec.reading.wpm:g} wpm ends at "
+                           f"{t_end:.4g} s")
     n = int(round(t_end / dt))
     if n < 1:
         raise ScenarioError(f"{spec.source}: duration {t_end:g} s is shorter than one control period")

@@ -42,6 +42,7 @@ from typing import Sequence, Union
 
 import numpy as np
 
+from ebraille_sim.base.compiled import njit
 from ebraille_sim.scenarios.braille import Cell, text_to_cells
 
 __all__ = [
@@ -58,6 +59,8 @@ MAX_WPM: float = 1000.0
 
 
 def _check_wpm(wpm: object) -> float:
+    if type(wpm) is float and 0.0 < wpm <= MAX_WPM:
+        return wpm                              # the common case, without the checks of numbers.Real
     if isinstance(wpm, bool) or not isinstance(wpm, numbers.Real):
         raise ValueError(f"wpm must be a positive finite number, got {wpm!r}")
     value = float(wpm)
@@ -69,6 +72,8 @@ def _check_wpm(wpm: object) -> float:
 
 
 def _check_real(name: str, value: object, *, non_negative: bool) -> float:
+    if type(value) is float and (0.0 if non_negative else -math.inf) <= value < math.inf and value != -math.inf:
+        return value                            # the common case, without the checks of numbers.Real
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
     out = float(value)
@@ -203,6 +208,9 @@ class ReadingSchedule:
         t_arr = np.asarray(t, dtype=float)
         if len(self.cells) == 0:
             idx = np.full(t_arr.shape, -1, dtype=np.int64)
+        elif t_arr.ndim == 1 and t_arr.flags.c_contiguous:
+            idx = np.empty(t_arr.shape[0], dtype=np.int64)
+            _cell_indices(self.start_s, float(self.t_end_s), t_arr, idx)
         else:
             idx = np.searchsorted(self.start_s, t_arr, side="right") - 1
             inside = (t_arr >= self.start_s[0]) & (t_arr < self.t_end_s)
@@ -210,6 +218,29 @@ class ReadingSchedule:
         if np.ndim(t) == 0:
             return int(idx)
         return idx
+
+
+
+@njit(cache=True)
+def _cell_indices(starts, t_end_s, t, out):
+    """:meth:`ReadingSchedule.index_at` of the 1-D times ``t`` into ``out`` in one compiled pass:
+    ``-1`` outside ``[starts[0], t_end_s)`` (NaN included), else the last ``k`` with
+    ``starts[k] <= t`` (``numpy.searchsorted(starts, t, side="right") - 1``, by bisection)."""
+    n = starts.shape[0]
+    t0 = starts[0]
+    for i in range(t.shape[0]):
+        x = t[i]
+        if x >= t0 and x < t_end_s:
+            lo, hi = 0, n
+            while lo < hi:
+                mid = (lo + hi) >> 1
+                if starts[mid] <= x:
+                    lo = mid + 1
+                else:
+                    hi = mid
+            out[i] = lo - 1
+        else:
+            out[i] = -1
 
 
 def build_schedule(
