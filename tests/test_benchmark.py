@@ -112,6 +112,17 @@ def test_latched_supervisor_faults_are_counted_in_tracking_scenarios_only(quick)
     assert line.split()[4] == "-"
 
 
+def test_a_loop_hunting_under_the_compensated_estimate_latches_no_stuck_fault():
+    """``pid_scheduled`` on refresh_120wpm with the hysteresis compensation, benchmark reader 6:
+    the loop hunts inside the film's blind stretch, where the compensated estimate holds still
+    to the bit.  The stuck rule once summed that back-and-forth travel and latched ``fsr_stuck``
+    4.7 s into the run; it counts net travel now."""
+    sc = next(s for s in B.get_suite("standard").scenarios if s.key == "refresh_120wpm")
+    rows = B.run_episode(("pid_scheduled", sc, 6, 8, (("hysteresis_compensation", True),)))
+    assert rows[0]["supervisor_fault"] is None
+    assert rows[0]["char_in_band_fraction"] is not None
+
+
 def test_true_force_controllers_get_the_true_force_others_the_estimate():
     seen = []
 
