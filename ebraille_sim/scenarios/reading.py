@@ -72,7 +72,7 @@ def _check_wpm(wpm: object) -> float:
 
 
 def _check_real(name: str, value: object, *, non_negative: bool) -> float:
-    if type(value) is float and (0.0 if non_negative else -math.inf) <= value < math.inf and value != -math.inf:
+    if type(value) is float and math.isfinite(value) and not (non_negative and value < 0.0):
         return value                            # the common case, without the checks of numbers.Real
     if isinstance(value, bool) or not isinstance(value, numbers.Real):
         raise ValueError(f"{name} must be a finite number, got {value!r}")
@@ -218,7 +218,6 @@ class ReadingSchedule:
         if np.ndim(t) == 0:
             return int(idx)
         return idx
-
 
 
 @njit(cache=True)
