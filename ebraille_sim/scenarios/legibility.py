@@ -262,9 +262,15 @@ def _impedance(force_n, stim):
     force are evaluated at the touch force.
     """
     f = max(force_n, stim.touch_force_n)
-    p = f / _contact_area_m2(f, stim.contact_area_1n_m2, stim.contact_area_exponent)
-    return stim.impedance_pressed_ohm + stim.impedance_interface_ohm \
-        * (stim.reference_pressure_pa / p) ** stim.pressure_exponent
+    return _impedance_at(f, _contact_area_m2(f, stim.contact_area_1n_m2, stim.contact_area_exponent), stim)
+
+
+@njit
+def _impedance_at(force_n, area_m2, stim):
+    """:func:`_impedance` at a force at or above the touch force whose contact area is ``area_m2``."""
+    q = stim.reference_pressure_pa / (force_n / area_m2)
+    k = stim.pressure_exponent
+    return stim.impedance_pressed_ohm + stim.impedance_interface_ohm * (q if k == 1.0 else q ** k)
 
 
 @njit
@@ -278,7 +284,12 @@ def _current_a(phi, z_ohm, z_setpoint_ohm, stim):
 @njit
 def _sample_coverage(force_n, contact, distance_m, phi):
     """Covered fraction of each electrode at one force, into ``phi``."""
-    a = _contact_radius(force_n, contact)
+    _coverage_at_radius(_contact_radius(force_n, contact), contact, distance_m, phi)
+
+
+@njit
+def _coverage_at_radius(a, contact, distance_m, phi):
+    """:func:`_sample_coverage` for a contact disc of radius ``a`` (m)."""
     r = contact.electrode_radius_m
     for e in range(distance_m.size):
         phi[e] = _lens_area(distance_m[e], r, a) / (np.pi * r * r)
@@ -301,10 +312,15 @@ def _sample_intensity(force_n, setpoint_n, phi, stim, ratio):
 @njit
 def _sample_intensity_z(z, z_sp, j_nom, phi, stim, ratio):
     """:func:`_sample_intensity` given the full-coverage impedance ``z`` (ohm) at the sample's force."""
-    area = stim.electrode_area_m2
     for e in range(phi.size):
-        j = _current_a(phi[e], z, z_sp, stim) / (phi[e] * area) if phi[e] > 1e-12 else 0.0
-        ratio[e] = j / j_nom
+        ratio[e] = _electrode_ratio(phi[e], z, z_sp, j_nom, stim)
+
+
+@njit
+def _electrode_ratio(phi, z, z_sp, j_nom, stim):
+    """Relative intensity of one electrode of coverage ``phi`` (0 where ``phi`` is 0)."""
+    j = _current_a(phi, z, z_sp, stim) / (phi * stim.electrode_area_m2) if phi > 1e-12 else 0.0
+    return j / j_nom
 
 
 # --- array loops behind the public functions ---
@@ -479,13 +495,14 @@ def _legibility_counts(force_n, setpoint_n, char_index, masks, contact, distance
     raised dots.  The coverage is computed once per sample for all stimulators, the
     impedance once per sample for stimulators of the same impedance law (``z_first[m]``: the
     first stimulator whose law is that of ``stims[m]``), the setpoint's nominal values once
-    per setpoint."""
+    per setpoint, the contact area once per sample for the coverage and the impedances (the
+    stimulators in ``stims`` share the patch law of ``contact``: :func:`_legible_fractions`
+    groups them by it)."""
     n_cells = masks.size
     n_ok = np.zeros((len(stims), n_cells), np.int64)
     n_all = np.zeros(n_cells, np.int64)
     shown = np.zeros(n_cells, np.bool_)
     phi = np.empty(distance_m.size)
-    ratio = np.empty(distance_m.size)
     z_sp = np.empty(len(stims))
     j_nom = np.empty(len(stims))
     z = np.empty(len(stims))
@@ -505,16 +522,24 @@ def _legibility_counts(force_n, setpoint_n, char_index, masks, contact, distance
                 n_ok[m, c] += 1
             continue
         shown[c] = True
-        _sample_coverage(force_n[k], contact, distance_m, phi)
+        fk = force_n[k]
+        area = _contact_area_m2(fk, contact.contact_area_1n_m2, contact.contact_area_exponent)
+        _coverage_at_radius(math.sqrt(area / np.pi), contact, distance_m, phi)
         for m in range(len(stims)):
             stim = stims[m]
-            z[m] = z[z_first[m]] if z_first[m] < m else _impedance(force_n[k], stim)
-            _sample_intensity_z(z[m], z_sp[m], j_nom[m], phi, stim, ratio)
+            if z_first[m] < m:
+                z[m] = z[z_first[m]]
+            elif fk >= stim.touch_force_n:
+                z[m] = _impedance_at(fk, area, stim)
+            else:
+                z[m] = _impedance(fk, stim)
             ok = True
-            for e in range(distance_m.size):
-                if (dots >> e) & 1 and not (ratio[e] >= stim.band_low and ratio[e] <= stim.band_high):
-                    ok = False
-                    break
+            for e in range(distance_m.size):                # the raised dots only, to the first dim one
+                if (dots >> e) & 1:
+                    q = _electrode_ratio(phi[e], z[m], z_sp[m], j_nom[m], stim)
+                    if not (q >= stim.band_low and q <= stim.band_high):
+                        ok = False
+                        break
             if ok:
                 n_ok[m, c] += 1
     return n_ok, n_all, shown
