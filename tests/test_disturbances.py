@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 
 from ebraille_sim.scenarios import disturbances as D
+from ebraille_sim.scenarios import faults as F
+from ebraille_sim.scenarios import mechanism_section as M
 from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.scenarios.runner import run_scenario
 from ebraille_sim.scenarios.spec import ScenarioError, parse_scenario
@@ -274,3 +276,70 @@ def test_tremor_raises_the_tracking_error():
     quiet = run_scenario(_spec({}, duration=10.0)).metrics["force_rmse_n"]
     shaky = run_scenario(_spec({"tremor": {"rms_m": 30e-6}}, duration=10.0)).metrics["force_rmse_n"]
     assert shaky > 1.4 * quiet
+
+
+def _sections():
+    """Every shipped scenario's delegate sections, one of each disturbance and fault kind, a
+    mechanism section and drawn episodes."""
+    import pathlib
+    from ebraille_sim.scenarios.episodes import EpisodeDistribution
+    from ebraille_sim.scenarios.spec import load_scenario
+    specs = [load_scenario(p) for p in sorted(pathlib.Path(D.__file__).parents[2].joinpath("scenarios").glob("*.toml"))]
+    specs += [EpisodeDistribution(battery_probability=p).draw(np.random.SeedSequence(s))
+              for s in range(6) for p in (0.0, 1.0)]
+    for spec in specs:
+        yield spec.device, spec.sections
+    yield DeviceParams(), {"disturbances": D.validate_section("t", {k: {} for k in D.KINDS})}
+    yield DeviceParams(), {"faults": F.validate_section("t", [
+        {"kind": k, "start_s": 0.1, "duration_s": 0.2, **({"value_v": 1.0} if k == "fsr_value" else {})}
+        for k in F.KINDS])}
+    yield DeviceParams(), {"mechanism": M.validate_section("t", {"press_offset_m": 1e-3})}
+
+
+def test_every_section_module_names_the_inputs_it_builds():
+    import importlib
+    from ebraille_sim.scenarios.spec import DELEGATES
+    t = np.arange(200) * 1e-3
+    seen = set()
+    for device, sections in _sections():
+        for key, section in sections.items():
+            mod = importlib.import_module(DELEGATES[key])
+            if not hasattr(mod, "build_inputs"):
+                continue
+            built = mod.build_inputs(section, t, np.random.default_rng(0), device)
+            assert tuple(mod.driven_inputs(section)) == tuple(built), key
+            seen.update(built)
+    assert {"finger_pos_m", "driver_supply_v", "gravity_along_m_per_s2", "fsr_temp_offset_k", "est_creep_preload",
+            "fsr_fault", "fsr_fault_value", "motor_jammed", "press_offset_m"} <= seen
+    for kind in D.KINDS.values():
+        if hasattr(kind, "inputs"):
+            assert tuple(kind().inputs(t, np.random.default_rng(1), DeviceParams())) == kind.drives
+
+
+def test_profiles_are_rows_of_one_table_with_the_values_of_separate_arrays():
+    from ebraille_sim.base.seeds import SeedNode
+    from ebraille_sim.scenarios.inputs import build_run_inputs, profile_table
+    from ebraille_sim.scenarios.spec import load_scenario
+    spec = load_scenario("everyday_session")
+    run = build_run_inputs(spec)
+    n = run.n_steps
+    assert list(run.profiles) == ["est_creep_preload", "finger_pos_m", "fsr_temp_offset_k"]
+    assert profile_table(run.profiles, n) is not None                     # no copy for the loop
+    # the same profiles as separate arrays, the finger's summed as constant + (pressing + slips)
+    ss_inputs = SeedNode(spec.seed).spawn(3)[2]
+    built = D.build_inputs(spec.sections["disturbances"], run.t_s[:n], np.random.default_rng(ss_inputs), spec.device)
+    assert np.array_equal(run.profiles["finger_pos_m"], spec.finger.gap_m + built["finger_pos_m"][1])
+    for name in ("est_creep_preload", "fsr_temp_offset_k"):
+        assert np.array_equal(run.profiles[name], built[name][1])
+
+
+def test_a_section_that_builds_an_input_it_did_not_name_is_refused(monkeypatch):
+    from ebraille_sim.scenarios import mechanism_section
+    from ebraille_sim.scenarios.inputs import build_run_inputs
+    from ebraille_sim.scenarios.spec import ScenarioError, load_scenario
+    spec = load_scenario("steady_90wpm")
+    spec = dataclasses.replace(spec, sections={"mechanism": M.validate_section("t", {"press_offset_m": 1e-3})})
+    assert "press_offset_m" in build_run_inputs(spec).profiles
+    monkeypatch.setattr(mechanism_section, "driven_inputs", lambda section: ("press_offset_m",))
+    with pytest.raises(ScenarioError, match="drives 'finger_tilt_rad', which its module's driven_inputs does not name"):
+        build_run_inputs(spec)

@@ -77,3 +77,33 @@ def test_compiled_legibility_pass_equals_the_whole_run_evaluation(name, duration
         whole = L.character_legibility(tr["force_true_n"], tr["setpoint_n"], ci, res.schedule.cells, params)
         assert got[key] == whole["legible_char_fraction"] == res.metrics[key], key
     assert got["legible_char_fraction"] is not None
+
+
+def test_in_band_in_chunks_equals_the_whole_array_expression():
+    rng = np.random.default_rng(5)
+    n = 3 * M.IN_BAND_CHUNK + 17
+    sp = np.repeat(rng.uniform(0.2, 2.0, n // 1000 + 1), 1000)[:n]
+    f = sp * rng.normal(1.0, 0.1, n)
+    f[::97] = sp[::97] * 1.1                                   # on the band's edge
+    whole = np.abs(f - sp) <= 0.1 * sp
+    got = M.in_band(f, sp, 0.1)
+    assert got.dtype == bool and got.shape == (n,) and np.array_equal(got, whole)
+    assert 0.5 < got.mean() < 0.8
+    assert np.array_equal(M.in_band(f[:10], 1.0, 0.1), np.abs(f[:10] - 1.0) <= 0.1)   # a scalar setpoint
+
+
+def test_error_metrics_in_place_give_the_bits_of_the_plain_expressions():
+    rng = np.random.default_rng(6)
+    n = 5000
+    t = (np.arange(n) + 1) * 1e-3
+    sp = np.full(n, 1.0)
+    f = 1.0 + rng.normal(0, 0.05, n)
+    fe = f + rng.normal(0, 0.02, n)
+    tr = {"t_s": t, "force_true_n": f, "force_est_n": fe, "setpoint_n": sp, "energy_j": np.zeros(n),
+          "char_index": np.full(n, -1)}
+    m = M.compute_metrics(tr, 1.0, 0.1)
+    read = t >= 1.0
+    err = f[read] - sp[read]
+    assert m["force_rmse_n"] == float(np.sqrt(np.mean(err ** 2)))
+    assert m["force_mae_n"] == float(np.mean(np.abs(err)))
+    assert m["estimate_rmse_n"] == float(np.sqrt(np.mean((fe[read] - f[read]) ** 2)))

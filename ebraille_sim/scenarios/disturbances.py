@@ -85,7 +85,7 @@ from ebraille_sim.physics.fsr import held_resistance_factor
 from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2
 from ebraille_sim.scenarios.spec import ScenarioError, check_section_table
 
-__all__ = ["KINDS", "validate_section", "build_inputs", "parameter_table", "band_limited_noise",
+__all__ = ["KINDS", "validate_section", "driven_inputs", "build_inputs", "parameter_table", "band_limited_noise",
            "minimum_jerk", "strap_transmission", "li_ion_ocv_v", "Tremor", "Pressing", "StrapSlip",
            "Orientation", "FSRTemperature", "FSRDrift", "Battery"]
 
@@ -237,6 +237,9 @@ class Tremor:
     transmission: float = sourced(1.0, "-", "[E] 1 = frame does not follow the finger; "
                              "strap_transmission() for a strapped frame", lo=0.0, hi=1.0, kind="float")
 
+    drives = ("finger_pos_m",)
+    """The plant inputs :meth:`inputs` returns."""
+
     def inputs(self, t_s, rng, device):
         x = band_limited_noise(t_s, self.band_hz[0], self.band_hz[1], self.rms_m, rng)
         return {"finger_pos_m": ("add", self.transmission * x)}
@@ -256,6 +259,9 @@ class Pressing:
     """
     rms_m: float = sourced(0.1e-3, "m", "[D] 0.15 N RMS [E] / 1.5 N/mm [E]", lo=0.0, hi=2e-3, kind="float")
     band_hz: tuple = sourced((0.1, 1.0), "Hz", "[E] line- to word-scale adjustments", lo=0.0, hi=20.0, kind="band")
+
+    drives = ("finger_pos_m",)
+    """The plant inputs :meth:`inputs` returns."""
 
     def inputs(self, t_s, rng, device):
         return {"finger_pos_m": ("add", band_limited_noise(t_s, self.band_hz[0], self.band_hz[1], self.rms_m, rng))}
@@ -287,6 +293,9 @@ class StrapSlip:
                                 lo=1e-3, hi=5.0, kind="float")
     max_offset_m: float = sourced(1e-3, "m", "[E] the strap seats after ~1 mm of slips (tapering finger, "
                                   "stretched skin)", lo=0.0, hi=3e-3, kind="float")
+
+    drives = ("finger_pos_m",)
+    """The plant inputs :meth:`inputs` returns."""
 
     def inputs(self, t_s, rng, device):
         times = list(self.at_s)
@@ -330,6 +339,9 @@ class Orientation:
     at_s: float = sourced(5.0, "s", "[E] scenario-chosen", lo=0.0, hi=3600.0, kind="float")
     duration_s: float = sourced(0.6, "s", "[E] forearm rotation 0.4-1 s", lo=0.01, hi=60.0, kind="float")
     return_at_s: float = sourced(None, "s", "[E] optional return to from_deg", lo=0.0, hi=3600.0, kind="optional")
+
+    drives = ("gravity_along_m_per_s2",)
+    """The plant inputs :meth:`inputs` returns."""
 
     def inputs(self, t_s, rng, device):
         a0 = self.from_deg
@@ -428,6 +440,9 @@ class Battery:
         dead = np.maximum.accumulate(cell < self.cutoff_v)
         return np.where(dead, 0.0, self.cells_series * cell)
 
+    drives = ("driver_supply_v",)
+    """The plant inputs :meth:`inputs` returns."""
+
     def inputs(self, t_s, rng, device):
         return {"driver_supply_v": ("set", self.supply_v(t_s))}
 
@@ -511,7 +526,17 @@ def validate_section(source: str, value) -> dict:
 # profiles
 # --------------------------------------------------------------------------------------
 
-def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, device) -> dict:
+def driven_inputs(section: dict) -> tuple:
+    """The plant inputs :func:`build_inputs` returns for a validated ``[disturbances]`` section."""
+    names = [name for kind in KINDS if kind in section for name in getattr(section[kind], "drives", ())]
+    if "fsr_temperature" in section or "fsr_drift" in section:
+        names.append("fsr_temp_offset_k")
+    if "fsr_drift" in section:
+        names.append("est_creep_preload")
+    return tuple(dict.fromkeys(names))
+
+
+def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, device, out: dict | None = None) -> dict:
     """Per-period plant input profiles of a validated ``[disturbances]`` section.
 
     Parameters
@@ -525,6 +550,9 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
         (the ``SeedSequence`` that ``rng.spawn(len(KINDS))`` would give it; only the children
         of the kinds present are made, and ``rng`` is left as it was).
     device : DeviceParams
+    out : dict, optional
+        ``{input_name: ndarray of shape (n,)}``: arrays a "set" profile computed in chunks
+        (the FSR's temperature offset and creep preload) is written into and returned as.
 
     Returns
     -------
@@ -535,7 +563,8 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
     # child k of rng.spawn(len(KINDS)) (its spawn key extended by k), made only for the kinds present
     bits = rng.bit_generator
     parent = bits.seed_seq
-    out: dict = {}
+    rows = out or {}
+    out = {}
     for k, name in enumerate(KINDS):
         obj = section.get(name)
         if obj is None or not hasattr(obj, "inputs"):
@@ -544,7 +573,7 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
         child = type(rng)(type(bits)(seed=seed))
         for inp, (mode, arr) in obj.inputs(t_s, child, device).items():
             if inp in out and mode == "add" and out[inp][0] == "add":
-                out[inp] = ("add", out[inp][1] + arr)
+                np.add(out[inp][1], arr, out=out[inp][1])      # the kinds return arrays of their own
             else:
                 out[inp] = (mode, arr)
     temp, drift = section.get("fsr_temperature"), section.get("fsr_drift")
@@ -553,8 +582,10 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
         if drift is not None and alpha == 0.0:
             raise ScenarioError("[disturbances.fsr_drift] needs an FSR with a nonzero temperature_coeff_per_k "
                                 "(the creep offset is applied through the temperature input)")
-        offset = np.empty(len(t_s))
-        preload = np.empty(len(t_s)) if drift is not None else None
+        offset = rows.get("fsr_temp_offset_k")
+        offset = np.empty(len(t_s)) if offset is None else offset
+        preload = (rows.get("est_creep_preload") if "est_creep_preload" in rows else np.empty(len(t_s))) \
+            if drift is not None else None
         # sample by sample, so in chunks: a long run's temporaries stay at the chunk's size
         for a in range(0, len(t_s), PROFILE_CHUNK):
             tc = t_s[a:a + PROFILE_CHUNK]

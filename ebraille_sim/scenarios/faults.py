@@ -41,7 +41,7 @@ import numpy as np
 from ebraille_sim.base.validation import check_choice, check_keys, check_number
 from ebraille_sim.physics.fsr import FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE
 
-__all__ = ["KINDS", "validate_section", "build_inputs", "wrap_controller", "FaultyController"]
+__all__ = ["KINDS", "validate_section", "driven_inputs", "build_inputs", "wrap_controller", "FaultyController"]
 
 KINDS = {
     "fsr_open": ("fsr_fault", FAULT_OPEN),
@@ -109,8 +109,22 @@ def _withdraw_profile(t_s: np.ndarray, e: dict) -> np.ndarray:
     return d * (up - down)
 
 
-def build_inputs(section: list, t_s: np.ndarray, rng, device) -> dict:
-    """Per-period plant inputs of the faults: ``{input: ("set" | "add", array)}``.
+def driven_inputs(section: list) -> tuple:
+    """The plant inputs :func:`build_inputs` returns for a validated ``[[faults]]`` list."""
+    names = []
+    for e in section:
+        name = KINDS[e["kind"]][0]
+        if name is not None:
+            names.append(name)
+        if e["kind"] == "fsr_value":
+            names.append("fsr_fault_value")
+    return tuple(dict.fromkeys(names))
+
+
+def build_inputs(section: list, t_s: np.ndarray, rng, device, out: dict | None = None) -> dict:
+    """Per-period plant inputs of the faults: ``{input: ("set" | "add", array)}`` (``out``,
+    the rows :data:`~ebraille_sim.scenarios.spec.DELEGATES` modules may write into, is not
+    used: these profiles are built whole).
 
     Later entries override earlier ones where windows of the same input overlap.
     """

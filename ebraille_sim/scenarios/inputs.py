@@ -327,29 +327,43 @@ def input_profiles(spec: ScenarioSpec, t_s: np.ndarray, rng: np.random.Generator
         when a plant is given.
     """
     row = base_inputs.inputs[0] if hasattr(base_inputs, "inputs") else np.asarray(base_inputs, dtype=float)
-    # constants stay scalars: only the inputs a section drives become arrays
+    # constants stay scalars: only the inputs a section drives become arrays, the rows of one
+    # table in the order of their names, each filled as its section's array comes (and that
+    # array dropped): a long run never holds its profiles twice
     values = row.tolist()
     base = {name: values[j] for name, j in U.items() if name != "command_v"}
+    mods = [(key, section, importlib.import_module(DELEGATES[key])) for key, section in spec.sections.items()]
+    mods = [(key, section, mod) for key, section, mod in mods if hasattr(mod, "build_inputs")]
+    declared = sorted({name for key, section, mod in mods for name in mod.driven_inputs(section)})
+    table = np.empty((len(declared), len(t_s)))
+    rows = {name: table[j] for j, name in enumerate(declared)}
     touched = set()
-    for key, section in spec.sections.items():
-        mod = importlib.import_module(DELEGATES[key])
-        build = getattr(mod, "build_inputs", None)
-        if build is None:
-            continue
+    for key, section, mod in mods:
         try:
-            built = build(section, t_s, rng, spec.device)
+            built = mod.build_inputs(section, t_s, rng, spec.device, out=rows)
         except ScenarioError as exc:
             msg = str(exc)
             raise ScenarioError(msg if msg.startswith(f"{spec.source}:") else f"{spec.source}: {msg}") from None
         except ValueError as exc:
             raise ScenarioError(f"{spec.source}: [{key}] {exc}") from None
-        for name, (mode, arr) in built.items():
+        for name in list(built):
+            mode, arr = built.pop(name)
             if name not in base:
                 raise ScenarioError(f"{spec.source}: [{key}] drives unknown input {name!r}")
-            base[name] = base[name] + arr if mode == "add" else np.broadcast_to(arr, t_s.shape).astype(float)
+            if name not in rows:
+                raise ScenarioError(f"{spec.source}: [{key}] drives {name!r}, which its module's driven_inputs "
+                                    f"does not name")
+            r = rows[name]
+            if mode == "add":
+                np.add(r if name in touched else base[name], arr, out=r)
+            elif arr is not r:                        # a module may have written its row itself
+                r[...] = arr
+            del arr
             touched.add(name)
-    return {name: base[name] if np.shape(base[name]) == t_s.shape else np.broadcast_to(base[name], t_s.shape).astype(float)
-            for name in sorted(touched)}
+    if len(touched) < len(declared):                  # a section drove less than it named: no empty rows
+        table = table[[j for j, name in enumerate(declared) if name in touched]]
+        rows = {name: table[j] for j, name in enumerate(n for n in declared if n in touched)}
+    return rows
 
 
 def check_run_size(spec: ScenarioSpec, t_end_s: float, why: str | None = None) -> int:
@@ -432,12 +446,7 @@ def build_run_inputs(spec: ScenarioSpec, seed: int | None = None) -> RunInputs:
     t_start = period_starts(n + 1, dt)
     sp = setpoint_profile(spec, t_start, schedule)
     base = base_input_row(spec.device, spec.finger.gap_m)
-    profiles = input_profiles(spec, t_start[:n], np.random.default_rng(ss_inputs), base)
+    profiles = input_profiles(spec, t_start[:n], np.random.default_rng(ss_inputs), base)   # rows of one array
     del t_start
-    # one array holds every profile (its rows): the compiled loop reads it without a copy
-    table = np.empty((len(profiles), n))
-    for j, name in enumerate(list(profiles)):
-        table[j] = profiles[name]
-        profiles[name] = table[j]
     return RunInputs(spec=spec, seed=seed, sensor_seed=seed_from(ss_sensor), schedule=schedule, dt_s=dt,
                      n_steps=n, setpoint_n=sp, base_inputs=base, profiles=profiles)

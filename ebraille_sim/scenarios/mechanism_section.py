@@ -60,8 +60,14 @@ def _number(source, key, v, bounds):
         raise ScenarioError(f"{source}: [mechanism] {exc}") from None
 
 
-def build_inputs(section: dict, t_s: np.ndarray, rng, device) -> dict:
-    """Per-period inputs of a ``[mechanism]`` section: press offset, finger tilt, lateral gravity."""
+def driven_inputs(section: dict) -> tuple:
+    """The plant inputs :func:`build_inputs` returns (a ``[mechanism]`` section drives all three)."""
+    return ("press_offset_m", "finger_tilt_rad", "gravity_lateral_m_per_s2")
+
+
+def build_inputs(section: dict, t_s: np.ndarray, rng, device, out: dict | None = None) -> dict:
+    """Per-period inputs of a ``[mechanism]`` section: press offset, finger tilt, lateral gravity
+    (``out`` is not used: these profiles are built whole)."""
     off = np.full(len(t_s), section.get("press_offset_m", 0.0))
     tilt = np.full(len(t_s), math.radians(section.get("finger_tilt_deg", 0.0)))
     ramp = section.get("pose_ramp_s", 0.0)

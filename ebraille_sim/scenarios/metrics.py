@@ -41,11 +41,22 @@ METRIC_NAMES = [
 ]
 
 
+IN_BAND_CHUNK = 1 << 16
+"""Samples per chunk of :func:`in_band` on long 1-D runs (its temporaries stay at that size)."""
+
+
 def in_band(force_n, setpoint_n, band_fraction):
     """Boolean array: |force - setpoint| <= band_fraction * setpoint."""
-    d = np.asarray(np.asarray(force_n) - setpoint_n)
-    d = np.abs(d, out=d) if d.ndim else np.abs(d)            # in place: one temporary per long run
-    return d <= band_fraction * np.asarray(setpoint_n)
+    f = np.asarray(force_n)
+    sp = np.asarray(setpoint_n)
+    if f.ndim == 1 and sp.shape == f.shape and f.size > IN_BAND_CHUNK:
+        out = np.empty(f.shape, dtype=bool)
+        for a in range(0, f.size, IN_BAND_CHUNK):
+            out[a:a + IN_BAND_CHUNK] = in_band(f[a:a + IN_BAND_CHUNK], sp[a:a + IN_BAND_CHUNK], band_fraction)
+        return out
+    d = np.asarray(f - sp)
+    d = np.abs(d, out=d) if d.ndim else np.abs(d)
+    return d <= band_fraction * sp
 
 
 def settling_time(t_s, force_n, setpoint_n, band_fraction, hold_s=SETTLE_HOLD_S):
@@ -109,12 +120,15 @@ def compute_metrics(trace: dict, reading_start_s: float, band_fraction: float, s
     if read[i0:].all():
         read = slice(i0, None)
     if f[read].size:
-        err = f[read] - sp[read]
-        m["force_rmse_n"] = float(np.sqrt(np.mean(err ** 2)))
-        m["force_mae_n"] = float(np.mean(np.abs(err)))
+        # one temporary per long run: |e| and then |e|**2 (the bits of e**2) in place
+        err = np.subtract(f[read], sp[read])
+        m["force_mae_n"] = float(np.mean(np.abs(err, out=err)))
+        m["force_rmse_n"] = float(np.sqrt(np.mean(np.square(err, out=err))))
         del err
         m["in_band_fraction"] = float(np.mean(ok[read]))
-        m["estimate_rmse_n"] = float(np.sqrt(np.mean((fe[read] - f[read]) ** 2)))
+        err = np.subtract(fe[read], f[read])
+        m["estimate_rmse_n"] = float(np.sqrt(np.mean(np.square(err, out=err))))
+        del err
         touching = f[read] > CONTACT_THRESHOLD_N
         m["contact_loss_count"] = int(np.count_nonzero(touching[:-1] & ~touching[1:]))
     else:

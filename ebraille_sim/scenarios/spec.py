@@ -109,7 +109,10 @@ DELEGATES: dict[str, str] = {
 
 Each module provides ``validate_section(source, value) -> object`` (raising
 :class:`ScenarioError` with a one-line message) and is used by the runner through
-``build_inputs(section, t_s, rng, device) -> dict`` (per-period plant inputs) and/or
+``driven_inputs(section) -> tuple`` (the plant inputs it drives) with
+``build_inputs(section, t_s, rng, device, out=None) -> dict`` (per-period plant inputs;
+``out`` maps those inputs to the rows of the run's profile table, which a module may write
+its "set" profiles into) and/or
 ``wrap_controller(section, controller, dt_s, device=None) -> Controller``.  Wrappers are
 applied in the order of this dict, so an injected controller fault (``faults``) always sits
 inside the safety supervisor (``supervisor``)."""
