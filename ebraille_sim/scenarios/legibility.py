@@ -238,7 +238,13 @@ def _contact_area_m2(force_n, area_1n_m2, exponent):
 @njit
 def _contact_radius(force_n, contact):
     """Radius (m) of the disc with the contact area at one force (N): ``(A(F) / pi)^(1/2)``."""
-    return math.sqrt(_contact_area_m2(force_n, contact.contact_area_1n_m2, contact.contact_area_exponent) / np.pi)
+    return _radius_of_area(_contact_area_m2(force_n, contact.contact_area_1n_m2, contact.contact_area_exponent))
+
+
+@njit
+def _radius_of_area(area_m2):
+    """Radius (m) of the disc of area ``area_m2``."""
+    return math.sqrt(area_m2 / np.pi)
 
 
 @njit
@@ -524,7 +530,7 @@ def _legibility_counts(force_n, setpoint_n, char_index, masks, contact, distance
         shown[c] = True
         fk = force_n[k]
         area = _contact_area_m2(fk, contact.contact_area_1n_m2, contact.contact_area_exponent)
-        _coverage_at_radius(math.sqrt(area / np.pi), contact, distance_m, phi)
+        _coverage_at_radius(_radius_of_area(area), contact, distance_m, phi)
         for m in range(len(stims)):
             stim = stims[m]
             if z_first[m] < m:
