@@ -322,6 +322,78 @@ def search_both_refresh(ex, n: int, folder: pathlib.Path) -> list:
                          BOTH_START)
 
 
+OUT_DAMPING = ROOT / "docs" / "figures" / "benchmark_fast" / "hold_damping.json"
+DAMPING_SCENARIOS = ("refresh_120wpm", "refresh_60wpm", "contact_onset", "pressing_90wpm", "everyday_session",
+                     "tremor_90wpm", "reading_120wpm", "strap_slip")
+DAMPING = {"kv_v_per_v": 0.5, "after_step_s": 0.032, "near_fraction": 0.2, "filter_s": 0.001}
+"""The hold damping of the study (:func:`hold_damping`)."""
+
+
+def hold_damping(task) -> tuple:
+    """One training episode of ``pid_dob_fast_8.json``'s gains with a damping term on the board
+    speed that the back-EMF gives (``--hold-damping``).
+
+    The term is ``-kv v``, ``v = u_prev - R_n i`` (the back-EMF, V) through a first-order filter,
+    applied only in the hold: once the setpoint has not changed for ``after_step_s`` and the
+    estimate is within ``near_fraction`` of it.  ``task`` = ``(scenario, reader, deadband_lsb,
+    kv)``; returns ``(scenario, reader, deadband_lsb, kv, in_band, char_in_band, peak)``.
+    """
+    import math
+    from controllers.dob import DOBConfig, DOBPID
+    from ebraille_sim.physics.params import DeviceParams
+    from ebraille_sim.scenarios.runner import run_scenario
+    key, reader, deadband, kv = task
+    d = DAMPING
+
+    class HoldDamped(DOBPID):
+        def reset(self, **kw):
+            super().reset(**kw)
+            self.u, self.v, self.r_last, self.since = kw.get("command_v", 0.0), 0.0, kw["setpoint_n"], 1.0
+
+        def update(self, y, r, dt, motor_current_a=None):
+            if motor_current_a is not None:
+                self.v += -math.expm1(-dt / d["filter_s"]) * (self.u - R_N * motor_current_a - self.v)
+            self.since = 0.0 if r != self.r_last else self.since + dt
+            self.r_last = r
+            u = super().update(y, r, dt, motor_current_a)
+            if self.since >= d["after_step_s"] and abs(y - r) < d["near_fraction"] * r:
+                u = min(max(u - kv * self.v, self._cfg.u_min_v), self._cfg.u_max_v)
+            self.u = u
+            return u
+
+    R_N = DeviceParams().motor.resistance_ohm
+    gains = json.loads(FAST_8.read_text())["gains"]
+    sc = {s.key: s for s in bench.get_suite("standard").scenarios}[key]
+    spec = bench._spec(sc.scenario, sc.duration_s, sc.wpm)
+    unit = sample_devices(TRAIN_SEED, 16, base=spec.device)[reader]
+    dev = dataclasses.replace(unit, estimator=replace_checked(unit.estimator, hysteresis_compensation=True,
+                                                              hysteresis_deadband_lsb=deadband, **FAST_ESTIMATOR))
+    res = run_scenario(spec, controller=HoldDamped(DOBConfig(**gains)), seed=spec.seed + 101 * (reader + SEED_SHIFT),
+                       device=dev)
+    m = res.metrics
+    return key, reader, deadband, kv, m.get("in_band_fraction") or 0.0, m.get("char_in_band_fraction") or 0.0, \
+        m.get("peak_force_n") or 0.0
+
+
+def hold_damping_study(ex) -> dict:
+    """Worst training reader per scenario for the damping off and on, at the estimator's
+    deadband of 1.5 LSB (the firmware's) and 0.5 LSB."""
+    cases = [(db, kv) for db in (1.5, 0.5) for kv in (0.0, DAMPING["kv_v_per_v"])]
+    tasks = [(k, r, db, kv) for db, kv in cases for k in DAMPING_SCENARIOS for r in range(16)]
+    rows = list(ex.map(hold_damping, tasks))
+    out = []
+    for db, kv in cases:
+        worst = {}
+        for k in DAMPING_SCENARIOS:
+            mine = [r for r in rows if r[0] == k and r[2] == db and r[3] == kv]
+            worst[k] = [round(min(r[4] for r in mine), 3), round(min(r[5] for r in mine), 3)]
+        out.append({"deadband_lsb": db, "kv_v_per_v": kv, "worst_in_band_char": worst,
+                    "peak_force_n": round(max(r[6] for r in rows if r[2] == db and r[3] == kv), 3)})
+        print(f"deadband {db} LSB, kv {kv}: " + " ".join(f"{k}:{a:.2f}/{b:.2f}" for k, (a, b) in worst.items()),
+              flush=True)
+    return {"damping": DAMPING, "controller_gains": str(FAST_8.relative_to(ROOT)), "cases": out}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--search", type=int, default=0, metavar="N", help="run the random search of N candidates")
@@ -333,8 +405,18 @@ def main(argv=None) -> int:
                     help="with --fast: search N candidates for refresh_120wpm's worst training reader")
     ap.add_argument("--nominal-calibration", action="store_true",
                     help="reader 0 with its divider as shipped and calibrated like a drawn unit")
+    ap.add_argument("--hold-damping", action="store_true",
+                    help="the 1 kHz path's gains with a back-EMF damping term in the hold, two deadbands")
     ap.add_argument("-j", "--jobs", type=int, default=2)
     args = ap.parse_args(argv)
+    if args.hold_damping:
+        with ProcessPoolExecutor(args.jobs) as ex:
+            doc = hold_damping_study(ex)
+        OUT_DAMPING.write_text(json.dumps({"training_population_seed": TRAIN_SEED, "scenario_seed_shift": SEED_SHIFT,
+                                           "readers": 16, "estimator": {"hysteresis_compensation": True,
+                                                                        **FAST_ESTIMATOR}, **doc}, indent=1) + "\n")
+        print(f"wrote {OUT_DAMPING.relative_to(ROOT)}")
+        return 0
     searches = ((args.both_refresh, "--both-refresh", OUT_BOTH, 8, lambda ex, n, f: {"candidates": search_both_refresh(ex, n, f)}),
                 (args.refresh120, "--refresh120", OUT_R120, 16, search_refresh120))
     for n, flag, out, readers, run in searches:
