@@ -344,6 +344,7 @@ def hold_damping(task) -> tuple:
     from ebraille_sim.scenarios.runner import run_scenario
     key, reader, deadband, kv = task
     d = DAMPING
+    r_n = DeviceParams().motor.resistance_ohm
 
     class HoldDamped(DOBPID):
         def reset(self, **kw):
@@ -352,7 +353,7 @@ def hold_damping(task) -> tuple:
 
         def update(self, y, r, dt, motor_current_a=None):
             if motor_current_a is not None:
-                self.v += -math.expm1(-dt / d["filter_s"]) * (self.u - R_N * motor_current_a - self.v)
+                self.v += -math.expm1(-dt / d["filter_s"]) * (self.u - r_n * motor_current_a - self.v)
             self.since = 0.0 if r != self.r_last else self.since + dt
             self.r_last = r
             u = super().update(y, r, dt, motor_current_a)
@@ -361,7 +362,6 @@ def hold_damping(task) -> tuple:
             self.u = u
             return u
 
-    R_N = DeviceParams().motor.resistance_ohm
     gains = json.loads(FAST_8.read_text())["gains"]
     sc = {s.key: s for s in bench.get_suite("standard").scenarios}[key]
     spec = bench._spec(sc.scenario, sc.duration_s, sc.wpm)

@@ -343,3 +343,15 @@ def test_a_section_that_builds_an_input_it_did_not_name_is_refused(monkeypatch):
     monkeypatch.setattr(mechanism_section, "driven_inputs", lambda section: ("press_offset_m",))
     with pytest.raises(ScenarioError, match="drives 'finger_tilt_rad', which its module's driven_inputs does not name"):
         build_run_inputs(spec)
+
+
+def test_a_section_that_names_an_input_it_does_not_build_is_refused(monkeypatch):
+    from ebraille_sim.scenarios import mechanism_section
+    from ebraille_sim.scenarios.inputs import build_run_inputs
+    from ebraille_sim.scenarios.spec import load_scenario
+    spec = load_scenario("steady_90wpm")
+    spec = dataclasses.replace(spec, sections={"mechanism": M.validate_section("t", {"press_offset_m": 1e-3})})
+    names = mechanism_section.driven_inputs({})
+    monkeypatch.setattr(mechanism_section, "driven_inputs", lambda section: names + ("motor_jammed",))
+    with pytest.raises(ScenarioError, match="names 'motor_jammed' in driven_inputs but does not drive it"):
+        build_run_inputs(spec)

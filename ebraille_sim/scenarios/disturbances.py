@@ -564,7 +564,7 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
     bits = rng.bit_generator
     parent = bits.seed_seq
     rows = out or {}
-    out = {}
+    built: dict = {}
     for k, name in enumerate(KINDS):
         obj = section.get(name)
         if obj is None or not hasattr(obj, "inputs"):
@@ -572,20 +572,22 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
         seed = child_seed(parent, parent.n_children_spawned + k)
         child = type(rng)(type(bits)(seed=seed))
         for inp, (mode, arr) in obj.inputs(t_s, child, device).items():
-            if inp in out and mode == "add" and out[inp][0] == "add":
-                np.add(out[inp][1], arr, out=out[inp][1])      # the kinds return arrays of their own
+            if inp in built and mode == "add" and built[inp][0] == "add":
+                np.add(built[inp][1], arr, out=built[inp][1])  # the kinds return arrays of their own
             else:
-                out[inp] = (mode, arr)
+                built[inp] = (mode, arr)
     temp, drift = section.get("fsr_temperature"), section.get("fsr_drift")
     if temp is not None or drift is not None:
         alpha = device.fsr.temperature_coeff_per_k
         if drift is not None and alpha == 0.0:
             raise ScenarioError("[disturbances.fsr_drift] needs an FSR with a nonzero temperature_coeff_per_k "
                                 "(the creep offset is applied through the temperature input)")
-        offset = rows.get("fsr_temp_offset_k")
+        offset, preload = (rows.get(name) for name in ("fsr_temp_offset_k", "est_creep_preload"))
         offset = np.empty(len(t_s)) if offset is None else offset
-        preload = (rows.get("est_creep_preload") if "est_creep_preload" in rows else np.empty(len(t_s))) \
-            if drift is not None else None
+        if drift is None:
+            preload = None
+        elif preload is None:
+            preload = np.empty(len(t_s))
         # sample by sample, so in chunks: a long run's temporaries stay at the chunk's size
         for a in range(0, len(t_s), PROFILE_CHUNK):
             tc = t_s[a:a + PROFILE_CHUNK]
@@ -596,10 +598,10 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
                 scale = (1.0 + alpha * dtemp) * drift.factor(tc, device.fsr)
                 offset[a:a + PROFILE_CHUNK] = (scale - 1.0) / alpha
                 preload[a:a + PROFILE_CHUNK] = drift.factor(tc, FIRMWARE_FSR) - 1.0
-        out["fsr_temp_offset_k"] = ("set", offset)
+        built["fsr_temp_offset_k"] = ("set", offset)
         if preload is not None:
-            out["est_creep_preload"] = ("set", preload)
-    return out
+            built["est_creep_preload"] = ("set", preload)
+    return built
 
 
 def parameter_table() -> list[tuple[str, str, object, str, str, str]]:

@@ -360,9 +360,10 @@ def input_profiles(spec: ScenarioSpec, t_s: np.ndarray, rng: np.random.Generator
                 r[...] = arr
             del arr
             touched.add(name)
-    if len(touched) < len(declared):                  # a section drove less than it named: no empty rows
-        table = table[[j for j, name in enumerate(declared) if name in touched]]
-        rows = {name: table[j] for j, name in enumerate(n for n in declared if n in touched)}
+    if len(touched) < len(declared):
+        missing = sorted(set(declared) - touched)[0]
+        raise ScenarioError(f"{spec.source}: a section's module names {missing!r} in driven_inputs but does "
+                            f"not drive it")
     return rows
 
 
