@@ -64,6 +64,23 @@ reading (1.00), three of eight readers hunting.  The observer cannot help where 
 nor against the estimator's own errors (FSR hysteresis and creep pass into the force as they
 do with any feedback on the estimate).
 
+**Hold damping (off by default).**  The current gives the board's speed as well, with no
+sensor in the way: the back-EMF ``e = u - R_n i`` (V; ``kE g`` times the board speed, the
+winding's inductive drop outside the band as above), through a first-order filter of
+``hold_speed_filter_s``.  On a stiff pulp a step to a new setpoint overshoots and the force
+then rings at about 20 Hz through the hold, because the force estimate reaches the loop some
+10 ms late (on the 1 kHz estimator path: the anti-alias filter, the running median and the
+Wiener model's own lag) and the loop's phase runs out there.  Velocity feedback,
+``u -= kv e``, damps that ring at the board, where it starts, without the estimator's delay.
+It is applied only in a hold: once the setpoint has not changed for ``hold_after_step_s`` and
+the estimate is within ``hold_band_fraction`` of it.  Outside a hold it would slow every step
+(the board has to move to change the force) and fight a finger pressing the board away.  The
+term is added after the PID's clamp and anti-windup, which do not see it: in a hold it is a
+fraction of a volt.  Gains file ``docs/figures/benchmark_fast/pid_dob_hold.json`` (``kv``
+0.5 on ``pid_dob_fast_8.json``'s gains) with the 1 kHz estimator path and the hysteresis
+compensation's turn test (docs/benchmark.md); the study that chose it is
+``python docs/make_dob_tuning.py --hold-damping``.
+
 Examples
 --------
 >>> from controllers import make
@@ -133,6 +150,14 @@ class DOBConfig(PIDConfig):
     ----------
     q_time_constant_s : float
         ``tau`` of ``Q(s) = 1/(tau s + 1)``, s; in (0, 1].
+    hold_damping_v_per_v : float
+        ``kv`` of the hold damping ``-kv e`` on the back-EMF ``e``, V/V; in [0, 5]; 0 is off.
+    hold_speed_filter_s : float
+        Time constant of the back-EMF's first-order filter, s; in (0, 1].
+    hold_after_step_s : float
+        Time without a setpoint change before the damping applies, s; in [0, 10].
+    hold_band_fraction : float
+        The damping applies while ``|estimate - setpoint| < hold_band_fraction * setpoint``; in (0, 1].
     compensation_fraction : float
         ``f``: share of the estimated disturbance added to the command; in [0, 1).
     max_compensation_v : float
@@ -151,9 +176,18 @@ class DOBConfig(PIDConfig):
     q_time_constant_s: float = 0.003
     compensation_fraction: float = 0.66
     max_compensation_v: float = 3.0
+    hold_damping_v_per_v: float = 0.0
+    hold_speed_filter_s: float = 0.001
+    hold_after_step_s: float = 0.032
+    hold_band_fraction: float = 0.2
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        for name, lo, hi, lo_open in (("hold_damping_v_per_v", 0.0, 5.0, False),
+                                      ("hold_speed_filter_s", 0.0, 1.0, True),
+                                      ("hold_after_step_s", 0.0, 10.0, False),
+                                      ("hold_band_fraction", 0.0, 1.0, True)):
+            object.__setattr__(self, name, check_number(name, getattr(self, name), lo, hi, lo_open=lo_open))
         object.__setattr__(self, "q_time_constant_s",
                            check_number("q_time_constant_s", self.q_time_constant_s, 0.0, 1.0, lo_open=True))
         object.__setattr__(self, "compensation_fraction",
@@ -184,6 +218,9 @@ class DOBPID:
     disturbance_v : float
         The estimate ``d_hat`` after the last update, V (the command is ``u_pid + f d_hat``,
         clamped).
+    back_emf_v : float
+        The filtered back-EMF ``u - R_n i`` after the last update, V (read only when the hold
+        damping is on).
     """
 
     name: str = "pid_dob"
@@ -196,6 +233,10 @@ class DOBPID:
         self._inv_tt = tracking_gain_per_s(config.effective_tracking_time_s)
         self._core = PIDCore()
         self.disturbance_v = 0.0
+        self.back_emf_v = 0.0
+        self._command_v = 0.0
+        self._setpoint_n = 0.0
+        self._since_step_s = 0.0
 
     @property
     def config(self) -> DOBConfig:
@@ -213,9 +254,9 @@ class DOBPID:
         """Bumpless start from ``command_v``.
 
         The observer starts from the drive at rest holding ``command_v`` (``d_hat = command_v``,
-        the current ``command_v / R_n``), the PID's integrator from the rest of the command: the
-        first ``update`` with the same force and setpoint and that current (or none) returns
-        ``command_v``, clamped to the PID's output range.
+        the current ``command_v / R_n``, no back-EMF, in a hold), the PID's integrator from the
+        rest of the command: the first ``update`` with the same force and setpoint and that
+        current (or none) returns ``command_v``, clamped to the PID's output range.
 
         Raises
         ------
@@ -226,6 +267,8 @@ class DOBPID:
         pid = self._cfg
         u0 = min(max(u0, pid.u_min_v), pid.u_max_v)
         self.disturbance_v = u0
+        self.back_emf_v = 0.0
+        self._command_v, self._setpoint_n, self._since_step_s = u0, r, math.inf
         self._core.reset(y, r, u0, pid.kp_v_per_n * pid.gain_scale(r), pid.setpoint_weight_p,
                          pid.setpoint_weight_d, self._compensation_v())
 
@@ -249,13 +292,24 @@ class DOBPID:
         """
         y, r, h = check_update_args(force_est_n, setpoint_n, dt_s)
         cfg = pid = self._cfg
+        kv = cfg.hold_damping_v_per_v
         if motor_current_a is not None:
             i_a = check_finite("motor_current_a", motor_current_a)
+            if kv > 0.0:
+                self.back_emf_v += -math.expm1(-h / cfg.hold_speed_filter_s) * (
+                    self._command_v - self._r_ohm * i_a - self.back_emf_v)
             self.disturbance_v += -math.expm1(-h / cfg.q_time_constant_s) * (self._r_ohm * i_a - self.disturbance_v)
         s = pid.gain_scale(r)
-        return self._core.step(y, r, h, pid.kp_v_per_n * s, pid.ki_v_per_ns * s, pid.kd_vs_per_n * s,
-                               pid.derivative_filter_s, pid.setpoint_weight_p, pid.setpoint_weight_d,
-                               self._inv_tt, self._compensation_v(), pid.u_min_v, pid.u_max_v)
+        u = self._core.step(y, r, h, pid.kp_v_per_n * s, pid.ki_v_per_ns * s, pid.kd_vs_per_n * s,
+                            pid.derivative_filter_s, pid.setpoint_weight_p, pid.setpoint_weight_d,
+                            self._inv_tt, self._compensation_v(), pid.u_min_v, pid.u_max_v)
+        if kv > 0.0:
+            self._since_step_s = 0.0 if r != self._setpoint_n else self._since_step_s + h
+            self._setpoint_n = r
+            if self._since_step_s >= cfg.hold_after_step_s and abs(y - r) < cfg.hold_band_fraction * r:
+                u = min(max(u - kv * self.back_emf_v, pid.u_min_v), pid.u_max_v)
+            self._command_v = u
+        return u
 
 
 def make_dob(**gains: Any) -> DOBPID:

@@ -60,6 +60,15 @@ scenarios' nominal device, its divider as shipped) and on the same device with t
 assembly calibration of the drawn readers
 (:func:`ebraille_sim.estimation.calibration.calibrate_device`), on this firmware, and writes
 ``nominal_calibration.json`` beside the gains file.
+
+``--hold-damping`` runs ``pid_dob_fast_8.json``'s gains on the 1 kHz firmware with the
+compensation, with and without the hold damping of ``controllers/dob.py`` (``kv`` of
+``pid_dob_hold.json``), behind the compensation's plain deadband at 1.5 and 0.5 LSB and behind
+its turn test (``hysteresis_turn_lsb`` 1.25 to 2), on eight scenarios and the 16 training
+readers; then the chosen design (turn test 1.75 LSB, damping on: ``pid_dob_hold.json`` on the
+benchmark's 1 kHz firmware) and the one before it (``pid_dob_fast_8.json``, plain deadband) on
+32 further readers of the training population that the choice never saw, per reader, and
+writes ``docs/figures/benchmark_fast/hold_damping.json`` (about 4 minutes on 2 cores).
 """
 from __future__ import annotations
 
@@ -323,75 +332,101 @@ def search_both_refresh(ex, n: int, folder: pathlib.Path) -> list:
 
 
 OUT_DAMPING = ROOT / "docs" / "figures" / "benchmark_fast" / "hold_damping.json"
+HOLD = ROOT / "docs" / "figures" / "benchmark_fast" / "pid_dob_hold.json"
+
+
+def _damping() -> dict:
+    from controllers.dob import DOBConfig
+    c = DOBConfig()
+    return {"kv_v_per_v": json.loads(HOLD.read_text())["gains"]["hold_damping_v_per_v"],
+            "after_step_s": c.hold_after_step_s, "near_fraction": c.hold_band_fraction,
+            "filter_s": c.hold_speed_filter_s}
+
+
+DAMPING = _damping()
+"""The hold damping of the study: ``pid_dob_hold.json``'s gain with the controller's defaults."""
 DAMPING_SCENARIOS = ("refresh_120wpm", "refresh_60wpm", "contact_onset", "pressing_90wpm", "everyday_session",
                      "tremor_90wpm", "reading_120wpm", "strap_slip")
-DAMPING = {"kv_v_per_v": 0.5, "after_step_s": 0.032, "near_fraction": 0.2, "filter_s": 0.001}
-"""The hold damping of the study (:func:`hold_damping`)."""
+HELD_OUT_SCENARIOS = ("refresh_120wpm", "pressing_90wpm", "everyday_session", "battery_sag", "contact_onset",
+                      "refresh_60wpm", "tremor_90wpm")
+HELD_OUT_READERS = range(16, 48)
+"""Readers 16 to 47 of the training population: drawn by the same seed after the 16 the
+study chose on (the draw is prefix-stable), never used to choose."""
 
 
 def hold_damping(task) -> tuple:
-    """One training episode of ``pid_dob_fast_8.json``'s gains with a damping term on the board
-    speed that the back-EMF gives (``--hold-damping``).
-
-    The term is ``-kv v``, ``v = u_prev - R_n i`` (the back-EMF, V) through a first-order filter,
-    applied only in the hold: once the setpoint has not changed for ``after_step_s`` and the
-    estimate is within ``near_fraction`` of it.  ``task`` = ``(scenario, reader, deadband_lsb,
-    kv)``; returns ``(scenario, reader, deadband_lsb, kv, in_band, char_in_band, peak)``.
+    """One training episode of ``pid_dob_fast_8.json``'s gains with the hold damping of
+    ``controllers/dob.py`` (``kv`` V/V on the back-EMF board speed, 0 for none) on the 1 kHz
+    firmware with the hysteresis compensation and the estimator settings ``est`` (deadband,
+    turn test).  ``task`` = ``(scenario, reader, n_readers, est, kv)``; returns ``(scenario,
+    reader, est, kv, in_band, char_in_band, peak)``.
     """
-    import math
-    from controllers.dob import DOBConfig, DOBPID
-    from ebraille_sim.physics.params import DeviceParams
+    from controllers import make
     from ebraille_sim.scenarios.runner import run_scenario
-    key, reader, deadband, kv = task
-    d = DAMPING
-    r_n = DeviceParams().motor.resistance_ohm
-
-    class HoldDamped(DOBPID):
-        def reset(self, **kw):
-            super().reset(**kw)
-            self.u, self.v, self.r_last, self.since = kw.get("command_v", 0.0), 0.0, kw["setpoint_n"], 1.0
-
-        def update(self, y, r, dt, motor_current_a=None):
-            if motor_current_a is not None:
-                self.v += -math.expm1(-dt / d["filter_s"]) * (self.u - r_n * motor_current_a - self.v)
-            self.since = 0.0 if r != self.r_last else self.since + dt
-            self.r_last = r
-            u = super().update(y, r, dt, motor_current_a)
-            if self.since >= d["after_step_s"] and abs(y - r) < d["near_fraction"] * r:
-                u = min(max(u - kv * self.v, self._cfg.u_min_v), self._cfg.u_max_v)
-            self.u = u
-            return u
-
+    key, reader, n, est, kv = task
     gains = json.loads(FAST_8.read_text())["gains"]
     sc = {s.key: s for s in bench.get_suite("standard").scenarios}[key]
     spec = bench._spec(sc.scenario, sc.duration_s, sc.wpm)
-    unit = sample_devices(TRAIN_SEED, 16, base=spec.device)[reader]
+    unit = sample_devices(TRAIN_SEED, n, base=spec.device)[reader]
     dev = dataclasses.replace(unit, estimator=replace_checked(unit.estimator, hysteresis_compensation=True,
-                                                              hysteresis_deadband_lsb=deadband, **FAST_ESTIMATOR))
-    res = run_scenario(spec, controller=HoldDamped(DOBConfig(**gains)), seed=spec.seed + 101 * (reader + SEED_SHIFT),
-                       device=dev)
+                                                              **dict(est), **FAST_ESTIMATOR))
+    res = run_scenario(spec, controller=make("pid_dob", **gains, hold_damping_v_per_v=kv),
+                       seed=spec.seed + 101 * (reader + SEED_SHIFT), device=dev)
     m = res.metrics
-    return key, reader, deadband, kv, m.get("in_band_fraction") or 0.0, m.get("char_in_band_fraction") or 0.0, \
+    return key, reader, est, kv, m.get("in_band_fraction") or 0.0, m.get("char_in_band_fraction") or 0.0, \
         m.get("peak_force_n") or 0.0
 
 
-def hold_damping_study(ex) -> dict:
-    """Worst training reader per scenario for the damping off and on, at the estimator's
-    deadband of 1.5 LSB (the firmware's) and 0.5 LSB."""
-    cases = [(db, kv) for db in (1.5, 0.5) for kv in (0.0, DAMPING["kv_v_per_v"])]
-    tasks = [(k, r, db, kv) for db, kv in cases for k in DAMPING_SCENARIOS for r in range(16)]
-    rows = list(ex.map(hold_damping, tasks))
+def _cases_summary(rows, cases, scenarios) -> list:
     out = []
-    for db, kv in cases:
-        worst = {}
-        for k in DAMPING_SCENARIOS:
-            mine = [r for r in rows if r[0] == k and r[2] == db and r[3] == kv]
+    for est, kv in cases:
+        worst, readers = {}, {}
+        for k in scenarios:
+            mine = [r for r in rows if r[0] == k and r[2] == est and r[3] == kv]
             worst[k] = [round(min(r[4] for r in mine), 3), round(min(r[5] for r in mine), 3)]
-        out.append({"deadband_lsb": db, "kv_v_per_v": kv, "worst_in_band_char": worst,
-                    "peak_force_n": round(max(r[6] for r in rows if r[2] == db and r[3] == kv), 3)})
-        print(f"deadband {db} LSB, kv {kv}: " + " ".join(f"{k}:{a:.2f}/{b:.2f}" for k, (a, b) in worst.items()),
-              flush=True)
-    return {"damping": DAMPING, "controller_gains": str(FAST_8.relative_to(ROOT)), "cases": out}
+            readers[k] = min(mine, key=lambda r: r[5] if k.startswith("refresh") else r[4])[1]
+        peak = max(r[6] for r in rows if r[2] == est and r[3] == kv)
+        out.append({"estimator": dict(est), "kv_v_per_v": kv, "worst_in_band_char": worst, "worst_reader": readers,
+                    "peak_force_n": round(peak, 3)})
+        print(f"{dict(est)}, kv {kv}: " + " ".join(f"{k}:{a:.2f}/{b:.2f}" for k, (a, b) in worst.items()), flush=True)
+    return out
+
+
+def hold_damping_study(ex) -> dict:
+    """Worst of the 16 training readers per scenario for the hold damping off and on, with the
+    plain deadband at 1.5 LSB (the firmware's) and 0.5 LSB and with the turn test at several
+    thresholds; then the chosen design (turn test 1.75 LSB, ``kv`` 0.5) against the shipped one
+    on 32 readers the study never chose on, per reader."""
+    plain = lambda db: (("hysteresis_deadband_lsb", db),)
+    turn = lambda lsb: (("hysteresis_turn_lsb", lsb),)
+    kv = DAMPING["kv_v_per_v"]
+    cases = [(plain(db), k) for db in (1.5, 0.5) for k in (0.0, kv)]
+    cases += [(turn(1.75), 0.0)] + [(turn(t), kv) for t in (1.25, 1.5, 1.75, 2.0)]
+    tasks = [(k, r, 16, est, v) for est, v in cases for k in DAMPING_SCENARIOS for r in range(16)]
+    rows = list(ex.map(hold_damping, tasks, chunksize=2))
+    out = _cases_summary(rows, cases, DAMPING_SCENARIOS)
+    chosen = [(plain(1.5), 0.0), (turn(1.75), kv)]
+    tasks = [(k, r, HELD_OUT_READERS.stop, est, v) for est, v in chosen for k in HELD_OUT_SCENARIOS
+             for r in HELD_OUT_READERS]
+    held = list(ex.map(hold_damping, tasks, chunksize=2))
+    per_reader = []
+    for est, v in chosen:
+        row = {"estimator": dict(est), "kv_v_per_v": v, "scenarios": {}}
+        for k in HELD_OUT_SCENARIOS:
+            col = 5 if k.startswith("refresh") else 4
+            vals = np.array([r[col] for r in held if r[0] == k and r[2] == est and r[3] == v])
+            worst = np.sort(vals)[:max(1, int(round(0.1 * vals.size)))]
+            row["scenarios"][k] = {"statistic": "char_in_band" if col == 5 else "in_band",
+                                   "worst": round(float(vals.min()), 3), "cvar10": round(float(worst.mean()), 3),
+                                   "median": round(float(np.median(vals)), 3),
+                                   "share_at_least_0.8": round(float(np.mean(vals >= 0.8)), 3),
+                                   "share_at_least_0.9": round(float(np.mean(vals >= 0.9)), 3),
+                                   "per_reader": [round(float(x), 3) for x in vals]}
+        per_reader.append(row)
+        print(f"held out {dict(est)}, kv {v}: " + " ".join(
+            f"{k}:{s['worst']:.2f}/{s['cvar10']:.2f}/{s['median']:.2f}" for k, s in row["scenarios"].items()), flush=True)
+    return {"damping": DAMPING, "controller_gains": str(FAST_8.relative_to(ROOT)), "cases": out,
+            "held_out": {"readers": [HELD_OUT_READERS.start, HELD_OUT_READERS.stop - 1], "designs": per_reader}}
 
 
 def main(argv=None) -> int:
@@ -406,7 +441,7 @@ def main(argv=None) -> int:
     ap.add_argument("--nominal-calibration", action="store_true",
                     help="reader 0 with its divider as shipped and calibrated like a drawn unit")
     ap.add_argument("--hold-damping", action="store_true",
-                    help="the 1 kHz path's gains with a back-EMF damping term in the hold, two deadbands")
+                    help="the 1 kHz path's gains with and without the hold damping, behind the deadband or the turn test")
     ap.add_argument("-j", "--jobs", type=int, default=2)
     args = ap.parse_args(argv)
     if args.hold_damping:

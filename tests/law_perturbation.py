@@ -64,6 +64,8 @@ LAWS = [
      ["test_inverse_hysteresis_retraces_the_input_wherever_the_output_moves"]),
     ("hysteresis compensation", "ebraille_sim/estimation/blockmodels.py", "hysteresis_compensated_v",
      ["test_hysteresis_compensation_reads_the_loading_branch"]),
+    ("hysteresis turn test", "ebraille_sim/estimation/blockmodels.py", "turn_tested_v",
+     ["test_turn_test_reads_slow_and_fast_reversals_and_not_noise"]),
     ("push force bound", "ebraille_sim/physics/limits.py", "push_force_bound_n",
      ["test_push_force_bound_is_eta_km_n_over_r_less_friction_plus_weight"]),
     ("current for a push force", "ebraille_sim/physics/limits.py", "current_for_push_force_a",

@@ -103,6 +103,10 @@ def test_bad_update_input_one_line(args, kwargs, match):
     ({"max_compensation_v": -1.0}, "max_compensation_v"),
     ({"kp_v_per_n": -1.0}, "kp_v_per_n"),
     ({"gain": 1.0}, "unknown key 'gain' in the gains of pid_dob"),
+    ({"hold_damping_v_per_v": -0.5}, "hold_damping_v_per_v"),
+    ({"hold_speed_filter_s": 0.0}, "hold_speed_filter_s"),
+    ({"hold_after_step_s": math.nan}, "hold_after_step_s"),
+    ({"hold_band_fraction": 0.0}, "hold_band_fraction"),
 ])
 def test_bad_config_one_line(gains, match):
     with pytest.raises(ValueError, match=match) as exc:
@@ -175,3 +179,52 @@ def test_a_loop_hunting_in_the_films_blind_stretch_keeps_its_reader(tmp_path):
     res = run_scenario(spec, controller=str(gains), seed=spec.seed + 101 * 60, device=dev, trace_every=None)
     assert res.supervisor["fault"] is None
     assert res.metrics["in_band_fraction"] > 0.95
+
+
+def _damped_pair(**hold):
+    gains = {"hold_damping_v_per_v": 0.5, **hold}
+    return controllers.make("pid_dob"), controllers.make("pid_dob", **gains)
+
+
+def test_hold_damping_subtracts_kv_times_the_filtered_back_emf_in_a_hold():
+    """In a hold the damped command is the undamped one less ``kv`` times the back-EMF ``u - R_n i``
+    (previous command, measured current) through its first-order filter; the PID itself is the
+    same (the two commands differ by exactly that term, sample after sample)."""
+    plain, damped = _damped_pair()
+    kv, tf, h = 0.5, 0.001, 1e-3
+    g = -math.expm1(-h / tf)
+    for c in (plain, damped):
+        c.reset(force_est_n=1.0, setpoint_n=1.0, command_v=0.4)
+    e, u_prev = 0.0, 0.4
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        y, i = 1.0 + 0.05 * rng.standard_normal(), 0.01 * rng.random()
+        up = plain.update(y, 1.0, h, motor_current_a=i)
+        ud = damped.update(y, 1.0, h, motor_current_a=i)
+        e += g * (u_prev - R_OHM * i - e)
+        assert damped.back_emf_v == pytest.approx(e, rel=1e-12, abs=1e-15)
+        assert ud == pytest.approx(up - kv * e, rel=1e-12, abs=1e-15)
+        u_prev = ud
+
+
+def test_hold_damping_waits_after_a_setpoint_change_and_outside_the_band():
+    """No damping for ``hold_after_step_s`` after the setpoint changes, nor while the estimate is
+    ``hold_band_fraction`` or more from the setpoint; with ``kv = 0`` never."""
+    plain, damped = _damped_pair()
+    off = controllers.make("pid_dob", hold_damping_v_per_v=0.0)
+    for c in (plain, damped, off):
+        c.reset(force_est_n=0.4, setpoint_n=0.4, command_v=0.2)
+    diffs = []
+    for k in range(60):
+        y = 0.4 if k == 0 else 0.95
+        up = plain.update(y, 1.0, 1e-3, motor_current_a=0.002)
+        ud = damped.update(y, 1.0, 1e-3, motor_current_a=0.002)
+        assert off.update(y, 1.0, 1e-3, motor_current_a=0.002) == up
+        diffs.append(ud != up)
+    assert not any(diffs[:32]) and all(diffs[32:])
+    plain, damped = _damped_pair()
+    for c in (plain, damped):
+        c.reset(force_est_n=1.0, setpoint_n=1.0, command_v=0.4)
+    for y in (1.25, 0.75, 1.3):                                  # 20 % or more off the setpoint
+        assert damped.update(y, 1.0, 1e-3, motor_current_a=0.002) == plain.update(y, 1.0, 1e-3,
+                                                                                  motor_current_a=0.002)

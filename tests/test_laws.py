@@ -673,40 +673,80 @@ def test_hysteresis_compensation_reads_the_loading_branch():
 
     nm = blockmodels.HYSTERESIS_MEDIAN - 1
     M0 = 2 + n
+    T0 = M0 + nm
 
     def state(x, side, v):
-        return np.array([v, x] + [x + side * w for w in widths] + [v] * nm)
+        return np.array([v, x] + [x + side * w for w in widths] + [v] * nm + [0.0, v, v])
 
     x = math.log(1.2 + F_EPS_N)
     v_load = volts(math.exp(x - h) - F_EPS_N)
     st = state(x, -1.0, v_load)
-    out = blockmodels.hysteresis_compensated_v(v_load, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
+    out = blockmodels.hysteresis_compensated_v(v_load, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
     assert out == pytest.approx(v_load, rel=1e-12)
     assert st[1] == pytest.approx(x, abs=1e-12)
     v_unload = volts(math.exp(x + h) - F_EPS_N)
     st = state(x, +1.0, v_unload)
-    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
+    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
     assert out == pytest.approx(v_load, rel=1e-12)
     assert v_unload > 1.05 * v_load
     # the film further down its unloading branch: the inversion moves the input with the output
     # (slope 1 on that branch) and the result is the loading branch 2 H lower
     v_down = v_unload - 3.0 * db
     st[M0:M0 + nm] = v_down                          # a sustained change: the median passes it
-    out3 = blockmodels.hysteresis_compensated_v(v_down, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
+    out3 = blockmodels.hysteresis_compensated_v(v_down, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
     vf = v_unload - 2.0 * db
     assert st[0] == vf
     f_down = (k * (fsr.divider_conductance_s(vf, r2, vs) - gso)) ** (1.0 / ex)
     assert st[1] == pytest.approx(math.log(f_down + F_EPS_N) - h, abs=1e-12)
     assert out3 == pytest.approx(volts(math.exp(math.log(f_down + F_EPS_N) - 2.0 * h) - F_EPS_N), rel=1e-12)
     st = state(x, +1.0, v_unload)
-    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso, r2, vs)
+    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
     # within the deadband the held voltage is used: the output does not move
-    out2 = blockmodels.hysteresis_compensated_v(v_unload + 0.9 * db, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso,
+    out2 = blockmodels.hysteresis_compensated_v(v_unload + 0.9 * db, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso,
                                                 r2, vs)
     assert out2 == out and st[0] == v_unload
     # a railed or faulted divider passes unchanged
-    assert blockmodels.hysteresis_compensated_v(vs, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso, r2, vs) == vs
-    assert blockmodels.hysteresis_compensated_v(0.0, st, 0, 1, 2, M0, pp, 0, n, n, h, db, k, ex, gso, r2, vs) == 0.0
+    assert blockmodels.hysteresis_compensated_v(vs, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs) == vs
+    assert blockmodels.hysteresis_compensated_v(0.0, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs) == 0.0
+
+
+def test_turn_test_reads_slow_and_fast_reversals_and_not_noise():
+    """The hysteresis compensation's turn test (voltages in counts).  A fast rise is followed
+    within ``follow`` and, the 8-sample average lagging it by more than ``turn``, taken to end
+    in a turn on the next sample (output unchanged).  A slow fall of two counts, which the plain
+    deadband never reads, is then followed down along the average, ``max(v, a) + follow``; a
+    step fall of two counts outruns the average and is itself taken to end in a turn (not
+    read).  A code toggling does not ratchet the output below the toggle's mean, and a fall
+    beyond the plain swing from the turn is followed at once."""
+    db, fo, turn = 1.5, 0.5, 1.75
+    alpha = -math.expm1(-1.0 / 8.0)
+
+    def step(s, v):
+        y = blockmodels.turn_tested_v(v, v, s, 0, 1, db, fo, turn, alpha)
+        s[0] = y
+        return y
+
+    s = np.array([100.0, 0.0, 100.0, 100.0, 100.0])      # output, direction, average, extreme, turn
+    assert step(s, 110.0) == 109.5 and s[1] == 1.0 and s[3] == 110.0 and s[2] == 100.0 + 10.0 * alpha
+    assert step(s, 110.0) == 109.5 and s[1] == -1.0 and s[4] == 110.0
+    for _ in range(60):
+        assert step(s, 110.0) == 109.5 and s[1] == -1.0
+    plain = 110.0 - db
+    assert fsr.play(108.0, plain, db) == plain                  # the plain deadband never reads the fall
+    stepped = s.copy()
+    assert [step(stepped, 108.0) for _ in range(40)] == [109.5] * 40 and stepped[1] == 1.0
+    ramp = 110.0 - 2.0 * np.arange(1, 61) / 60.0
+    outs, avgs = [], []
+    for v in np.concatenate([ramp, np.full(60, 108.0)]):
+        outs.append(step(s, v))
+        avgs.append(s[2])
+    m = np.minimum.accumulate(np.maximum(np.concatenate([ramp, np.full(60, 108.0)]), avgs))
+    want = np.where(m < 109.5 - fo, m + fo, 109.5)
+    assert np.array(outs) == pytest.approx(want, abs=1e-12)
+    assert outs[0] == 109.5 and outs[-1] == pytest.approx(108.5, abs=1e-3) and s[1] == -1.0
+    lo = [step(s, 107.0 + (k % 2)) for k in range(1000)]
+    assert s[1] == -1.0 and min(lo) >= 107.5 + fo - 0.05
+    assert step(s, 104.0) == 104.5                              # beyond the plain swing from the turn
 
 
 def test_running_median_passes_a_ramp_delayed_and_removes_a_spike():

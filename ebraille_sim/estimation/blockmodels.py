@@ -97,11 +97,13 @@ HYSTERESIS_MEDIAN = 5
 """ADC samples in the hysteresis compensation's running median (odd)."""
 
 HYSTERESIS_COMP_SLOTS = ("comp_hyst_v", "comp_hyst_x") + tuple(f"comp_play_{j}" for j in range(N_PLAYS)) \
-    + tuple(f"comp_med_{j}" for j in range(HYSTERESIS_MEDIAN - 1))
+    + tuple(f"comp_med_{j}" for j in range(HYSTERESIS_MEDIAN - 1)) + ("comp_turn_dir", "comp_turn_avg_v", "comp_turn_ext_v", "comp_turn_at_v")
 """State slots of the firmware's hysteresis compensation: the voltage after its noise
 deadband (V), the last inverted operator input (ln N), its copy of the film's play
 operators (ln N), advanced by :func:`ebraille_sim.physics.fsr.inverse_hysteresis`, and the
-previous ADC voltages of its running median (V, newest first)."""
+previous ADC voltages of its running median (V, newest first); with the turn test, the
+direction the voltage is followed in (+1 rising, -1 falling, 0 none yet), the voltage's
+exponential average (V) and that average's extreme since the last turn (V)."""
 
 OWNED_STATE_SLOTS = ANTIALIAS_SLOTS + OUTPUT_SLOTS + TARE_SLOTS + FILTER_SLOTS + CREEP_COMP_SLOTS \
     + HYSTERESIS_COMP_SLOTS
@@ -1053,8 +1055,70 @@ def running_median_v(v, s, m0):
 
 
 @njit(cache=True, inline="always")
-def hysteresis_compensated_v(v, s, v0, x0, play0, m0, p, width0, weight0, n_plays, log_halfwidth, deadband_v,
-                             k_ohm, exponent, g_standoff_s, r2_ohm, supply_v):
+def turn_tested_v(v, vm, s, v0, t0, deadband_v, follow_v, turn_v, turn_alpha):
+    """The hysteresis compensation's voltage under the turn test (V): what the inverse operator
+    is given in place of the plain deadband's output.
+
+    The plain deadband (a play of half-width ``deadband_v`` on the median) cannot tell a small
+    real reversal from noise: the force relaxing by a few percent in a hold moves the voltage
+    back by less than its swing of ``2 deadband_v`` and is never read.  Here the voltage is
+    followed in one direction at a time (``s[t0]``: +1 rising, -1 falling, 0 not yet known),
+    and a move against it is a turn when either
+
+    * the median ``vm`` has moved back by ``2 deadband_v - follow_v`` from the output (the
+      plain deadband's swing of ``2 deadband_v`` from the peak), or
+    * the exponential average of the ADC voltage ``v`` (``s[t0+1]``, weight ``turn_alpha`` per
+      sample, about 0.1 count of noise at 0.4 count per sample) is ``turn_v`` behind the
+      median's extreme since the last turn (``s[t0+2]``).  At a standing voltage noise does
+      not give this.  A move that outruns the average, a press or a release faster than about
+      ``turn_v`` per average time constant, does, within a sample or two: the test takes the
+      end of every fast move for a turn.  That is the load's own behaviour: at a standing
+      board the pulp relaxes, so the force turns as soon as a press stops, by a few percent,
+      which the plain deadband never reads.  A move that goes on is read again once it
+      passes the plain swing or outruns the average the other way.
+
+    On a turn the output goes to within ``follow_v`` of the median (no nearer than it was)
+    and the turn's voltage is kept (``s[t0+3]``).  A move in the followed direction passes a
+    deadband of ``follow_v``: more than ``2 deadband_v`` from the turn the median itself,
+    within that the less advanced of the median and the average.  Within that stretch the
+    inverse operator is in the film's blind stretch, where any move reads as a large change of
+    force; bounding it by the average keeps the noise's extremes from ratcheting the output
+    away from the mean (at a standing 1.5 N the estimate is then the plain deadband's to
+    1 mN, ``tests/test_sensor_chain.py``).
+    """
+    a = s[t0 + 1] + turn_alpha * (v - s[t0 + 1])
+    s[t0 + 1] = a
+    d = s[t0]
+    y = s[v0]
+    at = s[t0 + 3]
+    back = 2.0 * deadband_v - follow_v
+    if d >= 0.0:
+        ext = vm if vm > s[t0 + 2] or d == 0.0 else s[t0 + 2]
+        w = vm if vm > at + 2.0 * deadband_v else min(vm, a)
+        if w > y + follow_v:
+            y = w - follow_v
+            d = 1.0
+        elif vm < y - back or (d > 0.0 and a < ext - turn_v):
+            y = min(y, vm + follow_v)
+            d, ext, at = -1.0, vm, vm
+    else:
+        ext = vm if vm < s[t0 + 2] else s[t0 + 2]
+        w = vm if vm < at - 2.0 * deadband_v else max(vm, a)
+        if w < y - follow_v:
+            y = w + follow_v
+        elif vm > y + back or a > ext + turn_v:
+            y = max(y, vm - follow_v)
+            d, ext, at = 1.0, vm, vm
+    s[t0 + 3] = at
+    s[t0] = d
+    s[t0 + 2] = ext
+    return y
+
+
+@njit(cache=True, inline="always")
+def hysteresis_compensated_v(v, s, v0, x0, play0, m0, t0, p, width0, weight0, n_plays, log_halfwidth,
+                             deadband_v, follow_v, turn_v, turn_alpha, k_ohm, exponent, g_standoff_s, r2_ohm,
+                             supply_v):
     """The divider voltage with the film's hysteresis branch replaced by its loading branch (V).
 
     The divider is calibrated by pressing monotonically, so the estimator's static map is
@@ -1077,7 +1141,11 @@ def hysteresis_compensated_v(v, s, v0, x0, play0, m0, p, width0, weight0, n_play
     """
     if not 0.0 < v < supply_v:
         return v
-    vf = play(running_median_v(v, s, m0), s[v0], deadband_v)
+    vm = running_median_v(v, s, m0)
+    if turn_v > 0.0:
+        vf = turn_tested_v(v, vm, s, v0, t0, deadband_v, follow_v, turn_v, turn_alpha)
+    else:
+        vf = play(vm, s[v0], deadband_v)
     x = s[x0]
     if vf != s[v0]:
         s[v0] = vf

@@ -474,6 +474,17 @@ class EstimatorParams(_Checked):
                                          "hysteresis compensation (the median removes single noisy samples; "
                                          "the creep compensation's transient after a fast press moves its "
                                          "voltage back by more than one count; docs/model.md)")
+    hysteresis_turn_lsb: float = _nn(0.0, "LSB", "[E] turn test of the hysteresis compensation: a slow reversal "
+                                     "is read once the voltage's exponential average is this many counts back "
+                                     "from the median's extreme since the last turn; 0 is off (the plain "
+                                     "deadband).  1.75 on the 1 kHz firmware of docs/benchmark.md, chosen on a "
+                                     "training population (docs/make_dob_tuning.py --hold-damping; "
+                                     "estimation.blockmodels.turn_tested_v)")
+    hysteresis_follow_lsb: float = _nn(0.5, "LSB", "[E] with the turn test, the deadband a move on in the "
+                                       "followed direction passes (at most hysteresis_deadband_lsb; a fast "
+                                       "reversal still needs the plain deadband's swing of twice that)")
+    hysteresis_turn_time_s: float = _pos(0.008, "s", "[E] time constant of the turn test's exponential "
+                                         "average: at 1 kHz and 0.4 LSB of noise its noise is about 0.1 LSB")
 
     def __post_init__(self):
         super().__post_init__()

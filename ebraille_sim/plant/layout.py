@@ -122,6 +122,7 @@ PARAM_NAMES = [
     "comp_reference_gain",
     # the estimator's hysteresis compensation (the device's nominal FSR)
     "est_hyst_comp", "comp_fsr_k_ohm", "comp_hyst_halfwidth", "comp_hyst_deadband_v",
+    "comp_hyst_follow_v", "comp_hyst_turn_v", "comp_turn_alpha",
     "seed",
 ] + [f"creep_a{j}" for j in range(N_CREEP)] + [f"comp_creep_a{j}" for j in range(N_CREEP)] \
   + [f"play_w{j}" for j in range(N_PLAYS)] + [f"play_weight{j}" for j in range(N_PLAYS)] \

@@ -161,7 +161,7 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     p[P.est_clamp] = 1.0 if e.clamp_nonnegative else 0.0
     p[P.est_nyquist_average] = 1.0 if e.nyquist_average else 0.0
     _pack_creep_compensation(p, e, dt_sensor)
-    _pack_hysteresis_compensation(p, e, c, s)
+    _pack_hysteresis_compensation(p, e, c, s, float(r.sensor_rate_hz))
     p[P.seed] = float(seed)
     return p
 
@@ -234,27 +234,28 @@ def _fill_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
     p[P.comp_reference_gain] = creep_gain(e.creep_reference_hold_s, nominal)
 
 
-def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr) -> None:
+def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr, sensor_rate_hz: float) -> None:
     """The estimator's hysteresis compensation: on/off; play operators of the nominal FSR's
     exponent (:data:`~ebraille_sim.estimation.blockmodels.FIRMWARE_FSR`, whose resistance at 1 N is packed too and whose exponent and
     stand-off are packed with the creep compensation) with the loop the estimator was given,
     or, when it was given none, the unit's loop as measured at assembly
-    (:func:`ebraille_sim.estimation.calibration.measured_hysteresis_fraction`); and the noise
-    deadband in volts.  Given the loop, the slots depend only on the estimator and the ADC's
-    LSB: they are computed once per combination."""
+    (:func:`ebraille_sim.estimation.calibration.measured_hysteresis_fraction`); the noise
+    deadband, the turn test's threshold and following deadband in volts and its average's weight
+    per sensor sample.  Given the loop, the slots depend only on the estimator, the ADC's LSB and
+    the sensor rate: they are computed once per combination."""
     h = e.hysteresis_fraction
     if h is None:
         h = measured_hysteresis_fraction(fsr) if e.hysteresis_compensation else FIRMWARE_FSR.hysteresis_fraction
-    slots, values = _hysteresis_compensation_slots(e, float(circuit.adc_lsb_v), h)
+    slots, values = _hysteresis_compensation_slots(e, float(circuit.adc_lsb_v), h, sensor_rate_hz)
     p[slots] = values
 
 
 @functools.lru_cache(maxsize=256)
-def _hysteresis_compensation_slots(e, adc_lsb_v: float, h) -> tuple[np.ndarray, np.ndarray]:
-    return _cached_slots(_fill_hysteresis_compensation, e, adc_lsb_v, h)
+def _hysteresis_compensation_slots(e, adc_lsb_v: float, h, sensor_rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    return _cached_slots(_fill_hysteresis_compensation, e, adc_lsb_v, h, sensor_rate_hz)
 
 
-def _fill_hysteresis_compensation(p: np.ndarray, e, adc_lsb_v: float, h) -> None:
+def _fill_hysteresis_compensation(p: np.ndarray, e, adc_lsb_v: float, h, sensor_rate_hz: float) -> None:
     nominal = FIRMWARE_FSR
     p[P.est_hyst_comp] = 1.0 if e.hysteresis_compensation else 0.0
     widths, weights = play_widths(dataclasses.replace(nominal, hysteresis_fraction=h))
@@ -264,6 +265,9 @@ def _fill_hysteresis_compensation(p: np.ndarray, e, adc_lsb_v: float, h) -> None
     p[P.comp_hyst_halfwidth] = sum(w * x for w, x in zip(weights, widths))
     p[P.comp_fsr_k_ohm] = nominal.resistance_at_1n_ohm
     p[P.comp_hyst_deadband_v] = e.hysteresis_deadband_lsb * adc_lsb_v
+    p[P.comp_hyst_turn_v] = e.hysteresis_turn_lsb * adc_lsb_v
+    p[P.comp_hyst_follow_v] = min(e.hysteresis_follow_lsb, e.hysteresis_deadband_lsb) * adc_lsb_v
+    p[P.comp_turn_alpha] = -math.expm1(-1.0 / (e.hysteresis_turn_time_s * sensor_rate_hz))
 
 
 @functools.lru_cache(maxsize=64)
@@ -366,6 +370,9 @@ def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None
     s[S.fsr_voltage_v] = v_read
     s[S.tare_v] = v_read if device.estimator.tare_at_start else 0.0
     s[S.comp_hyst_v] = v_read
+    s[S.comp_turn_avg_v] = v_read
+    s[S.comp_turn_ext_v] = v_read
+    s[S.comp_turn_at_v] = v_read
     s[_COMP_MEDIAN_SLOTS] = v_read
     s[S.comp_hyst_x] = lf
     s[_COMP_PLAY_STATE_SLOTS] = lf

@@ -207,6 +207,9 @@ class EstimatorSpec:
     hysteresis_compensation: bool | None = _key(None, "-", "bool")
     hysteresis_fraction: float | None = _key(None, "-", "float", lo=0, hi=1, hi_open=True)
     hysteresis_deadband_lsb: float | None = _key(None, "LSB", "float", lo=0, hi=1e3)
+    hysteresis_turn_lsb: float | None = _key(None, "LSB", "float", lo=0, hi=1e3)
+    hysteresis_follow_lsb: float | None = _key(None, "LSB", "float", lo=0, hi=1e3)
+    hysteresis_turn_time_s: float | None = _key(None, "s", "float", lo=0, hi=10, lo_open=True)
 
 
 @dataclass(frozen=True)
@@ -381,7 +384,10 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
                                        ("creep_reference_hold_s", "creep_reference_hold_s"),
                                        ("hysteresis_compensation", "hysteresis_compensation"),
                                        ("hysteresis_fraction", "hysteresis_fraction"),
-                                       ("hysteresis_deadband_lsb", "hysteresis_deadband_lsb")) if k1 in est})
+                                       ("hysteresis_deadband_lsb", "hysteresis_deadband_lsb"),
+                                       ("hysteresis_turn_lsb", "hysteresis_turn_lsb"),
+                                       ("hysteresis_follow_lsb", "hysteresis_follow_lsb"),
+                                       ("hysteresis_turn_time_s", "hysteresis_turn_time_s")) if k1 in est})
         if "model" in est and not est["model"].startswith("paper:"):
             mp = pathlib.Path(est["model"])
             if not mp.is_absolute():
