@@ -76,7 +76,9 @@ It is applied only in a hold: once the setpoint has not changed for ``hold_after
 the estimate is within ``hold_band_fraction`` of it.  Outside a hold it would slow every step
 (the board has to move to change the force) and fight a finger pressing the board away.  The
 term is added after the PID's clamp and anti-windup, which do not see it: in a hold it is a
-fraction of a volt.  Gains file ``docs/figures/benchmark_fast/pid_dob_hold.json`` (``kv``
+fraction of a volt.  The previous command is taken as the voltage applied: where the drive
+cannot apply it (a sagging cell below the command) the back-EMF reads high and the damping
+takes off more than the board's speed asks.  Gains file ``docs/figures/benchmark_fast/pid_dob_hold.json`` (``kv``
 0.5 on ``pid_dob_fast_8.json``'s gains) with the 1 kHz estimator path and the hysteresis
 compensation's turn test (docs/benchmark.md); the study that chose it is
 ``python docs/make_dob_tuning.py --hold-damping``.
