@@ -352,3 +352,10 @@ def test_turn_test_reads_a_relaxation_the_deadband_holds_and_keeps_a_standing_fo
     assert reads[1.75][0] < 1.03
     assert abs(reads[1.75][1] - reads[0.0][1]) < 0.006
     assert reads[1.75][2] <= max(reads[0.0][2], 0.001)
+
+
+def test_turn_test_refuses_a_follow_deadband_wider_than_the_deadband_in_one_line():
+    EstimatorParams(hysteresis_deadband_lsb=0.3)                      # turn test off: not read
+    with pytest.raises(ValueError, match="hysteresis_follow_lsb = 0.5 must not exceed") as exc:
+        EstimatorParams(hysteresis_turn_lsb=1.75, hysteresis_deadband_lsb=0.3)
+    assert "\n" not in str(exc.value)

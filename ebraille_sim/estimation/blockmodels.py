@@ -101,9 +101,10 @@ HYSTERESIS_COMP_SLOTS = ("comp_hyst_v", "comp_hyst_x") + tuple(f"comp_play_{j}" 
 """State slots of the firmware's hysteresis compensation: the voltage after its noise
 deadband (V), the last inverted operator input (ln N), its copy of the film's play
 operators (ln N), advanced by :func:`ebraille_sim.physics.fsr.inverse_hysteresis`, and the
-previous ADC voltages of its running median (V, newest first); with the turn test, the
-direction the voltage is followed in (+1 rising, -1 falling, 0 none yet), the voltage's
-exponential average (V) and that average's extreme since the last turn (V)."""
+previous ADC voltages of its running median (V, newest first); with the turn test
+(:func:`turn_tested_v`), the direction the voltage is followed in (+1 rising, -1 falling, 0 none
+yet), the voltage's exponential average (V), the median's extreme since the last turn (V) and
+the median at that turn (V)."""
 
 OWNED_STATE_SLOTS = ANTIALIAS_SLOTS + OUTPUT_SLOTS + TARE_SLOTS + FILTER_SLOTS + CREEP_COMP_SLOTS \
     + HYSTERESIS_COMP_SLOTS
@@ -1084,7 +1085,7 @@ def turn_tested_v(v, vm, s, v0, t0, deadband_v, follow_v, turn_v, turn_alpha):
     inverse operator is in the film's blind stretch, where any move reads as a large change of
     force; bounding it by the average keeps the noise's extremes from ratcheting the output
     away from the mean (at a standing 1.5 N the estimate is then the plain deadband's to
-    1 mN, ``tests/test_sensor_chain.py``).
+    3 mN, ``tests/test_sensor_chain.py``).
     """
     a = s[t0 + 1] + turn_alpha * (v - s[t0 + 1])
     s[t0 + 1] = a

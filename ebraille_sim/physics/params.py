@@ -491,6 +491,9 @@ class EstimatorParams(_Checked):
         h = self.hysteresis_fraction
         if h is not None and not (isinstance(h, (int, float)) and 0.0 <= h < 1.0):
             raise ValueError(f"EstimatorParams.hysteresis_fraction = {h!r} must be None or in [0, 1)")
+        if self.hysteresis_turn_lsb > 0.0 and self.hysteresis_follow_lsb > self.hysteresis_deadband_lsb:
+            raise ValueError(f"EstimatorParams.hysteresis_follow_lsb = {self.hysteresis_follow_lsb!r} must not exceed "
+                             f"hysteresis_deadband_lsb = {self.hysteresis_deadband_lsb!r} with the turn test on")
 
 
 @dataclass(frozen=True)

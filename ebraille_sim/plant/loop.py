@@ -266,7 +266,7 @@ def _fill_hysteresis_compensation(p: np.ndarray, e, adc_lsb_v: float, h, sensor_
     p[P.comp_fsr_k_ohm] = nominal.resistance_at_1n_ohm
     p[P.comp_hyst_deadband_v] = e.hysteresis_deadband_lsb * adc_lsb_v
     p[P.comp_hyst_turn_v] = e.hysteresis_turn_lsb * adc_lsb_v
-    p[P.comp_hyst_follow_v] = min(e.hysteresis_follow_lsb, e.hysteresis_deadband_lsb) * adc_lsb_v
+    p[P.comp_hyst_follow_v] = e.hysteresis_follow_lsb * adc_lsb_v
     p[P.comp_turn_alpha] = -math.expm1(-1.0 / (e.hysteresis_turn_time_s * sensor_rate_hz))
 
 
