@@ -83,6 +83,18 @@ takes off more than the board's speed asks.  Gains file ``docs/figures/benchmark
 compensation's turn test (docs/benchmark.md); the study that chose it is
 ``python docs/make_dob_tuning.py --hold-damping``.
 
+**Refresh learning (off by default).**  In refresh reading every character is pressed, held
+and released again, and the loop meets each press with the same estimate delay: the force
+sags through the hold while the estimate still shows the press, or a stiff pulp rings.  With
+``refresh_learning_gain`` > 0 the controller recognises the repeated press from the setpoint
+(:mod:`controllers.refresh`) and adds a learned correction to the reference its PID tracks,
+dwell after dwell; while the pattern is recognised the hold damping uses
+``refresh_hold_damping_v_per_v`` (a press that has just stopped rings; a hold in steady reading
+has a finger moving the board, which strong damping would fight).  Without a recognised
+pattern the controller is exactly the one without learning.  Gains file
+``docs/figures/benchmark_fast/pid_dob_learn.json`` (``pid_dob_hold.json`` with gain 0.25 and
+``kv`` 2 in refresh); the study is ``python docs/make_dob_tuning.py --refresh-learning``.
+
 Examples
 --------
 >>> from controllers import make
@@ -104,6 +116,7 @@ from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N
 
 from controllers.base import check_reset_args, check_update_args
 from controllers.pid import DEFAULT_PID, PIDConfig, PIDCore, pulp_stiffness_n_per_m, tracking_gain_per_s
+from controllers.refresh import RefreshLearner, RefreshLearning
 
 __all__ = ["DOBConfig", "DOBPID", "DEFAULT_DOB", "NominalPlant", "make_dob"]
 
@@ -160,6 +173,16 @@ class DOBConfig(PIDConfig):
         Time without a setpoint change before the damping applies, s; in [0, 10].
     hold_band_fraction : float
         The damping applies while ``|estimate - setpoint| < hold_band_fraction * setpoint``; in (0, 1].
+    refresh_learning_gain : float
+        ``gamma`` of the refresh learning (:mod:`controllers.refresh`); in [0, 1]; 0 is off.
+    refresh_learning_lead_s, refresh_learning_smoothing_s, refresh_learning_after_s : float
+        Its lead, the half-width of its moving average and the time after each press's rise
+        from which it learns, s (:class:`controllers.refresh.RefreshLearning`).
+    refresh_learning_limit_fraction : float
+        Bound on its correction, a fraction of the high setpoint; in (0, 1].
+    refresh_hold_damping_v_per_v : float or None
+        ``kv`` of the hold damping while the refresh pattern is recognised, V/V; in [0, 5];
+        None keeps ``hold_damping_v_per_v``.
     compensation_fraction : float
         ``f``: share of the estimated disturbance added to the command; in [0, 1).
     max_compensation_v : float
@@ -182,20 +205,48 @@ class DOBConfig(PIDConfig):
     hold_speed_filter_s: float = 0.001
     hold_after_step_s: float = 0.032
     hold_band_fraction: float = 0.2
+    refresh_learning_gain: float = 0.0
+    refresh_learning_lead_s: float = RefreshLearning.lead_s
+    refresh_learning_smoothing_s: float = RefreshLearning.smoothing_s
+    refresh_learning_after_s: float = RefreshLearning.after_s
+    refresh_learning_limit_fraction: float = RefreshLearning.limit_fraction
+    refresh_hold_damping_v_per_v: float | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
         for name, lo, hi, lo_open in (("hold_damping_v_per_v", 0.0, 5.0, False),
                                       ("hold_speed_filter_s", 0.0, 1.0, True),
                                       ("hold_after_step_s", 0.0, 10.0, False),
-                                      ("hold_band_fraction", 0.0, 1.0, True)):
+                                      ("hold_band_fraction", 0.0, 1.0, True),
+                                      ("refresh_learning_gain", 0.0, 1.0, False)):
             object.__setattr__(self, name, check_number(name, getattr(self, name), lo, hi, lo_open=lo_open))
+        if self.refresh_hold_damping_v_per_v is not None:
+            object.__setattr__(self, "refresh_hold_damping_v_per_v",
+                               check_number("refresh_hold_damping_v_per_v", self.refresh_hold_damping_v_per_v,
+                                            0.0, 5.0))
+        self.refresh_learning()   # checks the learning's own fields, one line each
         object.__setattr__(self, "q_time_constant_s",
                            check_number("q_time_constant_s", self.q_time_constant_s, 0.0, 1.0, lo_open=True))
         object.__setattr__(self, "compensation_fraction",
                            check_number("compensation_fraction", self.compensation_fraction, 0.0, 1.0, hi_open=True))
         object.__setattr__(self, "max_compensation_v",
                            check_number("max_compensation_v", self.max_compensation_v, 0.0, 12.0, lo_open=True))
+
+    def refresh_learning(self) -> RefreshLearning | None:
+        """The refresh learning's settings, or None when ``refresh_learning_gain`` is 0.
+
+        Raises
+        ------
+        ValueError
+            One line naming the ``refresh_learning_*`` field out of range.
+        """
+        fields = {"lead_s": self.refresh_learning_lead_s, "smoothing_s": self.refresh_learning_smoothing_s,
+                  "after_s": self.refresh_learning_after_s, "limit_fraction": self.refresh_learning_limit_fraction}
+        try:
+            settings = RefreshLearning(gain=self.refresh_learning_gain or 1.0, **fields)
+        except ValueError as exc:
+            raise ValueError(f"refresh_learning_{exc}") from None
+        return dataclasses.replace(settings, gain=self.refresh_learning_gain) if self.refresh_learning_gain else None
 
 
 DEFAULT_DOB = DOBConfig()
@@ -239,6 +290,11 @@ class DOBPID:
         self._command_v = 0.0
         self._setpoint_n = 0.0
         self._since_step_s = 0.0
+        learning = config.refresh_learning()
+        self.learner = RefreshLearner(learning) if learning is not None else None
+        kv, kv_refresh = config.hold_damping_v_per_v, config.refresh_hold_damping_v_per_v
+        self._kv_refresh = kv if kv_refresh is None or self.learner is None else kv_refresh
+        self._speed_read = max(kv, self._kv_refresh) > 0.0
 
     @property
     def config(self) -> DOBConfig:
@@ -271,6 +327,8 @@ class DOBPID:
         self.disturbance_v = u0
         self.back_emf_v = 0.0
         self._command_v, self._setpoint_n, self._since_step_s = u0, r, math.inf
+        if self.learner is not None:
+            self.learner.reset(setpoint_n=r)
         self._core.reset(y, r, u0, pid.kp_v_per_n * pid.gain_scale(r), pid.setpoint_weight_p,
                          pid.setpoint_weight_d, self._compensation_v())
 
@@ -295,17 +353,22 @@ class DOBPID:
         y, r, h = check_update_args(force_est_n, setpoint_n, dt_s)
         cfg = pid = self._cfg
         kv = cfg.hold_damping_v_per_v
+        r_loop = r
+        if self.learner is not None:
+            r_loop = r + self.learner.step(y, r, h)
+            if self.learner.active:
+                kv = self._kv_refresh
         if motor_current_a is not None:
             i_a = check_finite("motor_current_a", motor_current_a)
-            if kv > 0.0:
+            if self._speed_read:
                 self.back_emf_v += -math.expm1(-h / cfg.hold_speed_filter_s) * (
                     self._command_v - self._r_ohm * i_a - self.back_emf_v)
             self.disturbance_v += -math.expm1(-h / cfg.q_time_constant_s) * (self._r_ohm * i_a - self.disturbance_v)
-        s = pid.gain_scale(r)
-        u = self._core.step(y, r, h, pid.kp_v_per_n * s, pid.ki_v_per_ns * s, pid.kd_vs_per_n * s,
+        s = pid.gain_scale(r_loop)
+        u = self._core.step(y, r_loop, h, pid.kp_v_per_n * s, pid.ki_v_per_ns * s, pid.kd_vs_per_n * s,
                             pid.derivative_filter_s, pid.setpoint_weight_p, pid.setpoint_weight_d,
                             self._inv_tt, self._compensation_v(), pid.u_min_v, pid.u_max_v)
-        if kv > 0.0:
+        if self._speed_read:
             self._since_step_s = 0.0 if r != self._setpoint_n else self._since_step_s + h
             self._setpoint_n = r
             if self._since_step_s >= cfg.hold_after_step_s and abs(y - r) < cfg.hold_band_fraction * r:

@@ -429,6 +429,116 @@ def hold_damping_study(ex) -> dict:
             "held_out": {"readers": [HELD_OUT_READERS.start, HELD_OUT_READERS.stop - 1], "designs": per_reader}}
 
 
+LEARN = ROOT / "docs" / "figures" / "benchmark_fast" / "pid_dob_learn.json"
+OUT_LEARNING = ROOT / "docs" / "figures" / "benchmark_fast" / "refresh_learning.json"
+TURN_LSB = 1.75
+"""The compensation's turn test of the benchmark's 1 kHz firmware (``hysteresis_turn_lsb``)."""
+REFRESH = ("refresh_120wpm", "refresh_60wpm")
+LEARNING_SCENARIOS = REFRESH + ("contact_onset", "pressing_90wpm", "everyday_session", "tremor_90wpm",
+                                "reading_120wpm", "strap_slip", "battery_sag", "setpoint_steps")
+UNSEEN_READERS = range(48, 96)
+"""Readers 48 to 95 of the training population: never run while the refresh learning was
+designed (readers 16-47 were looked at while its first settings were explored)."""
+
+
+def hold_firmware(task) -> tuple:
+    """One episode of ``pid_dob_hold.json`` with the gains ``extra`` over it, on the 1 kHz
+    firmware with the compensation and its turn test.  ``task`` = ``(scenario, reader,
+    n_readers, extra)``; returns ``(scenario, reader, extra, in_band, char_in_band, peak)``."""
+    from controllers import make
+    from ebraille_sim.scenarios.runner import run_scenario
+    key, reader, n, extra = task
+    gains = {**json.loads(HOLD.read_text())["gains"], **dict(extra)}
+    sc = {s.key: s for s in bench.get_suite("standard").scenarios}[key]
+    spec = bench._spec(sc.scenario, sc.duration_s, sc.wpm)
+    unit = sample_devices(TRAIN_SEED, n, base=spec.device)[reader]
+    dev = dataclasses.replace(unit, estimator=replace_checked(unit.estimator, hysteresis_compensation=True,
+                                                              hysteresis_turn_lsb=TURN_LSB, **FAST_ESTIMATOR))
+    res = run_scenario(spec, controller=make("pid_dob", **gains), seed=spec.seed + 101 * (reader + SEED_SHIFT),
+                       device=dev, trace_every=None)
+    m = res.metrics
+    return key, reader, extra, m.get("in_band_fraction") or 0.0, m.get("char_in_band_fraction") or 0.0, \
+        m.get("peak_force_n") or 0.0
+
+
+def _population_stats(vals) -> dict:
+    vals = np.asarray(vals, dtype=float)
+    worst = np.sort(vals)[:max(1, int(round(0.1 * vals.size)))]
+    return {"worst": round(float(vals.min()), 3), "cvar10": round(float(worst.mean()), 3),
+            "median": round(float(np.median(vals)), 3), "share_at_least_0.8": round(float(np.mean(vals >= 0.8)), 3),
+            "share_at_least_0.9": round(float(np.mean(vals >= 0.9)), 3)}
+
+
+def _worst(rows, extra, key) -> float:
+    col = 4 if key.startswith("refresh") else 3
+    return min(r[col] for r in rows if r[0] == key and r[2] == extra)
+
+
+def refresh_learning_study(ex) -> dict:
+    """The refresh learning's settings, chosen on the 16 training readers, then checked.
+
+    1. lead 10 ms; gain 0.15 or 0.25, smoothing half-width 20, 25 or 35 ms, learning from 24 to
+       30 ms after each rise, the damping as in ``pid_dob_hold.json``: refresh_120wpm and
+       refresh_60wpm; the best is the largest worst reader of the two scenarios' char_in_band.
+    2. With those, ``refresh_hold_damping_v_per_v`` 0.5 (unchanged) to 2.5, chosen the same way.
+    3. The chosen design against ``pid_dob_hold.json`` on ten scenarios of the training readers
+       (away from refresh reading the commands are the same, so the numbers must be too).
+    4. Both on readers 16-95 (16-47 were looked at while the first settings were explored, 48-95
+       never), refresh reading for both, the other held-out scenarios once (they are the same).
+    """
+    grid = [(("refresh_learning_gain", g), ("refresh_learning_smoothing_s", sm), ("refresh_learning_after_s", a))
+            for a in (0.024, 0.026, 0.028, 0.030) for g in (0.15, 0.25) for sm in (0.020, 0.025, 0.035)]
+    rows = list(ex.map(hold_firmware, [(k, r, 16, e) for e in grid for k in REFRESH for r in range(16)], chunksize=2))
+    score = {e: min(_worst(rows, e, k) for k in REFRESH) for e in grid}
+    for e in grid:
+        print(dict(e), " ".join(f"{k}:{_worst(rows, e, k):.2f}" for k in REFRESH), flush=True)
+    best = max(grid, key=lambda e: score[e])
+    kvs = (0.5, 1.0, 1.5, 2.0, 2.5)
+    damped = [best + (("refresh_hold_damping_v_per_v", kv),) for kv in kvs]
+    rows_kv = list(ex.map(hold_firmware, [(k, r, 16, e) for e in damped for k in REFRESH for r in range(16)],
+                          chunksize=2))
+    for e in damped:
+        print(dict(e), " ".join(f"{k}:{_worst(rows_kv, e, k):.2f}" for k in REFRESH), flush=True)
+    chosen = max(damped, key=lambda e: min(_worst(rows_kv, e, k) for k in REFRESH))
+    designs = ((), chosen)
+    rows_all = list(ex.map(hold_firmware, [(k, r, 16, e) for e in designs for k in LEARNING_SCENARIOS
+                                           for r in range(16)], chunksize=2))
+    training = []
+    for e in designs:
+        worst = {k: [round(min(r[3] for r in rows_all if r[0] == k and r[2] == e), 3),
+                     round(min(r[4] for r in rows_all if r[0] == k and r[2] == e), 3)] for k in LEARNING_SCENARIOS}
+        peak = round(max(r[5] for r in rows_all if r[2] == e), 3)
+        training.append({"extra": dict(e), "worst_in_band_char": worst, "peak_force_n": peak})
+        print(dict(e), " ".join(f"{k}:{a:.2f}/{b:.2f}" for k, (a, b) in worst.items()), flush=True)
+    readers = range(HELD_OUT_READERS.start, UNSEEN_READERS.stop)
+    tasks = [(k, r, readers.stop, e) for e in designs for k in REFRESH for r in readers]
+    tasks += [(k, r, readers.stop, ()) for k in HELD_OUT_SCENARIOS if k not in REFRESH for r in readers]
+    held = list(ex.map(hold_firmware, tasks, chunksize=2))
+    checked = []
+    for name, span in (("readers 16-47 (looked at while exploring)", HELD_OUT_READERS),
+                       ("readers 48-95 (never run before)", UNSEEN_READERS)):
+        for e in designs:
+            row = {"readers": name, "extra": dict(e), "scenarios": {}}
+            for k in HELD_OUT_SCENARIOS:
+                src = e if k in REFRESH else ()
+                col = 4 if k in REFRESH else 3
+                vals = [r[col] for r in held if r[0] == k and r[2] == src and r[1] in span]
+                row["scenarios"][k] = {"statistic": "char_in_band" if k in REFRESH else "in_band",
+                                       **_population_stats(vals),
+                                       "below_0.8": {str(r[1]): round(r[col], 3) for r in held
+                                                     if r[0] == k and r[2] == src and r[1] in span and r[col] < 0.8}}
+            checked.append(row)
+            print(name, dict(e), " ".join(f"{k}:{v['worst']:.2f}/{v['cvar10']:.2f}/{v['median']:.2f}"
+                                          f"({v['share_at_least_0.8']:.2f})" for k, v in row["scenarios"].items()),
+                  flush=True)
+    return {"base": str(HOLD.relative_to(ROOT)), "turn_lsb": TURN_LSB,
+            "grid": [{"extra": dict(e), "worst_char": {k: round(_worst(rows, e, k), 3) for k in REFRESH}} for e in grid],
+            "damping": [{"extra": dict(e), "worst_char": {k: round(_worst(rows_kv, e, k), 3) for k in REFRESH}}
+                        for e in damped],
+            "chosen": dict(chosen), "training": training, "held_out": checked,
+            "peak_force_n_held_out": round(max(r[5] for r in held), 3)}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--search", type=int, default=0, metavar="N", help="run the random search of N candidates")
@@ -442,8 +552,23 @@ def main(argv=None) -> int:
                     help="reader 0 with its divider as shipped and calibrated like a drawn unit")
     ap.add_argument("--hold-damping", action="store_true",
                     help="the 1 kHz path's gains with and without the hold damping, behind the deadband or the turn test")
+    ap.add_argument("--refresh-learning", action="store_true",
+                    help="the refresh learning of pid_dob on the 1 kHz path: choose its settings, then check them")
     ap.add_argument("-j", "--jobs", type=int, default=2)
     args = ap.parse_args(argv)
+    if args.refresh_learning:
+        with ProcessPoolExecutor(args.jobs) as ex:
+            doc = refresh_learning_study(ex)
+        OUT_LEARNING.write_text(json.dumps({"training_population_seed": TRAIN_SEED, "scenario_seed_shift": SEED_SHIFT,
+                                            "estimator": {"hysteresis_compensation": True,
+                                                          "hysteresis_turn_lsb": TURN_LSB, **FAST_ESTIMATOR},
+                                            **doc}, indent=1) + "\n")
+        from controllers import make
+        shipped = make(str(LEARN)).config
+        same = all(getattr(shipped, k) == v for k, v in doc["chosen"].items())
+        print(f"wrote {OUT_LEARNING.relative_to(ROOT)}; {LEARN.relative_to(ROOT)} "
+              f"{'holds' if same else 'does NOT hold'} the chosen settings")
+        return 0
     if args.hold_damping:
         with ProcessPoolExecutor(args.jobs) as ex:
             doc = hold_damping_study(ex)
