@@ -93,7 +93,7 @@ dwell after dwell; while the pattern is recognised the hold damping uses
 has a finger moving the board, which strong damping would fight).  Without a recognised
 pattern the controller is exactly the one without learning.  Gains file
 ``docs/figures/benchmark_fast/pid_dob_learn.json`` (``pid_dob_hold.json`` with gain 0.25 and
-``kv`` 2 in refresh); the study is ``python docs/make_dob_tuning.py --refresh-learning``.
+``kv`` 1.5 in refresh); the study is ``python docs/make_dob_tuning.py --refresh-learning``.
 
 Examples
 --------
@@ -175,9 +175,12 @@ class DOBConfig(PIDConfig):
         The damping applies while ``|estimate - setpoint| < hold_band_fraction * setpoint``; in (0, 1].
     refresh_learning_gain : float
         ``gamma`` of the refresh learning (:mod:`controllers.refresh`); in [0, 1]; 0 is off.
-    refresh_learning_lead_s, refresh_learning_smoothing_s, refresh_learning_after_s : float
-        Its lead, the half-width of its moving average and the time after each press's rise
-        from which it learns, s (:class:`controllers.refresh.RefreshLearning`).
+    refresh_learning_lead_s : float
+        Its lead: the error seen this long after a sample corrects that sample, s; in [0, 0.2].
+    refresh_learning_smoothing_s : float
+        Half-width of its moving average over the correction, s; in [0, 0.2].
+    refresh_learning_after_s : float
+        It learns from this long after each rise of the setpoint on, s; in [0, 1].
     refresh_learning_limit_fraction : float
         Bound on its correction, a fraction of the high setpoint; in (0, 1].
     refresh_hold_damping_v_per_v : float or None

@@ -21,7 +21,7 @@ error ``r - y`` of the estimate in dwell ``j``, the reference offset for the nex
 
 * ``l`` (``lead_s``, 10 ms) is the lead: the error the estimate shows at ``k + l`` was caused
   about ``l`` earlier, so it is corrected there (the sensor chain's delay, docs/benchmark.md);
-* ``Q`` is a centred moving average of half-width ``smoothing_s`` (35 ms, window 71 samples at
+* ``Q`` is a centred moving average of half-width ``smoothing_s`` (25 ms, window 51 samples at
   1 kHz): the learning keeps the slow shape of the error (the sag through the hold) and leaves
   what rings faster to the loop and the hold damping: a learned correction at the loop's own
   ring frequency, where the closed loop's phase turns fast, was measured to grow instead of
@@ -87,7 +87,7 @@ class RefreshLearning:
     """
     gain: float
     lead_s: float = 0.010
-    smoothing_s: float = 0.035
+    smoothing_s: float = 0.025
     after_s: float = 0.028
     limit_fraction: float = 0.15
     edge_fraction: float = 0.05

@@ -217,7 +217,7 @@ def fig_library(summary):
     ax.set_xlim(0, 1)
     ax.grid(axis="x", lw=0.3)
     ax.legend(fontsize=7, loc="lower right")
-    ax.set_title("scenario library with the default PID (each scenario's seed)", fontsize=9)
+    ax.set_title("scenario library, each with its own controller and seed", fontsize=9)
     fig.tight_layout()
     fig.savefig(OUT / "library_metrics.png", dpi=100)
     plt.close(fig)

@@ -53,7 +53,7 @@ def test_learner_switches_on_at_the_second_equal_dwell_and_learns_the_high_level
     err[28:75] = 0.05
     table = np.zeros(1000)
     for start in (210, 310):                                    # learned at the 2nd and 3rd rises
-        learn_dwell(table, err, 100, 0.25, 10, 35, 0.15)
+        learn_dwell(table, err, 100, 0.25, 10, 25, 0.15)
         assert out[start:start + 100] == pytest.approx(table[:100], rel=1e-12, abs=1e-15)
     assert lr.active and np.max(out) > 0.0
 
@@ -165,6 +165,6 @@ def test_learning_holds_refresh_characters_a_plain_loop_loses():
     plain = run_scenario(spec, controller=controllers.make("pid_dob", **gains), seed=seed, device=dev,
                          trace_every=None).metrics["char_in_band_fraction"]
     learn = run_scenario(spec, controller=controllers.make("pid_dob", **gains, refresh_learning_gain=0.25,
-                                                           refresh_hold_damping_v_per_v=2.0),
+                                                           refresh_hold_damping_v_per_v=1.5),
                          seed=seed, device=dev, trace_every=None).metrics["char_in_band_fraction"]
     assert plain < 0.5 < 0.8 < learn

@@ -64,7 +64,7 @@ JSON_SCHEMA_PATH = "scenarios/scenario.schema.json"
 _SETTING = "scenario setting"
 
 _UNIT_SUFFIXES = (("_v_per_ns", "V/(N s)"), ("_vs_per_n", "V s/N"), ("_v_per_n", "V/N"),
-                  ("_n_per_s", "N/s"), ("_v_per_s", "V/s"), ("_ohm", "ohm"), ("_deg", "deg"),
+                  ("_n_per_s", "N/s"), ("_v_per_s", "V/s"), ("_v_per_v", "V/V"), ("_ohm", "ohm"), ("_deg", "deg"),
                   ("_hz", "Hz"), ("_s", "s"), ("_n", "N"), ("_v", "V"), ("_a", "A"), ("_m", "m"))
 """Unit of a key without unit metadata, from the suffix of its name (the project's naming rule)."""
 
