@@ -77,7 +77,9 @@ training readers (readers 0-47), ranked by the lower of the two scenarios' CVaR1
 char_in_band; then the chosen design and ``pid_dob_hold.json`` on ten scenarios of readers 0-15
 and on readers 48-191 (:func:`refresh_learning_study`), and writes
 ``docs/figures/benchmark_fast/refresh_learning.json`` and whether ``pid_dob_learn.json`` holds
-the chosen settings.
+the chosen settings.  ``--learning-holds`` runs ``pid_dob_learn.json`` on refresh_120wpm for
+readers 96-191 and writes the estimate's error against the force in the hold windows
+(``refresh_learning_holds.json``).
 """
 from __future__ import annotations
 
@@ -551,6 +553,35 @@ def refresh_learning_study(ex) -> dict:
             "peak_force_n_held_out": round(max(r[5] for r in held), 3)}
 
 
+OUT_LEARNING_HOLDS = ROOT / "docs" / "figures" / "benchmark_fast" / "refresh_learning_holds.json"
+
+
+def learning_hold_error(reader: int) -> dict:
+    """``pid_dob_learn.json`` on refresh_120wpm for one of readers 96-191: char_in_band, and over
+    the hold windows after the first 4 s the estimate's mean and RMS error against the true
+    force and the share of hold samples out of band."""
+    from controllers import make
+    from ebraille_sim.scenarios.inputs import refresh_phases
+    from ebraille_sim.scenarios.runner import run_scenario
+    sc = {s.key: s for s in bench.get_suite("standard").scenarios}["refresh_120wpm"]
+    spec = bench._spec(sc.scenario, sc.duration_s, sc.wpm)
+    n = CHECK_READERS[-1][1].stop
+    unit = sample_devices(TRAIN_SEED, n, base=spec.device)[reader]
+    dev = dataclasses.replace(unit, estimator=replace_checked(unit.estimator, hysteresis_compensation=True,
+                                                              hysteresis_turn_lsb=TURN_LSB, **FAST_ESTIMATOR))
+    res = run_scenario(spec, controller=make(str(LEARN)), seed=spec.seed + 101 * (reader + SEED_SHIFT), device=dev)
+    tr = res.trace
+    t = np.asarray(tr["t_s"])
+    f, fe, sp = (np.asarray(tr[k]) for k in ("force_true_n", "force_est_n", "setpoint_n"))
+    _, hold = refresh_phases(spec, res.schedule, t)
+    hold &= t > 4.0
+    e = fe[hold] - f[hold]
+    return {"reader": reader, "char_in_band": round(res.metrics["char_in_band_fraction"], 3),
+            "estimate_error_mean_n": round(float(e.mean()), 4), "estimate_error_rms_n": round(float(np.sqrt(np.mean(e * e))), 4),
+            "hold_out_of_band": round(float(np.mean(np.abs(f[hold] - sp[hold]) > spec.setpoint.band_fraction * sp[hold])), 3),
+            "film_hysteresis_fraction": round(unit.fsr.hysteresis_fraction, 4)}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--search", type=int, default=0, metavar="N", help="run the random search of N candidates")
@@ -566,8 +597,26 @@ def main(argv=None) -> int:
                     help="the 1 kHz path's gains with and without the hold damping, behind the deadband or the turn test")
     ap.add_argument("--refresh-learning", action="store_true",
                     help="the refresh learning of pid_dob on the 1 kHz path: choose its settings, then check them")
+    ap.add_argument("--learning-holds", action="store_true",
+                    help="pid_dob_learn.json on refresh_120wpm, readers 96-191: the estimate's error in the holds")
     ap.add_argument("-j", "--jobs", type=int, default=2)
     args = ap.parse_args(argv)
+    if args.learning_holds:
+        with ProcessPoolExecutor(args.jobs) as ex:
+            rows = list(ex.map(learning_hold_error, CHECK_READERS[-1][1], chunksize=4))
+        ok = [r for r in rows if r["char_in_band"] >= 0.8]
+        lost = [r for r in rows if r["char_in_band"] < 0.8]
+        rms = np.array([r["estimate_error_rms_n"] for r in rows])
+        summary = {"passing_rms_median_n": round(float(np.median([r["estimate_error_rms_n"] for r in ok])), 4),
+                   "passing_rms_range_n": [min(r["estimate_error_rms_n"] for r in ok),
+                                           max(r["estimate_error_rms_n"] for r in ok)],
+                   "lost": lost,
+                   "correlation_char_rms": round(float(np.corrcoef([r["char_in_band"] for r in rows], rms)[0, 1]), 3)}
+        print(json.dumps(summary, indent=1))
+        OUT_LEARNING_HOLDS.write_text(json.dumps({"controller": str(LEARN.relative_to(ROOT)), "scenario": "refresh_120wpm",
+                                                  "summary": summary, "rows": rows}, indent=1) + "\n")
+        print(f"wrote {OUT_LEARNING_HOLDS.relative_to(ROOT)}")
+        return 0
     if args.refresh_learning:
         with ProcessPoolExecutor(args.jobs) as ex:
             doc = refresh_learning_study(ex)
