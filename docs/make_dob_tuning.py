@@ -79,7 +79,10 @@ and on readers 48-191 (:func:`refresh_learning_study`), and writes
 ``docs/figures/benchmark_fast/refresh_learning.json`` and whether ``pid_dob_learn.json`` holds
 the chosen settings.  ``--learning-holds`` runs ``pid_dob_learn.json`` on refresh_120wpm for
 readers 96-191 and writes the estimate's error against the force in the hold windows
-(``refresh_learning_holds.json``).
+(``refresh_learning_holds.json``).  ``--learning-firmware`` runs ``pid_dob_learn.json`` on that
+firmware and on the same with a 100 Hz anti-alias cutoff and no Nyquist average
+(:data:`SHORT_DELAY`) over the learning's training readers, readers 96-191 and readers 192-287
+(:func:`learning_firmware_study`) and writes ``refresh_learning_firmware.json``.
 """
 from __future__ import annotations
 
@@ -582,6 +585,69 @@ def learning_hold_error(reader: int) -> dict:
             "film_hysteresis_fraction": round(unit.fsr.hysteresis_fraction, 4)}
 
 
+OUT_LEARNING_FIRMWARE = ROOT / "docs" / "figures" / "benchmark_fast" / "refresh_learning_firmware.json"
+SHORT_DELAY = (("antialias_cutoff_hz", 100.0), ("nyquist_average", False))
+"""The 1 kHz firmware with less delay before the estimator: a 100 Hz anti-alias cutoff (2.3 ms
+of low-frequency delay instead of 4.5 ms) and no Nyquist average (half a sample)."""
+FRESH_READERS = range(192, 288)
+"""Readers 192-287 of the training population: never run before the firmware comparison."""
+OTHER_SCENARIOS = tuple(k for k in LEARNING_SCENARIOS if k not in REFRESH)
+
+
+def learn_firmware(task) -> tuple:
+    """One episode of ``pid_dob_learn.json`` on the 1 kHz firmware of the benchmark with the
+    estimator settings ``est`` over it.  ``task`` = ``(scenario, reader, n_readers, est)``;
+    returns ``(scenario, reader, est, in_band, char_in_band, peak)``."""
+    from controllers import make
+    from ebraille_sim.scenarios.runner import run_scenario
+    key, reader, n, est = task
+    sc = {s.key: s for s in bench.get_suite("standard").scenarios}[key]
+    spec = bench._spec(sc.scenario, sc.duration_s, sc.wpm)
+    unit = sample_devices(TRAIN_SEED, n, base=spec.device)[reader]
+    settings = {"hysteresis_compensation": True, "hysteresis_turn_lsb": TURN_LSB, **FAST_ESTIMATOR, **dict(est)}
+    dev = dataclasses.replace(unit, estimator=replace_checked(unit.estimator, **settings))
+    res = run_scenario(spec, controller=make(str(LEARN)), seed=spec.seed + 101 * (reader + SEED_SHIFT), device=dev,
+                       trace_every=None)
+    m = res.metrics
+    return key, reader, est, m.get("in_band_fraction") or 0.0, m.get("char_in_band_fraction") or 0.0, \
+        m.get("peak_force_n") or 0.0
+
+
+def learning_firmware_study(ex) -> dict:
+    """``pid_dob_learn.json`` (settings chosen on the benchmark's 1 kHz firmware) on that firmware
+    and on :data:`SHORT_DELAY`: refresh reading on the 48 readers the settings were chosen on and
+    the other eight scenarios on readers 0-15; refresh reading on readers 96-191 (whose five lost
+    readers led to the comparison); and every held-out scenario on readers 192-287, never run
+    before."""
+    firmwares = ((), SHORT_DELAY)
+    groups = (("readers 0-47 (the learning's training readers; other scenarios 0-15)", REFRESH, LEARNING_TRAIN_READERS),
+              ("readers 0-47 (the learning's training readers; other scenarios 0-15)", OTHER_SCENARIOS, range(16)),
+              ("readers 96-191 (their lost readers led to the comparison)", REFRESH, CHECK_READERS[-1][1]),
+              ("readers 192-287 (never run before)", HELD_OUT_SCENARIOS, FRESH_READERS))
+    n = FRESH_READERS.stop
+    tasks = [(k, r, n, fw) for fw in firmwares for _, keys, span in groups for k in keys for r in span]
+    rows = list(ex.map(learn_firmware, tasks, chunksize=2))
+    out = []
+    for name in dict.fromkeys(g[0] for g in groups):
+        for fw in firmwares:
+            row = {"readers": name, "estimator": dict(fw), "scenarios": {}}
+            for gname, keys, span in groups:
+                if gname != name:
+                    continue
+                for k in keys:
+                    col = 4 if k in REFRESH else 3
+                    mine = [r for r in rows if r[0] == k and r[2] == fw and r[1] in span]
+                    row["scenarios"][k] = {"statistic": "char_in_band" if k in REFRESH else "in_band",
+                                           **_population_stats([r[col] for r in mine]),
+                                           "peak_force_n": round(max(r[5] for r in mine), 3),
+                                           "below_0.8": {str(r[1]): round(r[col], 3) for r in mine if r[col] < 0.8}}
+            out.append(row)
+            print(name, dict(fw), " ".join(f"{k}:{v['worst']:.2f}/{v['cvar10']:.2f}/{v['median']:.2f}"
+                                           f"({v['share_at_least_0.8']:.2f})" for k, v in row["scenarios"].items()),
+                  flush=True)
+    return {"controller": str(LEARN.relative_to(ROOT)), "short_delay": dict(SHORT_DELAY), "groups": out}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--search", type=int, default=0, metavar="N", help="run the random search of N candidates")
@@ -599,8 +665,20 @@ def main(argv=None) -> int:
                     help="the refresh learning of pid_dob on the 1 kHz path: choose its settings, then check them")
     ap.add_argument("--learning-holds", action="store_true",
                     help="pid_dob_learn.json on refresh_120wpm, readers 96-191: the estimate's error in the holds")
+    ap.add_argument("--learning-firmware", action="store_true",
+                    help="pid_dob_learn.json on the 1 kHz firmware and with less delay before the estimator")
     ap.add_argument("-j", "--jobs", type=int, default=2)
     args = ap.parse_args(argv)
+    if args.learning_firmware:
+        with ProcessPoolExecutor(args.jobs) as ex:
+            doc = learning_firmware_study(ex)
+        OUT_LEARNING_FIRMWARE.write_text(json.dumps({"training_population_seed": TRAIN_SEED,
+                                                     "scenario_seed_shift": SEED_SHIFT,
+                                                     "estimator": {"hysteresis_compensation": True,
+                                                                   "hysteresis_turn_lsb": TURN_LSB, **FAST_ESTIMATOR},
+                                                     **doc}, indent=1) + "\n")
+        print(f"wrote {OUT_LEARNING_FIRMWARE.relative_to(ROOT)}")
+        return 0
     if args.learning_holds:
         with ProcessPoolExecutor(args.jobs) as ex:
             rows = list(ex.map(learning_hold_error, CHECK_READERS[-1][1], chunksize=4))
