@@ -220,8 +220,7 @@ class DOBConfig(PIDConfig):
         for name, lo, hi, lo_open in (("hold_damping_v_per_v", 0.0, 5.0, False),
                                       ("hold_speed_filter_s", 0.0, 1.0, True),
                                       ("hold_after_step_s", 0.0, 10.0, False),
-                                      ("hold_band_fraction", 0.0, 1.0, True),
-                                      ("refresh_learning_gain", 0.0, 1.0, False)):
+                                      ("hold_band_fraction", 0.0, 1.0, True)):
             object.__setattr__(self, name, check_number(name, getattr(self, name), lo, hi, lo_open=lo_open))
         if self.refresh_hold_damping_v_per_v is not None:
             object.__setattr__(self, "refresh_hold_damping_v_per_v",
@@ -243,13 +242,14 @@ class DOBConfig(PIDConfig):
         ValueError
             One line naming the ``refresh_learning_*`` field out of range.
         """
-        fields = {"lead_s": self.refresh_learning_lead_s, "smoothing_s": self.refresh_learning_smoothing_s,
-                  "after_s": self.refresh_learning_after_s, "limit_fraction": self.refresh_learning_limit_fraction}
         try:
-            settings = RefreshLearning(gain=self.refresh_learning_gain or 1.0, **fields)
-        except ValueError as exc:
+            settings = RefreshLearning(gain=self.refresh_learning_gain, lead_s=self.refresh_learning_lead_s,
+                                       smoothing_s=self.refresh_learning_smoothing_s,
+                                       after_s=self.refresh_learning_after_s,
+                                       limit_fraction=self.refresh_learning_limit_fraction)
+        except ValueError as exc:               # RefreshLearning names its own field: add the prefix
             raise ValueError(f"refresh_learning_{exc}") from None
-        return dataclasses.replace(settings, gain=self.refresh_learning_gain) if self.refresh_learning_gain else None
+        return settings if settings.gain > 0.0 else None
 
 
 DEFAULT_DOB = DOBConfig()

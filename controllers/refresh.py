@@ -66,7 +66,8 @@ class RefreshLearning:
     Parameters
     ----------
     gain : float
-        ``gamma``, the share of a dwell's error added to the next dwell's reference; in (0, 1].
+        ``gamma``, the share of a dwell's error added to the next dwell's reference; in [0, 1]
+        (0 learns nothing: ``pid_dob`` then builds no learner).
     lead_s : float
         ``l``, s; in [0, 0.2].
     smoothing_s : float
@@ -94,7 +95,7 @@ class RefreshLearning:
     max_period_s: float = 1.0
 
     def __post_init__(self) -> None:
-        for name, lo, hi, lo_open, hi_open in (("gain", 0.0, 1.0, True, False),
+        for name, lo, hi, lo_open, hi_open in (("gain", 0.0, 1.0, False, False),
                                                ("lead_s", 0.0, 0.2, False, False),
                                                ("smoothing_s", 0.0, 0.2, False, False),
                                                ("after_s", 0.0, 1.0, False, False),
@@ -198,6 +199,5 @@ class RefreshLearner:
         k = self._k
         if k < 0:
             return 0.0
-        high = self._levels is None or r >= self._levels[1] - 1e-9
-        self._err[k] = (r - y) if (high and k >= self._after) else 0.0
+        self._err[k] = (r - y) if (r >= self._levels[1] - 1e-9 and k >= self._after) else 0.0
         return float(self.table[k]) if self.active else 0.0

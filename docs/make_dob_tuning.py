@@ -126,19 +126,31 @@ OUT = ROOT / "docs" / "figures" / "benchmark" / "dob_tuning.json"
 OUT_FAST = ROOT / "docs" / "figures" / "benchmark" / "dob_tuning_fast.json"
 
 
-def episode(task) -> tuple:
-    """``(scenario, reader, in_band, char_in_band, peak)`` of one training episode."""
+def training_run(key: str, reader: int, n: int, controller, estimator: dict, trace: bool = False):
+    """``run_scenario`` of the suite's scenario ``key`` for reader ``reader`` of ``n`` drawn from
+    the training population (seed :data:`TRAIN_SEED`, scenario seeds shifted by
+    :data:`SEED_SHIFT` readers), with the hysteresis compensation on and ``estimator``'s settings
+    over the unit's estimator; the trace is kept only with ``trace``."""
     from ebraille_sim.scenarios.runner import run_scenario
-    ctrl_file, key, reader, n, extra = task
     sc = {s.key: s for s in bench.get_suite("standard").scenarios}[key]
     spec = bench._spec(sc.scenario, sc.duration_s, sc.wpm)
-    dev = sample_devices(TRAIN_SEED, n, base=spec.device)[reader]
-    dev = dataclasses.replace(dev, estimator=replace_checked(dev.estimator, hysteresis_compensation=True,
-                                                             **dict(extra)))
-    res = run_scenario(spec, controller=ctrl_file, seed=spec.seed + 101 * (reader + SEED_SHIFT), device=dev)
+    unit = sample_devices(TRAIN_SEED, n, base=spec.device)[reader]
+    dev = dataclasses.replace(unit, estimator=replace_checked(unit.estimator, hysteresis_compensation=True,
+                                                              **estimator))
+    return run_scenario(spec, controller=controller, seed=spec.seed + 101 * (reader + SEED_SHIFT), device=dev,
+                        **({} if trace else {"trace_every": None}))
+
+
+def _fractions(res) -> tuple:
+    """``(in_band, char_in_band, peak)`` of a run, 0 where a metric is None."""
     m = res.metrics
-    return key, reader, m.get("in_band_fraction") or 0.0, m.get("char_in_band_fraction") or 0.0, \
-        m.get("peak_force_n") or 0.0
+    return m.get("in_band_fraction") or 0.0, m.get("char_in_band_fraction") or 0.0, m.get("peak_force_n") or 0.0
+
+
+def episode(task) -> tuple:
+    """``(scenario, reader, in_band, char_in_band, peak)`` of one training episode."""
+    ctrl_file, key, reader, n, extra = task
+    return (key, reader) + _fractions(training_run(key, reader, n, ctrl_file, dict(extra)))
 
 
 RANK_SCENARIOS = SCENARIOS + ("refresh_60wpm",)
@@ -376,19 +388,11 @@ def hold_damping(task) -> tuple:
     reader, est, kv, in_band, char_in_band, peak)``.
     """
     from controllers import make
-    from ebraille_sim.scenarios.runner import run_scenario
     key, reader, n, est, kv = task
     gains = json.loads(FAST_8.read_text())["gains"]
-    sc = {s.key: s for s in bench.get_suite("standard").scenarios}[key]
-    spec = bench._spec(sc.scenario, sc.duration_s, sc.wpm)
-    unit = sample_devices(TRAIN_SEED, n, base=spec.device)[reader]
-    dev = dataclasses.replace(unit, estimator=replace_checked(unit.estimator, hysteresis_compensation=True,
-                                                              **dict(est), **FAST_ESTIMATOR))
-    res = run_scenario(spec, controller=make("pid_dob", **gains, hold_damping_v_per_v=kv),
-                       seed=spec.seed + 101 * (reader + SEED_SHIFT), device=dev)
-    m = res.metrics
-    return key, reader, est, kv, m.get("in_band_fraction") or 0.0, m.get("char_in_band_fraction") or 0.0, \
-        m.get("peak_force_n") or 0.0
+    res = training_run(key, reader, n, make("pid_dob", **gains, hold_damping_v_per_v=kv),
+                       {**dict(est), **FAST_ESTIMATOR})
+    return (key, reader, est, kv) + _fractions(res)
 
 
 def _cases_summary(rows, cases, scenarios) -> list:
@@ -404,6 +408,20 @@ def _cases_summary(rows, cases, scenarios) -> list:
                     "peak_force_n": round(peak, 3)})
         print(f"{dict(est)}, kv {kv}: " + " ".join(f"{k}:{a:.2f}/{b:.2f}" for k, (a, b) in worst.items()), flush=True)
     return out
+
+
+def _population_stats(vals) -> dict:
+    """Worst, CVaR10 (the benchmark's: :func:`ebraille_sim.tools.benchmark.cvar_low`), median and the
+    shares at or above 0.8 and 0.9 of one statistic over readers."""
+    vals = np.asarray(vals, dtype=float)
+    return {"worst": round(float(vals.min()), 3), "cvar10": round(bench.cvar_low(vals), 3),
+            "median": round(float(np.median(vals)), 3), "share_at_least_0.8": round(float(np.mean(vals >= 0.8)), 3),
+            "share_at_least_0.9": round(float(np.mean(vals >= 0.9)), 3)}
+
+
+def _print_stats(label: str, scenarios: dict) -> None:
+    print(label, " ".join(f"{k}:{v['worst']:.2f}/{v['cvar10']:.2f}/{v['median']:.2f}({v['share_at_least_0.8']:.2f})"
+                          for k, v in scenarios.items()), flush=True)
 
 
 def hold_damping_study(ex) -> dict:
@@ -428,17 +446,11 @@ def hold_damping_study(ex) -> dict:
         row = {"estimator": dict(est), "kv_v_per_v": v, "scenarios": {}}
         for k in HELD_OUT_SCENARIOS:
             col = 5 if k.startswith("refresh") else 4
-            vals = np.array([r[col] for r in held if r[0] == k and r[2] == est and r[3] == v])
-            worst = np.sort(vals)[:max(1, int(round(0.1 * vals.size)))]
-            row["scenarios"][k] = {"statistic": "char_in_band" if col == 5 else "in_band",
-                                   "worst": round(float(vals.min()), 3), "cvar10": round(float(worst.mean()), 3),
-                                   "median": round(float(np.median(vals)), 3),
-                                   "share_at_least_0.8": round(float(np.mean(vals >= 0.8)), 3),
-                                   "share_at_least_0.9": round(float(np.mean(vals >= 0.9)), 3),
+            vals = [r[col] for r in held if r[0] == k and r[2] == est and r[3] == v]
+            row["scenarios"][k] = {"statistic": "char_in_band" if col == 5 else "in_band", **_population_stats(vals),
                                    "per_reader": [round(float(x), 3) for x in vals]}
         per_reader.append(row)
-        print(f"held out {dict(est)}, kv {v}: " + " ".join(
-            f"{k}:{s['worst']:.2f}/{s['cvar10']:.2f}/{s['median']:.2f}" for k, s in row["scenarios"].items()), flush=True)
+        _print_stats(f"held out {dict(est)}, kv {v}:", row["scenarios"])
     return {"damping": DAMPING, "controller_gains": str(FAST_8.relative_to(ROOT)), "cases": out,
             "held_out": {"readers": [HELD_OUT_READERS.start, HELD_OUT_READERS.stop - 1], "designs": per_reader}}
 
@@ -462,37 +474,16 @@ def hold_firmware(task) -> tuple:
     firmware with the compensation and its turn test.  ``task`` = ``(scenario, reader,
     n_readers, extra)``; returns ``(scenario, reader, extra, in_band, char_in_band, peak)``."""
     from controllers import make
-    from ebraille_sim.scenarios.runner import run_scenario
     key, reader, n, extra = task
     gains = {**json.loads(HOLD.read_text())["gains"], **dict(extra)}
-    sc = {s.key: s for s in bench.get_suite("standard").scenarios}[key]
-    spec = bench._spec(sc.scenario, sc.duration_s, sc.wpm)
-    unit = sample_devices(TRAIN_SEED, n, base=spec.device)[reader]
-    dev = dataclasses.replace(unit, estimator=replace_checked(unit.estimator, hysteresis_compensation=True,
-                                                              hysteresis_turn_lsb=TURN_LSB, **FAST_ESTIMATOR))
-    res = run_scenario(spec, controller=make("pid_dob", **gains), seed=spec.seed + 101 * (reader + SEED_SHIFT),
-                       device=dev, trace_every=None)
-    m = res.metrics
-    return key, reader, extra, m.get("in_band_fraction") or 0.0, m.get("char_in_band_fraction") or 0.0, \
-        m.get("peak_force_n") or 0.0
-
-
-def _population_stats(vals) -> dict:
-    vals = np.asarray(vals, dtype=float)
-    worst = np.sort(vals)[:max(1, int(round(0.1 * vals.size)))]
-    return {"worst": round(float(vals.min()), 3), "cvar10": round(float(worst.mean()), 3),
-            "median": round(float(np.median(vals)), 3), "share_at_least_0.8": round(float(np.mean(vals >= 0.8)), 3),
-            "share_at_least_0.9": round(float(np.mean(vals >= 0.9)), 3)}
+    res = training_run(key, reader, n, make("pid_dob", **gains),
+                       {"hysteresis_turn_lsb": TURN_LSB, **FAST_ESTIMATOR})
+    return (key, reader, extra) + _fractions(res)
 
 
 def _worst(rows, extra, key) -> float:
     col = 4 if key.startswith("refresh") else 3
     return min(r[col] for r in rows if r[0] == key and r[2] == extra)
-
-
-def _cvar10(vals) -> float:
-    vals = np.sort(np.asarray(vals, dtype=float))
-    return float(vals[:max(1, int(round(0.1 * vals.size)))].mean())
 
 
 def refresh_learning_study(ex) -> dict:
@@ -514,7 +505,7 @@ def refresh_learning_study(ex) -> dict:
             for sm in (0.020, 0.025, 0.035) for a in (0.026, 0.028, 0.030) for kv in (1.0, 1.5, 2.0, 2.5)]
     rows = list(ex.map(hold_firmware, [(k, r, train.stop, e) for e in grid for k in REFRESH for r in train],
                        chunksize=4))
-    cvar = {e: {k: _cvar10([r[4] for r in rows if r[0] == k and r[2] == e]) for k in REFRESH} for e in grid}
+    cvar = {e: {k: bench.cvar_low([r[4] for r in rows if r[0] == k and r[2] == e]) for k in REFRESH} for e in grid}
     for e in grid:
         print(dict(e), " ".join(f"{k}:{_worst(rows, e, k):.2f}/{cvar[e][k]:.3f}" for k in REFRESH), flush=True)
     chosen = max(grid, key=lambda e: min(cvar[e].values()))
@@ -545,9 +536,7 @@ def refresh_learning_study(ex) -> dict:
                                        **_population_stats([r[col] for r in mine]),
                                        "below_0.8": {str(r[1]): round(r[col], 3) for r in mine if r[col] < 0.8}}
             checked.append(row)
-            print(name, dict(e), " ".join(f"{k}:{v['worst']:.2f}/{v['cvar10']:.2f}/{v['median']:.2f}"
-                                          f"({v['share_at_least_0.8']:.2f})" for k, v in row["scenarios"].items()),
-                  flush=True)
+            _print_stats(f"{name} {dict(e)}", row["scenarios"])
     return {"base": str(HOLD.relative_to(ROOT)), "turn_lsb": TURN_LSB,
             "training_readers": [train.start, train.stop - 1],
             "grid": [{"extra": dict(e), "worst_char": {k: round(_worst(rows, e, k), 3) for k in REFRESH},
@@ -565,14 +554,11 @@ def learning_hold_error(reader: int) -> dict:
     force and the share of hold samples out of band."""
     from controllers import make
     from ebraille_sim.scenarios.inputs import refresh_phases
-    from ebraille_sim.scenarios.runner import run_scenario
-    sc = {s.key: s for s in bench.get_suite("standard").scenarios}["refresh_120wpm"]
-    spec = bench._spec(sc.scenario, sc.duration_s, sc.wpm)
     n = CHECK_READERS[-1][1].stop
+    res = training_run("refresh_120wpm", reader, n, make(str(LEARN)),
+                       {"hysteresis_turn_lsb": TURN_LSB, **FAST_ESTIMATOR}, trace=True)
+    spec = res.spec
     unit = sample_devices(TRAIN_SEED, n, base=spec.device)[reader]
-    dev = dataclasses.replace(unit, estimator=replace_checked(unit.estimator, hysteresis_compensation=True,
-                                                              hysteresis_turn_lsb=TURN_LSB, **FAST_ESTIMATOR))
-    res = run_scenario(spec, controller=make(str(LEARN)), seed=spec.seed + 101 * (reader + SEED_SHIFT), device=dev)
     tr = res.trace
     t = np.asarray(tr["t_s"])
     f, fe, sp = (np.asarray(tr[k]) for k in ("force_true_n", "force_est_n", "setpoint_n"))
@@ -599,18 +585,10 @@ def learn_firmware(task) -> tuple:
     estimator settings ``est`` over it.  ``task`` = ``(scenario, reader, n_readers, est)``;
     returns ``(scenario, reader, est, in_band, char_in_band, peak)``."""
     from controllers import make
-    from ebraille_sim.scenarios.runner import run_scenario
     key, reader, n, est = task
-    sc = {s.key: s for s in bench.get_suite("standard").scenarios}[key]
-    spec = bench._spec(sc.scenario, sc.duration_s, sc.wpm)
-    unit = sample_devices(TRAIN_SEED, n, base=spec.device)[reader]
-    settings = {"hysteresis_compensation": True, "hysteresis_turn_lsb": TURN_LSB, **FAST_ESTIMATOR, **dict(est)}
-    dev = dataclasses.replace(unit, estimator=replace_checked(unit.estimator, **settings))
-    res = run_scenario(spec, controller=make(str(LEARN)), seed=spec.seed + 101 * (reader + SEED_SHIFT), device=dev,
-                       trace_every=None)
-    m = res.metrics
-    return key, reader, est, m.get("in_band_fraction") or 0.0, m.get("char_in_band_fraction") or 0.0, \
-        m.get("peak_force_n") or 0.0
+    res = training_run(key, reader, n, make(str(LEARN)),
+                       {"hysteresis_turn_lsb": TURN_LSB, **FAST_ESTIMATOR, **dict(est)})
+    return (key, reader, est) + _fractions(res)
 
 
 def learning_firmware_study(ex) -> dict:
@@ -642,9 +620,7 @@ def learning_firmware_study(ex) -> dict:
                                            "peak_force_n": round(max(r[5] for r in mine), 3),
                                            "below_0.8": {str(r[1]): round(r[col], 3) for r in mine if r[col] < 0.8}}
             out.append(row)
-            print(name, dict(fw), " ".join(f"{k}:{v['worst']:.2f}/{v['cvar10']:.2f}/{v['median']:.2f}"
-                                           f"({v['share_at_least_0.8']:.2f})" for k, v in row["scenarios"].items()),
-                  flush=True)
+            _print_stats(f"{name} {dict(fw)}", row["scenarios"])
     return {"controller": str(LEARN.relative_to(ROOT)), "short_delay": dict(SHORT_DELAY), "groups": out}
 
 
