@@ -4,9 +4,9 @@ For 60 s of ``steady_90wpm`` with the built-in PID, without and with the safety 
 (``run_scenario(..., supervised=False)`` and the default), this reports, as the median of
 ``--repeat`` rounds in one process:
 
-* the wall time of the whole call and of its control loop, with the loop in one compiled
-  call (:mod:`ebraille_sim.scenarios.compiled_loop`) and with one Python iteration per
-  control period (the path of Python controllers);
+* the wall time of the whole call and of its control loop, with the loop in one call of the
+  loop engine (:func:`ebraille_sim.plant.engine.run`) and with one Python iteration per control
+  period (the shim of Python controllers, :func:`ebraille_sim.scenarios.runner.python_periods`);
 * two references measured in the same rounds:
 
   - the all-compiled loop: physics, estimator, PID and trace of the same run in one compiled

@@ -155,7 +155,8 @@ def thread_table(sizes=(1, 4, 16, 64, 256, 1024)) -> list[dict]:
             a = np.zeros(n)
 
             def call():
-                fn(venv.state, venv.params, venv.inputs, venv._z, venv._c, venv._seq, venv._setpoint,
+                fn(venv.state, venv.params, venv.inputs, venv._z, venv._c, venv._slots, venv._counts, venv._tables,
+                   venv._setpoint,
                    venv._n_steps, a, venv._active, venv.config.substeps, venv._obs, venv._reward,
                    venv._violation, venv._terminated, venv._truncated, False, venv._no_sv, venv._no_sv,
                    venv._dt)

@@ -4,8 +4,8 @@ Runs ``steady_90wpm`` supervised (the default) once with its full trace and take
 controller saw in every control period: the fed-back estimate, the setpoint and the motor
 current measured at the end of the previous period.  Those periods are then replayed in one
 compiled loop without the plant, twice from a fresh start: through the PID alone, and through
-the supervisor's hooks around the PID as :func:`ebraille_sim.scenarios.compiled_loop.run_loop`
-calls them (``supervise_begin``, the PID's step, ``supervise_end``, the resets they ask for).
+the loop engine's command (:func:`ebraille_sim.plant.engine.command`: ``supervise_begin``, the
+PID's step, ``supervise_end``, the resets they ask for).
 The supervised replay must give the run's commands to the last bit (checked); the difference
 of the two loops over the number of periods is the supervisor's cost per control period.
 
@@ -23,9 +23,9 @@ import time
 import numpy as np
 
 import ebraille_sim
-from controllers.compiled import compiled_form, controller_reset, controller_step
-from controllers.supervisor import supervise_begin, supervise_end
+from controllers.compiled import compiled_form
 from ebraille_sim.base.compiled import njit
+from ebraille_sim.plant.engine import command
 from ebraille_sim.plant.layout import S
 from ebraille_sim.scenarios import runner
 
@@ -34,22 +34,9 @@ SCENARIO = "steady_90wpm"
 
 @njit(cache=True)
 def _replay(kind, cstate, cparams, supervised, sv, cfg, f_in, sp, cur_in, dt_s, out):
-    """The controller part of ``run_loop`` over recorded inputs; the commands go to ``out``."""
+    """The engine's command over recorded inputs, without the plant; the commands go to ``out``."""
     for k in range(f_in.shape[0]):
-        f = f_in[k]
-        cur = cur_in[k]
-        if supervised:
-            code, c, sp_inner = supervise_begin(sv, cfg, f, sp[k], dt_s, cur)
-            if code == 1:
-                u_inner = controller_step(kind, cstate, cparams, f, sp_inner, dt_s, cur)
-                code2, c, reset_cmd = supervise_end(sv, cfg, u_inner, f, sp[k], dt_s, cur)
-                if code2 == 1:
-                    controller_reset(kind, cstate, cparams, f, sp_inner, reset_cmd)
-            elif code == 2:
-                controller_reset(kind, cstate, cparams, f, sp_inner, 0.0)
-        else:
-            c = controller_step(kind, cstate, cparams, f, sp[k], dt_s, cur)
-        out[k] = c
+        out[k] = command(kind, cstate, cparams, 0.0, supervised, sv, cfg, f_in[k], sp[k], dt_s, cur_in[k])
 
 
 def _recorded(duration_s: float):

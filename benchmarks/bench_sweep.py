@@ -11,7 +11,7 @@ scenarios' ``start_s`` replaced); ``--readers 417`` gives 10,008 episodes.  Rows
 * ``batched``: ``run_sweep(jobs=1)``: the episodes of a batch that share a duration run
   together, all their control loops in one compiled call
   (:func:`ebraille_sim.scenarios.runner.run_batch`,
-  :func:`ebraille_sim.scenarios.compiled_loop.run_rows`);
+  :func:`ebraille_sim.plant.engine.run`);
 * ``local xN`` and ``dask``: batches distributed over worker processes.
 
 Every executor must give the same rows (wall-clock metric aside); the script checks it and

@@ -51,7 +51,7 @@ from ebraille_sim.base.compiled import njit
 from ebraille_sim.physics.fingertip import tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N
 
-__all__ = ["KIND_NONE", "KIND_PID", "KIND_LQG", "MAP_POINTS", "PS", "PP", "LS", "LP", "record",
+__all__ = ["KIND_NONE", "KIND_PID", "KIND_LQG", "KIND_EXTERNAL", "MAP_POINTS", "PS", "PP", "LS", "LP", "record",
            "pid_state", "pid_params", "lqg_state", "lqg_params", "lqg_order", "py_min", "py_max",
            "core_step", "core_reset", "pid_step", "pid_reset", "scheduled_gains", "map_reference",
            "model_feedforward_v", "feedforward_v", "lqg_step", "lqg_reset", "controller_step",
@@ -63,6 +63,9 @@ KIND_PID = 1
 """The PID family (:func:`pid_step`)."""
 KIND_LQG = 2
 """The LQG (:func:`lqg_step`)."""
+KIND_EXTERNAL = 3
+"""A command handed in from outside each period: an agent's action, or the command a Python
+controller returned (:mod:`ebraille_sim.plant.engine`); resets do not reach it."""
 
 MAP_POINTS = 57
 """Breakpoints of the static reference map of :class:`controllers.schedule.ScheduledPID`."""

@@ -134,7 +134,6 @@ from controllers.base import check_dt
 
 __all__ = ["SupervisorConfig", "Supervisor", "RATED_CURRENT_A", "RATED_TO_STALL", "rated_current_a",
            "FORCE_CAP_LIMIT_N", "SAFE_FORCE_N", "device_limits", "supervise_begin", "supervise_end",
-           "supervise_commands",
            "MIN_CONTROL_PERIOD_S", "MAX_WINDOW_SAMPLES", "EVENT_CAPACITY", "MODES", "FAULTS", "SV", "CF"]
 
 _NOMINAL = DeviceParams()
@@ -1217,7 +1216,7 @@ class Supervisor:
 
     def bind(self, state_out: np.ndarray, config_out: np.ndarray) -> None:
         """Move the live arrays into ``state_out`` and ``config_out`` (e.g. one row each of a
-        batch's 2-D arrays, stepped by :func:`supervise_commands`); this object then reads and
+        batch's 2-D arrays, stepped by the loop engine, :mod:`ebraille_sim.plant.engine`); this object then reads and
         resets those.
 
         Raises
@@ -1404,23 +1403,3 @@ def _envelope_table(c: SupervisorConfig, out: np.ndarray) -> None:
                    c.envelope_force_n, c.reader_b_n_per_m, c.reader_m_per_m, c.push_force_per_a_n,
                    c.friction_current_a, c.weight_n,
                    _envelope_memo(c.envelope_force_n, c.reader_b_n_per_m, c.reader_m_per_m))
-
-
-@njit(cache=True)
-def supervise_commands(sv2, cfg2, rows, commands_v, force_est_n, setpoint_n, dt_s, current_a, out_v):
-    """One period of several supervisors whose inner controller returns a given command.
-
-    Row ``r`` of ``sv2``/``cfg2`` is a supervisor's state and configuration
-    (:meth:`Supervisor.bind`); its inner controller (an agent's action, which ignores resets)
-    commands ``commands_v[r]``.  For every ``r`` in ``rows`` this is
-    :meth:`Supervisor.update` (:func:`supervise_begin`, the inner command,
-    :func:`supervise_end`) and writes the shaped command to ``out_v[r]``; a non-finite
-    ``current_a[r]`` means no measurement.
-    """
-    for r in rows:
-        cur = current_a[r] if math.isfinite(current_a[r]) else math.nan
-        code, u, sp_inner = supervise_begin(sv2[r], cfg2[r], force_est_n[r], setpoint_n[r], dt_s, cur)
-        if code == 1:
-            code, u, reset_cmd = supervise_end(sv2[r], cfg2[r], commands_v[r], force_est_n[r], setpoint_n[r],
-                                               dt_s, cur)
-        out_v[r] = u

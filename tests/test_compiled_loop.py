@@ -1,5 +1,5 @@
-"""The compiled controller steps and the one-call scenario loop give the per-period loop's
-numbers to the last bit."""
+"""The compiled controller steps and the loop engine's one-call runs give the numbers of the
+per-period shim (Python controllers handing their command to the engine) to the last bit."""
 from __future__ import annotations
 
 import math
@@ -9,8 +9,9 @@ import pytest
 
 import controllers
 import ebraille_sim
-from controllers.compiled import KIND_LQG, KIND_PID, MAP_POINTS, PP, PS, controller_reset, controller_step, map_reference
-from ebraille_sim.scenarios import compiled_loop, runner
+from controllers.compiled import KIND_EXTERNAL, KIND_LQG, KIND_PID, MAP_POINTS, PP, PS, controller_reset, controller_step, map_reference
+from ebraille_sim.plant import engine
+from ebraille_sim.scenarios import runner
 
 CONTROLLERS = ["pid", "pid_scheduled", "pid_feedforward", "pid_friction", "lqg", "actuator_bound"]
 SCENARIOS = [("steady_90wpm", 2.0), ("setpoint_steps", 6.0), ("battery_sag", 3.0), ("pressing_90wpm", 3.0),
@@ -34,17 +35,25 @@ class PythonProxy:
         return self.inner.update(force_est_n, setpoint_n, dt_s, motor_current_a)
 
 
+def _compiled_rows(args) -> int:
+    """Rows of an engine call that step a compiled controller over periods (0 for a zero-period
+    warm-up call and for the per-period shim's calls, whose rows are all external)."""
+    kinds, n_periods = args[4], args[18]
+    return int(np.sum(kinds != KIND_EXTERNAL)) if n_periods > 0 else 0
+
+
 @pytest.fixture
 def loop_calls(monkeypatch):
-    """Count the calls of the compiled loop."""
+    """Count the engine calls that run a compiled controller."""
     calls = []
-    real = compiled_loop.run_loop
+    real = engine.run
 
     def counted(*args):
-        calls.append(1)
+        if _compiled_rows(args):
+            calls.append(1)
         return real(*args)
 
-    monkeypatch.setattr(compiled_loop, "run_loop", counted)
+    monkeypatch.setattr(engine, "run", counted)
     return calls
 
 
@@ -151,19 +160,40 @@ def test_a_bad_setpoint_raises_the_controllers_error_in_the_compiled_loop():
     sp[3] = math.nan
     plant = runner._plant_for(spec, run, "lumped")
     ctrl.reset(force_est_n=0.0, setpoint_n=1.0, command_v=0.0)
-    form = runner._loop_form(ctrl, ctrl, plant, "lumped")
+    form = runner._compiled_controller(ctrl, ctrl)
     n = run.n_steps
+    rows = runner._engine_rows(plant, [form], sp[None, :], [run.profiles], run.dt_s, runner.S.force_est_n, 1, n)
+    runner._run_timed(rows, n)
+    assert rows.status[0] == engine.BAD_CONTROLLER_INPUT and rows.periods[0] == 3
     with pytest.raises(ValueError, match="setpoint_n must be finite"):
-        runner._run_compiled(form, plant, run, ctrl, sp, runner.S.force_est_n, 1, np.zeros(n), np.zeros(n),
-                             np.zeros((len(compiled_loop.KEPT), n)))
+        runner._raise_row(rows, 0, ctrl)
+
+
+def test_a_non_finite_external_command_stops_its_row_only():
+    """The engine refuses a non-finite command of one row (status BAD_COMMAND, the row's plant not
+    advanced in that period) and steps the other rows."""
+    spec, _, run, _ = runner.prepare_run("steady_90wpm", "pid", duration_s=0.05)
+    from ebraille_sim.plant.loop import make_plant
+    plant = make_plant([spec.device, spec.device], seeds=[1, 1])
+    n = 4
+    sp = np.full((2, n), 1.0)
+    rows = runner._engine_rows(plant, [runner._external_form()] * 2, sp, [{}, {}], run.dt_s, runner.S.force_est_n,
+                               1, n)
+    rows.u_ext[:] = [2.0, math.nan]
+    before = rows.states[1].copy()
+    engine.run(*rows.arguments(0, n))
+    assert list(rows.status) == [engine.OK, engine.BAD_COMMAND] and rows.periods[1] == 0
+    assert np.array_equal(rows.states[1], before)
+    assert rows.states[0, runner.S.current_a] > 0.0 and rows.states[0, runner.S.time_s] > 0.0
+    assert np.all(rows.kept[0, engine.ROW.command_v] == 2.0)
 
 
 def test_other_backends_and_wrapped_controllers_have_no_compiled_loop():
     spec, _, run, ctrl = runner.prepare_run("steady_90wpm", "pid", duration_s=0.05)
-    plant = runner._plant_for(spec, run, "lumped")
-    assert runner._loop_form(ctrl, ctrl, plant, "lumped") is not None
-    assert runner._loop_form(ctrl, PythonProxy(ctrl), plant, "lumped") is None
-    assert runner._loop_form(PythonProxy(ctrl), PythonProxy(ctrl), plant, "lumped") is None
+    assert runner._compiled_controller(ctrl, ctrl) is not None
+    assert runner._compiled_controller(ctrl, PythonProxy(ctrl)) is None
+    assert runner._compiled_controller(PythonProxy(ctrl), PythonProxy(ctrl)) is None
+    assert not runner._is_lumped(runner._plant_for(spec, run, "pymunk"))
 
 
 # --- the compiled steps against the classes, on random inputs -------------------------------
@@ -250,15 +280,15 @@ def test_the_compiled_pid_follows_the_recursion_of_the_pid_docstring():
 
 @pytest.fixture
 def rows_calls(monkeypatch):
-    """Rows of every call of the batched compiled loop."""
+    """Compiled rows of every engine call."""
     calls = []
-    real = compiled_loop.run_rows
+    real = engine.run
 
     def counted(*args):
-        calls.append(args[0].shape[0])
+        calls.append(_compiled_rows(args))
         return real(*args)
 
-    monkeypatch.setattr(compiled_loop, "run_rows", counted)
+    monkeypatch.setattr(engine, "run", counted)
     return calls
 
 

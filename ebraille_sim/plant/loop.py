@@ -1,10 +1,10 @@
-"""The closed loop, one control period at a time.
+"""The lumped plant: the packed state, parameters and inputs of ``n`` devices.
 
-:func:`loop_step` is the one function that advances the whole loop (drive train, board,
-fingertip, FSR, ADC, estimator) by one control period; the scenario runner, the
-Gymnasium environment and its vectorised form all call it, so a learned controller and a
-PID see identical physics.  :class:`Plant` holds the packed state of ``n`` devices
-(``n = 1`` for a scenario) and exposes the microcontroller's view.
+:class:`Plant` holds the packed rows of ``n`` devices (``n = 1`` for a scenario), packs a
+device's parameters for the compiled kernel (:mod:`ebraille_sim.plant.kernel`) and exposes the
+microcontroller's view.  The closed loop around it is the loop engine's
+(:mod:`ebraille_sim.plant.engine`); :meth:`Plant.advance` advances the devices by one control
+period with a given command (the plant alone, open loop).
 
 Array-shape convention: per-device quantities are arrays of shape ``(n,)``; the packed
 state is ``(n, N_STATE)``, the parameters ``(n, N_PARAM)``, the inputs ``(n, N_INPUT)``.
@@ -15,7 +15,7 @@ Examples
 >>> plant = Plant.from_devices([DeviceParams()], seeds=[1])
 >>> plant.set_finger(1.0e-3)
 >>> for _ in range(200):
-...     loop_step(plant, 3.0)          # 3 V up for 0.2 s
+...     plant.advance(3.0)             # 3 V up for 0.2 s
 >>> bool(plant.contact_force_n[0] > 0.0)
 True
 """
@@ -41,7 +41,7 @@ from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import (MAX_BREAKPOINTS, MAX_TF_LEN, N_INPUT, N_PARAM, N_PLAYS, N_STATE, P, S, U)
 
-__all__ = ["Plant", "loop_step", "make_plant", "PLANT_BACKENDS", "pack_params", "pack_devices", "initial_state",
+__all__ = ["Plant", "make_plant", "PLANT_BACKENDS", "pack_params", "pack_devices", "initial_state",
            "check_step", "check_sensor_rates", "load_estimator"]
 
 
@@ -509,7 +509,8 @@ class Plant:
         return self.state.shape[0]
 
     def advance(self, command_v) -> None:
-        """Advance every device by one control period (see :func:`loop_step`)."""
+        """Advance every device by one control period with ``command_v`` held (V, finite; a
+        float or one per device; clipped to the driver supply inside the kernel)."""
         inp = self.inputs
         if self.state.shape[0] == 1:
             c = float(command_v) if isinstance(command_v, (float, int)) else float(np.ravel(command_v)[0])
@@ -566,19 +567,6 @@ class Plant:
     @property
     def time_s(self):
         return self._col("time_s")
-
-
-def loop_step(plant, command_v) -> None:
-    """Advance every device of ``plant`` by one control period with ``command_v`` held.
-
-    Parameters
-    ----------
-    plant : Plant or another backend with the same interface
-        Modified in place.
-    command_v : float or ndarray, shape (n,)
-        Motor command, V (clipped to the driver supply inside the kernel).  Must be finite.
-    """
-    plant.advance(command_v)
 
 
 from ebraille_sim.plant.backends import PLANT_BACKENDS, make_plant  # noqa: E402  (re-exported here)

@@ -2,8 +2,9 @@ r"""Gymnasium environment: learn to hold the display against the reading finger.
 
 One environment step is one control period of the device's microcontroller at
 ``control_rate_hz`` (default 200 Hz, i.e. 50 physics steps of the 10 kHz lumped plant):
-the action is held as the motor command while :func:`ebraille_sim.plant.loop.loop_step` (the
-same closed-loop function the scenario runner calls) advances the drive train, board,
+the action is held as the motor command while the loop engine's period
+(:func:`ebraille_sim.plant.engine.period`, the closed-loop body the scenario runner runs too)
+advances the drive train, board,
 fingertip, FSR, ADC and force estimator.  A learned controller and a PID therefore see
 identical physics.
 
@@ -185,12 +186,12 @@ from ebraille_sim.base.seeds import SeedNode
 from ebraille_sim.base.validation import check_bool, check_choice, check_number, check_pair, check_range
 
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
-from ebraille_sim.plant import kernel
+from ebraille_sim.plant import engine
 from ebraille_sim.plant.layout import S, U
-from ebraille_sim.plant.loop import loop_step
 from ebraille_sim.rl.registration import ENV_ID, register_envs
 from controllers import features
-from controllers.supervisor import CF, FAULTS, MODES, SV, supervise_begin, supervise_end
+from controllers.compiled import KIND_EXTERNAL
+from controllers.supervisor import CF, FAULTS, MODES, SV
 from controllers.features import (C_CMD_SCALE, C_DT, C_SAFE, C_WARN, C_WU, C_WV, ERROR_SCALE_N, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, Z_STEP, _clip,
                                   observe, reset_features, write_observation)
 
@@ -211,7 +212,7 @@ __all__ = [
     "post_step",
     "register_envs",
     "reward_of",
-    "supervised_action",
+    "HeldCommand",
     "validate_options",
 ]
 
@@ -313,15 +314,11 @@ def scalar_step(state, inputs, ws, k, action):
 
     ``state`` and ``inputs`` are the plant's rows, ``ws`` the episode's workspace
     (:func:`pack_workspace`), ``k`` the period (below the episode's steps: not checked here),
-    ``action`` the agent's (finite) action.  Writes period ``k``'s varying inputs
-    (``inputs[rows[j]] = prof[j, k]``), passes the clipped ``action`` through the safety layer when the
-    workspace's safety flag is set (:func:`controllers.supervisor.supervise_begin` and
-    :func:`~controllers.supervisor.supervise_end` with the agent's command as the inner
-    controller's, what :func:`supervised_action` does through
-    :class:`~controllers.supervisor.Supervisor`), advances the plant
-    (:func:`ebraille_sim.plant.kernel.advance`, as :meth:`ebraille_sim.plant.loop.Plant.advance`)
-    and computes reward, termination and the next observation (:func:`post_step`, into the
-    workspace's parts).
+    ``action`` the agent's (finite) action.  The clipped action, as a command in volts, is the
+    external command of one period of the loop engine (:func:`ebraille_sim.plant.engine.period`:
+    the period's varying inputs, the safety supervisor when the workspace's safety flag is set,
+    the command held within the base supply, the physics); then reward, termination and the
+    next observation (:func:`post_step`, into the workspace's parts).
 
     Returns
     -------
@@ -332,38 +329,28 @@ def scalar_step(state, inputs, ws, k, action):
     """
     c = _part(ws, P_C)
     setpoint = _part(ws, P_SETPOINT)
-    prof = _part(ws, P_PROF)
     rows = _part(ws, P_ROWS)
-    stride = int(ws[W_PROF_STRIDE])
-    for j in range(rows.shape[0]):
-        inputs[int(rows[j])] = prof[j * stride + k]
+    table = _part(ws, P_PROF).reshape((rows.shape[0], int(ws[W_PROF_STRIDE])))
     a = _clip(action, -1.0, 1.0)
     scale = c[C_CMD_SCALE]
     ws[W_ACTION_V] = a * scale
-    dt_s = ws[W_DT]
     safety = ws[W_SAFETY] != 0.0
+    sv = _part(ws, P_SV)
+    code, u = engine.period(state, _part(ws, P_PARAMS), inputs, int(ws[W_SUBSTEPS]), KIND_EXTERNAL, c[:0], c[:0],
+                            a * scale, scale, safety, sv, _part(ws, P_CFG), setpoint[k], ws[W_DT], S.force_est_n,
+                            rows, table, k)
+    if code != engine.OK:
+        return (math.nan, False, math.nan, math.nan, setpoint[k + 1], u, 0.0, (k + 1) * ws[W_DT], 0.0, 0.0)
     if safety:
-        sv = _part(ws, P_SV)
-        cfg = _part(ws, P_CFG)
-        f = state[S.force_est_n]
-        sp = setpoint[k]
-        cur = state[S.current_a]
-        if not math.isfinite(cur):
-            cur = math.nan
-        code, u, sp_inner = supervise_begin(sv, cfg, f, sp, dt_s, cur)
-        if code == 1:
-            code, u, reset_cmd = supervise_end(sv, cfg, a * scale, f, sp, dt_s, cur)
-        a = _clip(u / scale, -1.0, 1.0)
+        a = u / scale
         mode = sv[SV.mode]
         fault = sv[SV.fault]
     else:
         mode = fault = 0.0
-    inputs[U.command_v] = a * scale
-    kernel.advance(state, _part(ws, P_PARAMS), inputs, int(ws[W_SUBSTEPS]))
     ft = state[S.contact_force_n]
     r, v, term = post_step(_part(ws, P_Z), c, state[S.force_est_n], ft, state[S.current_a],
                            setpoint[k], setpoint[k + 1], a, _part(ws, P_OBS).view(np.float32)[:N_OBS])
-    return (r, term, ft, state[S.force_est_n], setpoint[k + 1], inputs[U.command_v], v, (k + 1) * dt_s, mode,
+    return (r, term, ft, state[S.force_est_n], setpoint[k + 1], inputs[U.command_v], v, (k + 1) * ws[W_DT], mode,
             fault)
 
 
@@ -382,6 +369,29 @@ class ActionCommand:
         return self.command_v
 
 
+class HeldCommand:
+    """The agent as a Python controller of the runner's per-period shim: the command of the
+    safety layer around it (or its own, without one) held within +/- ``scale_v``."""
+
+    name = "agent"
+
+    def __init__(self, inner, scale_v: float):
+        self.inner = inner
+        self.scale_v = float(scale_v)
+        self.command_v = 0.0
+
+    def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
+        pass
+
+    def update(self, force_est_n, setpoint_n, dt_s, motor_current_a=None) -> float:
+        if self.inner is None:
+            u = self.command_v
+        else:
+            self.inner.inner.command_v = self.command_v
+            u = self.inner.update(force_est_n, setpoint_n, dt_s, motor_current_a)
+        return -self.scale_v if u < -self.scale_v else (self.scale_v if u > self.scale_v else u)
+
+
 def make_supervisor(device, config=None, state_out=None, config_out=None):
     """The safety layer of one env: a supervisor for ``device`` around an :class:`ActionCommand`.
 
@@ -393,14 +403,6 @@ def make_supervisor(device, config=None, state_out=None, config_out=None):
     if config is None:
         config = SupervisorConfig.for_device(device)
     return Supervisor(ActionCommand(), config, state_out=state_out, config_out=config_out)
-
-
-def supervised_action(sup, action: float, cmd_scale_v: float, force_est_n: float, setpoint_n: float,
-                      dt_s: float, current_a: float) -> float:
-    """The applied command of the safety layer as a fraction of ``cmd_scale_v`` (in [-1, 1])."""
-    sup.inner.command_v = action * cmd_scale_v
-    u = sup.update(force_est_n, setpoint_n, dt_s, current_a) / cmd_scale_v
-    return -1.0 if u < -1.0 else (1.0 if u > 1.0 else u)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -739,6 +741,7 @@ class ContactForceEnv(gym.Env):
         self._renderer = None
         self._history = None
         self._sup = None
+        self._agent = None
         self._compiled = False
         self._ws = None
         self._buffer = None
@@ -786,6 +789,8 @@ class ContactForceEnv(gym.Env):
             self._bind_workspace(ep, svc)                     # makes the supervisor in the workspace
         elif svc is not None:
             self._sup = make_supervisor(dev, svc)
+        if not self._compiled:
+            self._agent = HeldCommand(self._sup, self._c[C_CMD_SCALE])
         if self._sup is not None:
             self._sup.reset(force_est_n=fe, setpoint_n=float(ep.setpoint_n[0]), command_v=0.0)
             if self.config.dt_s < self._sup.min_control_period_s:
@@ -884,7 +889,10 @@ class ContactForceEnv(gym.Env):
         h["setpoint_n"].append(info["setpoint_n"])
 
     def _step_python(self, action):
-        """The step on a plant that is not the compiled lumped one (another backend)."""
+        """The step on a plant that is not the compiled lumped one (another backend): the agent's
+        command enters the loop through the runner's per-period shim
+        (:func:`ebraille_sim.scenarios.runner.python_periods`), as a Python controller's does."""
+        from ebraille_sim.scenarios.runner import python_periods
         if self.episode is None:
             raise RuntimeError("call reset() before step()")
         a = check_action(action)
@@ -893,14 +901,13 @@ class ContactForceEnv(gym.Env):
         k = self._k
         if k >= ep.n_steps:
             raise RuntimeError("the episode has ended; call reset()")
+        scale = self._c[C_CMD_SCALE]
+        self._agent.command_v = a * scale
+        python_periods(self.plant, [self._agent], ep.setpoint_n[None, :ep.n_steps], [ep.run.profiles], S.force_est_n, None, 1,
+                       k0=k, n_record=0)
         st = self._st
-        inp = self._inp
-        for j, arr in self._varying:
-            inp[j] = arr[k]
         if self._sup is not None:
-            a = supervised_action(self._sup, a, self._c[C_CMD_SCALE], float(st[S.force_est_n]),
-                                  float(ep.setpoint_n[k]), self.config.dt_s, float(st[S.current_a]))
-        loop_step(self.plant, a * self._c[C_CMD_SCALE])
+            a = float(self._inp[U.command_v]) / scale
         self._k = k + 1
         ft = float(st[S.contact_force_n])
         if not math.isfinite(ft):

@@ -3,11 +3,12 @@
 ``gymnasium.make_vec("EBraille/ContactForce-v0", num_envs=N)`` builds this class (the id's
 ``vector_entry_point``).  The N plants live as rows of packed arrays (state ``(N, N_STATE)``,
 parameters ``(N, N_PARAM)``, inputs ``(N, N_INPUT)``, see :mod:`ebraille_sim.plant.layout`) and one
-compiled call steps all of them: for every row it writes the command and the period's
-plant inputs (finger position, driver supply, ... as built for the episode's spec by
-:func:`ebraille_sim.scenarios.inputs.build_run_inputs`), calls :func:`ebraille_sim.plant.kernel.advance` (the function that
-:meth:`ebraille_sim.plant.loop.Plant.advance` calls for one device) and then
-:func:`ebraille_sim.rl.env.post_step` (the scalar env's reward, termination and observation).
+compiled call steps all of them: for every row it runs one period of the loop engine
+(:func:`ebraille_sim.plant.engine.period`, the scalar env's and the scenario runner's loop
+body) with the row's action as the command, its period inputs (finger position, driver
+supply, ... as built for the episode's spec by :func:`ebraille_sim.scenarios.inputs.build_run_inputs`)
+and its safety supervisor, and then :func:`ebraille_sim.rl.env.post_step` (the scalar env's
+reward, termination and observation).
 With ``parallel=True`` the rows are spread over threads with ``numba.prange``; rows are
 independent, so the result does not depend on the thread count.  The default
 (``parallel=None``) uses threads only where they pay, measured while it runs: with at least
@@ -59,8 +60,8 @@ from gymnasium.vector.utils import batch_space
 from ebraille_sim.base.compiled import njit, prange
 from ebraille_sim.base.seeds import SeedNode
 
-from controllers.supervisor import supervise_begin, supervise_end
-from ebraille_sim.plant import kernel
+from controllers.compiled import KIND_EXTERNAL
+from ebraille_sim.plant import engine
 from ebraille_sim.rl.env import (
     C_CMD_SCALE,
     N_OBS,
@@ -143,17 +144,13 @@ class ThreadChoice:
 
 
 @njit(cache=True)
-def step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_sub,
+def step_row(i, state, params, inputs, z, c, slots, counts, tables, setpoint, n_steps, actions, n_sub,
              obs, reward, violation, terminated, truncated, safety, sv2, cfg2, dt_s):
-    """One control period of row ``i``: safety layer, command and period inputs, physics,
-    reward, observation.
-
-    ``seq[i, k]`` is row ``i``'s plant input row for period ``k`` (the command slot unused).
-    With ``safety`` the clipped action passes through row ``i``'s supervisor (state
-    ``sv2[i]``, configuration ``cfg2[i]``, :meth:`controllers.supervisor.Supervisor.bind`) as
-    :func:`controllers.supervisor.supervise_commands` steps it: the agent's command
-    ``a * driver_supply_v`` is the inner controller's, and the applied command is the
-    supervisor's output over the supply, clipped to [-1, 1].
+    """One control period of row ``i``: the clipped action, as a command in volts, is the
+    external command of one period of the loop engine (:func:`ebraille_sim.plant.engine.period`:
+    the row's varying inputs ``tables[i, j, k]`` at slots ``slots[i, :counts[i]]``, the row's
+    supervisor (state ``sv2[i]``, configuration ``cfg2[i]``) when ``safety``, the command held
+    within the base supply, the physics); then reward and observation, as the scalar env's step.
     """
     a = actions[i]
     if a < -1.0:
@@ -161,26 +158,16 @@ def step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_
     elif a > 1.0:
         a = 1.0
     k = int(z[i, Z_STEP])
+    scale = c[i, C_CMD_SCALE]
+    sp = setpoint[i, min(k, setpoint.shape[1] - 1)]
+    m = counts[i]
+    code, u = engine.period(state[i], params[i], inputs[i], n_sub, KIND_EXTERNAL, sv2[i, :0], sv2[i, :0], a * scale,
+                            scale, safety, sv2[i], cfg2[i], sp, dt_s, S.force_est_n, slots[i, :m], tables[i, :m], k)
+    if code != engine.OK:
+        state[i, S.contact_force_n] = math.nan               # reported as a diverged simulation
+        return
     if safety:
-        scale = c[i, C_CMD_SCALE]
-        f = state[i, S.force_est_n]
-        sp = setpoint[i, min(k, setpoint.shape[1] - 1)]
-        cur = state[i, S.current_a]
-        if not math.isfinite(cur):
-            cur = math.nan
-        code, u, sp_inner = supervise_begin(sv2[i], cfg2[i], f, sp, dt_s, cur)
-        if code == 1:
-            code, u, reset_cmd = supervise_end(sv2[i], cfg2[i], a * scale, f, sp, dt_s, cur)
         a = u / scale
-        if a < -1.0:
-            a = -1.0
-        elif a > 1.0:
-            a = 1.0
-    for j in range(inputs.shape[1]):
-        if j != U.command_v:
-            inputs[i, j] = seq[i, k, j]
-    inputs[i, U.command_v] = a * c[i, C_CMD_SCALE]
-    kernel.advance(state[i], params[i], inputs[i], n_sub)
     r, v, term = post_step(z[i], c[i], state[i, S.force_est_n], state[i, S.contact_force_n], state[i, S.current_a],
                            setpoint[i, k], setpoint[i, k + 1], a, obs[i])
     reward[i] = r
@@ -190,22 +177,22 @@ def step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_
 
 
 @njit(parallel=True, cache=True)
-def step_rows(state, params, inputs, z, c, seq, setpoint, n_steps, actions, active, n_sub,
+def step_rows(state, params, inputs, z, c, slots, counts, tables, setpoint, n_steps, actions, active, n_sub,
               obs, reward, violation, terminated, truncated, safety, sv2, cfg2, dt_s):
     """:func:`step_row` for every active row, rows spread over threads (``numba.prange``)."""
     for i in prange(state.shape[0]):
         if active[i]:
-            step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_sub,
+            step_row(i, state, params, inputs, z, c, slots, counts, tables, setpoint, n_steps, actions, n_sub,
                      obs, reward, violation, terminated, truncated, safety, sv2, cfg2, dt_s)
 
 
 @njit(cache=True)
-def step_rows_serial(state, params, inputs, z, c, seq, setpoint, n_steps, actions, active, n_sub,
+def step_rows_serial(state, params, inputs, z, c, slots, counts, tables, setpoint, n_steps, actions, active, n_sub,
                      obs, reward, violation, terminated, truncated, safety, sv2, cfg2, dt_s):
     """:func:`step_row` for every active row on one thread."""
     for i in range(state.shape[0]):
         if active[i]:
-            step_row(i, state, params, inputs, z, c, seq, setpoint, n_steps, actions, n_sub,
+            step_row(i, state, params, inputs, z, c, slots, counts, tables, setpoint, n_steps, actions, n_sub,
                      obs, reward, violation, terminated, truncated, safety, sv2, cfg2, dt_s)
 
 
@@ -272,7 +259,9 @@ class ContactForceVectorEnv(VectorEnv):
         self._z = np.zeros((n, N_Z))
         self._c = np.tile(self.config.config_vector(), (n, 1))
         width = self.config.max_episode_steps() + 2
-        self._seq = np.zeros((n, width, N_INPUT))
+        self._slots = np.zeros((n, N_INPUT), dtype=np.int64)      # each row's varying inputs: slots,
+        self._counts = np.zeros(n, dtype=np.int64)                # how many,
+        self._tables = np.zeros((n, 0, width))                    # and their values per period
         self._setpoint = np.zeros((n, width))
         self._n_steps = np.zeros(n, dtype=np.int64)
         self._obs = np.zeros((n, N_OBS), dtype=np.float32)
@@ -289,8 +278,7 @@ class ContactForceVectorEnv(VectorEnv):
         self._sv2 = self._svcfg2 = None          # the supervisors' live arrays, one row per sub-env
         self._renderer = None
         self._ready = False
-        self._fused = True                        # the safety layer inside the compiled row step
-        self._no_sv = np.zeros((n, 1))
+        self._no_sv = np.zeros((n, 1))            # the supervisor arrays of rows without one
         self._dt = float(self.config.dt_s)
         self._substeps = self.config.substeps
 
@@ -310,9 +298,11 @@ class ContactForceVectorEnv(VectorEnv):
                 self._masters[i] = SeedNode(int(self._rngs[i].integers(0, 2**63)))
             eps.append(draw_episode(self._masters[i].spawn(1)[0], self.config, options))
         longest = max(ep.n_steps for ep in eps)
-        if longest + 1 > self._setpoint.shape[1]:
-            width = longest + 2
-            self._seq = np.pad(self._seq, ((0, 0), (0, width - self._seq.shape[1]), (0, 0)))
+        varying = max(len(ep.run.profiles) for ep in eps)
+        if longest + 1 > self._setpoint.shape[1] or varying > self._tables.shape[1]:
+            width = max(longest + 2, self._setpoint.shape[1])
+            self._tables = np.pad(self._tables, ((0, 0), (0, max(0, varying - self._tables.shape[1])),
+                                                 (0, width - self._tables.shape[2])))
             self._setpoint = np.pad(self._setpoint, ((0, 0), (0, width - self._setpoint.shape[1])))
         sups = []
         for i, ep in zip(rows, eps):
@@ -323,10 +313,10 @@ class ContactForceVectorEnv(VectorEnv):
             self.state[i] = initial_state(dev, p, None)
             self.inputs[i] = run.initial_inputs()
             n = ep.n_steps
-            seq = self._seq[i]
-            seq[:n] = run.base_inputs
-            for name, arr in run.profiles.items():
-                seq[:n, U[name]] = arr
+            self._counts[i] = len(run.profiles)
+            for j, (name, arr) in enumerate(run.profiles.items()):
+                self._slots[i, j] = U[name]
+                self._tables[i, j, :n] = arr
             self._setpoint[i, :n + 1] = ep.setpoint_n
             self._n_steps[i] = min(n, self.max_episode_steps)
             fe = float(self.state[i, S.force_est_n])
@@ -431,10 +421,8 @@ class ContactForceVectorEnv(VectorEnv):
         a = check_action(actions, self.num_envs)[:, 0]
         done = self._prev_done
         np.logical_not(done, out=self._active)
-        fused = self.config.safety and self._fused
-        if self.config.safety and not fused:
-            a = self._supervised(a)
-        sv2, cfg2 = (self._sv2, self._svcfg2) if fused else (self._no_sv, self._no_sv)
+        safety = self.config.safety
+        sv2, cfg2 = (self._sv2, self._svcfg2) if safety else (self._no_sv, self._no_sv)
         choice = self._choice
         if choice is not None:
             way = choice.pick()
@@ -442,9 +430,9 @@ class ContactForceVectorEnv(VectorEnv):
             t0 = time.perf_counter()
         else:
             fn = self._step_fn
-        fn(self.state, self.params, self.inputs, self._z, self._c, self._seq, self._setpoint,
+        fn(self.state, self.params, self.inputs, self._z, self._c, self._slots, self._counts, self._tables, self._setpoint,
            self._n_steps, a, self._active, self._substeps, self._obs, self._reward,
-           self._violation, self._terminated, self._truncated, fused, sv2, cfg2, self._dt)
+           self._violation, self._terminated, self._truncated, safety, sv2, cfg2, self._dt)
         if choice is not None:
             choice.record(way, time.perf_counter() - t0)
             self.parallel = choice.threads
@@ -462,25 +450,6 @@ class ContactForceVectorEnv(VectorEnv):
         info = {"force_true_n": fc.copy(), "_force_true_n": every, "force_est_n": self.state[:, S.force_est_n].copy(),
                 "_force_est_n": every.copy(), "violation": self._violation.copy(), "_violation": every.copy()}
         return (self._obs.copy(), self._reward.copy(), self._terminated.copy(), self._truncated.copy(), info)
-
-    def _supervised(self, a: np.ndarray) -> np.ndarray:
-        """The safety layer's applied commands (fractions of the supply) of the active rows:
-        every row's supervisor in one compiled call (:func:`controllers.supervisor.supervise_commands`,
-        what :func:`ebraille_sim.rl.env.supervised_action` does row by row)."""
-        from controllers.supervisor import supervise_commands
-        out = np.clip(a, -1.0, 1.0)
-        st = self.state
-        rows = np.nonzero(self._active)[0]
-        if rows.size == 0:
-            return out
-        scale = self._c[:, C_CMD_SCALE]
-        k = np.minimum(self._z[:, Z_STEP].astype(np.int64), self._setpoint.shape[1] - 1)
-        sp = self._setpoint[np.arange(self.num_envs), k]
-        u = np.zeros(self.num_envs)
-        supervise_commands(self._sv2, self._svcfg2, rows, out * scale, np.ascontiguousarray(st[:, S.force_est_n]),
-                           sp, float(self.config.dt_s), np.ascontiguousarray(st[:, S.current_a]), u)
-        out[rows] = np.clip(u[rows] / scale[rows], -1.0, 1.0)
-        return out
 
     def render(self):
         """One RGB frame per sub-env (tuple of arrays), or None without a render mode."""

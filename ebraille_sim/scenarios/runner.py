@@ -17,7 +17,7 @@ import numpy as np
 
 from ebraille_sim.plant.layout import S, U
 from ebraille_sim.plant.loop import make_plant
-from ebraille_sim.scenarios.compiled_loop import KEPT, ROW
+from ebraille_sim.plant.engine import KEPT
 from ebraille_sim.scenarios.inputs import build_run_inputs, refresh_phases
 from ebraille_sim.scenarios.metrics import compute_metrics
 from ebraille_sim.scenarios.spec import ScenarioError, ScenarioSpec, load_scenario
@@ -196,66 +196,57 @@ def _closed_loop(spec, run, ctrl, backend: str, every: int | None, supervised: b
     """The control loop of one prepared run: the true and estimated force at every period
     (the metrics need them), the other trace columns at every ``every``-th (None: not at all).
 
+    A controller with a compiled form, alone or inside the safety supervisor, on the lumped
+    plant runs all its periods in one call of the loop engine (:func:`ebraille_sim.plant.engine.run`);
+    any other goes through :func:`python_periods`.
+
     Returns ``(setpoint, force_true, force_est, kept columns, energy at the end (J), wall s,
     controller name, the wrapped controller)``.
     """
-    dt, n = run.dt_s, run.n_steps
+    n = run.n_steps
     sp = run.setpoint_n[:n]                       # read only: a view, not a copy
     plant = _plant_for(spec, run, backend)
     # a reference controller that declares ``feedback = "true_force"`` (controllers.bounds) is fed
     # the true contact force instead of the estimate; every other controller sees the estimate
-    i_fb = S.contact_force_n if getattr(ctrl, "feedback", "estimate") == "true_force" else S.force_est_n
+    i_fb = _feedback_slot(ctrl)
     ctrl_name = _name(ctrl)
-    ctrl_unwrapped = ctrl
-    ctrl = wrap_controller(spec, ctrl, dt, supervised)
+    wrapped = wrap_controller(spec, ctrl, run.dt_s, supervised)
     st = plant.state[0]
-    ctrl.reset(force_est_n=float(st[i_fb]), setpoint_n=float(sp[0]), command_v=0.0)
-    f_true, f_est = np.zeros(n), np.zeros(n)
-    n_kept = 0 if every is None else n // every
-    kept = np.zeros((len(KEPT), n_kept))
-    form = _loop_form(ctrl_unwrapped, ctrl, plant, backend)
-    if form is not None and _loop_not_compiled():
-        # compile (or load from the cache) before the timed loop: zero periods change nothing
-        _run_compiled(form, plant, run, ctrl, sp[:0], i_fb, every, np.zeros(0), np.zeros(0),
-                      np.zeros((len(KEPT), 0)))
-    wall0 = time.perf_counter()
-    if form is not None:
-        _run_compiled(form, plant, run, ctrl, sp, i_fb, every, f_true, f_est, kept)
+    wrapped.reset(force_est_n=float(st[i_fb]), setpoint_n=float(sp[0]), command_v=0.0)
+    form = _compiled_controller(ctrl, wrapped) if _is_lumped(plant) else None
+    if form is None:
+        rec, wall = python_periods(plant, [wrapped], sp[None, :], [run.profiles], i_fb, every, n)
     else:
-        _run_periods(plant, run, ctrl, sp, i_fb, every, f_true, f_est, kept)
-    wall = time.perf_counter() - wall0
+        rec = _engine_rows(plant, [form], sp[None, :], [run.profiles], run.dt_s, i_fb, every, n)
+        wall = _run_timed(rec, n)
+        rec.copy_back()
+        _raise_row(rec, 0, wrapped)
     energy_end = float(st[S.energy_j]) if n else 0.0
-    return sp, f_true, f_est, dict(zip(KEPT, kept)), energy_end, wall, ctrl_name, ctrl
+    return sp, rec.f_true[0], rec.f_est[0], dict(zip(KEPT, rec.kept[0])), energy_end, wall, ctrl_name, wrapped
 
 
-def _loop_not_compiled() -> bool:
-    """Whether this process has not yet compiled (or loaded) the compiled loop."""
-    from ebraille_sim.scenarios import compiled_loop
-    return not getattr(compiled_loop.run_loop, "signatures", True)
+def _feedback_slot(ctrl) -> int:
+    """The state slot fed back to ``ctrl``: the estimate, or the true force for a reference
+    controller that declares ``feedback = "true_force"``."""
+    return S.contact_force_n if getattr(ctrl, "feedback", "estimate") == "true_force" else S.force_est_n
+
+
+def _is_lumped(plant) -> bool:
+    """Whether ``plant`` is the compiled lumped plant (the loop engine steps its rows)."""
+    from ebraille_sim.plant.loop import Plant
+    return type(plant) is Plant
 
 
 _USE_COMPILED_LOOP = True
-"""Run a loop in one compiled call when it can (:func:`_loop_form`); False forces the
-per-period loop (for tests that compare the two)."""
-
-
-def _loop_form(ctrl, wrapped, plant, backend: str):
-    """What :func:`_run_compiled` needs to run the loop of ``wrapped`` in one compiled call:
-    ``(kind, state, params, sv_state, sv_cfg)`` (the supervisor's vectors None when it
-    runs unsupervised), or None when it cannot.
-
-    It can on the lumped plant with one device, for a controller ``ctrl`` with a compiled
-    form (:func:`controllers.compiled.compiled_form`) that runs unwrapped, or wrapped only in
-    an enabled safety supervisor (whose period is compiled too).
-    """
-    from ebraille_sim.plant.loop import Plant
-    if backend != "lumped" or type(plant) is not Plant or plant.n != 1:
-        return None
-    return _compiled_controller(ctrl, wrapped)
+"""Run a built-in controller's loop in the loop engine with the controller compiled (one call
+for all periods); False hands every controller's command in from Python, one period per call
+(:func:`python_periods`: for tests that compare the two)."""
 
 
 def _compiled_controller(ctrl, wrapped):
-    """The controller part of :func:`_loop_form` (any plant)."""
+    """``(kind, state, params, sv_state, sv_cfg)`` of a controller ``ctrl`` with a compiled form
+    (:func:`controllers.compiled.compiled_form`) that runs unwrapped (the supervisor's vectors
+    None) or wrapped only in an enabled safety supervisor; None for any other."""
     if not _USE_COMPILED_LOOP:
         return None
     from controllers.compiled import compiled_form
@@ -273,68 +264,197 @@ def _compiled_controller(ctrl, wrapped):
     return None
 
 
-def _run_compiled(form, plant, run, ctrl, sp, i_fb: int, every, f_true, f_est, kept) -> None:
-    """The loop of :func:`_closed_loop` in one call of
-    :func:`ebraille_sim.scenarios.compiled_loop.run_loop`; raises what the per-period loop raises."""
-    from ebraille_sim.scenarios.compiled_loop import profile_arrays, run_loop
-    kind, cstate, cparams, sv_state, sv_cfg = form
-    supervised = sv_state is not None
-    if not supervised:
-        sv_state = sv_cfg = np.zeros(0)
-    n = len(f_true)
-    slots, table = profile_arrays(run.profiles, n)
-    st = plant.state[0]
-    status, k, value = run_loop(st, plant.params[0], plant.inputs[0], plant.substeps, kind, cstate, cparams,
-                                supervised, sv_state, sv_cfg, sp, run.dt_s, i_fb, slots, table,
-                                0 if every is None else every, f_true, f_est, kept)
-    _raise_status(status, k, value, ctrl, st, sp, run.dt_s, i_fb)
+_EXTERNAL_FORM = None
 
 
-def _raise_status(status: int, k: int, value: float, ctrl, st, sp, dt_s: float, i_fb: int) -> None:
-    """Raise what the per-period loop raises for a compiled loop's error ``status`` (none for OK)."""
-    from ebraille_sim.scenarios.compiled_loop import BAD_COMMAND, BAD_CONTROLLER_INPUT
+def _external_form():
+    """The engine form of a row whose command is handed in (a Python controller's)."""
+    global _EXTERNAL_FORM
+    if _EXTERNAL_FORM is None:
+        from controllers.compiled import KIND_EXTERNAL
+        _EXTERNAL_FORM = (KIND_EXTERNAL, np.zeros(0), np.zeros(0), None, None)
+    return _EXTERNAL_FORM
+
+
+def _engine_rows(plant, forms: list, sp: np.ndarray, profiles: list, dt_s: float, i_fb: int, every, n_record: int):
+    """The loop engine's rows (:class:`ebraille_sim.plant.engine.Rows`) of a lumped ``plant``
+    whose row ``r`` runs the controller ``forms[r]`` (:func:`_compiled_controller`), on the
+    setpoints ``sp[r]`` and the varying inputs ``profiles[r]``.
+
+    The plant's arrays are the rows' (stepped in place); one row's controller and supervisor
+    vectors are its live vectors too, and its input table the run's own array where it is one."""
+    from ebraille_sim.plant.engine import Rows
+    from ebraille_sim.scenarios.inputs import profile_table
+    m, n = sp.shape
+    every = 0 if every is None else int(every)
+    if m == 1:
+        kind, cs, cp, sv, cfg = forms[0]
+        names = list(profiles[0])
+        slots = np.array([[U[name] for name in names]], dtype=np.int64).reshape(1, len(names))
+        table = profile_table(profiles[0], n)
+        if table is None:
+            table = np.zeros((len(names), n))
+            for j, name in enumerate(names):
+                table[j] = np.asarray(profiles[0][name], dtype=float)[:n]
+        supervised = sv is not None
+        sv2 = (sv if supervised else np.zeros(0))[None, :]
+        cfg2 = (cfg if supervised else np.zeros(0))[None, :]
+        return Rows(plant.state, plant.params, plant.inputs, plant.substeps, np.array([kind], dtype=np.int64),
+                    cs[None, :], cp[None, :], np.array([supervised]), sv2, cfg2, sp, dt_s, i_fb, slots,
+                    np.array([len(names)], dtype=np.int64), table[None, :, :], every, n_record)
+    rows = Rows.pack([(plant.state[r], plant.params[r], plant.inputs[r], plant.substeps) for r in range(m)],
+                     [f[:3] for f in forms], [None if f[3] is None else (f[3], f[4]) for f in forms], sp, dt_s,
+                     i_fb, profiles, every, n_record)
+    return rows
+
+
+def _run_timed(rows, n: int) -> float:
+    """All ``n`` periods of ``rows`` in one engine call (compiled, or loaded from the cache,
+    before the clock starts); the wall time of the call, s."""
+    from ebraille_sim.plant.engine import run
+    if not getattr(run, "signatures", True):
+        run(*rows.arguments(0, 0))                 # zero periods change nothing
+    wall0 = time.perf_counter()
+    run(*rows.arguments(0, n))
+    return time.perf_counter() - wall0
+
+
+def _raise_row(rows, r: int, ctrl) -> None:
+    """Raise what the plant or the controller raises for row ``r``'s engine status (none for OK)."""
+    from ebraille_sim.plant.engine import BAD_COMMAND, BAD_CONTROLLER_INPUT
+    status, k, value = int(rows.status[r]), int(rows.periods[r]), float(rows.values[r])
     if status == BAD_CONTROLLER_INPUT:
         # the controller's own check names the bad argument
-        ctrl.update(float(st[i_fb]), sp[k], dt_s, float(st[S.current_a]) if k else 0.0)
+        st = rows.states[r]
+        ctrl.update(float(st[rows.i_feedback]), rows.setpoints[r, k], rows.dt, float(st[S.current_a]) if k else 0.0)
         raise ValueError(f"non-finite controller input at control period {k}")
     if status == BAD_COMMAND:
         raise ValueError(f"command_v must be finite, got {value}")
 
 
-def _run_periods(plant, run, ctrl, sp, i_fb: int, every, f_true, f_est, kept) -> None:
-    """The loop of :func:`_closed_loop`, one control period per Python iteration."""
-    dt, n = run.dt_s, len(f_true)
-    st = plant.state[0]
-    # slot indices and trace columns bound to locals: the loop below runs once per control period
-    i_fc, i_fe, i_v, i_i, i_x, i_e = (S.contact_force_n, S.force_est_n, S.fsr_voltage_v,
-                                      S.current_a, S.board_pos_m, S.energy_j)
-    cmd_v, v_fsr, cur, xb, en = (kept[ROW.command_v], kept[ROW.fsr_voltage_v], kept[ROW.motor_current_a],
-                                 kept[ROW.board_pos_m], kept[ROW.energy_j])
-    fe = float(st[i_fb])
-    i_a = 0.0
-    update = ctrl.update
-    advance = plant.advance
+FAILED_IN_PYTHON = 3
+"""Engine status of a row whose Python controller raised (:func:`python_periods`): the engine
+skips it from then on."""
+
+
+def python_periods(plant, controllers: list, sp: np.ndarray, profiles: list, i_fb: int, every, n: int,
+                   errors: list | None = None, k0: int = 0, n_record: int | None = None):
+    """The one shim through which Python controllers (and plants other than the lumped one)
+    enter the closed loop: per control period, every row's controller is called from Python on
+    what it measured at the end of the previous period, and its command is handed to the loop
+    engine (:func:`ebraille_sim.plant.engine.run` for that one period, the controller's kind
+    :data:`~controllers.compiled.KIND_EXTERNAL`), which writes the period's inputs, holds the
+    command, advances the physics and records.
+
+    A plant without compiled rows (the pymunk backend) is advanced by its own ``advance``
+    with the same order of operations, recorded here.
+
+    Parameters
+    ----------
+    plant : a plant backend with ``m`` devices
+    controllers : list of m controllers (already wrapped and reset)
+    sp : ndarray, shape (m, n)
+        Setpoint per row and period.
+    profiles : list of m dicts
+        Each row's varying inputs.
+    i_fb : int
+        The state slot fed back as the force.
+    every : int or None
+        Keep the trace columns every ``every``-th period (None: none).
+    errors : list, optional
+        Filled with each row's exception (None for a row that ran); without it the first
+        row's exception is raised.
+    k0 : int
+        The first period: periods ``k0 .. k0 + n - 1`` run (an env steps one at a time).
+    n_record : int, optional
+        Periods recorded (default ``n``; 0 records nothing).
+
+    Returns
+    -------
+    (rows, wall)
+        The engine's rows (``f_true``, ``f_est``, ``kept``, ``states``) and the loop's wall time, s.
+    """
+    m = sp.shape[0]
+    lumped = _is_lumped(plant)
+    n_record = n if n_record is None else n_record
+    if lumped:
+        from ebraille_sim.plant.engine import run
+        rows = _engine_rows(plant, [_external_form()] * m, sp, profiles, plant.control_dt_s, i_fb, every, n_record)
+    else:
+        from ebraille_sim.plant.engine import Rows
+        rows = Rows(plant.state, None, plant.inputs, plant.substeps, None, None, None, None, None, None, sp,
+                    plant.control_dt_s, i_fb, None, None, None, 0 if every is None else every, n_record)
+    dt = rows.dt
+    errs: list = [None] * m
+    st = rows.states
+    u_ext = rows.u_ext
+    status = rows.status
+    updates = [c.update for c in controllers]
+    varying = [(U[name], arr) for name, arr in profiles[0].items()] if not lumped else None
+    fes = st[:, i_fb].tolist()
+    ias = st[:, S.current_a].tolist()
+    live = list(range(m))
+    wall0 = time.perf_counter()
+    for k in range(k0, k0 + n):
+        for r in live:
+            try:
+                c = updates[r](fes[r], sp[r, k], dt, ias[r])
+                if type(c) is not float:
+                    c = float(c) if isinstance(c, (float, int)) else float(np.ravel(c)[0])
+            except _RUN_ERRORS as exc:
+                errs[r] = exc
+                status[r] = FAILED_IN_PYTHON
+                continue
+            u_ext[r] = c
+        if lumped:
+            run(*rows.arguments(k, 1))
+        else:
+            _python_plant_period(plant, varying, rows, k, float(u_ext[0]))
+        if status.any():
+            for r in live:
+                if status[r] != 0 and errs[r] is None:
+                    try:
+                        _raise_row(rows, r, controllers[r])
+                    except _RUN_ERRORS as exc:
+                        errs[r] = exc
+            live = [r for r in live if status[r] == 0]
+            if not live:
+                break
+        fes = st[:, i_fb].tolist()
+        ias = st[:, S.current_a].tolist()
+    wall = time.perf_counter() - wall0
+    if errors is not None:
+        errors[:] = errs
+    elif errs[0] is not None:
+        raise errs[0]
+    return rows, wall
+
+
+def _python_plant_period(plant, varying: list, rows, k: int, c: float) -> None:
+    """One period of a one-device plant without compiled rows (:func:`python_periods`): the
+    engine's order of operations (inputs, checked command, advance, record), in Python."""
+    from ebraille_sim.plant.engine import BAD_COMMAND, ROW
     inp = plant.inputs[0]
-    varying = [(U[name], arr) for name, arr in run.profiles.items()]
-    due = -1 if every is None else every - 1          # next period whose end is kept
-    q = 0
-    for k in range(n):
-        for j, arr in varying:
-            inp[j] = arr[k]
-        c = update(fe, sp[k], dt, i_a)
-        advance(c)
-        fe = float(st[i_fb])
-        i_a = float(st[i_i])
-        f_true[k] = st[i_fc]
-        f_est[k] = st[i_fe]
-        if k == due:
-            cmd_v[q] = c
-            v_fsr[q] = st[i_v]
-            cur[q] = i_a
-            xb[q] = st[i_x]
-            en[q] = st[i_e]
-            q += 1
-            due += every
+    for j, arr in varying:
+        inp[j] = arr[k]
+    if not math.isfinite(c):
+        rows.status[0], rows.periods[0], rows.values[0] = BAD_COMMAND, k, c
+        return
+    plant.advance(c)
+    st = plant.state[0]
+    if rows.f_true.shape[1] == 0:
+        return
+    rows.f_true[0, k] = st[S.contact_force_n]
+    rows.f_est[0, k] = st[S.force_est_n]
+    every = rows.every
+    if every > 0 and (k + 1) % every == 0:
+        q = (k + 1) // every - 1
+        kept = rows.kept[0]
+        kept[ROW.command_v, q] = c
+        kept[ROW.fsr_voltage_v, q] = st[S.fsr_voltage_v]
+        kept[ROW.motor_current_a, q] = st[S.current_a]
+        kept[ROW.board_pos_m, q] = st[S.board_pos_m]
+        kept[ROW.energy_j, q] = st[S.energy_j]
 
 
 def _simulate_lean(spec, seed, run, ctrl, backend: str, every: int | None, supervised: bool = True,
@@ -406,10 +526,9 @@ BATCH_TRACE_BYTES = 256 * 2**20
 stay below it), bytes."""
 
 COMPILED_BATCH_ROWS = 128
-"""Most runs of one call of :func:`ebraille_sim.scenarios.compiled_loop.run_rows` (each row
+"""Most runs of one call of the loop engine's :func:`ebraille_sim.plant.engine.run` (each row
 holds its supervisor's state, about 140 kB, besides its trace and inputs)."""
 
-_BATCH_SLOTS = ("contact_force_n", "force_est_n", "fsr_voltage_v", "current_a", "board_pos_m", "energy_j")
 _BATCH_COLUMNS = ("force_true_n", "force_est_n", "fsr_voltage_v", "motor_current_a", "board_pos_m", "energy_j")
 _RUN_ERRORS = (ValueError, FloatingPointError, FileNotFoundError)
 
@@ -417,9 +536,10 @@ _RUN_ERRORS = (ValueError, FloatingPointError, FileNotFoundError)
 def run_batch(runs: list, keep_traces: bool = True) -> list:
     """Several runs of :func:`run_scenario` (lumped plant), their plants advanced together.
 
-    Runs with the same number of control periods and the same rates share one packed plant:
-    every control period calls each run's controller (Python objects, in a loop) and then
-    advances all rows in one compiled call (:func:`ebraille_sim.plant.kernel.advance_batch`).
+    Runs with the same number of control periods and the same rates are rows of one call of
+    the loop engine (:func:`ebraille_sim.plant.engine.run`): runs whose controller is compiled
+    run all their periods in that call; the others share one plant stepped through
+    :func:`python_periods` (their controllers called from Python each period).
     Rows are independent, so every run's trace and metrics are those of :func:`run_scenario`
     with the same arguments, exactly (``real_time_factor`` aside: the batch's loop time is
     shared equally among its rows).
@@ -534,24 +654,16 @@ def _plant_rows(spec, run, cache: dict) -> tuple:
     return state, params, inputs, hit[3]
 
 
-def _padded(rows: list, dtype=float) -> np.ndarray:
-    """Rows of different lengths as one zero-padded 2-D array."""
-    out = np.zeros((len(rows), max((len(r) for r in rows), default=0)), dtype=dtype)
-    for i, r in enumerate(rows):
-        out[i, :len(r)] = r
-    return out
-
-
 def _simulate_compiled_rows(prepared: list, keep_traces: bool = True) -> list:
     """The runs of ``prepared`` that can run compiled (:func:`_compiled_controller`), all in one
-    call of :func:`ebraille_sim.scenarios.compiled_loop.run_rows`; None for the others.
+    call of the loop engine (:func:`ebraille_sim.plant.engine.run`); None for the others.
 
     Each row is the computation of :func:`_simulate` (or :func:`_simulate_lean` without a
     trace) of the same run: the same plant rows, controller and supervisor vectors and
-    inputs, stepped by the same compiled loop, so traces and metrics are equal to the last
-    bit (``real_time_factor`` aside: the call's time is shared equally among its rows).
+    inputs, stepped by the same engine, so traces and metrics are equal to the last bit
+    (``real_time_factor`` aside: the call's time is shared equally among its rows).
     """
-    from ebraille_sim.scenarios.compiled_loop import run_rows
+    from ebraille_sim.plant.engine import Rows
     m = len(prepared)
     out: list = [None] * m
     run0 = prepared[0][2]
@@ -574,75 +686,41 @@ def _simulate_compiled_rows(prepared: list, keep_traces: bool = True) -> list:
         rows.append((r, wrapped, _name(ctrl), form, prow))
     if not rows:
         return out
-    k = len(rows)
     runs = [prepared[row[0]][2] for row in rows]
-    states = np.array([row[4][0] for row in rows])
-    params = np.array([row[4][1] for row in rows])
-    inputs = np.array([row[4][2] for row in rows])
-    n_sub = rows[0][4][3]
-    kinds = np.array([row[3][0] for row in rows], dtype=np.int64)
-    cstates = _padded([row[3][1] for row in rows])
-    cparams = _padded([row[3][2] for row in rows])
-    supervised = np.array([row[3][3] is not None for row in rows])
-    sizes = [(0, 0) if row[3][3] is None else (row[3][3].size, row[3][4].size) for row in rows]
-    sv_states = np.zeros((k, max(z[0] for z in sizes)))
-    sv_cfgs = np.zeros((k, max(z[1] for z in sizes)))
-    for i, row in enumerate(rows):
-        if row[3][3] is not None and sizes[i] == sv_states.shape[1:] + sv_cfgs.shape[1:]:
-            # the supervisor reads and writes its row from now on (nothing to copy back)
-            row[1].bind(sv_states[i], sv_cfgs[i])
-            rows[i] = row[:3] + (row[3][:3] + (None, None), row[4])
-        elif row[3][3] is not None:
-            sv_states[i, :sizes[i][0]] = row[3][3]
-            sv_cfgs[i, :sizes[i][1]] = row[3][4]
-    setpoints = np.empty((k, n))
+    setpoints = np.empty((len(rows), n))
     for i, run in enumerate(runs):
         setpoints[i] = run.setpoint_n[:n]
-    names = [list(run.profiles) for run in runs]
-    counts = np.array([len(x) for x in names], dtype=np.int64)
-    slots = np.zeros((k, max(counts)), dtype=np.int64)
-    table = np.zeros((k, max(counts), n))
-    for i, run in enumerate(runs):
-        for j, name in enumerate(names[i]):
-            slots[i, j] = U[name]
-            table[i, j] = run.profiles[name][:n]
-    every = 1 if keep_traces else 0
-    f_true, f_est = np.zeros((k, n)), np.zeros((k, n))
-    kept = np.zeros((k, len(KEPT), n * every))
-    status, periods, values = np.zeros(k, dtype=np.int64), np.zeros(k, dtype=np.int64), np.zeros(k)
-    args = [states, params, inputs, n_sub, kinds, cstates, cparams, supervised, sv_states, sv_cfgs, setpoints,
-            dt, i_fb, slots, counts, table, every, f_true, f_est, kept, status, periods, values]
-    if not getattr(run_rows, "signatures", True):
-        # compile (or load from the cache) before the timed call: zero rows change nothing
-        run_rows(*[a[:0] if isinstance(a, np.ndarray) else a for a in args])
-    wall0 = time.perf_counter()
-    run_rows(*args)
-    wall = (time.perf_counter() - wall0) / k
+    rec = Rows.pack([row[4] for row in rows], [row[3][:3] for row in rows],
+                    [None if row[3][3] is None else (row[3][3], row[3][4]) for row in rows], setpoints, dt, i_fb,
+                    [run.profiles for run in runs], 1 if keep_traces else 0, n)
+    wall = _run_timed(rec, n) / len(rows)
+    rec.copy_back()
     for i, (r, wrapped, name, form, _) in enumerate(rows):
-        # the controller and supervisor objects read their vectors: copy the rows back
-        form[1][:] = cstates[i, :len(form[1])]
-        if form[3] is not None:
-            form[3][:] = sv_states[i, :len(form[3])]
         spec, seed, run, _ = prepared[r]
         try:
-            _raise_status(int(status[i]), int(periods[i]), float(values[i]), wrapped, states[i], setpoints[i], dt,
-                          i_fb)
-            if keep_traces:
-                tr = {"force_true_n": f_true[i], "force_est_n": f_est[i], **dict(zip(KEPT, kept[i]))}
-            else:
-                tr = {"force_true_n": f_true[i], "force_est_n": f_est[i],
-                      "energy_j": np.array([float(states[i, S.energy_j]) if n else 0.0])}
-            res = _finish(spec, seed, run, tr, setpoints[i], wall, name, keep_trace=keep_traces)
-            out[r] = _with_supervisor(res, spec, True, wrapped)
+            _raise_row(rec, i, wrapped)
+            out[r] = _with_supervisor(_finish(spec, seed, run, _row_trace(rec, i, keep_traces), setpoints[i], wall,
+                                              name, keep_trace=keep_traces), spec, True, wrapped)
         except _RUN_ERRORS as exc:
             out[r] = exc
     return out
 
 
+def _row_trace(rec, i: int, keep_traces: bool) -> dict:
+    """Row ``i``'s trace columns of the engine's record (only what the metrics read without
+    ``keep_traces``)."""
+    tr = {"force_true_n": rec.f_true[i], "force_est_n": rec.f_est[i]}
+    if keep_traces:
+        tr.update(zip(KEPT, rec.kept[i]))
+    else:
+        n = rec.f_true.shape[1]
+        tr["energy_j"] = np.array([float(rec.states[i, S.energy_j]) if n else 0.0])
+    return tr
+
+
 def _simulate_python_rows(prepared: list, keep_traces: bool = True) -> list:
     """:func:`_simulate` of several prepared runs with equal length and rates, one plant
-    stepped by one compiled call per control period, each controller called from Python."""
-    from ebraille_sim.plant import kernel
+    stepped through :func:`python_periods` (each controller called from Python)."""
     if len(prepared) == 1:
         spec, seed, run, ctrl = prepared[0]
         try:
@@ -659,95 +737,51 @@ def _simulate_python_rows(prepared: list, keep_traces: bool = True) -> list:
         # one row cannot be packed: run each on its own, for the error of that row alone
         return [r for p in prepared for r in _simulate_python_rows([p], keep_traces)]
     m = len(prepared)
-    run0 = runs[0]
-    dt, n = run0.dt_s, run0.n_steps
+    dt, n = runs[0].dt_s, runs[0].n_steps
     out: list = [None] * m
-    state, inputs = plant.state, plant.inputs
-    inputs[:, U.finger_pos_m] = [s.finger.gap_m for s in specs]
-    sp = np.stack([r.setpoint_n[:n] for r in runs], axis=1)           # (n, rows)
-    updates: list = [None] * m
+    plant.inputs[:, U.finger_pos_m] = [s.finger.gap_m for s in specs]
+    sp = np.stack([r.setpoint_n[:n] for r in runs])                   # (rows, n)
     names: list = [""] * m
     wrapped: list = [None] * m
-    i_fe, i_i = S.force_est_n, S.current_a
+    live = []
     for r, (spec, _, _, ctrl) in enumerate(prepared):
         try:
             names[r] = _name(ctrl)
-            ctrl = wrap_controller(spec, ctrl, dt)
-            ctrl.reset(force_est_n=float(state[r, i_fe]), setpoint_n=float(sp[0, r]), command_v=0.0)
+            w = wrap_controller(spec, ctrl, dt)
+            w.reset(force_est_n=float(plant.state[r, S.force_est_n]), setpoint_n=float(sp[r, 0]), command_v=0.0)
         except _RUN_ERRORS as exc:
             out[r] = exc
             continue
-        updates[r] = ctrl.update
-        wrapped[r] = ctrl
-    # inputs that vary: one column of the plant's inputs per name, all rows that have it
-    varying = []
-    for name in dict.fromkeys(k for r in runs for k in r.profiles):
-        rows = [r for r in range(m) if name in runs[r].profiles]
-        table = np.stack([runs[r].profiles[name] for r in rows], axis=1)  # (n, len(rows))
-        varying.append((U[name], None if len(rows) == m else np.array(rows), table))
-    slots = np.array([S[name] for name in _BATCH_SLOTS])
-    buf = np.empty((n, m, len(slots)))
-    cmd = np.zeros((n, m))
-    live = [r for r in range(m) if out[r] is None]
-    fes = state[:, i_fe].tolist()
-    ias = [0.0] * m
-    i_cmd = U.command_v
-    cmd_now = inputs[:, i_cmd]
-    cmd_now[:] = 0.0
-    cs = [0.0] * m
-    sub = plant.substeps
-    wall0 = time.perf_counter()
-    for k in range(n):
-        for j, rows, table in varying:
-            if rows is None:
-                inputs[:, j] = table[k]
-            else:
-                inputs[rows, j] = table[k]
-        sp_k = sp[k]
-        failed = False
-        for r in live:
-            try:
-                c = updates[r](fes[r], sp_k[r], dt, ias[r])
-                if type(c) is not float:
-                    c = float(c) if isinstance(c, (float, int)) else float(np.ravel(c)[0])
-            except _RUN_ERRORS as exc:
-                out[r] = exc
-                failed = True
-                c = 0.0
-            cs[r] = c
-        cmd_now[:] = cs
-        if not np.isfinite(cmd_now).all():
-            for r in live:
-                if out[r] is None and not math.isfinite(cs[r]):
-                    out[r] = ValueError(f"command_v must be finite, got {cs[r]}")
-            failed = True
-        if failed:                                   # a failed row holds a zero command from now on
-            for r in live:
-                if out[r] is not None:
-                    cs[r] = 0.0
-                    cmd_now[r] = 0.0
-            live = [r for r in live if out[r] is None]
-        kernel.advance_batch(state, plant.params, inputs, sub)
-        cmd[k] = cmd_now
-        buf[k] = state[:, slots]
-        fes = state[:, i_fe].tolist()
-        ias = state[:, i_i].tolist()
-    wall = (time.perf_counter() - wall0) / m
-    for r in live:
-        if keep_traces:
-            tr = {col: np.ascontiguousarray(buf[:, r, q]) for q, col in enumerate(_BATCH_COLUMNS)}
-            tr["command_v"] = np.ascontiguousarray(cmd[:, r])
-        else:                                           # what the metrics read
-            tr = {col: np.ascontiguousarray(buf[:, r, _BATCH_COLUMNS.index(col)])
-                  for col in ("force_true_n", "force_est_n")}
-            tr["energy_j"] = buf[-1:, r, _BATCH_COLUMNS.index("energy_j")].copy()
+        wrapped[r] = w
+        live.append(r)
+    if not live:
+        return out
+    if len(live) < m:
+        plant = _plant_subset(plant, live)
+    errors: list = []
+    rec, wall = python_periods(plant, [wrapped[r] for r in live], sp[live], [runs[r].profiles for r in live],
+                               S.force_est_n, 1 if keep_traces else None, n, errors)
+    wall /= len(live)
+    for i, r in enumerate(live):
+        if errors[i] is not None:
+            out[r] = errors[i]
+            continue
         spec, seed, run, _ = prepared[r]
         try:
-            out[r] = _with_supervisor(_finish(spec, seed, run, tr, np.ascontiguousarray(sp[:, r]), wall,
+            out[r] = _with_supervisor(_finish(spec, seed, run, _row_trace(rec, i, keep_traces), sp[r], wall,
                                               names[r], keep_trace=keep_traces), spec, True, wrapped[r])
         except _RUN_ERRORS as exc:
             out[r] = exc
     return out
+
+
+def _plant_subset(plant, rows: list):
+    """The lumped plant of only ``rows`` of ``plant`` (copies of their rows)."""
+    import copy
+    sub = copy.copy(plant)
+    sub.state, sub.params, sub.inputs = plant.state[rows], plant.params[rows], plant.inputs[rows]
+    sub.devices = [plant.devices[r] for r in rows]
+    return sub
 
 
 def _with_supervisor(res: RunResult, spec, supervised: bool, wrapped) -> RunResult:
