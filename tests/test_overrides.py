@@ -47,11 +47,12 @@ def test_a_gains_file_rejects_an_unknown_gain_and_an_unknown_key(tmp_path, name)
 
 
 def _controller_config_classes():
-    """Dataclasses with a ``from_dict`` in every module of the ``controllers`` package."""
+    """Dataclasses with a ``from_dict`` in every module of the ``controllers`` package (and its
+    sub-packages)."""
     found = {}
-    for info in pkgutil.iter_modules(controllers.__path__):
+    for info in pkgutil.walk_packages(controllers.__path__, "controllers."):
         try:
-            mod = importlib.import_module(f"controllers.{info.name}")
+            mod = importlib.import_module(info.name)
         except ImportError:                       # optional extras (e.g. the policy's)
             continue
         for obj in vars(mod).values():

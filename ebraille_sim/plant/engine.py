@@ -54,7 +54,7 @@ import numpy as np
 
 from controllers.compiled import KIND_EXTERNAL, controller_reset, controller_step, record
 from controllers.supervisor import supervise_begin, supervise_end
-from ebraille_sim.base.compiled import njit
+from ebraille_sim.base.compiled import entry_point, njit
 from ebraille_sim.plant.kernel import advance
 from ebraille_sim.plant.layout import S, U
 
@@ -280,6 +280,12 @@ class Rows:
                 self.u_ext, self.supervised, self.sv_states, self.sv_cfgs, self.setpoints, self.dt,
                 self.i_feedback, self.slots, self.counts, self.tables, k0, n_periods, self.every, self.f_true,
                 self.f_est, self.kept, self.status, self.periods, self.values)
+
+    def stepper(self):
+        """:func:`run` for these rows' argument types without the dispatcher's check of every
+        argument on each call (:func:`ebraille_sim.base.compiled.entry_point`): for one period per
+        call, as the per-period shim steps."""
+        return entry_point(run, *self.arguments(0, 1))
 
     def copy_back(self) -> None:
         """Write the rows' final controller and supervisor vectors into the vectors they were

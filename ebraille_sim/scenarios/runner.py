@@ -378,8 +378,8 @@ def python_periods(plant, controllers: list, sp: np.ndarray, profiles: list, i_f
     lumped = _is_lumped(plant)
     n_record = n if n_record is None else n_record
     if lumped:
-        from ebraille_sim.plant.engine import run
         rows = _engine_rows(plant, [_external_form()] * m, sp, profiles, plant.control_dt_s, i_fb, every, n_record)
+        run = rows.stepper()
     else:
         from ebraille_sim.plant.engine import Rows
         rows = Rows(plant.state, None, plant.inputs, plant.substeps, None, None, None, None, None, None, sp,

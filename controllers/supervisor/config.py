@@ -1,0 +1,380 @@
+"""The supervisor's configuration: its policy (thresholds and times) and the drive constants
+it derives its limits from (:class:`SupervisorConfig`, :func:`device_limits`)."""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import operator
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from controllers.supervisor.layout import _pack
+from ebraille_sim.base.validation import check_bool, check_keys, check_number, replace_fields
+from ebraille_sim.physics import limits
+from ebraille_sim.physics.fingertip import compression_at_force_m, tangent_stiffness_n_per_m
+from ebraille_sim.physics.params import DeviceParams, FINGERS, TACTILE_FORCE_MAX_N
+
+_NOMINAL = DeviceParams()
+
+FORCE_CAP_LIMIT_N = TACTILE_FORCE_MAX_N + 1.0
+"""Largest admissible ``force_cap_n``, N: the 3 N top of the tactile range ([R] seed paper)
+plus 1 N of margin [E] for a cap set above the reading force.  The cap exists to keep the
+board from pressing the finger harder than reading needs; one far above the tactile range
+would not protect it."""
+
+RATED_CURRENT_A: dict[str, float] = {"faulhaber_0816_006sr": 0.19}
+"""Continuous (rated) motor current by motor preset, A ([R] Faulhaber 0816 006 SR datasheet).
+A motor without an entry is rated at :data:`RATED_TO_STALL` of its stall current."""
+
+RATED_TO_STALL = 0.19 / (6.0 / 21.2)
+"""Rated over stall current at the nominal supply, [E] the Faulhaber 0816's ratio (0.67)."""
+
+
+SAFE_FORCE_N = 3.5
+"""Default bound on the true finger force, N: half a newton above the 3 N top of the tactile
+range ([R] seed paper) [E], below :data:`FORCE_CAP_LIMIT_N`."""
+
+CONTACT_ON_N = 0.2
+"""Estimate above which the board is taken to touch the finger, N: the 0.2 N bottom of the
+tactile range ([R] seed paper)."""
+
+DESIGN_GAP_M = 2e-3
+"""Largest board-to-pulp gap at the start of a session, m [E] (the shipped scenarios use 1-2 mm)."""
+
+
+def _design_reader(device: DeviceParams):
+    """Pulp constants the impact bound assumes: the stiffer of the device's reader and the stiff preset [E]."""
+    f, s = device.finger, FINGERS["stiff"]
+    return max(f.stiffness_b_n_per_m, s.stiffness_b_n_per_m), max(f.exponent_m_per_m, s.exponent_m_per_m)
+
+
+ESTIMATOR_PERIOD_S = 0.01
+"""Period of the force estimate, s: the paper's models run at 100 Hz ([R] seed paper); the
+estimate holds its value in between."""
+
+
+def _speed_limit(b: dict, rb: float, rm: float) -> float:
+    """Speed at which the impact alone brings the design reader to the safe force (no tremor allowance), m/s."""
+    e = limits.absorbed_energy_j(0.0, SAFE_FORCE_N, rb, rm)
+    return limits.speed_for_energy_m_per_s(e, b["pinion_mass_kg"], b["board_mass_kg"], b["gear_efficiency"])
+
+
+def device_limits(device: DeviceParams) -> dict:
+    """The drive and reader constants of ``device`` that :class:`SupervisorConfig` carries (see docs/safety.md)."""
+    b = limits.drive_bounds(device)
+    rb, rm = _design_reader(device)
+    soft = FINGERS["soft"]
+    k_contact = tangent_stiffness_n_per_m(CONTACT_ON_N, rb, rm)
+    dt = device.drivetrain
+    return {
+        "motor_resistance_ohm": device.motor.resistance_ohm,
+        "stall_current_a": device.driver_supply_v / device.motor.resistance_ohm,
+        "rated_current_a": rated_current_a(device),
+        "driver_supply_v": device.driver_supply_v,
+        "push_force_per_a_n": b["push_force_per_a_n"],
+        "friction_current_a": b["friction_current_a"],
+        "weight_n": b["weight_n"],
+        "back_emf_v_s_per_m": b["back_emf_v_s_per_m"],
+        "pinion_mass_kg": b["pinion_mass_kg"],
+        "board_mass_kg": b["board_mass_kg"],
+        "gear_efficiency": b["gear_efficiency"],
+        "friction_breakaway_ratio": device.motor.breakaway_ratio,
+        "guide_static_n": dt.guide_coulomb_n * dt.guide_breakaway_ratio,
+        "soft_b_n_per_m": soft.stiffness_b_n_per_m,
+        "soft_m_per_m": soft.exponent_m_per_m,
+        "reader_b_n_per_m": rb,
+        "reader_m_per_m": rm,
+        "speed_hold_s": 0.5 * math.pi * math.sqrt(b["impact_mass_kg"] / k_contact),
+        "stuck_travel_m": 2.0 * dt.backlash_m + ESTIMATOR_PERIOD_S * _speed_limit(b, rb, rm),
+        "first_contact_travel_m": DESIGN_GAP_M + compression_at_force_m(
+            SAFE_FORCE_N, soft.stiffness_b_n_per_m, soft.exponent_m_per_m),
+    }
+
+
+def rated_current_a(device: DeviceParams) -> float:
+    """Continuous current of ``device``'s motor, A (:data:`RATED_CURRENT_A`, else the ratio)."""
+    m = device.motor
+    if m.name in RATED_CURRENT_A:
+        return RATED_CURRENT_A[m.name]
+    return RATED_TO_STALL * device.driver_supply_v / m.resistance_ohm
+
+
+_NOMINAL_LIMITS: dict = {}
+_NUMERIC_FIELD_NAMES: list = []
+_numeric_values = None
+_FLOAT_ONLY = {float}
+
+
+def _numeric_field_names() -> tuple:
+    """The names of :class:`SupervisorConfig`'s numeric fields (every field but ``enabled``) and
+    a getter of their values from an instance's ``__dict__`` (a tuple), made once."""
+    global _numeric_values
+    _NUMERIC_FIELD_NAMES.extend(f.name for f in dataclasses.fields(SupervisorConfig) if f.name != "enabled")
+    _numeric_values = operator.itemgetter(*_NUMERIC_FIELD_NAMES)
+    return _NUMERIC_FIELD_NAMES, _numeric_values
+
+
+@dataclass(frozen=True)
+class SupervisorConfig:
+    """Limits and detector settings of :class:`Supervisor` (SI units in the names).
+
+    The motor, drive and reader constants default to the nominal device's
+    (:class:`DeviceParams`, :func:`device_limits`); :meth:`for_device` derives them from
+    another device.  Every numeric field must be a positive finite number.
+    """
+    force_cap_n: float = TACTILE_FORCE_MAX_N
+    """Cap on the estimated force (upper end of the tactile range, [R] seed paper)."""
+    cap_margin_n: float = 0.3
+    safe_force_n: float = SAFE_FORCE_N
+    """Bound on the true force that the current and speed envelope keeps whatever the sensor reads."""
+    finger_motion_m: float = 45e-6
+    """Motion of the pulp toward a held board that the drive cannot prevent, m: three times the
+    15 um RMS of physiological tremor [E] (the tremor scenarios' amplitude)."""
+    slew_v_per_s: float = 600.0
+    """Full scale (6 V) in 10 ms, one estimator period."""
+    rated_current_a: float = None  # type: ignore[assignment]
+    """Continuous motor current (:func:`rated_current_a`)."""
+    stall_current_a: float = None  # type: ignore[assignment]
+    """Stall current at the driver supply, [D] U / R."""
+    overload_time_s: float = 0.5
+    """Time allowed at the stall current before the I^2 t trip [E]."""
+    motor_resistance_ohm: float = None  # type: ignore[assignment]
+    """Armature resistance R of the device's motor (back-EMF ``u - R i`` and motion detection)."""
+    driver_supply_v: float = None  # type: ignore[assignment]
+    """H-bridge supply: the terminal voltage is the command clipped to it."""
+    push_force_per_a_n: float = None  # type: ignore[assignment]
+    """eta kM N/r, N/A: rack force per ampere through the gearhead in the pushing direction [D]."""
+    friction_current_a: float = None  # type: ignore[assignment]
+    """T_f / kM, A: current that the motor's own friction torque takes [D]."""
+    weight_n: float = None  # type: ignore[assignment]
+    """m_b g, N: weight of the board, counted as pushing (hand upside down) [D]."""
+    back_emf_v_s_per_m: float = None  # type: ignore[assignment]
+    """kE N/r, V s/m: back-EMF per rack speed [D]."""
+    pinion_mass_kg: float = None  # type: ignore[assignment]
+    """J (N/r)^2, kg: rotor inertia at the rack line [D]."""
+    board_mass_kg: float = None  # type: ignore[assignment]
+    gear_efficiency: float = None  # type: ignore[assignment]
+    friction_breakaway_ratio: float = None  # type: ignore[assignment]
+    guide_static_n: float = None  # type: ignore[assignment]
+    """Break-away friction of the guide rods, N (the plausibility band's lower edge)."""
+    reader_b_n_per_m: float = None  # type: ignore[assignment]
+    """Pulp b of the reader the impact bound assumes (the stiffer of the device's and the stiff preset)."""
+    reader_m_per_m: float = None  # type: ignore[assignment]
+    speed_hold_s: float = None  # type: ignore[assignment]
+    """How long the highest recent speed sets the current limit: a quarter period of the impact
+    mass on the design reader's stiffness at the contact threshold [D]."""
+    stuck_travel_m: float = None  # type: ignore[assignment]
+    """Net travel with an unchanged estimate that makes it stuck: twice the backlash plus the
+    travel at the impact speed limit within one estimator period [D]."""
+    first_contact_travel_m: float = None  # type: ignore[assignment]
+    """Travel from the start within which the first contact must show: the design gap plus the
+    soft reader's compression at the safe force [D]."""
+    soft_b_n_per_m: float = None  # type: ignore[assignment]
+    """Pulp b of the softest reader preset: the most travel a force change can take."""
+    soft_m_per_m: float = None  # type: ignore[assignment]
+    retract_v: float = 2.0
+    retract_s: float = 0.6
+    retract_moving_s: float = 0.05
+    max_retract_s: float = 10.0
+    out_of_range_n: float = 4.0
+    stuck_window_s: float = 0.1
+    stuck_response_s: float = 0.05
+    travel_follow_s: float = 5.0
+    """Time constant with which the travel check's reference follows the finger's slow motion
+    (drift, pressing, strap slips) [E]: a board running into the finger faster than this while
+    the reading stays low is caught."""
+    """Time the estimate needs to show a command's effect [E]: the 10 ms estimator period, its
+    two-sample mean and the 20 Hz anti-alias filter (about 40 ms), rounded up."""
+    stuck_tolerance_n: float = 2e-3
+    stuck_command_v: float = 0.25
+    stuck_emf_v: float = 0.05
+    contact_on_n: float = CONTACT_ON_N
+    contact_lost_n: float = 0.1
+    """Above the 0.063 N that the paper's estimator reads with no load (and with an open FSR)."""
+    drop_n: float = 0.3
+    drop_window_s: float = 0.03
+    drop_keep_fraction: float = 0.5
+    """A fall by ``drop_n`` within ``drop_window_s`` is a loss of contact only if the estimate ends
+    below this fraction of its value at the start of the window [E]: a lost contact takes the
+    estimate to its no-load value, a partial unloading keeps most of it (a 0.2 mm strap slip
+    on the pulp drops 1.0 N to 0.63-0.70 N within 30 ms and the finger stays in contact)."""
+    release_window_s: float = 0.15
+    """A fall of the setpoint within this time is an intended release, not a loss of contact [E]
+    (estimator delay plus the controller's settling)."""
+    backoff_s: float = 0.05
+    contact_loss_timeout_s: float = 0.6
+    watchdog_timeout_s: float = 0.5
+    moving_speed_m_per_s: float = 0.5e-3
+    """Rack speed above which the motor is taken to move (back-EMF 0.05 V for the nominal drive) [E]."""
+    stall_time_s: float = 0.5
+    """A motor pushing with current but not moving while no contact shows is stopped after this [E]."""
+    stall_fraction: float = 0.95
+    """Fraction of the current limit at rest above which a motor that does not move, and whose push
+    at the lower edge of the friction band exceeds the estimate by ``implausible_n``, is stalled [E]
+    (creeping a 2.8 N hold forward against the break-away friction takes about 97 % of the limit,
+    so the current alone does not tell a jam from a hold at the top of the range)."""
+    implausible_n: float = 0.5
+    """Margin by which the force the current implies may exceed the estimate [E]."""
+    implausible_s: float = 0.2
+    powered_current_a: float = 0.5e-3
+    """Smallest motor current that shows the driver powers the motor [E] (a few counts of a
+    current sense that resolves tens of microamperes): the back-EMF speed counts as travel only
+    above it.  A cut supply draws no current, and its command would read as speed; a motor
+    that moves while drawing less than its friction current (the finger pushing the board back
+    as the drive retracts) is counted, so the travel integral follows a force loop that
+    hunts back and forth."""
+    enabled: bool = True
+
+    def __post_init__(self):
+        check_bool("enabled", self.enabled)
+        d = self.__dict__
+        values = (_numeric_values or _numeric_field_names()[1])(d)
+        # floats, all positive, with a finite sum (no inf, no NaN) pass as check_number would return them
+        if not (set(map(type, values)) == _FLOAT_ONLY and min(values) > 0.0 and sum(values) < math.inf):
+            for name in _NUMERIC_FIELD_NAMES:
+                v = d[name]
+                if v is None:
+                    v = _NOMINAL_LIMITS[name]
+                elif type(v) is float and 0.0 < v < math.inf:
+                    continue                        # what check_number returns unchanged
+                object.__setattr__(self, name, check_number(name, v, lo=0.0, lo_open=True))
+        if self.force_cap_n > FORCE_CAP_LIMIT_N:
+            raise ValueError(f"force_cap_n = {self.force_cap_n:g} N is above the {FORCE_CAP_LIMIT_N:g} N safe limit "
+                             f"(the {TACTILE_FORCE_MAX_N:g} N top of the tactile range, [R] seed paper, plus "
+                             f"1 N margin): a cap above it would let the board press harder than reading needs")
+        if self.safe_force_n > FORCE_CAP_LIMIT_N:
+            raise ValueError(f"safe_force_n = {self.safe_force_n:g} N is above the {FORCE_CAP_LIMIT_N:g} N safe "
+                             f"limit: the bound on the true force may not exceed the largest admissible cap")
+        if self.envelope_force_n <= self.contact_on_n:
+            raise ValueError(f"safe_force_n = {self.safe_force_n:g} N leaves no force for reading once "
+                             f"finger_motion_m ({self.finger_motion_m:g} m) is allowed for")
+        if self.cap_margin_n >= self.force_cap_n:
+            raise ValueError(f"cap_margin_n ({self.cap_margin_n:g}) must be below force_cap_n "
+                             f"({self.force_cap_n:g})")
+        if self.out_of_range_n <= self.force_cap_n:
+            raise ValueError(f"out_of_range_n ({self.out_of_range_n:g}) must exceed force_cap_n "
+                             f"({self.force_cap_n:g})")
+        if self.drop_keep_fraction > 1.0:
+            raise ValueError(f"drop_keep_fraction = {self.drop_keep_fraction:g} must be at most 1 (a fraction of the "
+                             f"estimate before the drop)")
+        if self.contact_lost_n >= self.contact_on_n:
+            raise ValueError(f"contact_lost_n ({self.contact_lost_n:g}) must be below contact_on_n "
+                             f"({self.contact_on_n:g})")
+        if self.stall_current_a <= self.rated_current_a:
+            raise ValueError(f"stall_current_a ({self.stall_current_a:g}) must exceed rated_current_a "
+                             f"({self.rated_current_a:g})")
+        if self.gear_efficiency > 1.0:
+            raise ValueError(f"gear_efficiency = {self.gear_efficiency:g} must be at most 1")
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any], device: DeviceParams | None = None) -> SupervisorConfig:
+        """:meth:`for_device` with the fields of a mapping; an unknown key is a one-line error."""
+        check_keys("SupervisorConfig", d, _FIELD_NAMES)
+        return cls.for_device(_NOMINAL if device is None else device, **d)
+
+    @classmethod
+    def for_device(cls, device: DeviceParams, **overrides: Any) -> SupervisorConfig:
+        """The defaults with the motor, drive and reader constants of ``device``, then ``overrides``.
+
+        ``motor_resistance_ohm`` is the motor's R, ``stall_current_a`` the driver supply
+        over R, ``rated_current_a`` from :func:`rated_current_a`; the drive and reader
+        constants from :func:`device_limits`.
+
+        Examples
+        --------
+        >>> SupervisorConfig.for_device(DeviceParams()) == SupervisorConfig()
+        True
+        """
+        check_keys("SupervisorConfig", overrides, _FIELD_NAMES)
+        if cls is SupervisorConfig:                 # the defaults' fields replaced, then checked
+            return replace_fields(_default_config(), **{**device_limits(device), **overrides})
+        return cls(**{**device_limits(device), **overrides})
+
+    @property
+    def i2t_limit_a2s(self) -> float:
+        """Trip level of the I^2 t integral, A^2 s."""
+        return (self.stall_current_a ** 2 - self.rated_current_a ** 2) * self.overload_time_s
+
+    @property
+    def impact_mass_kg(self) -> float:
+        """eta M_p + m_b, kg: the mass whose kinetic energy reaches the finger (physics.limits eq. 2)."""
+        return self.gear_efficiency * self.pinion_mass_kg + self.board_mass_kg
+
+    def push_force_n(self, current_a: float, friction_scale: float = 1.0, weight_n: float | None = None) -> float:
+        """Steady force the drive pushes with at ``current_a`` (physics.limits eq. 1), N.
+
+        The constants are already at the rack line and through the gearhead, so the law is
+        called with ``kM = eta kM N/r``, ``N/r = eta = 1`` and ``T_f = friction_scale I_f eta kM N/r``.
+        """
+        return limits.push_force_bound_n(current_a, self.push_force_per_a_n, 1.0, 1.0,
+                                         friction_scale * self.friction_current_a * self.push_force_per_a_n,
+                                         self.weight_n if weight_n is None else weight_n)
+
+    def current_for_force_a(self, force_n: float) -> float:
+        """Current at which :meth:`push_force_n` equals ``force_n``, A."""
+        return limits.current_for_push_force_a(force_n, self.push_force_per_a_n, 1.0, 1.0,
+                                               self.friction_current_a * self.push_force_per_a_n, self.weight_n)
+
+    @functools.cached_property
+    def envelope_force_n(self) -> float:
+        """Force the drive may produce, N: ``safe_force_n`` less what :attr:`finger_motion_m` adds on
+        the design reader at the safe force (tangent stiffness ``b + m F``)."""
+        k = tangent_stiffness_n_per_m(self.safe_force_n, self.reader_b_n_per_m, self.reader_m_per_m)
+        return self.safe_force_n - k * self.finger_motion_m
+
+    @functools.cached_property
+    def current_limit_a(self) -> float:
+        """Current limit at rest: the steady push bound equals :attr:`envelope_force_n`, A."""
+        return self.current_for_force_a(self.envelope_force_n)
+
+    def drive_force_limit_n(self, speed_m_per_s: float) -> float:
+        """Largest drive force at ``speed_m_per_s`` whose impact still peaks at :attr:`envelope_force_n` (N; < 0: brake)."""
+        e = limits.impact_energy_j(max(speed_m_per_s, 0.0), self.pinion_mass_kg, self.board_mass_kg,
+                                   self.gear_efficiency)
+        return limits.drive_force_for_impact_n(e, self.envelope_force_n, self.reader_b_n_per_m, self.reader_m_per_m)
+
+    @property
+    def speed_limit_m_per_s(self) -> float:
+        """Approach speed at which the impact alone reaches :attr:`envelope_force_n` on the design reader, m/s."""
+        e = limits.absorbed_energy_j(0.0, self.envelope_force_n, self.reader_b_n_per_m, self.reader_m_per_m)
+        return limits.speed_for_energy_m_per_s(e, self.pinion_mass_kg, self.board_mass_kg, self.gear_efficiency)
+
+    def pack(self) -> np.ndarray:
+        """The configuration array the compiled period reads (:func:`supervise_begin`), computed once.
+
+        Holds the fields and derived constants, the layout of the state array (ring buffer
+        bases and capacities, sized for control periods of at least :data:`MIN_CONTROL_PERIOD_S`)
+        and the speed envelope table.  The array is cached and shared: do not modify it.
+        """
+        packed = self.__dict__.get("_packed")
+        if packed is None:
+            packed = _packed_config(self)
+            self.__dict__["_packed"] = packed
+        return packed
+
+
+@functools.lru_cache(maxsize=256)
+def _packed_config(c: SupervisorConfig) -> np.ndarray:
+    """:func:`_pack` of ``c``, read-only, shared by equal configurations (a device drawn again, or
+    the nominal device in every episode, packs once)."""
+    packed = _pack(c)
+    packed.flags.writeable = False
+    return packed
+
+
+_FIELD_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(SupervisorConfig))
+_NOMINAL_LIMITS.update(device_limits(_NOMINAL))
+
+
+@functools.lru_cache(maxsize=1)
+def _default_config() -> SupervisorConfig:
+    """``SupervisorConfig()``, made once: :meth:`SupervisorConfig.for_device` replaces its fields
+    (``replace_fields`` runs the checks of ``__post_init__`` on the result, as the constructor
+    does, and copies no attribute cached on it)."""
+    return SupervisorConfig()
+
+

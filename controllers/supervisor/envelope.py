@@ -1,0 +1,74 @@
+"""The drive's current and speed envelope: the current limit against rack speed, built once
+per configuration (:func:`_envelope_table`, compiled) from the laws of
+:mod:`ebraille_sim.physics.limits`."""
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from controllers.compiled import py_max as _pymax
+from ebraille_sim.base.compiled import njit
+from ebraille_sim.physics import limits
+
+
+ENVELOPE_POINTS = 34
+"""Rows of the speed envelope table: 33 speeds from rest to the speed limit and one beyond it."""
+
+_impact_energy_j = njit(cache=True)(limits.impact_energy_j)
+_current_for_push_force_a = njit(cache=True)(limits.current_for_push_force_a)
+
+
+ENVELOPE_MEMO_NODES = 1 << 14
+"""Midpoints one of the envelope's bisection memos keeps (0.4 MB; :func:`_envelope_memo`)."""
+
+
+@functools.lru_cache(maxsize=8)
+def _envelope_memo(envelope_force_n: float, reader_b_n_per_m: float, reader_m_per_m: float) -> np.ndarray:
+    """The bisection memo of the envelopes with this force and design reader, the most recently
+    used eight kept: the design reader is the stiffer of the device's and the stiff preset, so
+    most devices of a population share one (and their envelopes one tree of midpoints)."""
+    return limits.new_bisection_memo(ENVELOPE_MEMO_NODES)
+
+
+@njit(cache=True)
+def _envelope_into(out, v_max, pinion_mass_kg, board_mass_kg, gear_efficiency, envelope_force_n, reader_b_n_per_m,
+                   reader_m_per_m, push_force_per_a_n, friction_current_a, weight_n, memo):
+    """:func:`_envelope` of a configuration's constants written into ``out`` (speeds, then currents):
+    the laws of :meth:`SupervisorConfig.drive_force_limit_n` and :meth:`SupervisorConfig.current_for_force_a`
+    (:mod:`ebraille_sim.physics.limits`) in one compiled loop; ``memo`` keeps the bisections'
+    midpoints (:func:`ebraille_sim.physics.limits.drive_forces_for_impacts_n`)."""
+    n = ENVELOPE_POINTS
+    energies = np.empty(n - 1)
+    for k in range(n - 1):
+        v = v_max * k / 32
+        out[k] = v
+        energies[k] = _impact_energy_j(_pymax(v, 0.0), pinion_mass_kg, board_mass_kg, gear_efficiency)
+    forces = np.empty(n - 1)
+    limits.drive_forces_for_impacts_n(energies, envelope_force_n, reader_b_n_per_m, reader_m_per_m, forces, memo)
+    for k in range(n - 1):
+        out[n + k] = _current_for_push_force_a(_pymax(forces[k], 0.0), push_force_per_a_n, 1.0, 1.0,
+                                               friction_current_a * push_force_per_a_n, weight_n)
+    out[n - 1] = 1.05 * v_max
+    out[2 * n - 1] = -friction_current_a
+
+
+def _envelope_table(c, out: np.ndarray) -> None:
+    """Write :func:`_envelope` of ``c`` into ``out`` (length ``2 * ENVELOPE_POINTS``) in one compiled call."""
+    _envelope_into(out, c.speed_limit_m_per_s, c.pinion_mass_kg, c.board_mass_kg, c.gear_efficiency,
+                   c.envelope_force_n, c.reader_b_n_per_m, c.reader_m_per_m, c.push_force_per_a_n,
+                   c.friction_current_a, c.weight_n,
+                   _envelope_memo(c.envelope_force_n, c.reader_b_n_per_m, c.reader_m_per_m))
+
+
+def _envelope(c) -> tuple[list[float], list[float]]:
+    """Current limit against rack speed: (speeds, currents), from rest to beyond the speed limit.
+
+    At each of 33 speeds from rest to :attr:`SupervisorConfig.speed_limit_m_per_s` the drive
+    force may not exceed :meth:`SupervisorConfig.drive_force_limit_n` (the current of
+    :meth:`SupervisorConfig.current_for_force_a` for it); at 1.05 times the speed limit the
+    limit is a braking current.  The table is :func:`_envelope_table`'s, the one the compiled
+    period reads (:meth:`SupervisorConfig.pack`)."""
+    out = np.empty(2 * ENVELOPE_POINTS)
+    _envelope_table(c, out)
+    return out[:ENVELOPE_POINTS].tolist(), out[ENVELOPE_POINTS:].tolist()
