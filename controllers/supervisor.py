@@ -105,9 +105,9 @@ Examples
 >>> sup = Supervisor(make("pid"))
 >>> sup.reset(force_est_n=0.0, setpoint_n=1.0)
 >>> round(sup.update(0.0, 5.0, 1e-3), 4)      # setpoint clipped to 2.7 N; the PID's first step
-0.1035
+0.0396
 >>> round(sup.update(float("nan"), 1.0, 1e-3), 4)   # a NaN estimate: latched fault, retract (slew 0.6 V/ms)
--0.4965
+-0.5604
 >>> sup.fault, sup.mode
 ('fsr_out_of_range', 'retract')
 """
