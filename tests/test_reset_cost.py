@@ -2,8 +2,8 @@
 shared read-only and keyed on what they depend on.
 
 The trajectories are compared within this process, bit for bit: every configuration's episodes
-from caches emptied as a fresh process starts, and again after episodes of other seeds have
-filled them with other devices, specs and excerpts (observations, rewards, ends, infos, the
+from caches emptied as a fresh process starts, and again from emptied caches that episodes of
+other seeds have filled first with other devices, specs and excerpts (observations, rewards, ends, infos, the
 drawn specs and packed parameters of the scalar env at 200 Hz and 1 kHz, with and without the
 safety layer, device randomisation, disturbances and reset options, and of the vector env with
 autoresets).  Across machines the goldens of ``tests/test_backends.py`` and the scenario
@@ -98,7 +98,8 @@ def test_caches_change_no_trajectory():
     cold = {name: episodes(kw, opts, (0, 11)) for name, kw, opts in CASES}
     cold_vec = {name: vector_episodes(kw, 3, steps) for name, kw, steps in
                 (("vec", {}, 1500), ("vec1k", {"control_rate_hz": 1000.0}, 600))}
-    for name, kw, opts in CASES:                           # other devices, specs and excerpts cached
+    clear_caches()
+    for name, kw, opts in CASES:                           # other devices, specs and excerpts first
         episodes(kw, opts, (5, 23), steps=200)
     vector_episodes({}, 8, 300)
     for name, kw, opts in CASES:
