@@ -339,7 +339,7 @@ class PIDConfig:
         --------
         >>> cfg = PIDConfig(kp_v_per_n=2.0, schedule_above_n=1.0)
         >>> cfg.gain_scale(0.5), round(cfg.gain_scale(3.0), 3)
-        (1.0, 0.352)
+        (1.0, 0.34)
         """
         f_s = self.schedule_above_n
         if f_s is None or not setpoint_n > f_s:

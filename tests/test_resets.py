@@ -1,4 +1,5 @@
-"""Cheap resets: the cached calibration and packing give the numbers of the uncached path."""
+"""Cheap resets: the cached calibration and packing give the numbers of the uncached path
+(the env's trajectories from empty and from filled caches: ``tests/test_reset_cost.py``)."""
 import dataclasses
 
 import numpy as np
@@ -31,52 +32,6 @@ def test_calibration_moves_r2_and_reads_the_calibration_force():
     assert est == pytest.approx(1.0, abs=1e-5)
     # a different calibration force gives a different R2 (the cache key includes it)
     assert calibration.calibrate_device(dev, force_n=2.0).circuit.r2_ohm != cal.circuit.r2_ohm
-
-
-def env_trace() -> dict:
-    """Observations, rewards and plant states of a few episodes (two seeds, 200 Hz and 1 kHz),
-    with resets inside; ``tests/data/env_reset_trace.npz`` holds the same record made by the
-    env before its resets were cached."""
-    import gymnasium as gym
-    import ebraille_sim  # noqa: F401  (registers the id)
-    out = {}
-    for rate in (200.0, 1000.0):
-        env = gym.make("EBraille/ContactForce-v0", control_rate_hz=rate, safety=False)
-        for seed in (0, 7):
-            obs, _ = env.reset(seed=seed)
-            rows, rew = [obs], []
-            for k in range(2 * int(rate)):
-                obs, r, te, tr, _ = env.step(np.array([0.6 * np.sin(0.01 * k)], dtype=np.float32))
-                rows.append(obs)
-                rew.append(r)
-                if k == int(rate):
-                    out[f"state_{int(rate)}_{seed}"] = env.unwrapped.plant.state.copy()
-                if te or tr:
-                    obs, _ = env.reset()
-                    rows.append(obs)
-            obs, _ = env.reset()
-            rows.append(obs)
-            out[f"state0_{int(rate)}_{seed}"] = env.unwrapped.plant.state.copy()
-            out[f"obs_{int(rate)}_{seed}"] = np.array(rows)
-            out[f"rew_{int(rate)}_{seed}"] = np.array(rew)
-            out[f"r2_{int(rate)}_{seed}"] = np.array([env.unwrapped.episode.device.circuit.r2_ohm])
-    return out
-
-
-def test_env_trajectories_match_the_record_made_before_caching():
-    from pathlib import Path
-    stored = np.load(Path(__file__).parent / "data" / "env_reset_trace.npz")
-    now = env_trace()
-    assert sorted(stored.files) == sorted(now)
-    for key in stored.files:
-        got = now[key]
-        if key.startswith("state"):
-            # the record predates the estimator's hysteresis-compensation slots, which the
-            # layout appends after every earlier slot
-            from ebraille_sim.estimation.blockmodels import HYSTERESIS_COMP_SLOTS
-            assert got.shape[-1] == stored[key].shape[-1] + len(HYSTERESIS_COMP_SLOTS)
-            got = got[..., :stored[key].shape[-1]]
-        np.testing.assert_array_equal(got, stored[key], err_msg=key)
 
 
 def test_resets_reuse_the_caches_and_the_next_episode_differs():

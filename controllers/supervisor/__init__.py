@@ -117,7 +117,7 @@ from __future__ import annotations
 from controllers.supervisor.config import (CONTACT_ON_N, DESIGN_GAP_M, ESTIMATOR_PERIOD_S, FORCE_CAP_LIMIT_N,
                                            RATED_CURRENT_A, RATED_TO_STALL, SAFE_FORCE_N, SupervisorConfig,
                                            _default_config, _packed_config, device_limits, rated_current_a)
-from controllers.supervisor.envelope import ENVELOPE_POINTS, _envelope, _envelope_table
+from controllers.supervisor.envelope import ENVELOPE_POINTS, _envelope_memo, _envelope_table
 from controllers.supervisor.layout import (CF, EVENT, EVENT_CAPACITY, FAULT, FAULTS, MAX_WINDOW_SAMPLES,
                                            MIN_CONTROL_PERIOD_S, MODE, MODES, SV, _initial_state, _pack,
                                            _reset_header)

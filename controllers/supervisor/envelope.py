@@ -59,16 +59,3 @@ def _envelope_table(c, out: np.ndarray) -> None:
                    c.envelope_force_n, c.reader_b_n_per_m, c.reader_m_per_m, c.push_force_per_a_n,
                    c.friction_current_a, c.weight_n,
                    _envelope_memo(c.envelope_force_n, c.reader_b_n_per_m, c.reader_m_per_m))
-
-
-def _envelope(c) -> tuple[list[float], list[float]]:
-    """Current limit against rack speed: (speeds, currents), from rest to beyond the speed limit.
-
-    At each of 33 speeds from rest to :attr:`SupervisorConfig.speed_limit_m_per_s` the drive
-    force may not exceed :meth:`SupervisorConfig.drive_force_limit_n` (the current of
-    :meth:`SupervisorConfig.current_for_force_a` for it); at 1.05 times the speed limit the
-    limit is a braking current.  The table is :func:`_envelope_table`'s, the one the compiled
-    period reads (:meth:`SupervisorConfig.pack`)."""
-    out = np.empty(2 * ENVELOPE_POINTS)
-    _envelope_table(c, out)
-    return out[:ENVELOPE_POINTS].tolist(), out[ENVELOPE_POINTS:].tolist()

@@ -12,6 +12,11 @@ the same words (NumPy's documented algorithm, ``SeedSequence.mix_entropy`` and
 :meth:`~SeedNode.spawn`, and the generators made from it draw the same numbers
 (``tests/test_seeds.py`` compares them with NumPy's over many entropies and keys).
 
+What it buys (``python benchmarks/bench_replicas.py``, NumPy's ``SeedSequence`` in its place in
+the same run, 2-core machine): a reset of the default env 514 us with nodes, 569 us with
+NumPy's sequences (55 us, 11 % of the reset, 10 env steps); a seed of three children and
+their generators 12 us against 46 us.
+
 Examples
 --------
 >>> import numpy as np

@@ -151,7 +151,9 @@ def drive_forces_for_impacts_n(energies_j, peak_force_n, b_n_per_m, m_per_m, out
     and serves only calls with its ``F_pk``, ``b`` and ``m`` (others compute every midpoint);
     when it is full, new midpoints are computed and not kept.  Each midpoint's energy is the
     number the bisection would compute, so the results are those of one bisection after the
-    other without a memo.
+    other without a memo.  What it buys (``python benchmarks/bench_replicas.py``, 2-core
+    machine): the supervisor's envelope of a new device in 19 us against 187 us, 118 us of a
+    514 us reset of the default env.
     """
     n = energies_j.shape[0]
     d1 = compression_at_force_m(peak_force_n, b_n_per_m, m_per_m)

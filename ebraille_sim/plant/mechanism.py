@@ -776,9 +776,10 @@ def recording(every_s: float = 0.04, device_index: int = 0):
 
     Examples
     --------
-    >>> with recording(every_s=0.05) as rec:                         # doctest: +SKIP
-    ...     run_scenario("contact_onset", backend="pymunk", duration_s=1.0)
-    >>> len(rec.frames)                                              # doctest: +SKIP
+    >>> from ebraille_sim.scenarios.runner import run_scenario
+    >>> with recording(every_s=0.05) as rec:
+    ...     _ = run_scenario("contact_onset", backend="pymunk", duration_s=1.0)
+    >>> len(rec.frames)
     21
     """
     rec = _Recorder(every_s, device_index)

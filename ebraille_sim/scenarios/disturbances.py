@@ -77,7 +77,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ebraille_sim.base.fields import sourced
-from ebraille_sim.base.reductions import std as _std
 from ebraille_sim.base.seeds import child_seed
 from ebraille_sim.base.validation import check_keys, check_number, check_pair
 from ebraille_sim.estimation.blockmodels import FIRMWARE_FSR
@@ -149,7 +148,7 @@ def band_limited_noise(t_s: np.ndarray, f_lo_hz: float, f_hi_hz: float, rms: flo
     spec[i0:i0 + k] = rng.standard_normal(k) + 1j * rng.standard_normal(k)
     x = np.fft.irfft(spec, n_rec)
     del spec                                   # a long run's spectrum is as large as its record
-    s = float(_std(x))                         # numpy.std's bits in one compiled call
+    s = float(np.std(x))
     if not s > 0:
         return np.zeros(n)
     return x[:n] * (rms / s)

@@ -45,8 +45,9 @@ controller that loses the force from one whose loop misleads the detectors.
 
 Examples
 --------
->>> res = run_benchmark(["pid"], suite="quick", jobs=1)            # doctest: +SKIP
->>> print(format_leaderboard(res))                                 # doctest: +SKIP
+>>> res = run_benchmark(["pid"], suite="quick", jobs=1)
+>>> print(format_leaderboard(res).splitlines()[0])
+suite quick v1: 4 scenarios x 2 readers
 """
 from __future__ import annotations
 

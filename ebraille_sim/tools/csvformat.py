@@ -9,6 +9,11 @@ as a 128-bit product of the significand and ``5**k`` (``k <= 27``), shifted by t
 exponent, the remainder compared with one half.  Values outside what that covers
 (``|v| >= 1e9``, ``0 < |v| < 1e-19``) make :func:`csv_body` return None, and the caller
 formats the table in Python; zeros, infinities and NaN are written as Python writes them.
+
+What it buys (``python benchmarks/bench_replicas.py``, the Python formatting of
+:func:`ebraille_sim.tools.report.write_trace_csv` in its place in the same run, 2-core
+machine): trace.csv of a 60 s steady_90wpm run (67,633 rows) in 79 ms against 210 ms, for a
+run that simulates in 125 ms; the bytes are the same.
 """
 from __future__ import annotations
 
