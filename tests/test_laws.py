@@ -23,12 +23,13 @@ from ebraille_sim.physics.drivetrain import (end_stop, friction_velocity_update,
                                              mesh_force, reflected, shaft_speed_rad_per_s, shaft_to_rack_per_m,
                                              stribeck, viscous_force_n, weight_along_n)
 from ebraille_sim.physics.fingertip import (compression_m, contact_force, elastic_force, prony_coefficients,
-                                            prony_step, tangent_stiffness_n_per_m)
+                                            prony_rate_n_per_s, prony_step, tangent_stiffness_n_per_m)
 from ebraille_sim.physics.fsr import (F_EPS_N, FAULT_NONE, FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE,
                                       N_PLAYS, adc_code, adc_sample, adc_voltage, conductance_s, creep_force,
                                       creep_state_step, divider_voltage, hysteresis, lag_step, log_force, play_widths,
                                       sensor_voltage, static_conductance, static_voltage, temperature_factor)
-from ebraille_sim.physics.motor import current_decay, current_step, driver_voltage, electrical_power_w, rack_force_n
+from ebraille_sim.physics.motor import (current_decay, current_rate_a_per_s, current_step, driver_voltage,
+                                       electrical_power_w, rack_force_n)
 from ebraille_sim.physics.noise import noise_v, normal_at
 from ebraille_sim.physics.params import (FINGERS, FSRS, MOTORS, CircuitParams, DeviceParams, DriveTrainParams,
                                          EstimatorParams, FSRParams)
@@ -56,6 +57,23 @@ def test_motor_current_step_follows_the_closed_form_exponential():
     for _ in range(1000):
         i = current_step(i, v, w, r, ke, decay)
     assert i == pytest.approx(i_ss, rel=1e-12)
+
+
+def test_armature_ode_is_the_rate_of_the_exact_current_step():
+    """``di/dt = (V - R i - kE w)/L``: the slope at t = 0 of the exact solution
+    ``i_ss + (i0 - i_ss) exp(-t R/L)``, and the rate of :func:`current_step` over a short step."""
+    r, l_h, ke = FAULHABER.resistance_ohm, FAULHABER.inductance_h, FAULHABER.back_emf_v_s_per_rad
+    v, w, i0 = 6.0, 400.0, 0.05
+    i_ss = (v - ke * w) / r
+    rate = current_rate_a_per_s(i0, v, w, r, l_h, ke)
+    assert rate == pytest.approx((i_ss - i0) * r / l_h, rel=1e-12)
+    h = 1e-4 * l_h / r
+    stepped = (current_step(i0, v, w, r, ke, current_decay(h, r, l_h)) - i0) / h
+    assert stepped == pytest.approx(rate, rel=1e-4)
+    assert current_rate_a_per_s(i_ss, v, w, r, l_h, ke) == pytest.approx(0.0, abs=1e-9 * abs(rate))
+    # linear: its values on unit inputs are its partial derivatives
+    assert current_rate_a_per_s(1.0, 0.0, 0.0, r, l_h, ke) == pytest.approx(-r / l_h, rel=1e-12)
+    assert current_rate_a_per_s(0.0, 0.0, 1.0, r, l_h, ke) == pytest.approx(-ke / l_h, rel=1e-12)
 
 
 def test_motor_force_driver_clip_and_power():
@@ -194,6 +212,22 @@ def test_qlv_ramp_is_exact_and_contact_only_pushes():
     assert contact_force(1e-3, 1.0, 0.4, 0.1, 0.1, 0.1) == pytest.approx(0.7, rel=1e-12)
     assert contact_force(-1e-6, 1.0, 0.4, 0.1, 0.1, 0.1) == 0.0          # board below the pulp
     assert contact_force(1e-3, 0.1, 0.4, -0.3, 0.0, 0.0) == 0.0          # would pull
+
+
+def test_prony_ode_is_the_rate_of_the_exact_prony_step():
+    """``dh/dt = -h/tau + c dFe/dt``: the closed form, and the rate of :func:`prony_step` over a
+    step short against tau with Fe rising at ``dFe/dt``."""
+    f = NOMINAL
+    tau, c = f.relax_tau_2_s, f.relax_weight_2
+    h0, fe_rate = 0.05, 3.0
+    rate = prony_rate_n_per_s(h0, tau, c, fe_rate)
+    assert rate == pytest.approx(-h0 / tau + c * fe_rate, rel=1e-12)
+    h = 1e-6 * tau
+    (a,), (beta,) = prony_coefficients(h, (tau,))
+    assert (prony_step(h0, a, c, beta, fe_rate * h) - h0) / h == pytest.approx(rate, rel=1e-5)
+    # relaxation alone decays at 1/tau; a held state is in equilibrium with a steady ramp c tau dFe/dt
+    assert prony_rate_n_per_s(1.0, tau, c, 0.0) == pytest.approx(-1.0 / tau, rel=1e-12)
+    assert prony_rate_n_per_s(c * tau * fe_rate, tau, c, fe_rate) == pytest.approx(0.0, abs=1e-12)
 
 
 # ---------------------------------------------------------------------------- FSR
