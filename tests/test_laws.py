@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from ebraille_sim.estimation import blockmodels
-from ebraille_sim.estimation.blockmodels import (BlockModel, LinearBF, PiecewiseLinear, biquad_step, df2t_step,
-                                                 creep_compensated_v, estimator_step, pwl_eval, tared_v)
+from ebraille_sim.estimation import blockmodels, firmware
+from ebraille_sim.estimation.blockmodels import (BlockModel, LinearBF, PiecewiseLinear, df2t_step, estimator_step,
+                                                 pwl_eval)
+from ebraille_sim.estimation.firmware import biquad_step, creep_compensated_v, tared_v
 from ebraille_sim.estimation.calibration import loading_branch_factor, loading_voltage
 from ebraille_sim.estimation.paper_models import paper_model
 from ebraille_sim.physics import drivetrain, fingertip, fsr, motor, noise
@@ -505,6 +506,7 @@ def test_state_layout_is_composed_from_the_module_declarations():
     assert layout.STATE_OWNERS["fingertip"] == fingertip.OWNED_STATE_SLOTS
     assert layout.STATE_OWNERS["fsr"] == fsr.OWNED_STATE_SLOTS
     assert layout.STATE_OWNERS["noise"] == noise.OWNED_STATE_SLOTS
+    assert layout.STATE_OWNERS["firmware"] == firmware.OWNED_STATE_SLOTS
     assert layout.STATE_OWNERS["estimator"] == blockmodels.OWNED_STATE_SLOTS
     # the order the state vector always had
     assert layout.STATE_NAMES[:5] == ["current_a", "pinion_pos_m", "pinion_vel_m_per_s", "board_pos_m",
@@ -705,7 +707,7 @@ def test_hysteresis_compensation_reads_the_loading_branch():
     def volts(f_eff):
         return divider_voltage(gso + f_eff ** ex / k, r2, vs)
 
-    nm = blockmodels.HYSTERESIS_MEDIAN - 1
+    nm = firmware.HYSTERESIS_MEDIAN - 1
     M0 = 2 + n
     T0 = M0 + nm
 
@@ -715,33 +717,33 @@ def test_hysteresis_compensation_reads_the_loading_branch():
     x = math.log(1.2 + F_EPS_N)
     v_load = volts(math.exp(x - h) - F_EPS_N)
     st = state(x, -1.0, v_load)
-    out = blockmodels.hysteresis_compensated_v(v_load, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
+    out = firmware.hysteresis_compensated_v(v_load, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
     assert out == pytest.approx(v_load, rel=1e-12)
     assert st[1] == pytest.approx(x, abs=1e-12)
     v_unload = volts(math.exp(x + h) - F_EPS_N)
     st = state(x, +1.0, v_unload)
-    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
+    out = firmware.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
     assert out == pytest.approx(v_load, rel=1e-12)
     assert v_unload > 1.05 * v_load
     # the film further down its unloading branch: the inversion moves the input with the output
     # (slope 1 on that branch) and the result is the loading branch 2 H lower
     v_down = v_unload - 3.0 * db
     st[M0:M0 + nm] = v_down                          # a sustained change: the median passes it
-    out3 = blockmodels.hysteresis_compensated_v(v_down, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
+    out3 = firmware.hysteresis_compensated_v(v_down, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
     vf = v_unload - 2.0 * db
     assert st[0] == vf
     f_down = (k * (fsr.divider_conductance_s(vf, r2, vs) - gso)) ** (1.0 / ex)
     assert st[1] == pytest.approx(math.log(f_down + F_EPS_N) - h, abs=1e-12)
     assert out3 == pytest.approx(volts(math.exp(math.log(f_down + F_EPS_N) - 2.0 * h) - F_EPS_N), rel=1e-12)
     st = state(x, +1.0, v_unload)
-    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
+    out = firmware.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
     # within the deadband the held voltage is used: the output does not move
-    out2 = blockmodels.hysteresis_compensated_v(v_unload + 0.9 * db, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso,
+    out2 = firmware.hysteresis_compensated_v(v_unload + 0.9 * db, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso,
                                                 r2, vs)
     assert out2 == out and st[0] == v_unload
     # a railed or faulted divider passes unchanged
-    assert blockmodels.hysteresis_compensated_v(vs, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs) == vs
-    assert blockmodels.hysteresis_compensated_v(0.0, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs) == 0.0
+    assert firmware.hysteresis_compensated_v(vs, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs) == vs
+    assert firmware.hysteresis_compensated_v(0.0, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs) == 0.0
 
 
 def test_turn_test_reads_slow_and_fast_reversals_and_not_noise():
@@ -756,7 +758,7 @@ def test_turn_test_reads_slow_and_fast_reversals_and_not_noise():
     alpha = -math.expm1(-1.0 / 8.0)
 
     def step(s, v):
-        y = blockmodels.turn_tested_v(v, v, s, 0, 1, db, fo, turn, alpha)
+        y = firmware.turn_tested_v(v, v, s, 0, 1, db, fo, turn, alpha)
         s[0] = y
         return y
 
@@ -784,18 +786,18 @@ def test_turn_test_reads_slow_and_fast_reversals_and_not_noise():
 
 
 def test_running_median_passes_a_ramp_delayed_and_removes_a_spike():
-    nm = blockmodels.HYSTERESIS_MEDIAN - 1
+    nm = firmware.HYSTERESIS_MEDIAN - 1
     st = np.zeros(nm)
-    out = [blockmodels.running_median_v(float(k), st, 0) for k in range(1, 12)]
+    out = [firmware.running_median_v(float(k), st, 0) for k in range(1, 12)]
     assert out[nm // 2:] == [float(k) for k in range(1, 12 - nm // 2)]
     st = np.full(nm, 1.0)
     seq = [1.0, 1.0, 5.0, 1.0, 1.0, 1.0, -3.0, -3.0, 1.0, 1.0]
-    assert [blockmodels.running_median_v(v, st, 0) for v in seq] == [1.0] * len(seq)
+    assert [firmware.running_median_v(v, st, 0) for v in seq] == [1.0] * len(seq)
     # the selection is the median of the last five samples, whatever their order
     rng = np.random.default_rng(4)
     x = rng.integers(0, 4, 3000).astype(float)           # many ties, as quantised codes have
     st = x[3::-1].copy()
-    got = [blockmodels.running_median_v(x[k], st, 0) for k in range(4, len(x))]
+    got = [firmware.running_median_v(x[k], st, 0) for k in range(4, len(x))]
     np.testing.assert_array_equal(got, [np.median(x[k - 4:k + 1]) for k in range(4, len(x))])
     np.testing.assert_array_equal(st, x[:-5:-1])
 
