@@ -194,12 +194,12 @@ def _make_lqg(**gains: Any) -> Controller:
     """Factory for ``"lqg"``: the LQG designed on the simulator's linearised plant.
 
     The design model comes from the analysis layer
-    (:func:`ebraille_sim.analysis.tuning.make_lqg`), resolved when the controller is
+    (:func:`ebraille_sim.analysis.design.make_lqg`), resolved when the controller is
     made, like a plugin entry point; ``controllers`` itself imports only the physics and
     estimation layers.
     """
     import importlib
-    return importlib.import_module("ebraille_sim.analysis.tuning").make_lqg(**gains)
+    return importlib.import_module("ebraille_sim.analysis.design").make_lqg(**gains)
 
 
 register("pid_scheduled", _make_scheduled)

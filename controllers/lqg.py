@@ -3,8 +3,8 @@
 The controller is handed its design model: a discrete-time ``control.StateSpace`` from
 the command (held over a sample) to the estimated force, with the operating point
 ``(u0, y0)`` it was linearised at.  The registered ``"lqg"`` uses the sampled-data plant of
-:func:`ebraille_sim.analysis.tuning.linearize` at the estimator rate for the nominal device
-at ``design_force_n`` (:func:`ebraille_sim.analysis.tuning.make_lqg`).  The controller is therefore a sampled-data controller at the
+:func:`ebraille_sim.analysis.sampled.linearize` at the estimator rate for the nominal device
+at ``design_force_n`` (:func:`ebraille_sim.analysis.design.make_lqg`).  The controller is therefore a sampled-data controller at the
 estimator period ``sample_s`` (0.01 s): the measured signal only changes at that rate.
 It accumulates the ``dt_s`` it is given and acts when a full ``sample_s`` has elapsed,
 holding its command in between (its rate is a named, documented parameter, not a hidden
@@ -143,7 +143,7 @@ class LQG:
         """The linear controller at ``sample_s``: inputs (setpoint, estimate), output command deviation.
 
         States: the observer's prediction and the integrator.  Used by
-        :func:`ebraille_sim.analysis.tuning.loop_models` for the margins and Ms.
+        :func:`ebraille_sim.analysis.sampled.loop_models` for the margins and Ms.
         """
         A, B, C, L, K, kz = self._A, self._B[:, None], self._C[None, :], self._L[:, None], self._K[None, :], self._kz
         ts, Nx, Nu = self.config.sample_s, self._Nx[:, None], self._Nu

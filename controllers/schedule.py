@@ -8,7 +8,7 @@ off, a :class:`ScheduledPID` returns exactly the commands of a :class:`controlle
 with the same gains.
 
 **Gain scheduling on force.**  The loop gain grows with the pulp's tangent stiffness,
-``K(F) = b + m F / c0`` at a relaxed equilibrium (:mod:`ebraille_sim.analysis.tuning`), which is why
+``K(F) = b + m F / c0`` at a relaxed equilibrium (:mod:`ebraille_sim.analysis.plant_model`), which is why
 one set of gains that is fast at 0.6 N oscillates at 2 N.  The scheduled gains are::
 
     kp(F) = kp_ref K(F_ref) / K(F),  and the same factor for ki and kd,
@@ -23,7 +23,7 @@ uses the measured force.
 **Feedforward from the setpoint trajectory and the static command-force map.**  The
 setpoint comes from the reading schedule, so its rate ``r'`` (backward difference of the
 setpoints passed to :meth:`update`) is known without noise.  From the operating-point
-balance of :func:`ebraille_sim.analysis.tuning.operating_point`, holding ``r`` needs the command
+balance of :func:`ebraille_sim.analysis.plant_model.operating_point`, holding ``r`` needs the command
 ``R r / (kM g)`` (the middle of the friction band at rest), and moving the board so
 that the force rises at ``r'`` needs the back-EMF of the speed ``r'/K(r)`` plus the
 sliding friction in that direction::
@@ -36,7 +36,7 @@ reset).  ``s`` is latched on purpose: the drive sticks inside its friction band,
 feedforward that fell back to the middle of the band when a ramp ends would leave the
 integrator to wind the command back to the band's edge before the next correction in the
 same direction; the latched term holds the command on the edge (the operating point's
-command of :func:`ebraille_sim.analysis.tuning.operating_point`).  ``u_ff`` enters before the
+command of :func:`ebraille_sim.analysis.plant_model.operating_point`).  ``u_ff`` enters before the
 saturation and the integrator only corrects what it misses.
 
 **Static reference map** (on by default).  The controller regulates the *estimate*; the estimator has a
@@ -203,7 +203,7 @@ class ScheduledPID:
             reference_map=float(c.reference_map), **self._friction_params())
         if config.reference_map:
             from ebraille_sim.estimation.calibration import calibrate_device, steady_estimate
-            from ebraille_sim.estimation.models import load_estimator
+            from ebraille_sim.estimation.registry import load_estimator
             dev = calibrate_device(device)
             model = load_estimator(dev.estimator.model)
             self._map_f = np.linspace(F_MIN_N, F_MAX_N, MAP_POINTS)

@@ -96,7 +96,7 @@ def fast_estimator(path: pathlib.Path) -> dict:
     """
     import control
 
-    from ebraille_sim.estimation.models import load_estimator
+    from ebraille_sim.estimation.registry import load_estimator
     m = load_estimator("paper:wiener:5")
     t = m.dt_s
     tf = m.to_control()

@@ -275,7 +275,7 @@ NOMINAL_SCENARIOS = ("pressing_90wpm", "everyday_session", "battery_sag", "tremo
 def nominal_calibration(task) -> dict:
     """Reader 0 of the benchmark with its divider as shipped or calibrated like a drawn unit."""
     from ebraille_sim.estimation.calibration import calibrate_device, steady_estimate
-    from ebraille_sim.estimation.models import cached_model
+    from ebraille_sim.estimation.registry import cached_model
     from ebraille_sim.scenarios.runner import run_scenario
     key, calibrated = task
     sc = {s.key: s for s in bench.get_suite("standard").scenarios}[key]

@@ -15,7 +15,7 @@ Writes ``docs/figures/estimators/fast_estimator.json`` and prints its tables:
 * ``closed_loop``: four scenarios, the default ``pid`` and ``pid_friction``, the 100 Hz
   estimator and the 1 kHz one with anti-alias cutoffs of 20, 50 and 100 Hz: estimate RMSE,
   in_band and char_in_band for the scenario's seed and the mean over it and seeds 1-4;
-* ``loop``: the default PID's margins at 1 N from :func:`ebraille_sim.analysis.tuning.analyse_loop`;
+* ``loop``: the default PID's margins at 1 N from :func:`ebraille_sim.analysis.margins.analyse_loop`;
 * ``retune``: the ``pid_scheduled`` and ``pid`` gains tuned for the 1 kHz path
   (``docs/figures/estimators/gains_fast.toml``, ``gains_fast_pid.toml``) against the default PID and the shipped
   ``RECOMMENDED`` on the four scenarios (scenario seed and seeds 1-4; estimate RMSE, in_band,
@@ -37,7 +37,7 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from ebraille_sim.estimation.blockmodels import fitness  # noqa: E402
-from ebraille_sim.estimation.models import load_estimator  # noqa: E402
+from ebraille_sim.estimation.registry import load_estimator  # noqa: E402
 
 OUT = ROOT / "docs" / "figures" / "estimators" / "fast_estimator.json"
 SLOW, FAST = "paper:wiener:5", "paper:wiener:5@1000"
@@ -106,7 +106,7 @@ def closed_loop() -> dict:
 
 def loop() -> dict:
     import controllers
-    from ebraille_sim.analysis.tuning import analyse_loop
+    from ebraille_sim.analysis.margins import analyse_loop
     from ebraille_sim.physics.params import DeviceParams, EstimatorParams
     out = {}
     for model, cutoff in ESTIMATORS:
@@ -123,7 +123,7 @@ def retune() -> dict:
     from controllers.pid import PID, DEFAULT_PID
     from controllers.schedule import RECOMMENDED, ScheduledPID
     from ebraille_sim.analysis.robust import evaluate, family_ms_controller, standard_scenarios, summarise
-    from ebraille_sim.analysis.tuning import analyse_loop
+    from ebraille_sim.analysis.margins import analyse_loop
     from ebraille_sim.physics.params import DeviceParams, EstimatorParams
     from ebraille_sim.scenarios.population import sample_devices
     from ebraille_sim.scenarios.spec import load_scenario

@@ -29,14 +29,16 @@ import numpy as np  # noqa: E402
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from ebraille_sim.analysis.tuning import make_lqg  # noqa: E402
+from ebraille_sim.analysis.design import make_lqg, simc_pid  # noqa: E402
 from controllers.pid import DEFAULT_PID, PID  # noqa: E402
 from ebraille_sim.analysis.robust import (evaluate, friction_band_v, linearisation_points, population_ms, robust_tune,  # noqa: E402
                                 standard_scenarios, summarise, tuning_population, unramped)
 from controllers.schedule import HAND, MS_1_6, RECOMMENDED, ScheduleConfig, ScheduledPID  # noqa: E402
 from controllers.friction import FRICTION_GAINS  # noqa: E402
-from ebraille_sim.analysis.tuning import (_sampled_front, analyse_loop, continuous_model, linearize,  # noqa: E402
-                                operating_point, plot_bode, plot_nyquist, simc_pid)
+from ebraille_sim.analysis.margins import analyse_loop  # noqa: E402
+from ebraille_sim.analysis.plant_model import continuous_model, operating_point  # noqa: E402
+from ebraille_sim.analysis.plots import plot_bode, plot_nyquist  # noqa: E402
+from ebraille_sim.analysis.sampled import linearize, sampled_front  # noqa: E402
 from ebraille_sim.plant.loop import Plant  # noqa: E402
 from ebraille_sim.physics.params import DeviceParams  # noqa: E402
 from ebraille_sim.scenarios.runner import run_scenario  # noqa: E402
@@ -202,7 +204,7 @@ def _linear_estimate(front, est, u, n=10):
     ``front`` runs at the control rate; the estimator reads every ``n``-th of its outputs
     (samples ``n - 1, 2 n - 1, ...``).  With the estimator's creep compensation ``front`` has
     a second input, the estimate the firmware holds: the sample the estimator reads still
-    holds the previous estimate, the ones after it the new one (as ``analysis.tuning._lift``).
+    holds the previous estimate, the ones after it the new one (as ``analysis.sampled._lift``).
     """
     A, B, C, D = (np.atleast_2d(np.asarray(m, float)) for m in (front.A, front.B, front.C, front.D))
     Ae, Be, Ce, De = (np.atleast_2d(np.asarray(m, float)) for m in (est.A, est.B, est.C, est.D))
@@ -247,7 +249,7 @@ def describing_function(results):
 
     for dname, dev in (("default device", base), ("pure Coulomb friction", coulomb)):
         op = operating_point(dev, 1.0)
-        front, est = _sampled_front(dev, op)
+        front, est = sampled_front(dev, op)
         for f in freqs:
             vals = []
             for a in amps:

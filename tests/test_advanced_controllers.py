@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import controllers
-from ebraille_sim.analysis.tuning import make_lqg
+from ebraille_sim.analysis.design import make_lqg
 from controllers.pid import DEFAULT_PID, PID, PIDConfig
 from ebraille_sim.analysis.robust import evaluate, linearisation_points, population_ms, summarise, tuning_population
 from controllers.pid import stiffness_ratio

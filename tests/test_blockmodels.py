@@ -434,7 +434,7 @@ def test_to_control_is_the_linear_block_of_the_model(linear):
 
 def test_to_control_of_the_paper_model():
     control = pytest.importorskip("control")
-    from ebraille_sim.estimation.models import load_estimator
+    from ebraille_sim.estimation.registry import load_estimator
     m = load_estimator("paper:wiener:5")
     tf = m.to_control()
     u = np.random.default_rng(3).uniform(0.0, 1.2, 1000)          # detrended divider volts

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from ebraille_sim.estimation.blockmodels import BlockModel, LinearBF, fitness
-from ebraille_sim.estimation.models import load_estimator
+from ebraille_sim.estimation.registry import load_estimator
 from ebraille_sim.estimation.paper_models import paper_model
 from ebraille_sim.estimation.resample import continuous_equivalent, resample, split_rate
 from ebraille_sim.physics.params import DeviceParams, EstimatorParams
@@ -173,9 +173,10 @@ def test_closed_loop_estimate_tracks_the_true_force_and_is_deterministic():
 
 
 def test_loop_analysis_handles_the_1khz_estimator_and_matches_the_nonlinear_plant():
-    """Small-step check of the linearisation (as tests/test_tuning.py does at 100 Hz):
+    """Small-step check of the linearisation (as tests/test_sampled.py does at 100 Hz):
     estimated force within 10 % of the final change, every millisecond."""
-    from ebraille_sim.analysis.tuning import analyse_loop, linearize
+    from ebraille_sim.analysis.margins import analyse_loop
+    from ebraille_sim.analysis.sampled import linearize
     from ebraille_sim.plant.loop import Plant
     from controllers.pid import PID, DEFAULT_PID
     base = DeviceParams()

@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from ebraille_sim.estimation import blockmodels
-from ebraille_sim.estimation.blockmodels import (BlockModel, LinearBF, PiecewiseLinear, biquad_step, df2t_step,
-                                                 creep_compensated_v, estimator_step, pwl_eval, tared_v)
+from ebraille_sim.estimation import blockmodels, firmware
+from ebraille_sim.estimation.blockmodels import (BlockModel, LinearBF, PiecewiseLinear, df2t_step, estimator_step,
+                                                 pwl_eval)
+from ebraille_sim.estimation.firmware import biquad_step, creep_compensated_v, tared_v
 from ebraille_sim.estimation.calibration import loading_branch_factor, loading_voltage
 from ebraille_sim.estimation.paper_models import paper_model
 from ebraille_sim.physics import drivetrain, fingertip, fsr, motor, noise
@@ -23,12 +24,13 @@ from ebraille_sim.physics.drivetrain import (end_stop, friction_velocity_update,
                                              mesh_force, reflected, shaft_speed_rad_per_s, shaft_to_rack_per_m,
                                              stribeck, viscous_force_n, weight_along_n)
 from ebraille_sim.physics.fingertip import (compression_m, contact_force, elastic_force, prony_coefficients,
-                                            prony_step, tangent_stiffness_n_per_m)
+                                            prony_rate_n_per_s, prony_step, tangent_stiffness_n_per_m)
 from ebraille_sim.physics.fsr import (F_EPS_N, FAULT_NONE, FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE,
                                       N_PLAYS, adc_code, adc_sample, adc_voltage, conductance_s, creep_force,
                                       creep_state_step, divider_voltage, hysteresis, lag_step, log_force, play_widths,
                                       sensor_voltage, static_conductance, static_voltage, temperature_factor)
-from ebraille_sim.physics.motor import current_decay, current_step, driver_voltage, electrical_power_w, rack_force_n
+from ebraille_sim.physics.motor import (current_decay, current_rate_a_per_s, current_step, driver_voltage,
+                                       electrical_power_w, rack_force_n)
 from ebraille_sim.physics.noise import noise_v, normal_at
 from ebraille_sim.physics.params import (FINGERS, FSRS, MOTORS, CircuitParams, DeviceParams, DriveTrainParams,
                                          EstimatorParams, FSRParams)
@@ -56,6 +58,23 @@ def test_motor_current_step_follows_the_closed_form_exponential():
     for _ in range(1000):
         i = current_step(i, v, w, r, ke, decay)
     assert i == pytest.approx(i_ss, rel=1e-12)
+
+
+def test_armature_ode_is_the_rate_of_the_exact_current_step():
+    """``di/dt = (V - R i - kE w)/L``: the slope at t = 0 of the exact solution
+    ``i_ss + (i0 - i_ss) exp(-t R/L)``, and the rate of :func:`current_step` over a short step."""
+    r, l_h, ke = FAULHABER.resistance_ohm, FAULHABER.inductance_h, FAULHABER.back_emf_v_s_per_rad
+    v, w, i0 = 6.0, 400.0, 0.05
+    i_ss = (v - ke * w) / r
+    rate = current_rate_a_per_s(i0, v, w, r, l_h, ke)
+    assert rate == pytest.approx((i_ss - i0) * r / l_h, rel=1e-12)
+    h = 1e-4 * l_h / r
+    stepped = (current_step(i0, v, w, r, ke, current_decay(h, r, l_h)) - i0) / h
+    assert stepped == pytest.approx(rate, rel=1e-4)
+    assert current_rate_a_per_s(i_ss, v, w, r, l_h, ke) == pytest.approx(0.0, abs=1e-9 * abs(rate))
+    # linear: its values on unit inputs are its partial derivatives
+    assert current_rate_a_per_s(1.0, 0.0, 0.0, r, l_h, ke) == pytest.approx(-r / l_h, rel=1e-12)
+    assert current_rate_a_per_s(0.0, 0.0, 1.0, r, l_h, ke) == pytest.approx(-ke / l_h, rel=1e-12)
 
 
 def test_motor_force_driver_clip_and_power():
@@ -194,6 +213,22 @@ def test_qlv_ramp_is_exact_and_contact_only_pushes():
     assert contact_force(1e-3, 1.0, 0.4, 0.1, 0.1, 0.1) == pytest.approx(0.7, rel=1e-12)
     assert contact_force(-1e-6, 1.0, 0.4, 0.1, 0.1, 0.1) == 0.0          # board below the pulp
     assert contact_force(1e-3, 0.1, 0.4, -0.3, 0.0, 0.0) == 0.0          # would pull
+
+
+def test_prony_ode_is_the_rate_of_the_exact_prony_step():
+    """``dh/dt = -h/tau + c dFe/dt``: the closed form, and the rate of :func:`prony_step` over a
+    step short against tau with Fe rising at ``dFe/dt``."""
+    f = NOMINAL
+    tau, c = f.relax_tau_2_s, f.relax_weight_2
+    h0, fe_rate = 0.05, 3.0
+    rate = prony_rate_n_per_s(h0, tau, c, fe_rate)
+    assert rate == pytest.approx(-h0 / tau + c * fe_rate, rel=1e-12)
+    h = 1e-6 * tau
+    (a,), (beta,) = prony_coefficients(h, (tau,))
+    assert (prony_step(h0, a, c, beta, fe_rate * h) - h0) / h == pytest.approx(rate, rel=1e-5)
+    # relaxation alone decays at 1/tau; a held state is in equilibrium with a steady ramp c tau dFe/dt
+    assert prony_rate_n_per_s(1.0, tau, c, 0.0) == pytest.approx(-1.0 / tau, rel=1e-12)
+    assert prony_rate_n_per_s(c * tau * fe_rate, tau, c, fe_rate) == pytest.approx(0.0, abs=1e-12)
 
 
 # ---------------------------------------------------------------------------- FSR
@@ -471,6 +506,7 @@ def test_state_layout_is_composed_from_the_module_declarations():
     assert layout.STATE_OWNERS["fingertip"] == fingertip.OWNED_STATE_SLOTS
     assert layout.STATE_OWNERS["fsr"] == fsr.OWNED_STATE_SLOTS
     assert layout.STATE_OWNERS["noise"] == noise.OWNED_STATE_SLOTS
+    assert layout.STATE_OWNERS["firmware"] == firmware.OWNED_STATE_SLOTS
     assert layout.STATE_OWNERS["estimator"] == blockmodels.OWNED_STATE_SLOTS
     # the order the state vector always had
     assert layout.STATE_NAMES[:5] == ["current_a", "pinion_pos_m", "pinion_vel_m_per_s", "board_pos_m",
@@ -671,7 +707,7 @@ def test_hysteresis_compensation_reads_the_loading_branch():
     def volts(f_eff):
         return divider_voltage(gso + f_eff ** ex / k, r2, vs)
 
-    nm = blockmodels.HYSTERESIS_MEDIAN - 1
+    nm = firmware.HYSTERESIS_MEDIAN - 1
     M0 = 2 + n
     T0 = M0 + nm
 
@@ -681,33 +717,33 @@ def test_hysteresis_compensation_reads_the_loading_branch():
     x = math.log(1.2 + F_EPS_N)
     v_load = volts(math.exp(x - h) - F_EPS_N)
     st = state(x, -1.0, v_load)
-    out = blockmodels.hysteresis_compensated_v(v_load, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
+    out = firmware.hysteresis_compensated_v(v_load, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
     assert out == pytest.approx(v_load, rel=1e-12)
     assert st[1] == pytest.approx(x, abs=1e-12)
     v_unload = volts(math.exp(x + h) - F_EPS_N)
     st = state(x, +1.0, v_unload)
-    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
+    out = firmware.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
     assert out == pytest.approx(v_load, rel=1e-12)
     assert v_unload > 1.05 * v_load
     # the film further down its unloading branch: the inversion moves the input with the output
     # (slope 1 on that branch) and the result is the loading branch 2 H lower
     v_down = v_unload - 3.0 * db
     st[M0:M0 + nm] = v_down                          # a sustained change: the median passes it
-    out3 = blockmodels.hysteresis_compensated_v(v_down, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
+    out3 = firmware.hysteresis_compensated_v(v_down, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
     vf = v_unload - 2.0 * db
     assert st[0] == vf
     f_down = (k * (fsr.divider_conductance_s(vf, r2, vs) - gso)) ** (1.0 / ex)
     assert st[1] == pytest.approx(math.log(f_down + F_EPS_N) - h, abs=1e-12)
     assert out3 == pytest.approx(volts(math.exp(math.log(f_down + F_EPS_N) - 2.0 * h) - F_EPS_N), rel=1e-12)
     st = state(x, +1.0, v_unload)
-    out = blockmodels.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
+    out = firmware.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
     # within the deadband the held voltage is used: the output does not move
-    out2 = blockmodels.hysteresis_compensated_v(v_unload + 0.9 * db, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso,
+    out2 = firmware.hysteresis_compensated_v(v_unload + 0.9 * db, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso,
                                                 r2, vs)
     assert out2 == out and st[0] == v_unload
     # a railed or faulted divider passes unchanged
-    assert blockmodels.hysteresis_compensated_v(vs, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs) == vs
-    assert blockmodels.hysteresis_compensated_v(0.0, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs) == 0.0
+    assert firmware.hysteresis_compensated_v(vs, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs) == vs
+    assert firmware.hysteresis_compensated_v(0.0, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs) == 0.0
 
 
 def test_turn_test_reads_slow_and_fast_reversals_and_not_noise():
@@ -722,7 +758,7 @@ def test_turn_test_reads_slow_and_fast_reversals_and_not_noise():
     alpha = -math.expm1(-1.0 / 8.0)
 
     def step(s, v):
-        y = blockmodels.turn_tested_v(v, v, s, 0, 1, db, fo, turn, alpha)
+        y = firmware.turn_tested_v(v, v, s, 0, 1, db, fo, turn, alpha)
         s[0] = y
         return y
 
@@ -750,18 +786,18 @@ def test_turn_test_reads_slow_and_fast_reversals_and_not_noise():
 
 
 def test_running_median_passes_a_ramp_delayed_and_removes_a_spike():
-    nm = blockmodels.HYSTERESIS_MEDIAN - 1
+    nm = firmware.HYSTERESIS_MEDIAN - 1
     st = np.zeros(nm)
-    out = [blockmodels.running_median_v(float(k), st, 0) for k in range(1, 12)]
+    out = [firmware.running_median_v(float(k), st, 0) for k in range(1, 12)]
     assert out[nm // 2:] == [float(k) for k in range(1, 12 - nm // 2)]
     st = np.full(nm, 1.0)
     seq = [1.0, 1.0, 5.0, 1.0, 1.0, 1.0, -3.0, -3.0, 1.0, 1.0]
-    assert [blockmodels.running_median_v(v, st, 0) for v in seq] == [1.0] * len(seq)
+    assert [firmware.running_median_v(v, st, 0) for v in seq] == [1.0] * len(seq)
     # the selection is the median of the last five samples, whatever their order
     rng = np.random.default_rng(4)
     x = rng.integers(0, 4, 3000).astype(float)           # many ties, as quantised codes have
     st = x[3::-1].copy()
-    got = [blockmodels.running_median_v(x[k], st, 0) for k in range(4, len(x))]
+    got = [firmware.running_median_v(x[k], st, 0) for k in range(4, len(x))]
     np.testing.assert_array_equal(got, [np.median(x[k - 4:k + 1]) for k in range(4, len(x))])
     np.testing.assert_array_equal(st, x[:-5:-1])
 

@@ -1,4 +1,4 @@
-"""Gain and phase margins from the loop's frequency response (ebraille_sim.analysis.tuning.loop_margins).
+"""Gain and phase margins from the loop's frequency response (ebraille_sim.analysis.margins.loop_margins).
 
 Each margin is checked against a computation that does not use ``loop_margins``: closed
 forms of discrete loops whose frequency response is known exactly, python-control's
@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 
 from controllers.pid import DEFAULT_PID
-from ebraille_sim.analysis.tuning import analyse_loop, loop_margins, loop_models
+from ebraille_sim.analysis.margins import analyse_loop, loop_margins
+from ebraille_sim.analysis.sampled import loop_models
 from ebraille_sim.physics.params import DeviceParams
 
 
@@ -233,7 +234,7 @@ def test_bad_loops_are_refused():
 
 def test_analyse_loop_takes_controller_objects_as_well_as_configs():
     import controllers
-    from ebraille_sim.analysis.tuning import analyse_loop
+    from ebraille_sim.analysis.margins import analyse_loop
     pid = controllers.make("pid")
     by_object = analyse_loop(pid, force_n=1.0)
     by_config = analyse_loop(pid.config, force_n=1.0)
@@ -244,3 +245,18 @@ def test_analyse_loop_takes_controller_objects_as_well_as_configs():
         analyse_loop(sched.pid_config_at(1.0), force_n=1.0).phase_margin_deg
     with pytest.raises(TypeError, match="cannot analyse a controller of type str"):
         analyse_loop("pid", force_n=1.0)
+
+
+def test_default_gains_fixed_lose_stability_at_2n_and_scaling_keeps_the_loop():
+    fixed = dataclasses.replace(DEFAULT_PID, schedule_above_n=None)
+    a06 = analyse_loop(fixed, force_n=0.6)
+    a2 = analyse_loop(fixed, force_n=2.0)
+    assert a06.stable and 1.0 < a06.ms < 3.0
+    assert not a2.stable and a2.ms == math.inf
+    # the default scales its gains above 1 N with the pulp's stiffness: the loop at 2 and 3 N
+    # has about the margins of the loop at 1 N
+    a1 = analyse_loop(DEFAULT_PID, force_n=1.0)
+    assert analyse_loop(DEFAULT_PID, force_n=0.6).ms == a06.ms
+    for f in (2.0, 3.0):
+        a = analyse_loop(DEFAULT_PID, force_n=f)
+        assert a.stable and a.ms < 1.5 * a1.ms

@@ -3,7 +3,7 @@
 The gains minimise a tracking cost measured in closed-loop simulation (the nonlinear
 plant, :func:`ebraille_sim.scenarios.runner.run_scenario`) over a population and a set of scenarios,
 subject to a robustness constraint checked on the sampled-data small-signal loop
-(:mod:`ebraille_sim.analysis.tuning`): the sensitivity peak ``Ms <= ms_max`` (1.6 by default) at
+(:mod:`ebraille_sim.analysis.margins`): the sensitivity peak ``Ms <= ms_max`` (1.6 by default) at
 every linearisation point, i.e. every device of the population at every setpoint of every
 scenario.
 
@@ -181,12 +181,13 @@ class _Point:
 
 def linearisation_points(population, forces_n) -> list[_Point]:
     """Sampled plant fronts of every device at every force (cached for :func:`population_ms`)."""
-    from ebraille_sim.analysis.tuning import _sampled_front, operating_point
+    from ebraille_sim.analysis.plant_model import operating_point
+    from ebraille_sim.analysis.sampled import sampled_front
     pts = []
     for label, dev in population:
         for f in forces_n:
             op = operating_point(dev, f)
-            pts.append(_Point(label, float(f), dev, _sampled_front(dev, op)))
+            pts.append(_Point(label, float(f), dev, sampled_front(dev, op)))
     return pts
 
 
@@ -200,7 +201,8 @@ def population_ms(controller, points, gain: float = 1.0) -> np.ndarray:
     """
     import control
 
-    from ebraille_sim.analysis.tuning import loop_models, sensitivity_peak
+    from ebraille_sim.analysis.margins import sensitivity_peak
+    from ebraille_sim.analysis.sampled import loop_models
     if not (math.isfinite(gain) and gain > 0):
         raise ValueError(f"gain must be finite and > 0, got {gain}")
     fixed = isinstance(controller, (PIDConfig, control.StateSpace))
@@ -388,10 +390,10 @@ def friction_band_v(device: DeviceParams = DeviceParams(), force_n: float = 1.0)
     """Width of the drive's kinetic friction band at ``force_n``, in command volts.
 
     The difference between the commands that hold ``force_n`` at the pressing and at the
-    releasing edge (:func:`ebraille_sim.analysis.tuning.operating_point`); inside it the drive
+    releasing edge (:func:`ebraille_sim.analysis.plant_model.operating_point`); inside it the drive
     sticks, so for small signals the drive acts as a play operator of this width.
     """
-    from ebraille_sim.analysis.tuning import operating_point
+    from ebraille_sim.analysis.plant_model import operating_point
     return float(operating_point(device, force_n, friction="press").command_v
                  - operating_point(device, force_n, friction="release").command_v)
 
@@ -540,7 +542,7 @@ def robust_tune(spec, population, *, family: str = "pid", ms_max: float = 1.6, s
     """
     import scipy.optimize
 
-    from ebraille_sim.analysis.tuning import simc_pid
+    from ebraille_sim.analysis.design import simc_pid
     if not (ms_max > 1.0):
         raise ValueError(f"ms_max must be > 1, got {ms_max}")
     if family not in FAMILIES:

@@ -154,7 +154,7 @@ def _markdown(spec, rep: dict, n_dev: int) -> str:
                  f"{_NAMES[k]} {rep['named_costs'][k]:.3f}" for k in keys if k != "tuned") + ")."), ""]
     if rep.get("nominal_loop"):
         out += ["## Loop of gains.toml on the nominal reader (sliding model)", "",
-                "Margins from the loop's frequency response (`ebraille_sim.analysis.tuning.loop_margins`); "
+                "Margins from the loop's frequency response (`ebraille_sim.analysis.margins.loop_margins`); "
                 "none are given for an unstable closed loop.", "",
                 "| setpoint | closed loop | phase margin | gain margin | Ms |", "|---|---|---|---|---|"]
         for a in rep["nominal_loop"]:
@@ -236,7 +236,8 @@ def main(args) -> int:
     import pathlib
 
     from ebraille_sim.analysis.robust import family_ms_controller, gains_document, robust_tune, tuning_population
-    from ebraille_sim.analysis.tuning import analyse_loop, plot_bode, plot_nyquist
+    from ebraille_sim.analysis.margins import analyse_loop
+    from ebraille_sim.analysis.plots import plot_bode, plot_nyquist
 
     from ebraille_sim.commands import FrameProgress, check_duration, check_out_dir, console
     from ebraille_sim.scenarios.spec import load_scenario

@@ -33,7 +33,7 @@ import numpy as np
 
 from ebraille_sim.base.compiled import njit
 from ebraille_sim.base.validation import replace_fields
-from ebraille_sim.estimation.models import cached_model
+from ebraille_sim.estimation.registry import cached_model
 from ebraille_sim.physics.fsr import adc_code, adc_voltage, divider_voltage, play_widths, static_conductance
 
 if TYPE_CHECKING:

@@ -28,7 +28,7 @@ sensor periods (:func:`resample` checks it when given the sensor rate;
 :func:`ebraille_sim.plant.loop.check_sensor_rates` checks it for every device).
 
 Estimator names carry the rate after ``@``: ``"paper:wiener:5@1000"`` is
-``resample(paper_model("wiener", 5), 1000.0)`` (:func:`ebraille_sim.estimation.models.load_estimator`).
+``resample(paper_model("wiener", 5), 1000.0)`` (:func:`ebraille_sim.estimation.registry.load_estimator`).
 
 Examples
 --------

@@ -51,7 +51,7 @@ import numpy as np
 from ebraille_sim.base.validation import check_number
 from ebraille_sim.identification.bench import (ACTUATED_MASS_KG, EQ3_DAMPING_COEFFS, EQ4_STIFFNESS_COEFFS, TABLE3_DAMPING_N_S_PER_M,
                     TABLE3_FREQUENCIES_HZ, TABLE3_STIFFNESS_N_PER_M, BenchParams, BenchRecord, Profile,
-                    _seed_sequence, run_profile)
+                    run_profile, seed_sequence)
 from ebraille_sim.estimation.blockmodels import fitness
 
 __all__ = ["DMA_FREQUENCIES_HZ", "PAPER_A", "TABLE4_FITNESS", "DMAPoint", "DMAResult", "estimate_kc",
@@ -232,7 +232,7 @@ def dma_test(bench: BenchParams | None = None, frequencies_hz=DMA_FREQUENCIES_HZ
         raise ValueError(f"frequencies_hz must be positive numbers, got {frequencies_hz!r}")
     for name, v, lo in (("cycles", cycles, 1), ("settle_cycles", settle_cycles, 0)):
         check_number(name, v, lo=lo, integer=True)
-    children = _seed_sequence(seed).spawn(len(freqs))
+    children = seed_sequence(seed).spawn(len(freqs))
     points = []
     for f, ch in zip(freqs, children):
         rec = run_profile(Profile(f"dma_{f:g}hz", "sine", f, settle_cycles + cycles), bench, ch)

@@ -10,6 +10,7 @@ function ``G(t) = c0 + sum_i c_i exp(-t/tau_i)`` (tau = 4 ms, 70 ms, 1.4 s)::
 
     F(t) = c0 Fe(t) + sum_i h_i(t),     dh_i/dt = -h_i/tau_i + c_i dFe/dt
 
+(:func:`prony_rate_n_per_s`, the form the loop analysis linearises).
 Each Prony state is advanced exactly for ``Fe`` varying linearly over a step ``h``::
 
     h_i <- a_i h_i + c_i beta_i (Fe_new - Fe_old),  a_i = exp(-h/tau_i),
@@ -63,6 +64,16 @@ def relaxed_elastic_force_n(contact_force_n, c0):
 def prony_step(h_n, a, c, beta, d_elastic_force_n):
     """One exact step of a Prony state: ``h <- a h + c beta (Fe_new - Fe_old)`` (N)."""
     return a * h_n + c * beta * d_elastic_force_n
+
+
+def prony_rate_n_per_s(h_n, tau_s, c, elastic_force_rate_n_per_s):
+    """The Prony ODE in continuous time, ``dh/dt = -h/tau + c dFe/dt`` (N/s).
+
+    :func:`prony_step` is its exact solution over a step with ``Fe`` varying linearly.  The
+    law is linear in ``(h, dFe/dt)``: its partial derivatives are its values on unit inputs
+    (``-1/tau`` and ``c``), which is how the loop analysis's Jacobian takes them.
+    """
+    return -h_n / tau_s + c * elastic_force_rate_n_per_s
 
 
 @njit(cache=True, inline="always")

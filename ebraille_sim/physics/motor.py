@@ -1,6 +1,7 @@
 """Brushed DC motor: armature circuit and torque.
 
-Armature: ``L di/dt = V - R i - kE w``.  Its time constant L/R (10 us for the Faulhaber
+Armature: ``L di/dt = V - R i - kE w`` (:func:`current_rate_a_per_s`, the form the loop
+analysis linearises).  Its time constant L/R (10 us for the Faulhaber
 0816 006 SR) is far below any practical physics step, so the current is advanced with
 the exact solution for a step ``h`` during which the voltage ``V`` and the speed ``w``
 are held::
@@ -76,6 +77,17 @@ def rack_force_n(i_a, kt_nm_per_a, shaft_to_rack_per_m):
 def electrical_power_w(v_v, i_a):
     """Power drawn from the driver, ``V i`` (W)."""
     return v_v * i_a
+
+
+def current_rate_a_per_s(i_a, v_v, omega_rad_s, r_ohm, l_h, ke_v_s):
+    """The armature ODE in continuous time, ``di/dt = (V - R i - kE w)/L`` (A/s).
+
+    :func:`current_step` is its exact solution over a step with ``V`` and ``w`` held.  The
+    law is linear in ``(i, V, w)``: its partial derivatives are its values on unit inputs
+    (``-R/L``, ``1/L``, ``-kE/L``), which is how the loop analysis's Jacobian takes them.
+    A speed at the rack line works as well with ``ke_v_s`` the rack-line constant ``kE N/r``.
+    """
+    return (v_v - r_ohm * i_a - ke_v_s * omega_rad_s) / l_h
 
 
 def current_decay(h_s: float, r_ohm: float, l_h: float) -> float:

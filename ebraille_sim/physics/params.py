@@ -479,7 +479,7 @@ class EstimatorParams(_Checked):
                                      "from the median's extreme since the last turn; 0 is off (the plain "
                                      "deadband).  1.75 on the 1 kHz firmware of docs/benchmark.md, chosen on a "
                                      "training population (docs/make_dob_tuning.py --hold-damping; "
-                                     "estimation.blockmodels.turn_tested_v)")
+                                     "estimation.firmware.turn_tested_v)")
     hysteresis_follow_lsb: float = _nn(0.5, "LSB", "[E] with the turn test, the deadband a move on in the "
                                        "followed direction passes (at most hysteresis_deadband_lsb; a fast "
                                        "reversal still needs the plain deadband's swing of twice that)")

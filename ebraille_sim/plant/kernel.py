@@ -9,7 +9,7 @@ The kernel holds no law of its own: every force, flow and conversion is a functi
 module that states the law (:mod:`~ebraille_sim.physics.motor`,
 :mod:`~ebraille_sim.physics.drivetrain`, :mod:`~ebraille_sim.physics.fingertip`,
 :mod:`~ebraille_sim.physics.fsr`, :mod:`~ebraille_sim.physics.noise`,
-:mod:`~ebraille_sim.estimation.blockmodels`), inlined at compile time.  The kernel only
+:mod:`~ebraille_sim.estimation.firmware`, :mod:`~ebraille_sim.estimation.blockmodels`), inlined at compile time.  The kernel only
 orders those calls, sums the forces on each body, integrates positions (semi-implicit
 Euler), time and energy, and schedules the sensor and estimator samples.
 
@@ -25,8 +25,8 @@ Per physics step ``h`` (default 0.1 ms), with the command held over the control 
    (:func:`~ebraille_sim.physics.fingertip.prony_step`, :func:`~ebraille_sim.physics.fingertip.contact_force`);
 6. FSR mechanical lag; at every sensor sample the hysteresis, hereditary creep, conduction,
    divider (or fault), noise and ADC, then the estimator's creep compensation
-   (:func:`~ebraille_sim.estimation.blockmodels.creep_compensated_v`, when on), the
-   hysteresis compensation (:func:`~ebraille_sim.estimation.blockmodels.hysteresis_compensated_v`,
+   (:func:`~ebraille_sim.estimation.firmware.creep_compensated_v`, when on), the
+   hysteresis compensation (:func:`~ebraille_sim.estimation.firmware.hysteresis_compensated_v`,
    when on) and the anti-alias filter; at every estimator
    sample the block-oriented estimator (:func:`~ebraille_sim.estimation.blockmodels.estimator_step`).
 
@@ -38,8 +38,8 @@ from __future__ import annotations
 
 from ebraille_sim.base.compiled import njit
 
-from ebraille_sim.estimation.blockmodels import (biquad_step, creep_compensated_v, estimator_step,
-                                                hysteresis_compensated_v, tared_v)
+from ebraille_sim.estimation.blockmodels import estimator_step
+from ebraille_sim.estimation.firmware import biquad_step, creep_compensated_v, hysteresis_compensated_v, tared_v
 from ebraille_sim.physics.drivetrain import (end_stop, friction_velocity_update, gear_loss_n, loaded_friction_n,
                                              mesh_force, shaft_speed_rad_per_s, stribeck, viscous_force_n,
                                              weight_along_n)

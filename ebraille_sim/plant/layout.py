@@ -12,7 +12,8 @@ sensor fault) travel in a third vector ``U`` of length ``N_INPUT``.
 State slots are declared by the module whose law advances them (``STATE_SLOTS`` and
 friends in :mod:`~ebraille_sim.physics.motor`, :mod:`~ebraille_sim.physics.drivetrain`,
 :mod:`~ebraille_sim.physics.fingertip`, :mod:`~ebraille_sim.physics.fsr`,
-:mod:`~ebraille_sim.physics.noise` and :mod:`~ebraille_sim.estimation.blockmodels`);
+:mod:`~ebraille_sim.physics.noise`, :mod:`~ebraille_sim.estimation.firmware` and
+:mod:`~ebraille_sim.estimation.blockmodels`);
 the loop itself owns only its clock and sample phases (:data:`LOOP_STATE_SLOTS`).
 :data:`STATE_BLOCKS` puts those declarations in their order in the state vector.
 
@@ -26,6 +27,7 @@ from __future__ import annotations
 import collections
 
 from ebraille_sim.estimation import blockmodels as _est
+from ebraille_sim.estimation import firmware as _fw
 from ebraille_sim.estimation.blockmodels import MAX_BREAKPOINTS, MAX_TF_LEN
 from ebraille_sim.physics import drivetrain as _drivetrain
 from ebraille_sim.physics import fingertip as _fingertip
@@ -81,15 +83,16 @@ samples since the last estimate, and the simulated time."""
 
 STATE_BLOCKS = (
     _motor.STATE_SLOTS, _drivetrain.STATE_SLOTS, _fingertip.STATE_SLOTS, _fsr.STATE_SLOTS,
-    _est.ANTIALIAS_SLOTS, LOOP_STATE_SLOTS[:2], _noise.STATE_SLOTS, _est.OUTPUT_SLOTS,
-    _motor.ENERGY_SLOTS, LOOP_STATE_SLOTS[2:], _est.TARE_SLOTS, _fsr.HYSTERESIS_SLOTS, _fsr.CREEP_SLOTS, _est.FILTER_SLOTS,
-    _est.CREEP_COMP_SLOTS, _est.HYSTERESIS_COMP_SLOTS,
+    _fw.ANTIALIAS_SLOTS, LOOP_STATE_SLOTS[:2], _noise.STATE_SLOTS, _est.OUTPUT_SLOTS,
+    _motor.ENERGY_SLOTS, LOOP_STATE_SLOTS[2:], _fw.TARE_SLOTS, _fsr.HYSTERESIS_SLOTS, _fsr.CREEP_SLOTS, _est.FILTER_SLOTS,
+    _fw.CREEP_COMP_SLOTS, _fw.HYSTERESIS_COMP_SLOTS,
 )
 """The modules' slot declarations in state-vector order."""
 
 STATE_OWNERS = {"motor": _motor.OWNED_STATE_SLOTS, "drivetrain": _drivetrain.OWNED_STATE_SLOTS,
                 "fingertip": _fingertip.OWNED_STATE_SLOTS, "fsr": _fsr.OWNED_STATE_SLOTS,
-                "noise": _noise.OWNED_STATE_SLOTS, "estimator": _est.OWNED_STATE_SLOTS,
+                "noise": _noise.OWNED_STATE_SLOTS, "firmware": _fw.OWNED_STATE_SLOTS,
+                "estimator": _est.OWNED_STATE_SLOTS,
                 "loop": LOOP_STATE_SLOTS}
 """Every state slot by the module that declares it."""
 

@@ -79,7 +79,7 @@ import numpy as np
 from ebraille_sim.base.fields import sourced
 from ebraille_sim.base.seeds import child_seed
 from ebraille_sim.base.validation import check_keys, check_number, check_pair
-from ebraille_sim.estimation.blockmodels import FIRMWARE_FSR
+from ebraille_sim.estimation.firmware import FIRMWARE_FSR
 from ebraille_sim.physics.fsr import held_resistance_factor
 from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2
 from ebraille_sim.scenarios.spec import ScenarioError, check_section_table
@@ -386,9 +386,9 @@ class FSRDrift:
     2.7 % per decade, datasheet < 5 % per decade), is advanced by the offset: the run sees
     ``c(t_off + t)`` instead of ``c(t)``.  Folded into the temperature input (module
     docstring).  The firmware has followed the same session: its creep compensation predicts
-    with its own law (:data:`ebraille_sim.estimation.blockmodels.FIRMWARE_FSR`) advanced by
+    with its own law (:data:`ebraille_sim.estimation.firmware.FIRMWARE_FSR`) advanced by
     the same offset, the ``est_creep_preload`` input (``factor - 1`` of that law,
-    :func:`ebraille_sim.estimation.blockmodels.creep_compensated_v`).  A reading session of
+    :func:`ebraille_sim.estimation.firmware.creep_compensated_v`).  A reading session of
     30 min to 2 h [E] gives offsets of 1800-7200 s; standard FSR ink drifts about 12 % in
     conductance over 48 h ([R] Sensitronics).
     """

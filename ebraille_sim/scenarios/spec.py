@@ -425,7 +425,7 @@ def _check_rates(device: _params.DeviceParams) -> None:
     The plant repeats the first and last check when it is built; here they reject a file
     before anything runs.
     """
-    from ebraille_sim.estimation.models import load_estimator
+    from ebraille_sim.estimation.registry import load_estimator
     from ebraille_sim.plant.loop import check_sensor_rates, check_step
     model = load_estimator(device.estimator.model)
     check_sensor_rates(device, model)
