@@ -262,30 +262,19 @@ def read_table(path: str, what: str) -> dict:
     FileNotFoundError
         ``"WHAT not found: PATH"``.
     ValueError
-        One line for malformed TOML/JSON or a file that does not hold a table/object.
+        One line for malformed TOML/JSON, a file that does not hold a table/object, or one
+        :func:`ebraille_sim.base.files.read_bytes` refuses (not a regular file, too large,
+        nested too deeply).
     """
-    import json
     import os
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"{what} not found: {path}")
-    if str(path).lower().endswith(".toml"):
-        try:
-            import tomllib
-        except ModuleNotFoundError:  # Python < 3.11
-            import tomli as tomllib
-        with open(path, "rb") as fh:
-            try:
-                data = tomllib.load(fh)
-            except tomllib.TOMLDecodeError as exc:
-                raise ValueError(f"invalid TOML in {path}: {exc}") from None
-    else:
-        with open(path, encoding="utf-8") as fh:
-            try:
-                data = json.load(fh)
-            except json.JSONDecodeError as exc:
-                raise ValueError(f"invalid JSON in {path}: {exc}") from None
+
+    from ebraille_sim.base.files import read_json, read_toml, short
+    if not os.path.lexists(path):
+        raise FileNotFoundError(f"{what} not found: {short(path)}")
+    read = read_toml if str(path).lower().endswith(".toml") else read_json
+    data = read(path, what)
     if not isinstance(data, dict):
-        raise ValueError(f"{what} {path} must hold a table/object, got {type(data).__name__}")
+        raise ValueError(f"{what} {short(path)} must hold a table/object, got {type(data).__name__}")
     return data
 
 

@@ -35,7 +35,9 @@ def add_arguments(p):
 
 
 def main(args) -> int:
-    from ebraille_sim.commands import FrameProgress, UserError, check_out_dir, console
+    import contextlib
+
+    from ebraille_sim.commands import FrameProgress, UserError, check_out_dir, claim_out_dir, console
     from ebraille_sim.tools import benchmark as bm
 
     con = console(args)
@@ -48,19 +50,23 @@ def main(args) -> int:
         estimator = bm.estimator_settings(args.estimator)
     except ValueError as exc:
         raise UserError(f"--estimator: {exc}") from None
-    out = check_out_dir(args.out) if args.out is not None else None
+    out = check_out_dir(args.out, owned=bm.RESULT_FILES) if args.out is not None else None
     old = bm.load_results(args.compare) if args.compare is not None else None
     if old is not None and (old["suite"], old["suite_version"]) != (suite.name, bm.SUITE_VERSION):
         raise UserError(f"--compare {args.compare}: suite {old['suite']} v{old['suite_version']}, "
                         f"this run is {suite.name} v{bm.SUITE_VERSION}")
     progress = FrameProgress("episodes", enabled=con.progress and not con.json)
-    result = bm.run_benchmark(args.controllers, suite, readers=args.readers, jobs=args.jobs,
-                              bounds=not args.no_bounds, progress=progress, estimator=estimator)
-    progress.close()
-    summary = bm.summarise(result)
-    doc = bm.results_document(result, summary)
-    deltas = bm.compare(doc, old) if old is not None else None
-    files = bm.write_results(result, out, summary) if out is not None else []
+    with (claim_out_dir(out, bm.RESULT_FILES) if out is not None else contextlib.nullcontext()) as target:
+        result = bm.run_benchmark(args.controllers, suite, readers=args.readers, jobs=args.jobs,
+                                  bounds=not args.no_bounds, progress=progress, estimator=estimator)
+        progress.close()
+        summary = bm.summarise(result)
+        doc = bm.results_document(result, summary)
+        deltas = bm.compare(doc, old) if old is not None else None
+        files = []
+        if target is not None:
+            with target.staged() as folder:
+                files = [out / p.name for p in bm.write_results(result, folder, summary)]
     con.result({**{k: v for k, v in doc.items() if k != "rows"}, "compare": deltas,
                 "files": [str(f) for f in files]})
     con.say(bm.format_leaderboard(result, summary))

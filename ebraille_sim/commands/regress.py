@@ -28,29 +28,12 @@ def add_arguments(p):
 
 def _prepare(option: str, path):
     """The report file, checked now (not a folder, its folder writable) so a bad path fails before the runs."""
-    import pathlib
-
-    from ebraille_sim.commands import UserError, check_out_dir
-    if not str(path).strip():
-        raise UserError(f"{option} is empty; give a file name")
-    p = pathlib.Path(path)
-    if p.is_dir():
-        raise UserError(f"{option} {str(p)!r} is a folder; give a file name")
-    check_out_dir(p.parent, option)
-    return p
-
-
-def _write(p, text: str) -> None:
-    from ebraille_sim.tools.outputs import signals_held
-    p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".tmp")
+    from ebraille_sim.commands import UserError
+    from ebraille_sim.tools.outputs import check_file
     try:
-        tmp.write_text(text, encoding="utf-8")
-        with signals_held():
-            tmp.replace(p)
-    finally:
-        with signals_held():
-            tmp.unlink(missing_ok=True)
+        return check_file(path, option)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
 
 
 def _check_inputs(args) -> None:
@@ -89,6 +72,7 @@ def main(args) -> int:
     import time
 
     from ebraille_sim.commands import console
+    from ebraille_sim.tools.outputs import write_file
     from ebraille_sim.tools.regress import format_report, json_document, junit_xml, regress_scenarios
 
     con = console(args)
@@ -108,9 +92,9 @@ def main(args) -> int:
     con.say(format_report(checks, verbose=args.verbose))
     con.say(f"wall time {time.perf_counter() - t0:.1f} s")
     if junit:
-        _write(junit, junit_xml(checks))
+        write_file(junit, junit_xml(checks), "--junit")
         con.say(f"wrote {junit}")
     if json_path:
-        _write(json_path, json.dumps(doc, indent=2, allow_nan=False) + "\n")
+        write_file(json_path, json.dumps(doc, indent=2, allow_nan=False) + "\n", "--json")
         con.say(f"wrote {json_path}")
     return 1 if any(c.failed for c in checks) else 0

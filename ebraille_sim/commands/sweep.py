@@ -45,8 +45,7 @@ def add_arguments(p):
 def main(args) -> int:
     import controllers
 
-    from ebraille_sim.commands import UserError, check_duration, check_out_dir, console
-    from ebraille_sim.tools.outputs import staged
+    from ebraille_sim.commands import UserError, check_duration, check_out_dir, claim_out_dir, console
     from ebraille_sim.tools.sweep import format_summary, plan_sweep, run_sweep, summarise, write_results
 
     con = console(args)
@@ -62,7 +61,7 @@ def main(args) -> int:
     known = set(_metric_names())
     if args.loss not in known:
         raise ValueError(f"unknown --loss metric {args.loss!r}; metrics: {', '.join(sorted(known))}")
-    out = check_out_dir(args.out)
+    out = check_out_dir(args.out, owned=SWEEP_OWNED)
     for c in args.controllers:
         try:
             controllers.make(c)
@@ -72,11 +71,12 @@ def main(args) -> int:
                       seed=args.seed, replicates=args.replicates, duration_s=args.duration)
     for spec in plan.specs.values():
         check_duration(spec, args.duration)
-    result = run_sweep(plan, jobs=args.jobs, scheduler=args.scheduler,
-                       progress=con.progress and not args.no_progress)
-    with staged(out, SWEEP_OWNED) as folder:
-        names = [p.relative_to(folder) for p in write_results(result, folder, loss=args.loss, alpha=args.alpha,
-                                                              figures=not args.no_figures)]
+    with claim_out_dir(out, SWEEP_OWNED) as target:
+        result = run_sweep(plan, jobs=args.jobs, scheduler=args.scheduler,
+                           progress=con.progress and not args.no_progress)
+        with target.staged() as folder:
+            names = [p.relative_to(folder) for p in write_results(result, folder, loss=args.loss, alpha=args.alpha,
+                                                                  figures=not args.no_figures)]
     paths = [out / n for n in names]
     summary = summarise(result, args.loss, args.alpha)
     failed = sum(1 for r in result.rows if r.get("error"))

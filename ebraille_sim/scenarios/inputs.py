@@ -158,6 +158,10 @@ def profile_table(profiles: dict, n: int) -> np.ndarray | None:
     return None
 
 
+MAX_READING_BYTES = 16 * 2 ** 20
+"""Largest ``[reading] file`` read (16 MiB of text, days of reading at 200 wpm)."""
+
+
 def reading_text(spec: ScenarioSpec) -> str:
     """The text a scenario reads (passage, inline text or file)."""
     r = spec.reading
@@ -167,10 +171,11 @@ def reading_text(spec: ScenarioSpec) -> str:
         p = pathlib.Path(r.file)
         if not p.is_absolute():
             p = pathlib.Path(spec.base_dir) / p
+        from ebraille_sim.base.files import read_text
         try:
-            return p.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise ScenarioError(f"{spec.source}: cannot read [reading] file {str(p)!r}: {exc.strerror}") from None
+            return read_text(p, "[reading] file", MAX_READING_BYTES)
+        except (ValueError, FileNotFoundError) as exc:
+            raise ScenarioError(f"{spec.source}: {exc}") from None
     try:
         return _passage(r.passage)
     except ValueError as exc:

@@ -54,6 +54,7 @@ import dataclasses
 import functools
 import json
 import math
+import os
 import pathlib
 import time
 from dataclasses import dataclass
@@ -473,31 +474,64 @@ def results_document(result: BenchmarkResult, summary: dict | None = None) -> di
             "rows": result.rows, "wall_s": round(result.wall_s, 3), "jobs": result.jobs}
 
 
+RESULT_FILES = ("benchmark.json", "leaderboard.md")
+"""What :func:`write_results` writes into its folder."""
+
+
 def write_results(result: BenchmarkResult, out, summary: dict | None = None) -> list:
-    """Write ``benchmark.json`` and ``leaderboard.md`` into folder ``out``; return the paths."""
+    """Write ``benchmark.json`` and ``leaderboard.md`` into folder ``out``; return the paths.
+
+    Each file is replaced whole (:func:`ebraille_sim.tools.outputs.write_file`); a symbolic
+    link, FIFO, device or folder of either name is refused, never written through.
+    """
+    from ebraille_sim.tools.outputs import write_file
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
     doc = results_document(result, summary)
     p_json, p_md = out / "benchmark.json", out / "leaderboard.md"
     doc = dict(doc, rows=[{k: round(v, 6) if isinstance(v, float) else v for k, v in r.items()}
                           for r in doc["rows"]])
-    p_json.write_text(json.dumps(doc, separators=(",", ":"), allow_nan=False, default=float) + "\n")
-    p_md.write_text(format_markdown(result, doc["summary"]))
+    write_file(p_json, json.dumps(doc, separators=(",", ":"), allow_nan=False, default=float) + "\n", "--out entry")
+    write_file(p_md, format_markdown(result, doc["summary"]), "--out entry")
     return [p_json, p_md]
 
 
 def load_results(path) -> dict:
     """A results document written by :func:`write_results`; one-line ValueError if it is not one."""
+    from ebraille_sim.base.files import read_json, short
     p = pathlib.Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"no results file {str(p)!r}")
-    try:
-        doc = json.loads(p.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{p}: not a JSON results file ({exc})") from None
+    if not os.path.lexists(p):
+        raise FileNotFoundError(f"no results file {short(p)}")
+    doc = read_json(p, "results file")
     if not isinstance(doc, dict) or not {"suite", "suite_version", "summary"} <= set(doc):
-        raise ValueError(f"{p}: not a benchmark results file (needs suite, suite_version and summary)")
+        raise ValueError(f"{short(p)}: not a benchmark results file (needs suite, suite_version and summary)")
+    _check_results_types(doc, short(p))
     return doc
+
+
+def _check_results_types(doc: dict, shown: str) -> None:
+    """The parts of a results document :func:`compare` reads, of the types it reads them as."""
+    def bad(where, want):
+        raise ValueError(f"{shown}: not a benchmark results file ({where} must be {want})")
+
+    def number(v):
+        return v is None or (isinstance(v, (int, float)) and not isinstance(v, bool))
+
+    if not isinstance(doc["suite"], str):
+        bad("suite", "a name")
+    if not isinstance(doc["suite_version"], (int, str)) or isinstance(doc["suite_version"], bool):
+        bad("suite_version", "a version")
+    if not isinstance(doc["summary"], dict):
+        bad("summary", "an object")
+    for c, s in doc["summary"].items():
+        if not isinstance(s, dict) or not number(s.get("score")) or s.get("score") is None:
+            bad(f"summary[{short(c, 40)}].score", "a number")
+        if not isinstance(s.get("scenarios"), dict):
+            bad(f"summary[{short(c, 40)}].scenarios", "an object")
+        for key, st in s["scenarios"].items():
+            if not isinstance(st, dict) or not all(number(st.get(m)) for m in COMPARED):
+                bad(f"summary[{short(c, 40)}].scenarios[{short(key, 40)}]",
+                    "an object of numbers (" + ", ".join(COMPARED) + ")")
 
 
 COMPARED = ("in_band_fraction_median", "in_band_fraction_cvar10", "char_in_band_fraction_median",
