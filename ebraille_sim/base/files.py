@@ -29,7 +29,7 @@ import json
 import os
 import stat
 
-__all__ = ["MAX_INPUT_BYTES", "MAX_DEPTH", "short", "file_kind", "read_bytes", "read_text", "read_json",
+__all__ = ["MAX_INPUT_BYTES", "MAX_DEPTH", "short", "file_kind", "check_regular", "read_bytes", "read_text", "read_json",
            "read_toml", "check_depth"]
 
 MAX_INPUT_BYTES = 64 * 2 ** 20
@@ -79,6 +79,23 @@ def file_kind(mode: int) -> str:
     if stat.S_ISLNK(mode):
         return "a symbolic link"
     return "a regular file" if stat.S_ISREG(mode) else "not a regular file"
+
+
+def check_regular(path, what: str, limit: int = MAX_INPUT_BYTES) -> None:
+    """Refuse now what :func:`read_bytes` would refuse later (missing, not a regular file, too
+    large), without opening the file: for inputs read after other work has begun."""
+    shown = short(os.fspath(path))
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise FileNotFoundError(f"{what} {shown} not found") from None
+    except OSError as exc:
+        raise ValueError(f"cannot read {what} {shown}: {exc.strerror or type(exc).__name__}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise ValueError(f"{what} {shown} is {file_kind(st.st_mode)}, not a regular file")
+    if st.st_size > limit:
+        raise ValueError(f"{what} {shown} holds {_size(st.st_size)}, more than the {_size(limit)} "
+                         f"an input file may hold")
 
 
 def read_bytes(path, what: str, limit: int = MAX_INPUT_BYTES) -> bytes:

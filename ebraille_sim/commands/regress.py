@@ -38,10 +38,12 @@ def _prepare(option: str, path):
 
 def _check_inputs(args) -> None:
     """Scenario folder, scenarios, baselines folder and controller, checked before any run."""
+    import os
     import pathlib
 
     import controllers
 
+    from ebraille_sim.base.files import short
     from ebraille_sim.commands import UserError, check_out_dir
     from ebraille_sim.tools.regress import scenario_files
     if args.scenarios is not None:
@@ -57,9 +59,32 @@ def _check_inputs(args) -> None:
         elif b.exists() and not b.is_dir():
             raise UserError(f"--baselines {str(b)!r} is a file, not a folder")
     try:
-        scenario_files(args.scenarios, args.only)
+        files = scenario_files(args.scenarios, args.only)
     except (ValueError, FileNotFoundError) as exc:
         raise UserError(str(exc)) from None
+    if not files:
+        where = args.scenarios if args.scenarios is not None else "the scenario folder"
+        raise UserError(f"no scenario files (*.toml) in {short(str(where))}; nothing to check")
+    from ebraille_sim.base.files import check_regular
+    from ebraille_sim.tools.regress import baseline_path
+    for f in files:                  # a baseline that is a FIFO or a device is refused before the runs
+        b = (pathlib.Path(args.baselines) / f"{pathlib.Path(f).stem}.json" if args.baselines is not None
+             else baseline_path(f))
+        if os.path.lexists(b):
+            try:
+                if os.path.islink(b) and args.update:
+                    raise ValueError(f"baseline {short(str(b))} is a symbolic link; ebraille-sim replaces only "
+                                     f"regular files")
+                check_regular(b, "baseline")
+            except (ValueError, FileNotFoundError) as exc:
+                raise UserError(str(exc)) from None
+    if args.only:
+        from ebraille_sim.scenarios.spec import load_scenario
+        for f in files:
+            try:
+                load_scenario(f)
+            except (ValueError, FileNotFoundError) as exc:
+                raise UserError(f"--only: {exc}") from None
     if args.controller is not None:
         try:
             controllers.make(args.controller)

@@ -92,6 +92,17 @@ def trace_every(spec, args) -> int | None:
         return 1
     control_hz = float(spec.device.rates.control_rate_hz)
     ratio = control_hz / args.trace_rate
+    duration = args.duration if args.duration is not None else spec.duration_s
+    if duration is not None:
+        periods, length = max(1, round(duration * control_hz)), f"the run's {duration:g} s"
+    else:
+        from ebraille_sim.scenarios.inputs import BYTES_PER_CONTROL_SAMPLE, MAX_RUN_BYTES
+        periods = MAX_RUN_BYTES // BYTES_PER_CONTROL_SAMPLE
+        length = f"the longest run ({periods / control_hz:g} s)"
+    if ratio > periods:
+        raise UserError(f"--trace-rate {args.trace_rate:g} Hz keeps one sample every {1.0 / args.trace_rate:g} s, "
+                        f"longer than {length}: no sample would be kept; give at least "
+                        f"{control_hz / periods:g} Hz")
     k = round(ratio)
     if k < 1 or abs(ratio - k) > 1e-9 * ratio:
         raise UserError(f"--trace-rate {args.trace_rate:g} Hz must divide the scenario's control rate "

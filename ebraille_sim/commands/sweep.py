@@ -3,6 +3,8 @@ from __future__ import annotations
 
 NAME = "sweep"
 HELP = "run scenarios over reading rates, drawn readers and controllers (local cores or a Dask cluster)"
+EPILOG = ("exit status: 0 when every episode ran, 1 when one failed (its row in results.csv holds the "
+          "error, one line on stderr), 2 for bad input")
 
 MAX_READERS = 10_000
 """Most readers drawn per scenario (``--readers``) and seeds per combination (``--replicates``)."""
@@ -86,6 +88,12 @@ def main(args) -> int:
     con.say(format_summary(summary))
     con.say(f"\n{len(result.rows)} episodes ({failed} failed) on {result.executor} in {result.wall_s:.1f} s")
     con.say("wrote " + ", ".join(str(p) for p in paths))
+    if failed:
+        import sys
+        first = next(r for r in result.rows if r.get("error"))
+        print(f"episodes failed: {failed} of {len(result.rows)} (first: {str(first['error'])[:160]})",
+              file=sys.stderr)
+        return 1
     return 0
 
 

@@ -158,10 +158,6 @@ def profile_table(profiles: dict, n: int) -> np.ndarray | None:
     return None
 
 
-MAX_READING_BYTES = 16 * 2 ** 20
-"""Largest ``[reading] file`` read (16 MiB of text, days of reading at 200 wpm)."""
-
-
 def reading_text(spec: ScenarioSpec) -> str:
     """The text a scenario reads (passage, inline text or file)."""
     r = spec.reading
@@ -172,6 +168,7 @@ def reading_text(spec: ScenarioSpec) -> str:
         if not p.is_absolute():
             p = pathlib.Path(spec.base_dir) / p
         from ebraille_sim.base.files import read_text
+        from ebraille_sim.scenarios.spec import MAX_READING_BYTES
         try:
             return read_text(p, "[reading] file", MAX_READING_BYTES)
         except (ValueError, FileNotFoundError) as exc:

@@ -498,6 +498,14 @@ def parse_scenario(data: dict, source: str = "<scenario>", base_dir: str = ".") 
         reading = ReadingSpec(**rd)
     except ScenarioError as exc:
         raise ScenarioError(f"{source}: {exc}") from None
+    if reading.file is not None:                 # refused now, not when the run reads it
+        from ebraille_sim.base.files import check_regular
+        rp = pathlib.Path(reading.file)
+        try:
+            check_regular(rp if rp.is_absolute() else pathlib.Path(base_dir) / rp, "[reading] file",
+                          MAX_READING_BYTES)
+        except (ValueError, FileNotFoundError) as exc:
+            raise ScenarioError(f"{source}: {exc}") from None
     sp = SetpointSpec(**top.get("setpoint", {}))
     dev = _build_device(source, top.get("device", {}), top.get("rates", {}), top.get("estimator", {}), base_dir)
     _warn_setpoints(source, sp)
@@ -521,6 +529,9 @@ def load_scenario(path) -> ScenarioSpec:
     p = resolve_scenario_path(path)
     return parse_scenario(parse_toml(read_scenario_bytes(p), p.name), source=p.name, base_dir=str(p.parent))
 
+
+MAX_READING_BYTES = 16 * 2 ** 20
+"""Largest ``[reading] file`` read (16 MiB of text, days of reading at 200 wpm)."""
 
 MAX_SCENARIO_BYTES = 4 * 2 ** 20
 """Largest scenario file read (4 MiB; the shipped ones hold a few KiB)."""
@@ -608,9 +619,14 @@ def resolve_scenario_path(path) -> pathlib.Path:
         (looked in DIRS); available: ..."`` for a name.
     """
     p = pathlib.Path(path)
-    if p.is_file():
-        return p
+    try:
+        if p.is_file():
+            return p
+    except OSError:                       # a name too long for the file system: not found
+        pass
     if not (p.suffix == "" and len(p.parts) == 1):
+        if os.path.lexists(p) and not p.is_dir():      # a FIFO, a device: the reader says what it is
+            return p
         raise ScenarioError(f"scenario file {_short(path)} " + ("is not a file" if p.exists() else "not found"))
     dirs = scenario_dirs()
     for d in dirs:
@@ -618,7 +634,10 @@ def resolve_scenario_path(path) -> pathlib.Path:
         if os.path.lexists(cand):         # not a regular file: the reader says what it is
             return cand
     names = ", ".join(list_scenarios()) or "none"
-    where = ", ".join(str(d) for d in dirs) or "no scenario folder found"
+    lib = library_dir()
+    where = ", ".join("./scenarios" if d == pathlib.Path.cwd() / "scenarios" else
+                      "the shipped library" if lib is not None and d.resolve() == lib.resolve() else
+                      _short(d) for d in dirs) or "no scenario folder found"
     if len(names) > 160:
         names = names[:names.rfind(", ", 0, 150)] + ", ... ('ebraille-sim list' shows them all)"
     raise ScenarioError(f"scenario {_short(path)} not found (looked in {where}); available: {names}")

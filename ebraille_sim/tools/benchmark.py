@@ -237,7 +237,32 @@ def estimator_settings(settings) -> dict:
             item = (key.strip(), value)
         out[str(item[0])] = item[1]
     replace_checked(EstimatorParams(), **out)
+    if "model" in out:
+        check_estimator_model(out)
     return dict(sorted(out.items()))
+
+
+def check_estimator_model(settings: dict) -> None:
+    """Load the estimator model of ``settings`` and check it against the rates of every suite
+    scenario's device, so that a model no episode can use is refused before any runs
+    (one-line ``ValueError``)."""
+    from ebraille_sim.base.validation import replace_checked
+    from ebraille_sim.estimation.models import load_estimator
+    from ebraille_sim.plant.loop import check_sensor_rates
+    from ebraille_sim.scenarios.spec import load_scenario
+    model = load_estimator(str(settings["model"]))
+    seen = set()
+    for suite in SUITES.values():
+        for sc in suite.scenarios:
+            if sc.scenario in seen:
+                continue
+            seen.add(sc.scenario)
+            device = load_scenario(sc.scenario).device
+            device = dataclasses.replace(device, estimator=replace_checked(device.estimator, **settings))
+            try:
+                check_sensor_rates(device, model)
+            except ValueError as exc:
+                raise ValueError(f"model {settings['model']!r} does not suit scenario {sc.scenario}: {exc}") from None
 
 
 def run_episode(task) -> list[dict]:
@@ -331,6 +356,7 @@ def run_benchmark(controllers, suite: str | Suite = "standard", readers: int | N
     tasks = [(c, suite.scenarios[i], r, n, tuple(est.items())) for c, i, r in plan_episodes(names, suite, n)]
     if jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
+    jobs = min(int(jobs), max(1, len(tasks)))          # no idle workers
     t0 = time.perf_counter()
     rows: list = []
     if jobs == 1:
@@ -511,6 +537,8 @@ def load_results(path) -> dict:
 
 def _check_results_types(doc: dict, shown: str) -> None:
     """The parts of a results document :func:`compare` reads, of the types it reads them as."""
+    from ebraille_sim.base.files import short
+
     def bad(where, want):
         raise ValueError(f"{shown}: not a benchmark results file ({where} must be {want})")
 

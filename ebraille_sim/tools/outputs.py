@@ -76,10 +76,12 @@ def signals_held():
 def _lstat(path):
     try:
         return os.lstat(path)
-    except FileNotFoundError:
+    except (FileNotFoundError, NotADirectoryError):
         return None
-    except NotADirectoryError:
-        return None
+    except OSError as exc:
+        if exc.errno == errno.ENAMETOOLONG:       # cannot exist
+            return None
+        raise
 
 
 def _refuse(option: str, path, kind: str, want: str):
@@ -220,6 +222,7 @@ class OutputFolder:
     """
 
     def __init__(self, path, owned=(), option: str = "--out"):
+        self._given = os.fspath(path)
         self.path = pathlib.Path(path)
         self.owned = dict(owned) if isinstance(owned, dict) else {name: None for name in owned}
         self.option = option
@@ -234,14 +237,15 @@ class OutputFolder:
         nearest existing folder writable, and each output name in it absent or of its kind
         (a regular file, or a real folder for a folder of files).
         """
-        if not str(self.path).strip():
+        if not str(self._given).strip():
             raise ValueError(f"{self.option} is empty; give a folder")
         st = _lstat(self.path)
         if st is not None and stat.S_ISLNK(st.st_mode):
             raise ValueError(f"{self.option} {short(self.path)} is a symbolic link; give the folder itself "
                              f"({short(os.path.realpath(self.path))})")
         if st is not None and not stat.S_ISDIR(st.st_mode):
-            raise ValueError(f"{self.option} {short(self.path)} is {file_kind(st.st_mode)}, not a folder")
+            kind = "a file" if stat.S_ISREG(st.st_mode) else file_kind(st.st_mode)
+            raise ValueError(f"{self.option} {short(self.path)} is {kind}, not a folder")
         _writable_ancestor(self.path, self.option)
         if st is not None:
             for name, pattern in self.owned.items():
@@ -381,18 +385,18 @@ class OutputFolder:
             dest = out / src.name
             if src.is_dir() and not src.is_symlink():
                 if dest.is_dir() and not dest.is_symlink():     # a folder with files of your own: merge
+                    pattern = owned.get(src.name)
+                    if pattern is not None:                      # owned files not written again go
+                        written = {f.name for f in src.glob(pattern)}
+                        for old in dest.glob(pattern):
+                            if old.name not in written and (old.is_file() or old.is_symlink()):
+                                old.unlink()
                     for f in sorted(src.rglob("*")):
                         target = dest / f.relative_to(src)
                         if f.is_dir():
                             target.mkdir(exist_ok=True)
                         else:
                             os.replace(f, target)
-                    pattern = owned.get(src.name)
-                    if pattern is not None:
-                        written = {f.name for f in src.glob(pattern)}
-                        for old in dest.glob(pattern):
-                            if old.name not in written and (old.is_file() or old.is_symlink()):
-                                old.unlink()
                 else:
                     os.replace(src, dest)
             else:
