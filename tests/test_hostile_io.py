@@ -438,3 +438,25 @@ def test_env_edges_are_one_line_value_errors():
     env = ContactForceEnv()
     with pytest.raises(ValueError, match="wpm"):
         env.reset(seed=0, options={"wpm": 5e-324})
+
+
+def test_the_lock_ends_with_the_command_not_with_its_forked_workers(tmp_path):
+    """A sweep killed outright leaves worker processes that finish their task: they must not
+    keep the folder locked (they close their copies of the lock at fork)."""
+    import time
+
+    from ebraille_sim.tools.outputs import OutputFolder
+    out = tmp_path / "o"
+    out.mkdir()                                          # kept: the same folder is claimed again
+    holder = OutputFolder(out, ["x"]).claim()
+    pid = os.fork()
+    if pid == 0:                                         # a worker: outlives the command's lock
+        time.sleep(30)
+        os._exit(0)
+    try:
+        holder.release()
+        with OutputFolder(out, ["x"]):                   # the worker is alive, the folder is free
+            pass
+    finally:
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)

@@ -47,10 +47,6 @@ def main(args) -> int:
 
     con = console(args)
     suite = bm.get_suite(args.suite)
-    if args.readers is not None and args.readers < 1:
-        raise UserError(f"--readers must be >= 1, got {args.readers}")
-    if args.jobs < 1:
-        raise UserError(f"--jobs must be >= 1, got {args.jobs}")
     try:
         estimator = bm.estimator_settings(args.estimator)
     except (ValueError, FileNotFoundError) as exc:

@@ -689,8 +689,8 @@ def check_action(action, n: int | None = None):
     if not np.all(np.isfinite(a)):
         bad = np.nonzero(~np.isfinite(a[:, 0] if n is not None else a))[0]
         raise ValueError(f"action must be finite, got {float(a.ravel()[0])!r}" if n is None else
-                         f"action must be finite; non-finite in {bad.size} env(s): {bad[:8].tolist()}"
-                         + (" ..." if bad.size > 8 else ""))
+                         f"action must be finite; non-finite in envs {bad[:8].tolist()}"
+                         + (f" ({bad.size} in all)" if bad.size > 8 else ""))
     return float(a[0]) if n is None else a
 
 

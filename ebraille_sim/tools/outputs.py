@@ -200,6 +200,24 @@ def _write_marker(folder: pathlib.Path) -> None:
         fh.write(_MARKER_TEXT)
 
 
+_LOCK_FDS: set = set()
+"""The folder descriptors this process holds locks through."""
+
+
+def _close_lock_fds_in_child() -> None:
+    """A forked worker process (a sweep's, a benchmark's) closes its copies of the locked
+    folders' descriptors, so that the lock ends with the command's own process: a command
+    killed outright frees its folder even while its workers finish their last task."""
+    for fd in list(_LOCK_FDS):
+        with contextlib.suppress(OSError):
+            os.close(fd)
+    _LOCK_FDS.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_close_lock_fds_in_child)
+
+
 def _say_warning(text: str) -> None:
     print(f"warning: {text}", file=sys.stderr)
 
@@ -303,6 +321,7 @@ class OutputFolder:
             return
         try:
             fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            _LOCK_FDS.add(self._fd)
         except OSError as exc:
             if exc.errno in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
                 raise ValueError(f"{self.option} {short(self.path)} is being written by another ebraille-sim "
@@ -411,6 +430,7 @@ class OutputFolder:
                 self.stage = None
             self._undo_created()
             if self._fd is not None:
+                _LOCK_FDS.discard(self._fd)
                 os.close(self._fd)
                 self._fd = None
 
