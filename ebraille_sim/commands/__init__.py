@@ -23,7 +23,6 @@ import argparse
 import builtins
 import json
 import math
-import os
 import pathlib
 import sys
 
