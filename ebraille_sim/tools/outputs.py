@@ -95,7 +95,8 @@ def _check_existing(path, option: str, folder: bool = False) -> None:
         return
     if folder:
         if not stat.S_ISDIR(st.st_mode):
-            _refuse(option, path, file_kind(st.st_mode), "folders it writes (not links or files)")
+            raise ValueError(f"{option} {short(os.fspath(path))} is {file_kind(st.st_mode)}; ebraille-sim writes "
+                             f"this output only into a real folder")
     elif not stat.S_ISREG(st.st_mode):
         _refuse(option, path, file_kind(st.st_mode), "regular files")
 
@@ -133,6 +134,24 @@ def _umask() -> int:
 
 
 @contextlib.contextmanager
+def _replacing(path, option: str):
+    """``(descriptor, name)`` of a temporary file created exclusively beside ``path``, renamed
+    over it when the block ends normally (the caller closes the descriptor)."""
+    p = check_file(path, option)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name[:80]}.", suffix=f".tmp{p.suffix[:16]}", dir=p.parent)
+    try:
+        os.fchmod(fd, 0o666 & ~_umask())
+        yield fd, tmp
+        with signals_held():
+            _check_existing(p, option)
+            os.replace(tmp, p)
+    finally:
+        with signals_held(), contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+
+
+@contextlib.contextmanager
 def staged_file(path, option: str = "FILE"):
     """A temporary file to write, renamed over the file ``path`` when the block ends normally.
 
@@ -142,28 +161,18 @@ def staged_file(path, option: str = "FILE"):
     (signals held back).  When the block raises, the temporary file is removed and ``path``
     is left as it was.
     """
-    p = check_file(path, option)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name[:80]}.", suffix=f".tmp{p.suffix[:16]}", dir=p.parent)
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())
+    with _replacing(path, option) as (fd, tmp):
         os.close(fd)
         yield pathlib.Path(tmp)
-        with signals_held():
-            _check_existing(p, option)
-            os.replace(tmp, p)
-    finally:
-        with signals_held(), contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
 
 
 def write_file(path, data, option: str = "FILE") -> pathlib.Path:
-    """Replace the file ``path`` with ``data`` (str: UTF-8) in one rename (:func:`staged_file`)."""
+    """Replace the file ``path`` with ``data`` (str: UTF-8) in one rename, the data written
+    through the descriptor of the temporary file created for them (:func:`staged_file`)."""
     if isinstance(data, str):
         data = data.encode("utf-8")
-    with staged_file(path, option) as tmp:
-        with open(tmp, "wb") as fh:
-            fh.write(data)
+    with _replacing(path, option) as (fd, _), os.fdopen(fd, "wb") as fh:
+        fh.write(data)
     return pathlib.Path(path)
 
 
