@@ -6,7 +6,7 @@ another, with named slots (:data:`PS`, :data:`PP` for the PID family, :data:`LS`
 The Python classes (:class:`controllers.pid.PID`, :class:`controllers.schedule.ScheduledPID`,
 :class:`controllers.friction.FrictionPID`, :class:`controllers.lqg.LQG`) validate their
 arguments and call these functions, so a controller stepped from Python and the same
-controller stepped inside a compiled loop (:mod:`ebraille_sim.scenarios.compiled_loop`) run
+controller stepped inside the loop engine (:mod:`ebraille_sim.plant.engine`) run
 the same code.  A controller's ``compiled()`` returns ``(kind, state, params)``: its kind
 (:data:`KIND_PID` or :data:`KIND_LQG`) and its live vectors; :func:`controller_step` and
 :func:`controller_reset` dispatch on the kind.

@@ -130,11 +130,19 @@ def save_actor(actor: MlpActor, path) -> str:
     return path
 
 
+MAX_ACTOR_BYTES = 256 * 2 ** 20
+"""Largest ``policy.npz`` read (256 MiB; the trained actors hold a few hundred KiB)."""
+
+
 def load_actor(path) -> MlpActor:
     """Read a ``policy.npz`` written by :func:`save_actor`; one-line ValueError if it is not one."""
+    import io
+
+    from ebraille_sim.base.files import read_bytes
     path = os.fspath(path)
+    raw = read_bytes(path, "policy actor", MAX_ACTOR_BYTES)
     try:
-        with np.load(path, allow_pickle=False) as z:
+        with np.load(io.BytesIO(raw), allow_pickle=False) as z:
             if "format" not in z.files or str(z["format"]) != ACTOR_FORMAT:
                 raise ValueError(f"{path}: not a policy actor (format {ACTOR_FORMAT!r} expected)")
             n = int(z["layers"])

@@ -55,9 +55,23 @@ def _sigterm_as_exception():
         signal.signal(signal.SIGTERM, previous)
 
 
+MAX_ERROR_LINE = 300
+"""Longest ``error: ...`` line printed; a longer message is shortened in the middle."""
+
+
+def error_line(message: str) -> str:
+    """``error: MESSAGE`` on one line of at most :data:`MAX_ERROR_LINE` characters."""
+    text = " ".join(str(message).split())
+    line = f"error: {text}"
+    if len(line) > MAX_ERROR_LINE:
+        keep = (MAX_ERROR_LINE - 5) // 2
+        line = f"{line[:keep]} ... {line[-keep:]}"
+    return line
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message):
-        self.exit(2, f"error: {message}\n")
+        self.exit(2, error_line(message) + "\n")
 
 
 def _commands(only: str | None = None):
@@ -111,16 +125,32 @@ def build_parser(command: str | None = None):
     return parser, table
 
 
+def _tolerant_streams() -> None:
+    """Print what the terminal's encoding cannot show as escapes (a non-ASCII path under
+    ``PYTHONIOENCODING=ascii``) instead of failing after the work is done."""
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None and stream.errors == "strict":
+            with contextlib.suppress(ValueError, OSError):
+                reconfigure(errors="backslashreplace")
+
+
 def main(argv=None) -> int:
     from ebraille_sim.commands import Console, UserError
+    _tolerant_streams()
     argv = sys.argv[1:] if argv is None else list(argv)
     parser, table = build_parser(argv[0] if argv and not argv[0].startswith("-") else None)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:
         return int(exc.code or 0)
+    if os.environ.get("NUMBA_DISABLE_JIT", "0").strip() not in ("", "0"):
+        print(error_line("NUMBA_DISABLE_JIT is set: the simulator runs only as compiled code (run as plain "
+                         "Python its integer noise overflows and the run is wrong); unset it"), file=sys.stderr)
+        return 2
     if not args.command:
-        parser.print_help()
+        names = ", ".join(mod.NAME for mod in _commands())
+        print(error_line(f"give a command: {names} (ebraille-sim --help describes them)"), file=sys.stderr)
         return 2
     def one_line(message, category, filename, lineno, file=None, line=None):
         text = str(message).strip().splitlines()
@@ -142,7 +172,13 @@ def main(argv=None) -> int:
         msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         if isinstance(exc, KeyError):
             msg = msg.strip("'\"")
-        print(f"error: {msg}", file=sys.stderr)
+        print(error_line(msg), file=sys.stderr)
+        return 2
+    except RecursionError:
+        print(error_line("input nested too deeply to read"), file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(error_line("out of memory: the inputs ask for more than this machine holds"), file=sys.stderr)
         return 2
     except Terminated:
         print("error: terminated (SIGTERM)", file=sys.stderr)
@@ -154,7 +190,7 @@ def main(argv=None) -> int:
         return _closed_stdout()
     except OSError as exc:
         where = f": {exc.filename}" if exc.filename else ""
-        print(f"error: {exc.strerror or type(exc).__name__}{where}", file=sys.stderr)
+        print(error_line(f"{exc.strerror or type(exc).__name__}{where}"), file=sys.stderr)
         return 2
 
 

@@ -181,8 +181,8 @@ def test_compare_reports_deltas_and_refuses_another_suite(quick):
 
 @pytest.mark.parametrize("argv, msg", [
     (["pid", "--suite", "huge"], "unknown suite 'huge'"),
-    (["pid", "--readers", "0"], "--readers must be >= 1"),
-    (["pid", "-j", "0"], "--jobs must be >= 1"),
+    (["pid", "--readers", "0"], "--readers: must be a whole number in [1, 10000]"),
+    (["pid", "-j", "0"], "--jobs: must be a whole number in [1, 256]"),
     (["lqr"], "unknown controller 'lqr'"),
     (["actuator_bound"], "is a bound the benchmark adds itself"),
     (["pid", "--compare", "missing.json"], "no results file"),

@@ -311,7 +311,7 @@ def test_load_errors_are_one_line(tmp_path):
     assert "\n" not in str(info.value)
     bad = tmp_path / "bad.json"
     bad.write_text("{not json", encoding="utf-8")
-    with pytest.raises(ValueError, match="malformed") as info:
+    with pytest.raises(ValueError, match="is not valid JSON") as info:
         BlockModel.load(bad)
     assert "\n" not in str(info.value)
     d = _hw_model().to_dict()

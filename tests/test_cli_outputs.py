@@ -532,6 +532,7 @@ sys.exit(main(sys.argv[1:]))
 
 def test_sigterm_in_the_write_phase_leaves_the_old_run_and_no_partial_files(tmp_path):
     """SIGTERM while ``run`` writes: exit 143, one line, the earlier run untouched, nothing left over."""
+    from ebraille_sim.tools.outputs import STAGING_PREFIX
     import signal
     import subprocess
     import sys
@@ -550,13 +551,13 @@ def test_sigterm_in_the_write_phase_leaves_the_old_run_and_no_partial_files(tmp_
             break
     else:
         raise AssertionError("never reached the write phase: " + "".join(seen))
-    staging = [q.name for q in tmp_path.iterdir() if q.name.startswith("steady.incomplete-")]
-    assert len(staging) == 1 and (tmp_path / staging[0] / "trace.csv").is_file()   # the half-written trace
+    staging = [q.name for q in out.iterdir() if q.name.startswith(STAGING_PREFIX)]
+    assert len(staging) == 1 and (out / staging[0] / "trace.csv").is_file()   # the half-written trace
     p.send_signal(signal.SIGTERM)
     err = p.stderr.read()
     p.wait(timeout=60)
     assert p.returncode == 143 and err == "error: terminated (SIGTERM)\n" and "Traceback" not in err
-    assert sorted(q.name for q in tmp_path.iterdir()) == ["steady"]          # no staging folder left
+    assert sorted(q.name for q in tmp_path.iterdir()) == ["steady"]          # nothing beside the folder
     assert {q.name: q.read_text() for q in out.iterdir()} == old             # the earlier run, as it was
 
 
@@ -574,11 +575,12 @@ def test_an_interrupt_while_writing_a_new_run_leaves_nothing(tmp_path, capsys, m
 
 
 def test_staged_moves_in_owned_outputs_and_keeps_the_rest(tmp_path):
-    from ebraille_sim.tools.outputs import INCOMPLETE, staged
+    from ebraille_sim.tools.outputs import INCOMPLETE, STAGING_PREFIX, staged
     out = tmp_path / "out"
     owned = {"summary.txt": None, "stale.json": None, "figures": "*.png"}
-    with staged(out, owned) as folder:
-        assert (folder / INCOMPLETE).is_file() and folder.parent == tmp_path and not out.exists()
+    with staged(out, owned) as folder:       # staged inside the folder, on its file system
+        assert (folder / INCOMPLETE).is_file() and folder.parent == out and folder.name.startswith(STAGING_PREFIX)
+        assert [p.name for p in out.iterdir()] == [folder.name]
         (folder / "summary.txt").write_text("one")
         (folder / "figures").mkdir()
         (folder / "figures" / "a.png").write_text("a1")

@@ -107,7 +107,7 @@ def test_user_text_file_with_natural_variability(tmp_path):
     again = run_scenario(load_scenario(tmp_path / "mine.toml"))
     np.testing.assert_array_equal(sched.dwell_s, again.schedule.dwell_s)
     (tmp_path / "gone.toml").write_text('name = "gone"\n[reading]\nfile = "missing.txt"\n')
-    with pytest.raises(ScenarioError, match="cannot read \\[reading\\] file"):
+    with pytest.raises(ScenarioError, match="\\[reading\\] file '.*missing.txt' not found"):
         run_scenario(load_scenario(tmp_path / "gone.toml"))
 
 

@@ -108,10 +108,10 @@ def test_read_table_reads_toml_and_json_and_names_each_problem(tmp_path):
     (tmp_path / "a.json").write_text('{"controller": "pid"}')
     assert read_table(str(tmp_path / "a.toml"), "config") == read_table(str(tmp_path / "a.json"), "config")
     (tmp_path / "bad.json").write_text("[1, 2]")
-    with pytest.raises(ValueError, match=r"config .*bad.json must hold a table/object, got list"):
+    with pytest.raises(ValueError, match=r"config '.*bad.json' must hold a table/object, got list"):
         read_table(str(tmp_path / "bad.json"), "config")
     (tmp_path / "broken.toml").write_text("controller = ")
-    with pytest.raises(ValueError, match="invalid TOML"):
+    with pytest.raises(ValueError, match="is not valid TOML"):
         read_table(str(tmp_path / "broken.toml"), "config")
     with pytest.raises(FileNotFoundError, match="config not found"):
         read_table(str(tmp_path / "missing.json"), "config")

@@ -131,6 +131,8 @@ class _LoadingCache(caching.FunctionCache):
 
 
 def _with_loading_cache(dispatcher):
+    if not hasattr(dispatcher, "py_func"):          # NUMBA_DISABLE_JIT=1: the plain Python function
+        return dispatcher
     dispatcher._cache = _LoadingCache(dispatcher.py_func)
     return dispatcher
 

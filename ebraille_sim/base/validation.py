@@ -49,7 +49,8 @@ from collections.abc import Iterable, Mapping
 from typing import Any
 
 __all__ = ["admissible", "check_number", "check_finite", "check_positive", "check_bool", "check_choice",
-           "check_pair", "check_keys", "check_range", "read_table", "replace_checked"]
+           "check_pair", "check_keys", "check_range", "check_count", "check_seeds", "read_table",
+           "replace_checked"]
 
 
 def _g(x: float) -> str:
@@ -221,6 +222,55 @@ def check_pair(name: str, value: Any, lo: float | None = None, hi: float | None 
     return (a, b)
 
 
+def check_count(name: str, value: Any, hi: int, lo: int = 1) -> int:
+    """A count (a Python or NumPy int, not a bool) in ``[lo, hi]``, as an int.
+
+    Examples
+    --------
+    >>> check_count("num_envs", 2 ** 40, 65536)
+    Traceback (most recent call last):
+    ...
+    ValueError: num_envs must be an int in [1, 65536], got 1099511627776
+    """
+    import numbers
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or not lo <= int(value) <= hi:
+        shown = repr(value) if isinstance(value, numbers.Number) else type(value).__name__
+        raise ValueError(f"{name} must be an int in [{lo}, {hi}], got {shown}")
+    return int(value)
+
+
+def check_seeds(name: str, value: Any, n: int, limit: int = 2 ** 63) -> list:
+    """``n`` seeds from ``value``: None (all None), an int ``s`` (``s, s + 1, ...``) or a
+    sequence of ``n`` entries, each None or an int in ``[0, limit)``.
+
+    Examples
+    --------
+    >>> check_seeds("seed", 5, 3)
+    [5, 6, 7]
+    >>> check_seeds("seed", True, 2)
+    Traceback (most recent call last):
+    ...
+    ValueError: seed must be None, an int or a sequence of 2 ints, got bool
+    """
+    import numbers
+    if value is None:
+        return [None] * n
+    if isinstance(value, numbers.Integral) and not isinstance(value, bool):
+        if not 0 <= int(value) <= limit - n:
+            raise ValueError(f"{name} must lie in [0, {limit} - {n}] for {n} envs, got {int(value)}")
+        return [int(value) + i for i in range(n)]
+    if isinstance(value, (bool, str, bytes, Mapping)) or not isinstance(value, Iterable):
+        raise ValueError(f"{name} must be None, an int or a sequence of {n} ints, got {type(value).__name__}")
+    seeds = list(value)
+    if len(seeds) != n:
+        raise ValueError(f"{name} must be an int or a sequence of {n} seeds, got {len(seeds)}")
+    for i, s in enumerate(seeds):
+        if s is not None and (isinstance(s, bool) or not isinstance(s, numbers.Integral) or not 0 <= int(s) < limit):
+            shown = repr(s) if isinstance(s, numbers.Number) else type(s).__name__
+            raise ValueError(f"{name}[{i}] must be None or an int in [0, 2**63), got {shown}")
+    return [None if s is None else int(s) for s in seeds]
+
+
 def check_keys(where: str, given: Iterable[str] | Mapping[str, Any], allowed: Iterable[str]) -> None:
     """Reject the first key of ``given`` that is not in ``allowed``.
 
@@ -262,30 +312,19 @@ def read_table(path: str, what: str) -> dict:
     FileNotFoundError
         ``"WHAT not found: PATH"``.
     ValueError
-        One line for malformed TOML/JSON or a file that does not hold a table/object.
+        One line for malformed TOML/JSON, a file that does not hold a table/object, or one
+        :func:`ebraille_sim.base.files.read_bytes` refuses (not a regular file, too large,
+        nested too deeply).
     """
-    import json
     import os
-    if not os.path.isfile(path):
-        raise FileNotFoundError(f"{what} not found: {path}")
-    if str(path).lower().endswith(".toml"):
-        try:
-            import tomllib
-        except ModuleNotFoundError:  # Python < 3.11
-            import tomli as tomllib
-        with open(path, "rb") as fh:
-            try:
-                data = tomllib.load(fh)
-            except tomllib.TOMLDecodeError as exc:
-                raise ValueError(f"invalid TOML in {path}: {exc}") from None
-    else:
-        with open(path, encoding="utf-8") as fh:
-            try:
-                data = json.load(fh)
-            except json.JSONDecodeError as exc:
-                raise ValueError(f"invalid JSON in {path}: {exc}") from None
+
+    from ebraille_sim.base.files import read_json, read_toml, short
+    if not os.path.lexists(path):
+        raise FileNotFoundError(f"{what} not found: {short(path)}")
+    read = read_toml if str(path).lower().endswith(".toml") else read_json
+    data = read(path, what)
     if not isinstance(data, dict):
-        raise ValueError(f"{what} {path} must hold a table/object, got {type(data).__name__}")
+        raise ValueError(f"{what} {short(path)} must hold a table/object, got {type(data).__name__}")
     return data
 
 

@@ -23,7 +23,6 @@ import argparse
 import builtins
 import json
 import math
-import os
 import pathlib
 import sys
 
@@ -181,25 +180,30 @@ def console(args) -> Console:
     return con
 
 
-def check_out_dir(path, option: str = "--out") -> pathlib.Path:
+def check_out_dir(path, option: str = "--out", owned=()) -> pathlib.Path:
     """``path`` as an output folder, refused now (one line) if it cannot be one.
 
-    Nothing is created: the folder itself, or else its nearest existing parent, must be a
-    folder this process may write into.
+    Nothing is created: the folder must be absent or a real folder (not a symbolic link),
+    its nearest existing folder writable, and each of the ``owned`` output names in it
+    absent or a regular file (:meth:`ebraille_sim.tools.outputs.OutputFolder.check`).
     """
-    if not str(path).strip():
-        raise UserError(f"{option} is empty; give a folder")
-    p = pathlib.Path(path)
-    if p.exists() and not p.is_dir():
-        raise UserError(f"{option} {str(p)!r} is a file, not a folder")
-    probe = p
-    while not probe.exists() and probe != probe.parent:
-        probe = probe.parent
-    if not probe.is_dir():
-        raise UserError(f"{option} {str(p)!r}: {str(probe)!r} is a file, not a folder")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise UserError(f"{option} {str(p)!r}: folder {str(probe)!r} is not writable")
-    return p
+    from ebraille_sim.tools.outputs import OutputFolder
+    try:
+        return OutputFolder(path, owned, option).check()
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+
+
+def claim_out_dir(path, owned=(), option: str = "--out"):
+    """The :class:`~ebraille_sim.tools.outputs.OutputFolder` of ``path``, claimed now (created,
+    locked, staged) so that every writability question is answered before the work; a
+    refusal is a :class:`UserError`.  Use it as a context manager around the work."""
+    from ebraille_sim.tools.outputs import OutputFolder
+    folder = OutputFolder(path, owned, option)
+    try:
+        return folder.claim()
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
 
 
 class FrameProgress:

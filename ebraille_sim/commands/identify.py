@@ -327,11 +327,10 @@ def _write_json(path, doc) -> None:
 def main(args) -> int:
     import numpy as np
 
-    from ebraille_sim.commands import check_out_dir, console
+    from ebraille_sim.commands import check_out_dir, claim_out_dir, console
     from ebraille_sim.identification import bench as B
     from ebraille_sim.identification import dma as D
     from ebraille_sim.identification.sysid import PAPER_FITNESS, shift_operating_point
-    from ebraille_sim.tools.outputs import staged
 
     con = console(args)
     if args.seed < 0:
@@ -360,116 +359,117 @@ def main(args) -> int:
     if args.nyquist_clearance:
         fit_options["nyquist_clearance"] = args.nyquist_clearance
 
-    out = check_out_dir(args.out)
-    log = con.say
-    labels = dict(B.PROFILE_LABELS)
-    extra = {}
-    if args.csv:
-        records = {}
-        for path in args.csv:
-            rec = B.load_csv(path, baseline_s=args.baseline_s, cutoff_hz=args.cutoff_hz or None)
-            if rec.name in records:
-                raise ValueError(f"two CSV files share the name {rec.name!r}; rename one")
-            first = next(iter(records.values()), rec)
-            if abs(rec.dt_s - first.dt_s) > 1e-6 * first.dt_s:
-                raise ValueError(f"{path} is sampled every {rec.dt_s:g} s but {first.name} every {first.dt_s:g} s; "
-                                 "all records must share one rate")
-            records[rec.name] = rec
-        estimation = next(iter(records))
-        source = "recorded CSV (" + ", ".join(str(p) for p in args.csv) + ")"
-        no_load_v = args.no_load_voltage
-        log(f"read {len(records)} record(s); estimation record: {estimation}")
-    else:
-        ss_bench, ss_hold, ss_dma = np.random.SeedSequence(args.seed).spawn(3)
-        bench = B.BenchParams()
-        log("virtual bench: recording the paper's profiles ...")
-        profiles = dict(B.PAPER_PROFILES)
-        if args.chirp_dwell is not None:
-            profiles["chirp"] = dataclasses.replace(profiles["chirp"], chirp_dwell_s=args.chirp_dwell)
-        records = B.run_profiles(profiles.values(), bench, ss_bench)
-        estimation = "chirp"
-        source = f"virtual bench, seed {args.seed}"
-        if args.chirp_dwell is not None:
-            source += f", chirp dwell {args.chirp_dwell:g} s"
-        from ebraille_sim.physics.fsr import static_voltage
-        no_load_v = static_voltage(0.0, bench.device.fsr, bench.device.circuit)
-        hold = B.run_profile(B.HOLD_PROFILE, bench, ss_hold)
-        creep = B.hold_creep(hold, bench)
-        extra["creep"] = {"hold_s": B.HOLD_PROFILE.hold_s, "resistance_start_ohm": creep["resistance_start_ohm"],
-                          "resistance_end_ohm": creep["resistance_end_ohm"],
-                          "creep_fraction": creep["creep_fraction"], "paper_creep_fraction": 0.06}
-        log(f"  30-min hold: resistance creep {100 * creep['creep_fraction']:+.2f} % (paper: about +6 %)")
-        log("virtual DMA at 0.125-0.5 Hz (ideal and realistic instruments) ...")
-        cycles = 3 if args.quick else 10
-        ss_ideal, ss_real = ss_dma.spawn(2)
-        dma_ideal = D.dma_test(D.ideal_instruments(bench), cycles=cycles, seed=ss_ideal)
-        dma_real = D.dma_test(bench, cycles=cycles, seed=ss_real)
-        ideal_rows, real_rows = D.table3_comparison(dma_ideal), D.table3_comparison(dma_real)
-        eq6_model = D.fit_second_order(records["chirp"], dma_ideal.damping_coeffs, dma_ideal.stiffness_coeffs)
-        eq6 = D.second_order_table(records, eq6_model)
-        eq6_paper_a = D.second_order_table(records, D.SecondOrderModel(D.PAPER_A))
-        extra["dma"] = {"ideal": {"points": ideal_rows, "damping_coeffs": list(dma_ideal.damping_coeffs),
-                                  "stiffness_coeffs": list(dma_ideal.stiffness_coeffs)},
-                        "realistic": {"points": real_rows, "damping_coeffs": list(dma_real.damping_coeffs),
-                                      "stiffness_coeffs": list(dma_real.stiffness_coeffs)},
-                        "eq6_amplitude": eq6_model.amplitude, "eq6_fitness": eq6,
-                        "eq6_fitness_paper_amplitude": eq6_paper_a}
-        extra["dma_md"] = dma_markdown(ideal_rows, real_rows, (dma_ideal.damping_coeffs, dma_ideal.stiffness_coeffs),
-                                       eq6, eq6_paper_a, eq6_model.amplitude, labels)
-        worst = max(abs(r[k]) for r in ideal_rows for k in ("k_rel_test1", "k_rel_test2", "c_rel_test1", "c_rel_test2"))
-        log(f"  ideal DMA vs Table 3: largest difference {100 * worst:.1f} %; eq. 6 A = {eq6_model.amplitude:.4g}")
+    out = check_out_dir(args.out, owned=IDENTIFY_OWNED)
+    with claim_out_dir(out, IDENTIFY_OWNED) as target:
+        log = con.say
+        labels = dict(B.PROFILE_LABELS)
+        extra = {}
+        if args.csv:
+            records = {}
+            for path in args.csv:
+                rec = B.load_csv(path, baseline_s=args.baseline_s, cutoff_hz=args.cutoff_hz or None)
+                if rec.name in records:
+                    raise ValueError(f"two CSV files share the name {rec.name!r}; rename one")
+                first = next(iter(records.values()), rec)
+                if abs(rec.dt_s - first.dt_s) > 1e-6 * first.dt_s:
+                    raise ValueError(f"{path} is sampled every {rec.dt_s:g} s but {first.name} every {first.dt_s:g} s; "
+                                     "all records must share one rate")
+                records[rec.name] = rec
+            estimation = next(iter(records))
+            source = "recorded CSV (" + ", ".join(str(p) for p in args.csv) + ")"
+            no_load_v = args.no_load_voltage
+            log(f"read {len(records)} record(s); estimation record: {estimation}")
+        else:
+            ss_bench, ss_hold, ss_dma = np.random.SeedSequence(args.seed).spawn(3)
+            bench = B.BenchParams()
+            log("virtual bench: recording the paper's profiles ...")
+            profiles = dict(B.PAPER_PROFILES)
+            if args.chirp_dwell is not None:
+                profiles["chirp"] = dataclasses.replace(profiles["chirp"], chirp_dwell_s=args.chirp_dwell)
+            records = B.run_profiles(profiles.values(), bench, ss_bench)
+            estimation = "chirp"
+            source = f"virtual bench, seed {args.seed}"
+            if args.chirp_dwell is not None:
+                source += f", chirp dwell {args.chirp_dwell:g} s"
+            from ebraille_sim.physics.fsr import static_voltage
+            no_load_v = static_voltage(0.0, bench.device.fsr, bench.device.circuit)
+            hold = B.run_profile(B.HOLD_PROFILE, bench, ss_hold)
+            creep = B.hold_creep(hold, bench)
+            extra["creep"] = {"hold_s": B.HOLD_PROFILE.hold_s, "resistance_start_ohm": creep["resistance_start_ohm"],
+                              "resistance_end_ohm": creep["resistance_end_ohm"],
+                              "creep_fraction": creep["creep_fraction"], "paper_creep_fraction": 0.06}
+            log(f"  30-min hold: resistance creep {100 * creep['creep_fraction']:+.2f} % (paper: about +6 %)")
+            log("virtual DMA at 0.125-0.5 Hz (ideal and realistic instruments) ...")
+            cycles = 3 if args.quick else 10
+            ss_ideal, ss_real = ss_dma.spawn(2)
+            dma_ideal = D.dma_test(D.ideal_instruments(bench), cycles=cycles, seed=ss_ideal)
+            dma_real = D.dma_test(bench, cycles=cycles, seed=ss_real)
+            ideal_rows, real_rows = D.table3_comparison(dma_ideal), D.table3_comparison(dma_real)
+            eq6_model = D.fit_second_order(records["chirp"], dma_ideal.damping_coeffs, dma_ideal.stiffness_coeffs)
+            eq6 = D.second_order_table(records, eq6_model)
+            eq6_paper_a = D.second_order_table(records, D.SecondOrderModel(D.PAPER_A))
+            extra["dma"] = {"ideal": {"points": ideal_rows, "damping_coeffs": list(dma_ideal.damping_coeffs),
+                                      "stiffness_coeffs": list(dma_ideal.stiffness_coeffs)},
+                            "realistic": {"points": real_rows, "damping_coeffs": list(dma_real.damping_coeffs),
+                                          "stiffness_coeffs": list(dma_real.stiffness_coeffs)},
+                            "eq6_amplitude": eq6_model.amplitude, "eq6_fitness": eq6,
+                            "eq6_fitness_paper_amplitude": eq6_paper_a}
+            extra["dma_md"] = dma_markdown(ideal_rows, real_rows, (dma_ideal.damping_coeffs, dma_ideal.stiffness_coeffs),
+                                           eq6, eq6_paper_a, eq6_model.amplitude, labels)
+            worst = max(abs(r[k]) for r in ideal_rows for k in ("k_rel_test1", "k_rel_test2", "c_rel_test1", "c_rel_test2"))
+            log(f"  ideal DMA vs Table 3: largest difference {100 * worst:.1f} %; eq. 6 A = {eq6_model.amplitude:.4g}")
 
-    log(f"identifying {len(kinds)} kind(s) x {len(orders)} order(s) on {estimation} ...")
-    t0 = time.perf_counter()
-    sims: dict = {}
-    models, table, info = identify_all(records, estimation, kinds, orders, fit_options, log, jobs=args.jobs,
-                                       sims=sims)
-    total = time.perf_counter() - t0
+        log(f"identifying {len(kinds)} kind(s) x {len(orders)} order(s) on {estimation} ...")
+        t0 = time.perf_counter()
+        sims: dict = {}
+        models, table, info = identify_all(records, estimation, kinds, orders, fit_options, log, jobs=args.jobs,
+                                           sims=sims)
+        total = time.perf_counter() - t0
 
-    with staged(out, IDENTIFY_OWNED) as tmp:
-        _write_json(tmp / "fitness.json", {k: {str(o): v for o, v in by.items()} for k, by in table.items()})
-        paper = None if args.csv else PAPER_FITNESS
-        (tmp / "fitness.md").write_text(fitness_markdown(table, labels, paper, estimation, source), encoding="utf-8")
-        kind, order, mean = best_model(table)
-        summary = {"source": source, "seed": args.seed, "estimation_record": estimation, "records": list(records),
-                   "fit_options": fit_options, "identification_seconds": total,
-                   "best": {"kind": kind, "order": order, "mean_fitness": mean}, "models": info}
-        if "creep" in extra:
-            summary["creep"] = extra["creep"]
-            _write_json(tmp / "creep.json", extra["creep"])
-            _write_json(tmp / "dma.json", extra["dma"])
-            (tmp / "dma.md").write_text(extra["dma_md"], encoding="utf-8")
-            (tmp / "data").mkdir()
-            for name, rec in records.items():
-                rec.to_csv(tmp / "data" / f"{name}.csv")
-        _write_json(tmp / "summary.json", summary)
-        (tmp / "models").mkdir()
-        plotter = None
-        if not args.no_plots:
-            (tmp / "plots").mkdir()
-            plotter = FitPlotter(records, labels)
-        est = records[estimation]
-        if no_load_v is not None:
-            offsets = {"input_offset_v": est.voltage_offset_v - no_load_v, "output_offset_n": est.force_offset_n,
-                       "no_load_voltage_v": no_load_v}
-            summary["device_model_offsets"] = offsets
+        with target.staged() as tmp:
+            _write_json(tmp / "fitness.json", {k: {str(o): v for o, v in by.items()} for k, by in table.items()})
+            paper = None if args.csv else PAPER_FITNESS
+            (tmp / "fitness.md").write_text(fitness_markdown(table, labels, paper, estimation, source), encoding="utf-8")
+            kind, order, mean = best_model(table)
+            summary = {"source": source, "seed": args.seed, "estimation_record": estimation, "records": list(records),
+                       "fit_options": fit_options, "identification_seconds": total,
+                       "best": {"kind": kind, "order": order, "mean_fitness": mean}, "models": info}
+            if "creep" in extra:
+                summary["creep"] = extra["creep"]
+                _write_json(tmp / "creep.json", extra["creep"])
+                _write_json(tmp / "dma.json", extra["dma"])
+                (tmp / "dma.md").write_text(extra["dma_md"], encoding="utf-8")
+                (tmp / "data").mkdir()
+                for name, rec in records.items():
+                    rec.to_csv(tmp / "data" / f"{name}.csv")
             _write_json(tmp / "summary.json", summary)
-        for (k, o), m in models.items():
-            m.save(tmp / "models" / f"{k}-{o}.json")
+            (tmp / "models").mkdir()
+            plotter = None
+            if not args.no_plots:
+                (tmp / "plots").mkdir()
+                plotter = FitPlotter(records, labels)
+            est = records[estimation]
             if no_load_v is not None:
-                shift_operating_point(m, offsets["input_offset_v"], offsets["output_offset_n"],
-                                      name=m.name + ", device (tared at no load)").save(
-                    tmp / "models" / f"{k}-{o}-device.json")
+                offsets = {"input_offset_v": est.voltage_offset_v - no_load_v, "output_offset_n": est.force_offset_n,
+                           "no_load_voltage_v": no_load_v}
+                summary["device_model_offsets"] = offsets
+                _write_json(tmp / "summary.json", summary)
+            for (k, o), m in models.items():
+                m.save(tmp / "models" / f"{k}-{o}.json")
+                if no_load_v is not None:
+                    shift_operating_point(m, offsets["input_offset_v"], offsets["output_offset_n"],
+                                          name=m.name + ", device (tared at no load)").save(
+                        tmp / "models" / f"{k}-{o}-device.json")
+                if plotter is not None:
+                    plotter.draw(m, tmp / "plots" / f"{k}-{o}.png", sims[(k, o)])
             if plotter is not None:
-                plotter.draw(m, tmp / "plots" / f"{k}-{o}.png", sims[(k, o)])
-        if plotter is not None:
-            plotter.close()
+                plotter.close()
 
-    con.result({**summary, "fitness": {k: {str(o): v for o, v in by.items()} for k, by in table.items()},
-                "out": str(out)})
-    con.say()
-    con.say((out / "fitness.md").read_text(encoding="utf-8").split("# The paper's")[0].rstrip())
-    con.say(f"\nidentification took {total:.1f} s; wrote {out}/fitness.json, fitness.md, summary.json, "
-          f"models/*.json" + ("" if args.no_plots else ", plots/*.png")
-          + ("" if args.csv else ", dma.md, dma.json, creep.json, data/*.csv"))
-    return 0
+        con.result({**summary, "fitness": {k: {str(o): v for o, v in by.items()} for k, by in table.items()},
+                    "out": str(out)})
+        con.say()
+        con.say((out / "fitness.md").read_text(encoding="utf-8").split("# The paper's")[0].rstrip())
+        con.say(f"\nidentification took {total:.1f} s; wrote {out}/fitness.json, fitness.md, summary.json, "
+              f"models/*.json" + ("" if args.no_plots else ", plots/*.png")
+              + ("" if args.csv else ", dma.md, dma.json, creep.json, data/*.csv"))
+        return 0

@@ -28,37 +28,22 @@ def add_arguments(p):
 
 def _prepare(option: str, path):
     """The report file, checked now (not a folder, its folder writable) so a bad path fails before the runs."""
-    import pathlib
-
-    from ebraille_sim.commands import UserError, check_out_dir
-    if not str(path).strip():
-        raise UserError(f"{option} is empty; give a file name")
-    p = pathlib.Path(path)
-    if p.is_dir():
-        raise UserError(f"{option} {str(p)!r} is a folder; give a file name")
-    check_out_dir(p.parent, option)
-    return p
-
-
-def _write(p, text: str) -> None:
-    from ebraille_sim.tools.outputs import signals_held
-    p.parent.mkdir(parents=True, exist_ok=True)
-    tmp = p.with_name(p.name + ".tmp")
+    from ebraille_sim.commands import UserError
+    from ebraille_sim.tools.outputs import check_file
     try:
-        tmp.write_text(text, encoding="utf-8")
-        with signals_held():
-            tmp.replace(p)
-    finally:
-        with signals_held():
-            tmp.unlink(missing_ok=True)
+        return check_file(path, option)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
 
 
 def _check_inputs(args) -> None:
     """Scenario folder, scenarios, baselines folder and controller, checked before any run."""
+    import os
     import pathlib
 
     import controllers
 
+    from ebraille_sim.base.files import short
     from ebraille_sim.commands import UserError, check_out_dir
     from ebraille_sim.tools.regress import scenario_files
     if args.scenarios is not None:
@@ -74,9 +59,32 @@ def _check_inputs(args) -> None:
         elif b.exists() and not b.is_dir():
             raise UserError(f"--baselines {str(b)!r} is a file, not a folder")
     try:
-        scenario_files(args.scenarios, args.only)
+        files = scenario_files(args.scenarios, args.only)
     except (ValueError, FileNotFoundError) as exc:
         raise UserError(str(exc)) from None
+    if not files:
+        where = args.scenarios if args.scenarios is not None else "the scenario folder"
+        raise UserError(f"no scenario files (*.toml) in {short(str(where))}; nothing to check")
+    from ebraille_sim.base.files import check_regular
+    from ebraille_sim.tools.regress import baseline_path
+    for f in files:                  # a baseline that is a FIFO or a device is refused before the runs
+        b = (pathlib.Path(args.baselines) / f"{pathlib.Path(f).stem}.json" if args.baselines is not None
+             else baseline_path(f))
+        if os.path.lexists(b):
+            try:
+                if os.path.islink(b) and args.update:
+                    raise ValueError(f"baseline {short(str(b))} is a symbolic link; ebraille-sim replaces only "
+                                     f"regular files")
+                check_regular(b, "baseline")
+            except (ValueError, FileNotFoundError) as exc:
+                raise UserError(str(exc)) from None
+    if args.only:
+        from ebraille_sim.scenarios.spec import load_scenario
+        for f in files:
+            try:
+                load_scenario(f)
+            except (ValueError, FileNotFoundError) as exc:
+                raise UserError(f"--only: {exc}") from None
     if args.controller is not None:
         try:
             controllers.make(args.controller)
@@ -89,6 +97,7 @@ def main(args) -> int:
     import time
 
     from ebraille_sim.commands import console
+    from ebraille_sim.tools.outputs import write_file
     from ebraille_sim.tools.regress import format_report, json_document, junit_xml, regress_scenarios
 
     con = console(args)
@@ -108,9 +117,9 @@ def main(args) -> int:
     con.say(format_report(checks, verbose=args.verbose))
     con.say(f"wall time {time.perf_counter() - t0:.1f} s")
     if junit:
-        _write(junit, junit_xml(checks))
+        write_file(junit, junit_xml(checks), "--junit")
         con.say(f"wrote {junit}")
     if json_path:
-        _write(json_path, json.dumps(doc, indent=2, allow_nan=False) + "\n")
+        write_file(json_path, json.dumps(doc, indent=2, allow_nan=False) + "\n", "--json")
         con.say(f"wrote {json_path}")
     return 1 if any(c.failed for c in checks) else 0

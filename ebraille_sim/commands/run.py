@@ -92,6 +92,17 @@ def trace_every(spec, args) -> int | None:
         return 1
     control_hz = float(spec.device.rates.control_rate_hz)
     ratio = control_hz / args.trace_rate
+    duration = args.duration if args.duration is not None else spec.duration_s
+    if duration is not None:
+        periods, length = max(1, round(duration * control_hz)), f"the run's {duration:g} s"
+    else:
+        from ebraille_sim.scenarios.inputs import BYTES_PER_CONTROL_SAMPLE, MAX_RUN_BYTES
+        periods = MAX_RUN_BYTES // BYTES_PER_CONTROL_SAMPLE
+        length = f"the longest run ({periods / control_hz:g} s)"
+    if ratio > periods:
+        raise UserError(f"--trace-rate {args.trace_rate:g} Hz keeps one sample every {1.0 / args.trace_rate:g} s, "
+                        f"longer than {length}: no sample would be kept; give at least "
+                        f"{control_hz / periods:g} Hz")
     k = round(ratio)
     if k < 1 or abs(ratio - k) > 1e-9 * ratio:
         raise UserError(f"--trace-rate {args.trace_rate:g} Hz must divide the scenario's control rate "
@@ -104,24 +115,36 @@ def _targets(args, spec):
     import pathlib
 
     from ebraille_sim.commands import UserError, check_out_dir
-    from ebraille_sim.tools.report import existing_outputs
+    from ebraille_sim.tools.outputs import check_file
+    from ebraille_sim.tools.report import RUN_OWNED
 
-    out = check_out_dir(args.out if args.out is not None else pathlib.Path("runs") / spec.name)
+    out = check_out_dir(args.out if args.out is not None else pathlib.Path("runs") / spec.name, owned=RUN_OWNED)
     anim = None
     if args.animate is not None:
         anim = pathlib.Path(args.animate) if args.animate else out / ANIMATION_NAME
         if args.animate:
             if anim.is_dir():
                 raise UserError(f"--animate {str(anim)!r} is a folder; give a file name such as press.gif")
-            check_out_dir(anim.parent, "--animate")
+            try:
+                check_file(anim, "--animate")
+            except ValueError as exc:
+                raise UserError(str(exc)) from None
+    _not_overwriting(args, out, anim)
+    return out, anim
+
+
+def _not_overwriting(args, out, anim) -> None:
+    """Refuse an --out folder that holds a run (or an --animate file that exists) without --force."""
+    from ebraille_sim.base.files import short
+    from ebraille_sim.commands import UserError
+    from ebraille_sim.tools.report import existing_outputs
     if not args.force:
         old = [p.name for p in existing_outputs(out)]
         if old:
-            raise UserError(f"run folder {str(out)!r} already holds a run ({', '.join(old)}); "
+            raise UserError(f"run folder {short(out)} already holds a run ({', '.join(old)}); "
                             "pass --force to overwrite it or choose another --out")
         if anim is not None and anim.exists():
-            raise UserError(f"--animate {str(anim)!r} exists; pass --force to overwrite it")
-    return out, anim
+            raise UserError(f"--animate {short(anim)} exists; pass --force to overwrite it")
 
 
 def _draw(frames, path, con):
@@ -158,10 +181,9 @@ def _run(args, plotter) -> int:
 
     import pathlib
 
-    from ebraille_sim.commands import UserError, check_duration, console
+    from ebraille_sim.commands import UserError, check_duration, claim_out_dir, console
     from ebraille_sim.scenarios.runner import make_controller, run_scenario
     from ebraille_sim.scenarios.spec import load_scenario
-    from ebraille_sim.tools.outputs import staged
     from ebraille_sim.tools.report import (RUN_OWNED, have_parquet, metrics_document, summary_table,
                                            write_run_files)
 
@@ -194,25 +216,30 @@ def _run(args, plotter) -> int:
                             backend=args.backend, supervised=not args.no_supervisor, trace_every=every)
 
     frames = None
-    if anim is not None:
-        from ebraille_sim.plant.mechanism import recording
-        with recording(every_s=1.0 / 25.0) as rec:
-            result = simulate()
-        frames = rec.frames
-    else:
-        result = simulate()
     inside = anim is not None and not args.animate           # the default: animation.gif in the run folder
     drawn = None
-    with staged(out, RUN_OWNED) as folder:
-        names = write_run_files(result, folder, plot=not args.no_plot, trace=args.trace, controller=ctrl,
-                                controller_file=gains_file, backend=args.backend, plotter=plotter)
-        if inside:
-            drawn = _draw(frames, folder / anim.name, con)
+    with claim_out_dir(out, RUN_OWNED) as target:
+        _not_overwriting(args, out, anim)
+        if anim is not None:
+            from ebraille_sim.plant.mechanism import recording
+            with recording(every_s=1.0 / 25.0) as rec:
+                result = simulate()
+            frames = rec.frames
+        else:
+            result = simulate()
+        with target.staged() as folder:
+            names = write_run_files(result, folder, plot=not args.no_plot, trace=args.trace, controller=ctrl,
+                                    controller_file=gains_file, backend=args.backend, plotter=plotter)
+            if inside:
+                drawn = _draw(frames, folder / anim.name, con)
     written = [out / n for n in names]
     if drawn is not None:
         written.append(out / pathlib.Path(drawn).relative_to(folder))
     elif frames is not None:
-        written.append(_draw(frames, anim, con))
+        from ebraille_sim.tools.outputs import staged_file
+        with staged_file(anim, "--animate") as tmp:
+            _draw(frames, tmp, con)
+        written.append(anim)
     doc = metrics_document(result, ctrl, gains_file)
     doc["out"] = str(out)
     doc["files"] = [str(p) for p in written]

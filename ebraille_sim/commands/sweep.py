@@ -3,6 +3,8 @@ from __future__ import annotations
 
 NAME = "sweep"
 HELP = "run scenarios over reading rates, drawn readers and controllers (local cores or a Dask cluster)"
+EPILOG = ("exit status: 0 when every episode ran, 1 when one failed (its row in results.csv holds the "
+          "error, one line on stderr), 2 for bad input")
 
 MAX_READERS = 10_000
 """Most readers drawn per scenario (``--readers``) and seeds per combination (``--replicates``)."""
@@ -45,8 +47,7 @@ def add_arguments(p):
 def main(args) -> int:
     import controllers
 
-    from ebraille_sim.commands import UserError, check_duration, check_out_dir, console
-    from ebraille_sim.tools.outputs import staged
+    from ebraille_sim.commands import UserError, check_duration, check_out_dir, claim_out_dir, console
     from ebraille_sim.tools.sweep import format_summary, plan_sweep, run_sweep, summarise, write_results
 
     con = console(args)
@@ -62,7 +63,7 @@ def main(args) -> int:
     known = set(_metric_names())
     if args.loss not in known:
         raise ValueError(f"unknown --loss metric {args.loss!r}; metrics: {', '.join(sorted(known))}")
-    out = check_out_dir(args.out)
+    out = check_out_dir(args.out, owned=SWEEP_OWNED)
     for c in args.controllers:
         try:
             controllers.make(c)
@@ -72,11 +73,12 @@ def main(args) -> int:
                       seed=args.seed, replicates=args.replicates, duration_s=args.duration)
     for spec in plan.specs.values():
         check_duration(spec, args.duration)
-    result = run_sweep(plan, jobs=args.jobs, scheduler=args.scheduler,
-                       progress=con.progress and not args.no_progress)
-    with staged(out, SWEEP_OWNED) as folder:
-        names = [p.relative_to(folder) for p in write_results(result, folder, loss=args.loss, alpha=args.alpha,
-                                                              figures=not args.no_figures)]
+    with claim_out_dir(out, SWEEP_OWNED) as target:
+        result = run_sweep(plan, jobs=args.jobs, scheduler=args.scheduler,
+                           progress=con.progress and not args.no_progress)
+        with target.staged() as folder:
+            names = [p.relative_to(folder) for p in write_results(result, folder, loss=args.loss, alpha=args.alpha,
+                                                                  figures=not args.no_figures)]
     paths = [out / n for n in names]
     summary = summarise(result, args.loss, args.alpha)
     failed = sum(1 for r in result.rows if r.get("error"))
@@ -86,6 +88,12 @@ def main(args) -> int:
     con.say(format_summary(summary))
     con.say(f"\n{len(result.rows)} episodes ({failed} failed) on {result.executor} in {result.wall_s:.1f} s")
     con.say("wrote " + ", ".join(str(p) for p in paths))
+    if failed:
+        import sys
+        first = next(r for r in result.rows if r.get("error"))
+        print(f"episodes failed: {failed} of {len(result.rows)} (first: {str(first['error'])[:160]})",
+              file=sys.stderr)
+        return 1
     return 0
 
 

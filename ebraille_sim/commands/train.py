@@ -203,7 +203,11 @@ def main(args) -> int:
         estimator = estimator_settings(args.estimator)
     except ValueError as exc:
         raise UserError(f"--estimator: {exc}") from None
-    out = check_out_dir(args.out if args.out is not None else pathlib.Path("runs") / f"train-{args.algo}")
+    out = check_out_dir(args.out if args.out is not None else pathlib.Path("runs") / f"train-{args.algo}",
+                       owned=TRAIN_OWNED)
+    import importlib.util
+    if any(importlib.util.find_spec(m) is None for m in ("stable_baselines3", "torch")):
+        raise UserError("training needs stable-baselines3; install it with pip install 'ebraille-sim[rl]'")
     bar = FrameProgress(f"train {args.algo}", enabled=con.progress, every=1)
     try:
         with staged(out, TRAIN_OWNED) as folder:

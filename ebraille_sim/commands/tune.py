@@ -239,9 +239,8 @@ def main(args) -> int:
     from ebraille_sim.analysis.margins import analyse_loop
     from ebraille_sim.analysis.plots import plot_bode, plot_nyquist
 
-    from ebraille_sim.commands import FrameProgress, check_duration, check_out_dir, console
+    from ebraille_sim.commands import FrameProgress, check_duration, check_out_dir, claim_out_dir, console
     from ebraille_sim.scenarios.spec import load_scenario
-    from ebraille_sim.tools.outputs import staged
 
     con = console(args)
     if args.population < 0:
@@ -265,72 +264,74 @@ def main(args) -> int:
             raise ValueError(f"scenario {sc.name!r} ends at {end:g} s, before its reading starts at "
                              f"{sc.spec.reading.start_s:g} s; the tuning cost is measured while reading "
                              f"(give a longer --duration)")
-    out = check_out_dir(args.out if args.out is not None else pathlib.Path("runs") / f"tune-{spec.name}")
-    pop = tuning_population(args.population, seed=args.seed, base=spec.device)
-    bar = FrameProgress(f"tune {spec.name}: runs", enabled=con.progress)
-    try:
-        res = robust_tune(spec, pop, family=args.family, ms_max=args.ms_max, ms_gain=args.ms_gain,
-                          max_evaluations=args.evaluations, progress=bar, scenarios=scenarios)
-    finally:
-        bar.close()
-    rep = res.report()
-    rep["scenario"] = spec.name
-    rep["population"] = [label for label, _ in pop]
-    rep["population_seed"] = args.seed
-    nominal = dict(pop).get("nominal", pop[0][1])
-    cfg_at = family_ms_controller(res.config)
-    if not callable(cfg_at):
-        cfg_at = (lambda c: (lambda f: c))(cfg_at)
-    analyses = [analyse_loop(cfg_at(f), nominal, f) for f in res.forces_n]
-    rep["nominal_loop"] = [a.summary() for a in analyses]
-    with staged(out, TUNE_OWNED) as tmp:
-        reason = (f"kept the shipped {res.chosen.family}: {res.selection_reason}\n"
-                  "the optimum under the bound is in gains_tuned.toml") if res.selected != "tuned" else ""
-        (tmp / "gains.toml").write_text(_toml(res.gains_file(), reason))
+    out = check_out_dir(args.out if args.out is not None else pathlib.Path("runs") / f"tune-{spec.name}",
+                        owned=TUNE_OWNED)
+    with claim_out_dir(out, TUNE_OWNED) as target:
+        pop = tuning_population(args.population, seed=args.seed, base=spec.device)
+        bar = FrameProgress(f"tune {spec.name}: runs", enabled=con.progress)
+        try:
+            res = robust_tune(spec, pop, family=args.family, ms_max=args.ms_max, ms_gain=args.ms_gain,
+                              max_evaluations=args.evaluations, progress=bar, scenarios=scenarios)
+        finally:
+            bar.close()
+        rep = res.report()
+        rep["scenario"] = spec.name
+        rep["population"] = [label for label, _ in pop]
+        rep["population_seed"] = args.seed
+        nominal = dict(pop).get("nominal", pop[0][1])
+        cfg_at = family_ms_controller(res.config)
+        if not callable(cfg_at):
+            cfg_at = (lambda c: (lambda f: c))(cfg_at)
+        analyses = [analyse_loop(cfg_at(f), nominal, f) for f in res.forces_n]
+        rep["nominal_loop"] = [a.summary() for a in analyses]
+        with target.staged() as tmp:
+            reason = (f"kept the shipped {res.chosen.family}: {res.selection_reason}\n"
+                      "the optimum under the bound is in gains_tuned.toml") if res.selected != "tuned" else ""
+            (tmp / "gains.toml").write_text(_toml(res.gains_file(), reason))
+            if res.selected != "tuned":
+                (tmp / "gains_tuned.toml").write_text(_toml(gains_document(res.tuned.config, args.family)))
+            if "hand" in res.references:
+                (tmp / "gains_hand.toml").write_text(_toml(gains_document(res.references["hand"].config, args.family)))
+            (tmp / "report.json").write_text(json.dumps(rep, indent=2, default=float) + "\n")
+            (tmp / "report.md").write_text(_markdown(spec, rep, len(pop)))
+            plot_bode(analyses, tmp / "bode.png", title=f"gains.toml loop, nominal reader ({spec.name})")
+            plot_nyquist(analyses, tmp / "nyquist.png", title=f"gains.toml loop, nominal reader ({spec.name})",
+                         ms_limit=args.ms_max if math.isfinite(args.ms_max) else 2.0)
+            _plot_population(rep, tmp / "population.png")
+        g = res.gains_file()["gains"]
+        ship_key = "shipped" if "shipped" in rep else "default"
+        files = ["gains.toml"] + (["gains_tuned.toml"] if res.selected != "tuned" else []) + \
+            (["gains_hand.toml"] if "hand" in res.references else []) + \
+            ["report.md", "report.json", "bode.png", "nyquist.png", "population.png"]
+        con.result({
+            "scenario": spec.name, "family": args.family, "gains": g, "ms_max": res.ms_max, "ms_bound": args.ms_max,
+            "ms_gain": args.ms_gain, "ms_max_tuned": res.tuned.ms_max, "cost": res.cost,
+            "selected": res.selected, "selection_reason": res.selection_reason,
+            "named_costs": rep["named_costs"],
+            "shipped": {"key": ship_key, "controller": rep[ship_key]["controller"], "gains": rep[ship_key]["gains"],
+                        "ms_max": rep[ship_key]["ms_max"]},
+            "population": len(pop), "population_seed": args.seed,
+            "scenarios": {s: {k: {q: rep[k]["scenarios"][s]["metrics"]["in_band_fraction"][q] for q in ("worst", "median")}
+                              for k in _KEYS if k in rep}
+                          for s in rep["scenarios"]},
+            "costs": {k: rep[k]["cost"] for k in ("tuned", "hand", "default", "simc") if k in rep},
+            "out": str(out), "files": [str(out / f) for f in files]})
+        bound = f"Ms <= {args.ms_max:g}" if math.isfinite(args.ms_max) else "no Ms bound"
+        ms_rule = bound + (" (default; --ms-max changes it)" if args.ms_max == 1.6 else "") + \
+            (f", loop factor {args.ms_gain:g}" if args.ms_gain != 1.0 else "")
+        t = rep["tuned"]["gains"]
+        con.say(f"tuned {args.family} under {ms_rule}: kp {t['kp_v_per_n']:.4g}, ki {t['ki_v_per_ns']:.4g}, "
+                f"kd {t['kd_vs_per_n']:.4g}; achieved max Ms {_fmt_ms(res.tuned.ms_max)}; cost {res.tuned.cost:.3f}")
         if res.selected != "tuned":
-            (tmp / "gains_tuned.toml").write_text(_toml(gains_document(res.tuned.config, args.family)))
-        if "hand" in res.references:
-            (tmp / "gains_hand.toml").write_text(_toml(gains_document(res.references["hand"].config, args.family)))
-        (tmp / "report.json").write_text(json.dumps(rep, indent=2, default=float) + "\n")
-        (tmp / "report.md").write_text(_markdown(spec, rep, len(pop)))
-        plot_bode(analyses, tmp / "bode.png", title=f"gains.toml loop, nominal reader ({spec.name})")
-        plot_nyquist(analyses, tmp / "nyquist.png", title=f"gains.toml loop, nominal reader ({spec.name})",
-                     ms_limit=args.ms_max if math.isfinite(args.ms_max) else 2.0)
-        _plot_population(rep, tmp / "population.png")
-    g = res.gains_file()["gains"]
-    ship_key = "shipped" if "shipped" in rep else "default"
-    files = ["gains.toml"] + (["gains_tuned.toml"] if res.selected != "tuned" else []) + \
-        (["gains_hand.toml"] if "hand" in res.references else []) + \
-        ["report.md", "report.json", "bode.png", "nyquist.png", "population.png"]
-    con.result({
-        "scenario": spec.name, "family": args.family, "gains": g, "ms_max": res.ms_max, "ms_bound": args.ms_max,
-        "ms_gain": args.ms_gain, "ms_max_tuned": res.tuned.ms_max, "cost": res.cost,
-        "selected": res.selected, "selection_reason": res.selection_reason,
-        "named_costs": rep["named_costs"],
-        "shipped": {"key": ship_key, "controller": rep[ship_key]["controller"], "gains": rep[ship_key]["gains"],
-                    "ms_max": rep[ship_key]["ms_max"]},
-        "population": len(pop), "population_seed": args.seed,
-        "scenarios": {s: {k: {q: rep[k]["scenarios"][s]["metrics"]["in_band_fraction"][q] for q in ("worst", "median")}
-                          for k in _KEYS if k in rep}
-                      for s in rep["scenarios"]},
-        "costs": {k: rep[k]["cost"] for k in ("tuned", "hand", "default", "simc") if k in rep},
-        "out": str(out), "files": [str(out / f) for f in files]})
-    bound = f"Ms <= {args.ms_max:g}" if math.isfinite(args.ms_max) else "no Ms bound"
-    ms_rule = bound + (" (default; --ms-max changes it)" if args.ms_max == 1.6 else "") + \
-        (f", loop factor {args.ms_gain:g}" if args.ms_gain != 1.0 else "")
-    t = rep["tuned"]["gains"]
-    con.say(f"tuned {args.family} under {ms_rule}: kp {t['kp_v_per_n']:.4g}, ki {t['ki_v_per_ns']:.4g}, "
-            f"kd {t['kd_vs_per_n']:.4g}; achieved max Ms {_fmt_ms(res.tuned.ms_max)}; cost {res.tuned.cost:.3f}")
-    if res.selected != "tuned":
-        con.say(f"kept the shipped {res.chosen.family} in gains.toml, better than the optimum: "
-                f"{res.selection_reason}; the optimum is in gains_tuned.toml")
-    for s in rep["scenarios"]:
-        t = rep["tuned"]["scenarios"][s]["metrics"]["in_band_fraction"]
-        d = rep[ship_key]["scenarios"][s]["metrics"]["in_band_fraction"]
-        con.say(f"  {s}: in-band worst {t['worst']:.3f} (shipped {rep[ship_key]['controller']} {d['worst']:.3f}), "
-                f"median {t['median']:.3f} (shipped {d['median']:.3f})")
-    if "hand" in rep and rep["hand"]["cost"] < rep["tuned"]["cost"]:
-        con.say(f"note: the family at the default gains has a lower cost ({rep['hand']['cost']:.3f}) but max Ms "
-              f"{_fmt_ms(rep['hand']['ms_max'])}: written as gains_hand.toml (see report.md)")
-    con.say(f"wrote {out / 'gains.toml'}, " + ", ".join(files[1:]))
-    return 0
+            con.say(f"kept the shipped {res.chosen.family} in gains.toml, better than the optimum: "
+                    f"{res.selection_reason}; the optimum is in gains_tuned.toml")
+        for s in rep["scenarios"]:
+            t = rep["tuned"]["scenarios"][s]["metrics"]["in_band_fraction"]
+            d = rep[ship_key]["scenarios"][s]["metrics"]["in_band_fraction"]
+            con.say(f"  {s}: in-band worst {t['worst']:.3f} (shipped {rep[ship_key]['controller']} {d['worst']:.3f}), "
+                    f"median {t['median']:.3f} (shipped {d['median']:.3f})")
+        if "hand" in rep and rep["hand"]["cost"] < rep["tuned"]["cost"]:
+            con.say(f"note: the family at the default gains has a lower cost ({rep['hand']['cost']:.3f}) but max Ms "
+                  f"{_fmt_ms(rep['hand']['ms_max'])}: written as gains_hand.toml (see report.md)")
+        con.say(f"wrote {out / 'gains.toml'}, " + ", ".join(files[1:]))
+        return 0

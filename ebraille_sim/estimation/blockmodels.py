@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -863,17 +864,18 @@ class BlockModel:
         ValueError
             If the file is not valid JSON or not a valid description.
         """
+        from ebraille_sim.base.files import read_json, short
         p = Path(path)
-        if not p.is_file():
-            raise FileNotFoundError(f"block-model file not found: {p}")
-        try:
-            data = json.loads(p.read_text(encoding="utf-8"))
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"malformed block-model JSON in {p}: {exc}") from None
+        if not os.path.lexists(p):
+            raise FileNotFoundError(f"block-model file not found: {short(p)}")
+        data = read_json(p, "block-model file")
+        if not isinstance(data, dict):
+            raise ValueError(f"invalid block-model file {short(p)}: holds a {type(data).__name__}, not an object")
         try:
             return cls.from_dict(data)
-        except ValueError as exc:
-            raise ValueError(f"invalid block-model file {p}: {exc}") from None
+        except (ValueError, TypeError, KeyError, AttributeError, IndexError) as exc:
+            first = (str(exc).strip().splitlines() or [type(exc).__name__])[0][:160]
+            raise ValueError(f"invalid block-model file {short(p)}: {first}") from None
 
     # -- compiled evaluator support ------------------------------------------
     def kernel_arrays(self) -> dict[str, Any]:

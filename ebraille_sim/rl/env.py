@@ -117,7 +117,7 @@ naming it):
 
 ``device`` (a :class:`~ebraille_sim.physics.params.DeviceParams`; its rates are set to the env's),
 ``passage`` (a name from :func:`ebraille_sim.scenarios.passages.list_passages`), ``first_character``
-(character offset of the excerpt in the passage text), ``wpm`` (0-1000], ``setpoint_n``
+(character offset of the excerpt in the passage text), ``wpm`` [1, 1000], ``setpoint_n``
 (0, safe force), ``setpoint_steps`` (list of ``(time_s, force_n)``), ``gap_m`` [0, 5 mm],
 ``drift_amplitude_m`` [0, 1 mm] and ``tremor_amplitude_m`` [0, 0.1 mm] (the pressing and
 tremor RMS is the amplitude over sqrt 2, as for a sine), ``supply_fraction`` [0.5, 1]
@@ -611,7 +611,7 @@ def validate_options(options, safe_force_n: float) -> dict:
         elif key == "first_character":
             value = check_number("option 'first_character'", value, lo=0, integer=True)
         elif key == "wpm":
-            value = check_range("option 'wpm'", value, 0.0, 1000.0, lo_open=True)
+            value = check_range("option 'wpm'", value, 1.0, 1000.0)
         elif key == "setpoint_n":
             value = check_range("option 'setpoint_n'", value, 0.0, safe_force_n, lo_open=True, hi_open=True)
         elif key == "setpoint_steps":
@@ -689,8 +689,10 @@ def check_action(action, n: int | None = None):
         else:
             raise ValueError(f"action must have shape {want}, got {a.shape}")
     if not np.all(np.isfinite(a)):
-        raise ValueError(f"action must be finite, got {action!r}" if n is None else
-                         f"action must be finite; non-finite in envs {np.nonzero(~np.isfinite(a[:, 0]))[0].tolist()}")
+        bad = np.nonzero(~np.isfinite(a[:, 0] if n is not None else a))[0]
+        raise ValueError(f"action must be finite, got {float(a.ravel()[0])!r}" if n is None else
+                         f"action must be finite; non-finite in envs {bad[:8].tolist()}"
+                         + (f" ({bad.size} in all)" if bad.size > 8 else ""))
     return float(a[0]) if n is None else a
 
 

@@ -59,6 +59,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 from ebraille_sim.base.compiled import njit, prange
 from ebraille_sim.base.seeds import SeedNode
+from ebraille_sim.base.validation import check_count, check_seeds
 
 from controllers.compiled import KIND_EXTERNAL
 from ebraille_sim.plant import engine
@@ -89,6 +90,10 @@ PROBE_STEPS = 4
 
 PROBE_EVERY = 256
 """Steps between two timings of the way of stepping not in use (default ``parallel``)."""
+
+MAX_NUM_ENVS = 2 ** 16
+"""Most sub-envs of one vector env (``num_envs``): their state and episode arrays are
+allocated up front, so a count beyond any machine's memory is refused before any is."""
 
 
 class ThreadChoice:
@@ -223,6 +228,7 @@ class ContactForceVectorEnv(VectorEnv):
                  parallel: bool | None = None, **env_kwargs):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        check_count("num_envs", num_envs, MAX_NUM_ENVS)
         if max_episode_steps is not None and (isinstance(max_episode_steps, bool) or
                                               not isinstance(max_episode_steps, (int, np.integer)) or
                                               max_episode_steps < 1):
@@ -365,14 +371,7 @@ class ContactForceVectorEnv(VectorEnv):
         """
         opt = validate_options(options, self.config.safe_force_n)
         n = self.num_envs
-        if seed is None:
-            seeds = [None] * n
-        elif isinstance(seed, (int, np.integer)) and not isinstance(seed, bool):
-            seeds = [int(seed) + i for i in range(n)]
-        else:
-            seeds = list(seed)
-            if len(seeds) != n:
-                raise ValueError(f"seed must be an int or a sequence of {n} seeds, got {len(seeds)}")
+        seeds = check_seeds("seed", seed, n)
         super().reset(seed=seeds[0] if seeds and seeds[0] is not None else None)
         for i, s in enumerate(seeds):
             if s is not None:

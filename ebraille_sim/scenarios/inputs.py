@@ -167,10 +167,12 @@ def reading_text(spec: ScenarioSpec) -> str:
         p = pathlib.Path(r.file)
         if not p.is_absolute():
             p = pathlib.Path(spec.base_dir) / p
+        from ebraille_sim.base.files import read_text
+        from ebraille_sim.scenarios.spec import MAX_READING_BYTES
         try:
-            return p.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise ScenarioError(f"{spec.source}: cannot read [reading] file {str(p)!r}: {exc.strerror}") from None
+            return read_text(p, "[reading] file", MAX_READING_BYTES)
+        except (ValueError, FileNotFoundError) as exc:
+            raise ScenarioError(f"{spec.source}: {exc}") from None
     try:
         return _passage(r.passage)
     except ValueError as exc:

@@ -92,14 +92,9 @@ def load_mechanism_scenario(path):
     :func:`build_inputs`; the rest of the file goes through
     :func:`ebraille_sim.scenarios.spec.parse_scenario` unchanged.
     """
-    from ebraille_sim.scenarios.spec import parse_scenario, resolve_scenario_path, tomllib
+    from ebraille_sim.scenarios.spec import parse_scenario, parse_toml, read_scenario_bytes, resolve_scenario_path
     p = resolve_scenario_path(path)
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise ScenarioError(f"cannot read scenario file {str(p)!r}: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"{p.name}: malformed TOML: {exc}") from None
+    data = parse_toml(read_scenario_bytes(p), p.name)
     section = data.pop("mechanism", None)
     spec = parse_scenario(data, source=p.name, base_dir=str(p.parent))
     if section is not None:

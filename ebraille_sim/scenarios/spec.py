@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import pathlib
 import re
 import warnings
@@ -441,6 +442,21 @@ def _check_rates(device: _params.DeviceParams) -> None:
     check_step(device)
 
 
+def _check_gap(source: str, finger: FingerSpec, device: _params.DeviceParams) -> None:
+    """A negative ``[finger] gap_m`` (the board starts pressed into the pulp) may overlap the
+    pulp at most by the compression at which the device's finger pushes back with the top of
+    the tactile range (:data:`~ebraille_sim.physics.params.TACTILE_FORCE_MAX_N`): a start
+    beyond it is a press no reading begins with (at -10 mm the pulp would push tens of kN)."""
+    if finger.gap_m >= 0:
+        return
+    limit = device.finger.compression_at_m(_params.TACTILE_FORCE_MAX_N)
+    if -finger.gap_m > limit * (1 + 1e-12):
+        raise ScenarioError(f"{source}: [finger] gap_m = {finger.gap_m:g} starts the board {-1e3 * finger.gap_m:g} mm "
+                            f"into the pulp; the {device.finger.name} finger pushes "
+                            f"{_params.TACTILE_FORCE_MAX_N:g} N (the top of the tactile range) at "
+                            f"{1e3 * limit:.3g} mm, so gap_m must be >= {-limit:.4g} m")
+
+
 def _warn_setpoints(source: str, sp: SetpointSpec) -> None:
     """Warn (:class:`ScenarioWarning`) about force setpoints below the tactile range."""
     lo = _params.TACTILE_FORCE_MIN_N
@@ -462,7 +478,9 @@ def check_scenario_name(source: str, name) -> str:
     ``_``, ``-`` and ``.``, starting with a letter or digit, at most 100 characters, and no
     ``..``; so a name can never point outside the run folder."""
     if not isinstance(name, str) or not _NAME_RE.fullmatch(name) or ".." in name:
-        raise ScenarioError(f"{source}: name {name!r} must be 1-100 letters, digits, '_', '-' or '.', start with "
+        from ebraille_sim.base.files import short
+        shown = short(name) if isinstance(name, str) else short(repr(name))
+        raise ScenarioError(f"{source}: name {shown} must be 1-100 letters, digits, '_', '-' or '.', start with "
                             f"a letter or digit and contain no '..' (it names the output folder runs/NAME)")
     return name
 
@@ -480,14 +498,24 @@ def parse_scenario(data: dict, source: str = "<scenario>", base_dir: str = ".") 
         reading = ReadingSpec(**rd)
     except ScenarioError as exc:
         raise ScenarioError(f"{source}: {exc}") from None
+    if reading.file is not None:                 # refused now, not when the run reads it
+        from ebraille_sim.base.files import check_regular
+        rp = pathlib.Path(reading.file)
+        try:
+            check_regular(rp if rp.is_absolute() else pathlib.Path(base_dir) / rp, "[reading] file",
+                          MAX_READING_BYTES)
+        except (ValueError, FileNotFoundError) as exc:
+            raise ScenarioError(f"{source}: {exc}") from None
     sp = SetpointSpec(**top.get("setpoint", {}))
     dev = _build_device(source, top.get("device", {}), top.get("rates", {}), top.get("estimator", {}), base_dir)
     _warn_setpoints(source, sp)
+    finger = FingerSpec(**top.get("finger", {}))
+    _check_gap(source, finger, dev)
     ctl = top.get("controller", {})
     return ScenarioSpec(
         name=top["name"], description=top.get("description", ""), seed=top.get("seed", 0),
         duration_s=top.get("duration_s"), reading=reading, setpoint=sp, device=dev,
-        finger=FingerSpec(**top.get("finger", {})),
+        finger=finger,
         controller=ControllerSpec(name=ctl.get("name", "pid"), gains=ctl.get("gains", {})),
         criteria=top.get("criteria", {}), sections={k: top[k] for k in DELEGATES if k in top},
         source=source, base_dir=base_dir)
@@ -499,11 +527,24 @@ def load_scenario(path) -> ScenarioSpec:
     ``path`` may also be the bare name of a scenario shipped in ``scenarios/``.
     """
     p = resolve_scenario_path(path)
+    return parse_scenario(parse_toml(read_scenario_bytes(p), p.name), source=p.name, base_dir=str(p.parent))
+
+
+MAX_READING_BYTES = 16 * 2 ** 20
+"""Largest ``[reading] file`` read (16 MiB of text, days of reading at 200 wpm)."""
+
+MAX_SCENARIO_BYTES = 4 * 2 ** 20
+"""Largest scenario file read (4 MiB; the shipped ones hold a few KiB)."""
+
+
+def read_scenario_bytes(p) -> bytes:
+    """The bytes of scenario file ``p`` (a regular file of at most :data:`MAX_SCENARIO_BYTES`),
+    or one :class:`ScenarioError` line."""
+    from ebraille_sim.base.files import read_bytes
     try:
-        raw = p.read_bytes()
-    except OSError as exc:
-        raise ScenarioError(f"cannot read scenario file {str(p)!r}: {exc.strerror}") from None
-    return parse_scenario(parse_toml(raw, p.name), source=p.name, base_dir=str(p.parent))
+        return read_bytes(p, "scenario file", MAX_SCENARIO_BYTES)
+    except (ValueError, FileNotFoundError) as exc:
+        raise ScenarioError(str(exc)) from None
 
 
 def parse_toml(raw: bytes, name: str) -> dict:
@@ -578,18 +619,33 @@ def resolve_scenario_path(path) -> pathlib.Path:
         (looked in DIRS); available: ..."`` for a name.
     """
     p = pathlib.Path(path)
-    if p.is_file():
-        return p
+    try:
+        if p.is_file():
+            return p
+    except OSError:                       # a name too long for the file system: not found
+        pass
     if not (p.suffix == "" and len(p.parts) == 1):
-        raise ScenarioError(f"scenario file {str(path)!r} " + ("is not a file" if p.exists() else "not found"))
+        if os.path.lexists(p) and not p.is_dir():      # a FIFO, a device: the reader says what it is
+            return p
+        raise ScenarioError(f"scenario file {_short(path)} " + ("is not a file" if p.exists() else "not found"))
     dirs = scenario_dirs()
     for d in dirs:
         cand = d / f"{p.name}.toml"
-        if cand.is_file():
+        if os.path.lexists(cand):         # not a regular file: the reader says what it is
             return cand
     names = ", ".join(list_scenarios()) or "none"
-    where = ", ".join(str(d) for d in dirs) or "no scenario folder found"
-    raise ScenarioError(f"scenario {str(path)!r} not found (looked in {where}); available: {names}")
+    lib = library_dir()
+    where = ", ".join("./scenarios" if d == pathlib.Path.cwd() / "scenarios" else
+                      "the shipped library" if lib is not None and d.resolve() == lib.resolve() else
+                      _short(d) for d in dirs) or "no scenario folder found"
+    if len(names) > 160:
+        names = names[:names.rfind(", ", 0, 150)] + ", ... ('ebraille-sim list' shows them all)"
+    raise ScenarioError(f"scenario {_short(path)} not found (looked in {where}); available: {names}")
+
+
+def _short(text) -> str:
+    from ebraille_sim.base.files import short
+    return short(text, 80)
 
 
 def list_scenarios() -> list[str]:

@@ -55,6 +55,7 @@ import dataclasses
 import functools
 import json
 import math
+import os
 import pathlib
 import time
 from dataclasses import dataclass
@@ -237,7 +238,32 @@ def estimator_settings(settings) -> dict:
             item = (key.strip(), value)
         out[str(item[0])] = item[1]
     replace_checked(EstimatorParams(), **out)
+    if "model" in out:
+        check_estimator_model(out)
     return dict(sorted(out.items()))
+
+
+def check_estimator_model(settings: dict) -> None:
+    """Load the estimator model of ``settings`` and check it against the rates of every suite
+    scenario's device, so that a model no episode can use is refused before any runs
+    (one-line ``ValueError``)."""
+    from ebraille_sim.base.validation import replace_checked
+    from ebraille_sim.estimation.models import load_estimator
+    from ebraille_sim.plant.loop import check_sensor_rates
+    from ebraille_sim.scenarios.spec import load_scenario
+    model = load_estimator(str(settings["model"]))
+    seen = set()
+    for suite in SUITES.values():
+        for sc in suite.scenarios:
+            if sc.scenario in seen:
+                continue
+            seen.add(sc.scenario)
+            device = load_scenario(sc.scenario).device
+            device = dataclasses.replace(device, estimator=replace_checked(device.estimator, **settings))
+            try:
+                check_sensor_rates(device, model)
+            except ValueError as exc:
+                raise ValueError(f"model {settings['model']!r} does not suit scenario {sc.scenario}: {exc}") from None
 
 
 def run_episode(task) -> list[dict]:
@@ -331,6 +357,7 @@ def run_benchmark(controllers, suite: str | Suite = "standard", readers: int | N
     tasks = [(c, suite.scenarios[i], r, n, tuple(est.items())) for c, i, r in plan_episodes(names, suite, n)]
     if jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
+    jobs = min(int(jobs), max(1, len(tasks)))          # no idle workers
     t0 = time.perf_counter()
     rows: list = []
     if jobs == 1:
@@ -474,31 +501,66 @@ def results_document(result: BenchmarkResult, summary: dict | None = None) -> di
             "rows": result.rows, "wall_s": round(result.wall_s, 3), "jobs": result.jobs}
 
 
+RESULT_FILES = ("benchmark.json", "leaderboard.md")
+"""What :func:`write_results` writes into its folder."""
+
+
 def write_results(result: BenchmarkResult, out, summary: dict | None = None) -> list:
-    """Write ``benchmark.json`` and ``leaderboard.md`` into folder ``out``; return the paths."""
+    """Write ``benchmark.json`` and ``leaderboard.md`` into folder ``out``; return the paths.
+
+    Each file is replaced whole (:func:`ebraille_sim.tools.outputs.write_file`); a symbolic
+    link, FIFO, device or folder of either name is refused, never written through.
+    """
+    from ebraille_sim.tools.outputs import write_file
     out = pathlib.Path(out)
     out.mkdir(parents=True, exist_ok=True)
     doc = results_document(result, summary)
     p_json, p_md = out / "benchmark.json", out / "leaderboard.md"
     doc = dict(doc, rows=[{k: round(v, 6) if isinstance(v, float) else v for k, v in r.items()}
                           for r in doc["rows"]])
-    p_json.write_text(json.dumps(doc, separators=(",", ":"), allow_nan=False, default=float) + "\n")
-    p_md.write_text(format_markdown(result, doc["summary"]))
+    write_file(p_json, json.dumps(doc, separators=(",", ":"), allow_nan=False, default=float) + "\n", "--out entry")
+    write_file(p_md, format_markdown(result, doc["summary"]), "--out entry")
     return [p_json, p_md]
 
 
 def load_results(path) -> dict:
     """A results document written by :func:`write_results`; one-line ValueError if it is not one."""
+    from ebraille_sim.base.files import read_json, short
     p = pathlib.Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"no results file {str(p)!r}")
-    try:
-        doc = json.loads(p.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{p}: not a JSON results file ({exc})") from None
+    if not os.path.lexists(p):
+        raise FileNotFoundError(f"no results file {short(p)}")
+    doc = read_json(p, "results file")
     if not isinstance(doc, dict) or not {"suite", "suite_version", "summary"} <= set(doc):
-        raise ValueError(f"{p}: not a benchmark results file (needs suite, suite_version and summary)")
+        raise ValueError(f"{short(p)}: not a benchmark results file (needs suite, suite_version and summary)")
+    _check_results_types(doc, short(p))
     return doc
+
+
+def _check_results_types(doc: dict, shown: str) -> None:
+    """The parts of a results document :func:`compare` reads, of the types it reads them as."""
+    from ebraille_sim.base.files import short
+
+    def bad(where, want):
+        raise ValueError(f"{shown}: not a benchmark results file ({where} must be {want})")
+
+    def number(v):
+        return v is None or (isinstance(v, (int, float)) and not isinstance(v, bool))
+
+    if not isinstance(doc["suite"], str):
+        bad("suite", "a name")
+    if not isinstance(doc["suite_version"], (int, str)) or isinstance(doc["suite_version"], bool):
+        bad("suite_version", "a version")
+    if not isinstance(doc["summary"], dict):
+        bad("summary", "an object")
+    for c, s in doc["summary"].items():
+        if not isinstance(s, dict) or not number(s.get("score")) or s.get("score") is None:
+            bad(f"summary[{short(c, 40)}].score", "a number")
+        if not isinstance(s.get("scenarios"), dict):
+            bad(f"summary[{short(c, 40)}].scenarios", "an object")
+        for key, st in s["scenarios"].items():
+            if not isinstance(st, dict) or not all(number(st.get(m)) for m in COMPARED):
+                bad(f"summary[{short(c, 40)}].scenarios[{short(key, 40)}]",
+                    "an object of numbers (" + ", ".join(COMPARED) + ")")
 
 
 COMPARED = ("in_band_fraction_median", "in_band_fraction_cvar10", "char_in_band_fraction_median",

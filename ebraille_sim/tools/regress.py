@@ -165,27 +165,20 @@ def baseline_path(scenario_file) -> pathlib.Path:
 
 def read_baseline(path) -> dict:
     """The stored document ``{"scenario", "seed", "controller", "metrics"}``."""
+    from ebraille_sim.base.files import read_json, short
     p = pathlib.Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except OSError as exc:
-        raise FileNotFoundError(f"cannot read baseline {str(p)!r}: {exc.strerror}") from None
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"baseline {str(p)!r} is not valid JSON: {exc}") from None
+    doc = read_json(p, "baseline")
     if not isinstance(doc, dict) or not isinstance(doc.get("metrics"), dict):
-        raise ValueError(f"baseline {str(p)!r} has no 'metrics' table")
+        raise ValueError(f"baseline {short(p)} has no 'metrics' table")
     return doc
 
 
 def write_baseline(path, result) -> None:
     """Write the baseline document of a :class:`~ebraille_sim.scenarios.runner.RunResult`."""
-    p = pathlib.Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
+    from ebraille_sim.tools.outputs import write_file
     doc = {"scenario": result.spec.name, "seed": result.seed, "controller": result.controller_name,
            "metrics": {k: v for k, v in result.metrics.items() if k not in EXCLUDED}}
-    tmp = p.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(doc, indent=2, sort_keys=False) + "\n", encoding="utf-8")
-    tmp.replace(p)
+    write_file(path, json.dumps(doc, indent=2, sort_keys=False) + "\n", "baseline")
 
 
 def scenario_files(scenario_dir=None, only=None) -> list[pathlib.Path]:

@@ -338,6 +338,7 @@ def run_sweep(plan: SweepPlan, jobs: int | None = None, scheduler=None, progress
             jobs = jobs or os.cpu_count() or 1
             if jobs < 1:
                 raise ValueError(f"jobs must be >= 1, got {jobs}")
+            jobs = min(jobs, max(1, len(eps)))          # no idle workers
             if jobs == 1 or len(eps) <= 1:
                 for b in _batches(eps, math.ceil(len(eps) / (batch_size or SERIAL_BATCH))):
                     part = _run_batch(plan, b)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 import pathlib
 from dataclasses import dataclass
 
@@ -196,6 +197,10 @@ def hold_creep(record: BenchRecord, bench: BenchParams | None = None, hold_s: fl
 CSV_COLUMNS = ("time_s", "voltage_v", "force_n")
 
 
+MAX_CSV_BYTES = 256 * 2 ** 20
+"""Largest recorded CSV file read (256 MiB: hours of a bench sampled at 1 kHz)."""
+
+
 def load_csv(path, baseline_s: float = 2.0, cutoff_hz: float | None = 40.0, min_samples: int = 100) -> BenchRecord:
     """Read a real bench recording and condition it like the virtual one.
 
@@ -227,13 +232,15 @@ def load_csv(path, baseline_s: float = 2.0, cutoff_hz: float | None = 40.0, min_
         One line naming the problem: missing column, non-numeric or non-finite cell (row
         and column), non-increasing or non-uniform time, too few rows, bad cut-off.
     """
+    from ebraille_sim.base.files import read_bytes
     p = pathlib.Path(path)
-    if not p.is_file():
-        raise FileNotFoundError(f"CSV file not found: {p}")
     if not (isinstance(baseline_s, (int, float)) and math.isfinite(baseline_s) and baseline_s >= 0):
         raise ValueError(f"baseline_s must be a finite number >= 0, got {baseline_s!r}")
+    if not os.path.lexists(p):
+        raise FileNotFoundError(f"CSV file not found: {p}")
+    raw = read_bytes(p, "CSV file", MAX_CSV_BYTES)
     try:
-        text = p.read_text(encoding="utf-8-sig")
+        text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise ValueError(f"{p}: not a UTF-8 text file") from None
     rows = list(csv.reader(text.splitlines()))
