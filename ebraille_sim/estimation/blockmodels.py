@@ -46,8 +46,6 @@ from typing import Any
 import numpy as np
 
 from ebraille_sim.base.compiled import njit
-# the firmware's constants at their earlier home, where the plant's parameter packing reads them
-from ebraille_sim.estimation.firmware import FIRMWARE_FSR, HYSTERESIS_COMP_SLOTS, HYSTERESIS_MEDIAN  # noqa: F401
 
 __all__ = [
     "PiecewiseLinear",

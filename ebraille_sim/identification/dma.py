@@ -39,7 +39,7 @@ Examples
 >>> ideal = BenchParams(load_cell=LoadCellParams(noise_n_rms=0.0, resolution_n=0.0))
 >>> res = dma_test(ideal, frequencies_hz=(0.25,), cycles=3)
 >>> round(res.points[0].stiffness_n_per_m / 1e3, 1)
-102.4
+101.3
 """
 from __future__ import annotations
 

@@ -28,9 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ebraille_sim.estimation.blockmodels import FIRMWARE_FSR, HYSTERESIS_MEDIAN, pwl_eval
+from ebraille_sim.estimation.blockmodels import pwl_eval
+from ebraille_sim.estimation.firmware import FIRMWARE_FSR, HYSTERESIS_MEDIAN
 from ebraille_sim.estimation.calibration import measured_hysteresis_fraction
-from ebraille_sim.estimation.models import load_estimator
+from ebraille_sim.estimation.registry import load_estimator
 from ebraille_sim.physics.drivetrain import (mesh_damping_n_s_per_m, reflected_force_n, reflected_inertia_kg,
                                              shaft_to_rack_per_m)
 from ebraille_sim.physics.fingertip import prony_coefficients, tangent_stiffness_n_per_m
@@ -209,7 +210,7 @@ def _cached_slots(fill, *key) -> tuple[np.ndarray, np.ndarray]:
 
 def _pack_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
     """The estimator's creep compensation: on/off, and the creep law of the nominal FSR
-    (:data:`~ebraille_sim.estimation.blockmodels.FIRMWARE_FSR`, the nominal unit: the firmware does not know the individual sensor's parameters)
+    (:data:`~ebraille_sim.estimation.firmware.FIRMWARE_FSR`, the nominal unit: the firmware does not know the individual sensor's parameters)
     at the sensor rate, with the creep gain of the calibration hold as its reference.
     Depends only on the estimator and the sensor period: the slots are computed once per pair."""
     slots, values = _creep_compensation_slots(e, float(dt_sensor_s))
@@ -236,7 +237,7 @@ def _fill_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
 
 def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr, sensor_rate_hz: float) -> None:
     """The estimator's hysteresis compensation: on/off; play operators of the nominal FSR's
-    exponent (:data:`~ebraille_sim.estimation.blockmodels.FIRMWARE_FSR`, whose resistance at 1 N is packed too and whose exponent and
+    exponent (:data:`~ebraille_sim.estimation.firmware.FIRMWARE_FSR`, whose resistance at 1 N is packed too and whose exponent and
     stand-off are packed with the creep compensation) with the loop the estimator was given,
     or, when it was given none, the unit's loop as measured at assembly
     (:func:`ebraille_sim.estimation.calibration.measured_hysteresis_fraction`); the noise

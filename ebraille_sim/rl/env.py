@@ -587,7 +587,7 @@ class Episode:
 @functools.lru_cache(maxsize=4)
 def estimator_model(spec: str):
     """The estimator model named ``spec``, loaded once per process."""
-    from ebraille_sim.estimation.models import load_estimator
+    from ebraille_sim.estimation.registry import load_estimator
     return load_estimator(spec)
 
 
