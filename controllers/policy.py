@@ -124,8 +124,9 @@ def save_actor(actor: MlpActor, path) -> str:
               "squash": np.array(actor.squash), "layers": np.array(len(actor.weights))}
     for k, (w, b) in enumerate(zip(actor.weights, actor.biases)):
         arrays[f"w{k}"], arrays[f"b{k}"] = w, b
+    from ebraille_sim.base.files import staged_file
     path = os.fspath(path)
-    with open(path, "wb") as fh:
+    with staged_file(path, "policy file") as tmp, open(tmp, "wb") as fh:
         np.savez(fh, **arrays)
     return path
 

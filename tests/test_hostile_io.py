@@ -449,11 +449,16 @@ def test_the_lock_ends_with_the_command_not_with_its_forked_workers(tmp_path):
     out = tmp_path / "o"
     out.mkdir()                                          # kept: the same folder is claimed again
     holder = OutputFolder(out, ["x"]).claim()
+    ready_r, ready_w = os.pipe()
     pid = os.fork()
     if pid == 0:                                         # a worker: outlives the command's lock
+        os.write(ready_w, b"1")                          # its fork hooks have run by now
         time.sleep(30)
         os._exit(0)
+    os.close(ready_w)
     try:
+        assert os.read(ready_r, 1) == b"1"
+        os.close(ready_r)
         holder.release()
         with OutputFolder(out, ["x"]):                   # the worker is alive, the folder is free
             pass

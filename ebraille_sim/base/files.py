@@ -1,4 +1,5 @@
-"""One reader for every input file: regular files only, a size bound, a nesting bound.
+"""One reader for every input file (regular files only, a size bound, a nesting bound) and
+one writer of single output files (an exclusive temporary file renamed over a regular file).
 
 Every file the simulator reads on a user's behalf (a scenario, a reading text, a gains
 file, an estimator model, a baseline, a results file, a bench CSV) goes through
@@ -8,6 +9,12 @@ file larger than its bound, and reports each problem as one ``ValueError`` line 
 file as ``FileNotFoundError``).  :func:`read_json` and :func:`read_toml` parse the bytes and
 refuse documents nested deeper than :data:`MAX_DEPTH` (the parsers' own recursion never
 escapes as ``RecursionError``).
+
+:func:`write_file` and :func:`staged_file` replace one output file: the data go into a
+temporary file of a unique name created exclusively beside the target and are renamed over
+it; the target must be absent or a regular file (never a link, FIFO, device or folder),
+checked before and again just before the rename, with SIGINT and SIGTERM held back.  Output
+folders are claimed, staged and locked by :mod:`ebraille_sim.tools.outputs`, which uses these.
 
 Examples
 --------
@@ -25,12 +32,18 @@ ValueError: gains file '.../f.json' is a FIFO, not a regular file
 """
 from __future__ import annotations
 
+import contextlib
+import errno
 import json
 import os
+import pathlib
+import signal
 import stat
+import tempfile
 
 __all__ = ["MAX_INPUT_BYTES", "MAX_DEPTH", "short", "file_kind", "check_regular", "read_bytes", "read_text", "read_json",
-           "read_toml", "check_depth"]
+           "read_toml", "check_depth", "signals_held", "lstat_or_none", "check_existing", "writable_ancestor", "check_file",
+           "staged_file", "write_file"]
 
 MAX_INPUT_BYTES = 64 * 2 ** 20
 """Largest input file read (64 MiB) unless a reader states its own bound."""
@@ -199,3 +212,120 @@ def read_toml(path, what: str, limit: int = MAX_INPUT_BYTES) -> dict:
     except ModuleNotFoundError:  # Python < 3.11
         import tomli as tomllib
     return _parsed(tomllib.loads, read_text(path, what, limit), path, what, "TOML", (tomllib.TOMLDecodeError,))
+
+
+@contextlib.contextmanager
+def signals_held():
+    """Hold SIGINT and SIGTERM back for the block; they are delivered when it ends."""
+    sigs = {signal.SIGINT, signal.SIGTERM}
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def lstat_or_none(path):
+    try:
+        return os.lstat(path)
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    except OSError as exc:
+        if exc.errno == errno.ENAMETOOLONG:       # cannot exist
+            return None
+        raise
+
+
+def _refuse(option: str, path, kind: str, want: str):
+    raise ValueError(f"{option} {short(os.fspath(path))} is {kind}; ebraille-sim replaces only {want}")
+
+
+def check_existing(path, option: str, folder: bool = False) -> None:
+    """Refuse ``path`` unless it is absent or a regular file (a real folder with ``folder``)."""
+    st = lstat_or_none(path)
+    if st is None:
+        return
+    if folder:
+        if not stat.S_ISDIR(st.st_mode):
+            raise ValueError(f"{option} {short(os.fspath(path))} is {file_kind(st.st_mode)}; ebraille-sim writes "
+                             f"this output only into a real folder")
+    elif not stat.S_ISREG(st.st_mode):
+        _refuse(option, path, file_kind(st.st_mode), "regular files")
+
+
+def writable_ancestor(path: pathlib.Path, option: str) -> pathlib.Path:
+    """The nearest existing folder of ``path`` (itself included), refused unless writable."""
+    probe = path
+    while lstat_or_none(probe) is None and probe != probe.parent:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise ValueError(f"{option} {short(path)}: {short(probe)} is a file, not a folder")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise ValueError(f"{option} {short(path)}: folder {short(probe)} is not writable")
+    return probe
+
+
+def check_file(path, option: str = "FILE") -> pathlib.Path:
+    """``path`` as an output file, refused now (one ``ValueError`` line) if it cannot be one.
+
+    It must be absent or a regular file (not a symbolic link, FIFO, device, socket or
+    folder), and its nearest existing folder writable.  Nothing is created.
+    """
+    if not str(path).strip():
+        raise ValueError(f"{option} is empty; give a file name")
+    p = pathlib.Path(path)
+    check_existing(p, option)
+    writable_ancestor(p.parent, option)
+    return p
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def _replacing(path, option: str):
+    """``(descriptor, name)`` of a temporary file created exclusively beside ``path``, renamed
+    over it when the block ends normally (the caller closes the descriptor)."""
+    p = check_file(path, option)
+    p.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.name[:80]}.", suffix=f".tmp{p.suffix[:16]}", dir=p.parent)
+    try:
+        os.fchmod(fd, 0o666 & ~_umask())
+        yield fd, tmp
+        with signals_held():
+            check_existing(p, option)
+            os.replace(tmp, p)
+    finally:
+        with signals_held(), contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+
+
+@contextlib.contextmanager
+def staged_file(path, option: str = "FILE"):
+    """A temporary file to write, renamed over the file ``path`` when the block ends normally.
+
+    The temporary file has a unique name, is created exclusively in the folder of ``path``
+    (so the rename stays on one file system) and keeps the suffix of ``path``; ``path`` must
+    be absent or a regular file (:func:`check_file`), checked again just before the rename
+    (signals held back).  When the block raises, the temporary file is removed and ``path``
+    is left as it was.
+    """
+    with _replacing(path, option) as (fd, tmp):
+        os.close(fd)
+        yield pathlib.Path(tmp)
+
+
+def write_file(path, data, option: str = "FILE") -> pathlib.Path:
+    """Replace the file ``path`` with ``data`` (str: UTF-8) in one rename, the data written
+    through the descriptor of the temporary file created for them (:func:`staged_file`)."""
+    if isinstance(data, str):
+        data = data.encode("utf-8")
+    with _replacing(path, option) as (fd, _), os.fdopen(fd, "wb") as fh:
+        fh.write(data)
+    return pathlib.Path(path)

@@ -322,8 +322,8 @@ def write_policy_metadata(path, model_or_algo, env) -> str:
     stem = path[:-4] if path.endswith(".zip") else path
     meta = policy_metadata(model_or_algo, env)
     out = stem + ".json"
-    with open(out, "w", encoding="utf-8") as fh:
-        fh.write(json.dumps(meta, indent=2) + "\n")
+    from ebraille_sim.base.files import write_file
+    write_file(out, json.dumps(meta, indent=2) + "\n", "policy metadata")
     if not isinstance(model_or_algo, str):
         from controllers.policy import actor_from_sb3, save_actor
         save_actor(actor_from_sb3(model_or_algo), stem + ".npz")

@@ -21,9 +21,10 @@ the new ones are renamed in, and the marker is removed.  Files the command does 
 exception by the CLI) the staging folder is removed, and a folder the claim created is
 removed again: the output folder is left as it was.
 
-**Report files.**  :func:`write_file` writes one file (``regress --junit FILE``, a
-baseline) into a temporary file of a unique name created exclusively beside it, then
-renames it over the target.
+**Report files.**  :func:`~ebraille_sim.base.files.write_file` writes one file
+(``regress --junit FILE``, a baseline, a policy's metadata) into a temporary file of a unique
+name created exclusively beside it, then renames it over the target (it lives in the base
+layer, so that every layer writes its files the same way).
 
 **What is never touched.**  Nothing is written through a symbolic link: a symbolic link,
 a FIFO, a device node, a socket or a folder where an output file goes (or a link or file
@@ -44,7 +45,8 @@ import stat
 import sys
 import tempfile
 
-from ebraille_sim.base.files import file_kind, short
+from ebraille_sim.base.files import (check_existing, lstat_or_none, writable_ancestor, check_file, file_kind, short,
+                                     signals_held, staged_file, write_file)
 
 __all__ = ["INCOMPLETE", "STAGING_PREFIX", "OutputFolder", "staged", "signals_held", "remove_owned",
            "check_file", "staged_file", "write_file"]
@@ -57,123 +59,6 @@ STAGING_PREFIX = ".ebraille-sim-staging-"
 
 _MARKER_TEXT = ("This folder is incomplete: ebraille-sim was stopped while writing it. "
                 "Its files do not form a complete result; run the command again.\n")
-
-
-@contextlib.contextmanager
-def signals_held():
-    """Hold SIGINT and SIGTERM back for the block; they are delivered when it ends."""
-    sigs = {signal.SIGINT, signal.SIGTERM}
-    if not hasattr(signal, "pthread_sigmask"):
-        yield
-        return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, sigs)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-
-def _lstat(path):
-    try:
-        return os.lstat(path)
-    except (FileNotFoundError, NotADirectoryError):
-        return None
-    except OSError as exc:
-        if exc.errno == errno.ENAMETOOLONG:       # cannot exist
-            return None
-        raise
-
-
-def _refuse(option: str, path, kind: str, want: str):
-    raise ValueError(f"{option} {short(os.fspath(path))} is {kind}; ebraille-sim replaces only {want}")
-
-
-def _check_existing(path, option: str, folder: bool = False) -> None:
-    """Refuse ``path`` unless it is absent or a regular file (a real folder with ``folder``)."""
-    st = _lstat(path)
-    if st is None:
-        return
-    if folder:
-        if not stat.S_ISDIR(st.st_mode):
-            raise ValueError(f"{option} {short(os.fspath(path))} is {file_kind(st.st_mode)}; ebraille-sim writes "
-                             f"this output only into a real folder")
-    elif not stat.S_ISREG(st.st_mode):
-        _refuse(option, path, file_kind(st.st_mode), "regular files")
-
-
-def _writable_ancestor(path: pathlib.Path, option: str) -> pathlib.Path:
-    """The nearest existing folder of ``path`` (itself included), refused unless writable."""
-    probe = path
-    while _lstat(probe) is None and probe != probe.parent:
-        probe = probe.parent
-    if not probe.is_dir():
-        raise ValueError(f"{option} {short(path)}: {short(probe)} is a file, not a folder")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise ValueError(f"{option} {short(path)}: folder {short(probe)} is not writable")
-    return probe
-
-
-def check_file(path, option: str = "FILE") -> pathlib.Path:
-    """``path`` as an output file, refused now (one ``ValueError`` line) if it cannot be one.
-
-    It must be absent or a regular file (not a symbolic link, FIFO, device, socket or
-    folder), and its nearest existing folder writable.  Nothing is created.
-    """
-    if not str(path).strip():
-        raise ValueError(f"{option} is empty; give a file name")
-    p = pathlib.Path(path)
-    _check_existing(p, option)
-    _writable_ancestor(p.parent, option)
-    return p
-
-
-def _umask() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return mask
-
-
-@contextlib.contextmanager
-def _replacing(path, option: str):
-    """``(descriptor, name)`` of a temporary file created exclusively beside ``path``, renamed
-    over it when the block ends normally (the caller closes the descriptor)."""
-    p = check_file(path, option)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name[:80]}.", suffix=f".tmp{p.suffix[:16]}", dir=p.parent)
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())
-        yield fd, tmp
-        with signals_held():
-            _check_existing(p, option)
-            os.replace(tmp, p)
-    finally:
-        with signals_held(), contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
-
-
-@contextlib.contextmanager
-def staged_file(path, option: str = "FILE"):
-    """A temporary file to write, renamed over the file ``path`` when the block ends normally.
-
-    The temporary file has a unique name, is created exclusively in the folder of ``path``
-    (so the rename stays on one file system) and keeps the suffix of ``path``; ``path`` must
-    be absent or a regular file (:func:`check_file`), checked again just before the rename
-    (signals held back).  When the block raises, the temporary file is removed and ``path``
-    is left as it was.
-    """
-    with _replacing(path, option) as (fd, tmp):
-        os.close(fd)
-        yield pathlib.Path(tmp)
-
-
-def write_file(path, data, option: str = "FILE") -> pathlib.Path:
-    """Replace the file ``path`` with ``data`` (str: UTF-8) in one rename, the data written
-    through the descriptor of the temporary file created for them (:func:`staged_file`)."""
-    if isinstance(data, str):
-        data = data.encode("utf-8")
-    with _replacing(path, option) as (fd, _), os.fdopen(fd, "wb") as fh:
-        fh.write(data)
-    return pathlib.Path(path)
 
 
 def remove_owned(path, owned: dict) -> None:
@@ -196,13 +81,13 @@ def remove_owned(path, owned: dict) -> None:
                 f.unlink()
         with contextlib.suppress(OSError):
             p.rmdir()
-    elif _lstat(p) is not None:
+    elif lstat_or_none(p) is not None:
         p.unlink()
 
 
 def _write_marker(folder: pathlib.Path) -> None:
     path = folder / INCOMPLETE
-    _check_existing(path, "marker")
+    check_existing(path, "marker")
     flags = os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
     fd = os.open(path, flags, 0o666)
     with os.fdopen(fd, "w", encoding="utf-8") as fh:
@@ -266,18 +151,18 @@ class OutputFolder:
         """
         if not str(self._given).strip():
             raise ValueError(f"{self.option} is empty; give a folder")
-        st = _lstat(self.path)
+        st = lstat_or_none(self.path)
         if st is not None and stat.S_ISLNK(st.st_mode):
             raise ValueError(f"{self.option} {short(self.path)} is a symbolic link; give the folder itself "
                              f"({short(os.path.realpath(self.path))})")
         if st is not None and not stat.S_ISDIR(st.st_mode):
             kind = "a file" if stat.S_ISREG(st.st_mode) else file_kind(st.st_mode)
             raise ValueError(f"{self.option} {short(self.path)} is {kind}, not a folder")
-        _writable_ancestor(self.path, self.option)
+        writable_ancestor(self.path, self.option)
         if st is not None:
             for name, pattern in self.owned.items():
-                _check_existing(self.path / name, f"{self.option} entry", folder=pattern is not None)
-            _check_existing(self.path / INCOMPLETE, f"{self.option} entry")
+                check_existing(self.path / name, f"{self.option} entry", folder=pattern is not None)
+            check_existing(self.path / INCOMPLETE, f"{self.option} entry")
         return self.path
 
     def claim(self) -> "OutputFolder":
@@ -313,7 +198,7 @@ class OutputFolder:
     def _make(self) -> None:
         missing = []
         p = self.path
-        while _lstat(p) is None and p != p.parent:
+        while lstat_or_none(p) is None and p != p.parent:
             missing.append(p)
             p = p.parent
         for d in reversed(missing):
@@ -345,7 +230,7 @@ class OutputFolder:
                   if len(p.name) == len(legacy.name) + 8 and (p / INCOMPLETE).is_file()]
         removed = []
         for p in stale:
-            st = _lstat(p)
+            st = lstat_or_none(p)
             if st is not None and stat.S_ISDIR(st.st_mode):
                 with contextlib.suppress(OSError):
                     shutil.rmtree(p)
@@ -398,16 +283,16 @@ class OutputFolder:
         (stage / INCOMPLETE).unlink()
         new = sorted(stage.iterdir())
         for src in new:                               # refuse before anything is replaced
-            _check_existing(out / src.name, f"{self.option} entry",
+            check_existing(out / src.name, f"{self.option} entry",
                             folder=src.is_dir() and not src.is_symlink())
             if src.is_dir() and not src.is_symlink() and (out / src.name).is_dir():
                 for f in src.rglob("*"):
                     if not f.is_dir():
-                        _check_existing(out / src.name / f.relative_to(src), f"{self.option} entry")
+                        check_existing(out / src.name / f.relative_to(src), f"{self.option} entry")
         _write_marker(out)
         names = {p.name for p in new}
         for name in owned:
-            if name not in names and _lstat(out / name) is not None:
+            if name not in names and lstat_or_none(out / name) is not None:
                 remove_owned(out / name, owned)
         for src in new:
             dest = out / src.name
