@@ -194,8 +194,8 @@ def test_sentence_unicode():
 def test_error_names_character_and_position():
     with pytest.raises(ValueError, match=r"cannot transcribe '€' at position 12 to Grade 1 Braille"):
         text_to_cells("It costs 10 €.")
-    with pytest.raises(ValueError, match=r"'@' at position 1"):
-        text_to_cells("a@b")
+    with pytest.raises(ValueError, match=r"'~' at position 1"):
+        text_to_cells("a~b")
     with pytest.raises(ValueError, match=r"'\\t' at position 0"):
         text_to_cells("\tx")
 
@@ -208,9 +208,25 @@ def test_error_lists_the_accepted_characters():
     assert message.startswith("cannot transcribe '\u2026' at position 4 to Grade 1 Braille; accepted: ")
     for shown in ("A-Z a-z", "0-9", "%", "/", "\u2014", "\u2018"):
         assert shown in message
-    for bad in "&@*_\t\u20ac[":
+    for bad in "~^_\t\u20ac[":
         with pytest.raises(ValueError, match="accepted: letters"):
             text_to_cells(f"ok {bad}")
+
+
+def test_ebae_symbols_and_their_number_forms():
+    """``$ & * @ #`` as en-us-g1.ctb writes them: dollar 4, 2-5-6 (2-5-6 before a digit, the
+    number sign after it), ampersand 4, 1-2-3-4-6, at 4, 1, asterisk 3-5, 3-5 (4, 1-6 between
+    digits, one number), hash 3-4-5-6 (4-5-6, 1-4-5-6 before a digit)."""
+    assert dots_of("$5") == [(2, 5, 6), (3, 4, 5, 6), (1, 5)]
+    assert dots_of("$ 5")[:2] == [(4,), (2, 5, 6)]
+    assert dots_of("&") == [(4,), (1, 2, 3, 4, 6)]
+    assert dots_of("@") == [(4,), (1,)]
+    assert dots_of("*") == [(3, 5), (3, 5)]
+    assert dots_of("3*4") == [(3, 4, 5, 6), (1, 4), (4,), (1, 6), (1, 4, 5)]      # no second number sign
+    assert dots_of("3 * 4")[3:5] == [(3, 5), (3, 5)]
+    assert dots_of("#5") == [(4, 5, 6), (1, 4, 5, 6), (3, 4, 5, 6), (1, 5)]
+    assert dots_of("#") == [(3, 4, 5, 6)]
+    assert kinds_of("$5") == ["punctuation", "number_sign", "digit"]
 
 
 def test_accepted_characters_all_transcribe():

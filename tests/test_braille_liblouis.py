@@ -48,6 +48,13 @@ RULE_CASES: list[tuple[str, str]] = [
     # percent
     ("Sales rose 50% in May, then 12.5% more.", "⠠⠎⠁⠇⠑⠎⠀⠗⠕⠎⠑⠀⠼⠑⠚⠈⠒⠏⠀⠊⠝⠀⠠⠍⠁⠽⠂⠀⠞⠓⠑⠝⠀⠼⠁⠃⠨⠑⠈⠒⠏⠀⠍⠕⠗⠑⠲"),
     ("Prices fell 50%-60% overnight.", "⠠⠏⠗⠊⠉⠑⠎⠀⠋⠑⠇⠇⠀⠼⠑⠚⠈⠒⠏⠤⠼⠋⠚⠈⠒⠏⠀⠕⠧⠑⠗⠝⠊⠛⠓⠞⠲"),
+    # symbols: dollar before a number and alone, ampersand, at, asterisk (alone and between digits), hash
+    ("Tom & Jerry", "⠠⠞⠕⠍⠀⠈⠯⠀⠠⠚⠑⠗⠗⠽"),
+    ("me@home", "⠍⠑⠈⠁⠓⠕⠍⠑"),
+    ("cost: $12.50", "⠉⠕⠎⠞⠒⠀⠲⠼⠁⠃⠨⠑⠚"),
+    ("#5 and 3*4 stars", "⠸⠹⠼⠑⠀⠁⠝⠙⠀⠼⠉⠈⠡⠙⠀⠎⠞⠁⠗⠎"),
+    ("pay $ now", "⠏⠁⠽⠀⠈⠲⠀⠝⠕⠺"),
+    ("stars ** here", "⠎⠞⠁⠗⠎⠀⠔⠔⠔⠔⠀⠓⠑⠗⠑"),
     # single quotes and apostrophe
     ("'Hello,' she said. 'Come in.'", "⠠⠦⠠⠓⠑⠇⠇⠕⠂⠴⠄⠀⠎⠓⠑⠀⠎⠁⠊⠙⠲⠀⠠⠦⠠⠉⠕⠍⠑⠀⠊⠝⠲⠴⠄"),
     ("It's his dog's bone; they didn't mind.", "⠠⠊⠞⠄⠎⠀⠓⠊⠎⠀⠙⠕⠛⠄⠎⠀⠃⠕⠝⠑⠆⠀⠞⠓⠑⠽⠀⠙⠊⠙⠝⠄⠞⠀⠍⠊⠝⠙⠲"),

@@ -187,8 +187,8 @@ def test_invalid_options(kwargs):
 
 
 def test_untranscribable_text_raises():
-    with pytest.raises(ValueError, match=r"'#' at position 2"):
-        build_schedule("ab#", 60)
+    with pytest.raises(ValueError, match=r"'~' at position 2"):
+        build_schedule("ab~", 60)
 
 
 def test_passages_available_and_transcribable():

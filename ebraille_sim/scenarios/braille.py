@@ -75,6 +75,14 @@ Percent and slash
     ends a number (a number after it takes a new number sign). ``/`` is the
     oblique stroke 4-5-6, 3-4 (two cells) [``always / 456-34``] except
     between two digits, where it is the fraction line 3-4 (see Numbers).
+Symbols
+    ``$`` is 4, 2-5-6 [``always $ 4-256``], and 2-5-6 right before a digit,
+    whose number sign follows [``begnum $ 256``]: ``$5`` is 2-5-6, 3-4-5-6,
+    1-5.  ``&`` is 4, 1-2-3-4-6 [``always & 4-12346``]; ``@`` is 4, 1
+    [``always @ 4-1``]; ``*`` is 3-5, 3-5 [``always * 35-35``] and 4, 1-6
+    between two digits, the number going on [``midnum * 4-16``]; ``#`` is
+    4-5-6, 1-4-5-6 right before a digit [``begnum # 456-1456``] and the single
+    cell 3-4-5-6 elsewhere [``sign # 3456`` of chardefs.cti].
 White space
     A space gives an empty cell. A newline (``\\n``, ``\\r\\n`` or ``\\r``)
     gives an empty cell with ``line_end=True`` so that a reading schedule
@@ -199,6 +207,22 @@ _CLOSE_SINGLE_QUOTE_DOTS: tuple[tuple[int, ...], ...] = ((3, 5, 6), (3,))
 _DASH_DOTS: tuple[tuple[int, ...], ...] = ((3, 6), (3, 6))
 _ELLIPSIS_DOTS: tuple[tuple[int, ...], ...] = ((3,), (3,), (3,))
 _PERCENT_DOTS: tuple[tuple[int, ...], ...] = ((4,), (2, 5), (1, 2, 3, 4))
+# print symbols [``always`` rules of en-us-g1.ctb], and their forms right before a digit
+# [``begnum``] or between two digits [``midnum``]
+_SYMBOL_DOTS: dict[str, tuple[tuple[int, ...], ...]] = {
+    "$": ((4,), (2, 5, 6)),
+    "&": ((4,), (1, 2, 3, 4, 6)),
+    "*": ((3, 5), (3, 5)),
+    "@": ((4,), (1,)),
+    "#": ((3, 4, 5, 6),),
+}
+_SYMBOL_BEFORE_NUMBER_DOTS: dict[str, tuple[tuple[int, ...], ...]] = {
+    "$": ((2, 5, 6),),
+    "#": ((4, 5, 6), (1, 4, 5, 6)),
+}
+_SYMBOL_IN_NUMBER_DOTS: dict[str, tuple[tuple[int, ...], ...]] = {
+    "*": ((4,), (1, 6)),
+}
 _SLASH_DOTS: tuple[tuple[int, ...], ...] = ((4, 5, 6), (3, 4))
 _DECIMAL_POINT_DOTS: tuple[int, ...] = (4, 6)
 _FRACTION_LINE_DOTS: tuple[int, ...] = (3, 4)
@@ -223,15 +247,16 @@ _APOSTROPHE_WORDS: tuple[str, ...] = ("twas", "tis", "em")
 
 ACCEPTED_CHARACTERS: str = (
     "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789"
-    " \n\r" + "".join(sorted(set(_PUNCTUATION_DOTS) | set("\"'%/"))) + "\u201c\u201d\u2018\u2019\u2013\u2014"
+    " \n\r" + "".join(sorted(set(_PUNCTUATION_DOTS) | set("\"'%/") | set(_SYMBOL_DOTS)))
+    + "\u201c\u201d\u2018\u2019\u2013\u2014"
 )
 """Every character :func:`text_to_cells` accepts: ASCII letters and digits,
-space, newline (``\\n``, ``\\r``), ``! " % ' ( ) , - . / : ; ?`` and the
-typographic quotes and dashes ``“ ” ‘ ’ – —``."""
+space, newline (``\\n``, ``\\r``), ``! " % ' ( ) , - . / : ; ?``, the
+symbols ``$ & * @ #`` and the typographic quotes and dashes ``“ ” ‘ ’ – —``."""
 
 _ACCEPTED_DESCRIPTION: str = (
     "letters A-Z a-z, digits 0-9, space, newline and "
-    + " ".join(sorted(set(_PUNCTUATION_DOTS) | set("\"'%/")))
+    + " ".join(sorted(set(_PUNCTUATION_DOTS) | set("\"'%/") | set(_SYMBOL_DOTS)))
     + " \u201c \u201d \u2018 \u2019 \u2013 \u2014"
 )
 
@@ -402,7 +427,8 @@ def text_to_cells(
     text : str
         Text made of the characters in :data:`ACCEPTED_CHARACTERS`: ASCII
         letters, digits, spaces, newlines, the punctuation
-        ``! " % ' ( ) , - . / : ; ?`` and ``“ ” ‘ ’ – —``.
+        ``! " % ' ( ) , - . / : ; ?``, the symbols ``$ & * @ #`` and
+        ``“ ” ‘ ’ – —``.
     double_capital : bool, optional
         If True (default), a run of two or more consecutive uppercase ASCII
         letters gets the double capital sign (two dot-6 cells) instead of a
@@ -460,6 +486,11 @@ def text_to_cells(
             and _is_digit(text, i + 1)
         ):
             cells.append(_cell(ch, _MIDNUM_DOTS[ch], "punctuation"))
+            i += 1
+            continue
+
+        if in_number and ch in _SYMBOL_IN_NUMBER_DOTS and _is_digit(text, i + 1):
+            signs(ch, _SYMBOL_IN_NUMBER_DOTS[ch])
             i += 1
             continue
 
@@ -564,6 +595,12 @@ def text_to_cells(
 
         if ch == "/":
             signs(ch, _SLASH_DOTS)
+            i += 1
+            continue
+
+        if ch in _SYMBOL_DOTS:
+            before_number = _SYMBOL_BEFORE_NUMBER_DOTS.get(ch)
+            signs(ch, before_number if before_number is not None and _is_digit(text, i + 1) else _SYMBOL_DOTS[ch])
             i += 1
             continue
 
