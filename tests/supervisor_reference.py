@@ -106,7 +106,7 @@ class Supervisor:
         self.fall_t = -math.inf
         self.stall_s = 0.0
         self.implausible_s = 0.0
-        self.current_limit_a = c.current_limit_a
+        self.current_limit_a = c.sensed_limit_a(c.current_limit_a)
         self.last_f = 0.0
 
     def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
@@ -197,7 +197,7 @@ class Supervisor:
         # does not reach the finger (the lower edge of the friction band at rest above the estimate)
         f_rest = c.push_force_n(cur, c.friction_breakaway_ratio, -c.weight_n) - c.guide_static_n
         if not moving and ((f < c.contact_on_n and cur > c.current_for_force_a(c.contact_on_n))
-                           or (cur > c.stall_fraction * c.current_limit_a
+                           or (cur > c.stall_fraction * c.sensed_limit_a(c.current_limit_a)
                                and f_rest - self.est_win.hi[0][1] > c.implausible_n)):
             self.stall_s += dt_s
             if self.stall_s > c.stall_time_s:
@@ -368,7 +368,7 @@ def _envelope(c: SupervisorConfig) -> tuple[list[float], list[float]]:
     """
     v_max = c.speed_limit_m_per_s
     speeds = [v_max * k / 32 for k in range(33)]
-    currents = [c.current_for_force_a(max(c.drive_force_limit_n(v), 0.0)) for v in speeds]
+    currents = [c.sensed_limit_a(c.current_for_force_a(max(c.drive_force_limit_n(v), 0.0))) for v in speeds]
     speeds.append(1.05 * v_max)
     currents.append(-c.friction_current_a)
     return speeds, currents

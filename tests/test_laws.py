@@ -20,6 +20,7 @@ from ebraille_sim.estimation.firmware import biquad_step, creep_compensated_v, t
 from ebraille_sim.estimation.calibration import loading_branch_factor, loading_voltage
 from ebraille_sim.estimation.paper_models import paper_model
 from ebraille_sim.physics import drivetrain, fingertip, fsr, motor, noise
+from ebraille_sim.physics.current_sense import NOISE_INDEX_OFFSET, amplifier_v, firmware_current_a, rc_step
 from ebraille_sim.physics.drivetrain import (end_stop, friction_velocity_update, gear_loss_n, loaded_friction_n,
                                              mesh_force, reflected, shaft_speed_rad_per_s, shaft_to_rack_per_m,
                                              stribeck, viscous_force_n, weight_along_n)
@@ -564,6 +565,11 @@ def _substep_by_hand(s, p, u):
     s[S.prony_1_n], s[S.prony_2_n], s[S.prony_3_n], s[S.elastic_force_n], s[S.contact_force_n] = h1, h2, h3, fe, fc
     s[S.energy_j] += electrical_power_w(v_cmd, i) * h
     s[S.time_s] += h
+    # the motor-current chain's two RC sections on the amplifier's image of the new current
+    va = amplifier_v(i, p[P.isense_shunt_ohm], p[P.isense_gain], 0.0, p[P.isense_offset_v], p[P.isense_ref_v])
+    s[S.isense_count] += 1.0
+    s[S.isense_filter1_v] = rc_step(s[S.isense_filter1_v], va, p[P.isense_decay])
+    s[S.isense_filter2_v] = rc_step(s[S.isense_filter2_v], s[S.isense_filter1_v], p[P.isense_decay])
     # sensor: lag, then (due) a sample and (due) an estimate
     s[S.fsr_force_lagged_n] = lag_step(s[S.fsr_force_lagged_n], fc, p[P.fsr_lag_alpha])
     s[S.sensor_phase] = 0.0
@@ -592,7 +598,66 @@ def _substep_by_hand(s, p, u):
                                       int(p[P.est_n_in]), P.est_num0, P.est_den0, int(p[P.est_len]),
                                       P.est_out_x0, P.est_out_y0, int(p[P.est_n_out]),
                                       p[P.est_nyquist_average] > 0.0, p[P.est_clamp] > 0.0)
+    # the end of the control period: the firmware reads the current once
+    noise = noise_v(p[P.isense_noise_v], p[P.seed], NOISE_INDEX_OFFSET + s[S.isense_count])
+    s[S.current_meas_a] = firmware_current_a(adc_code(s[S.isense_filter2_v] + noise, p[P.isense_lsb_v],
+                                                      p[P.isense_max_code]),
+                                             p[P.isense_zero_code], p[P.isense_lsb_v], p[P.isense_nominal_v_per_a])
     return s
+
+
+def test_current_sense_amplifier_is_the_ina240_transfer():
+    """V_ref + G (1 + e_G)(R_sh i + V_os): INA240A3 (100 V/V), 50 mOhm, mid-supply 2.5 V; clipped
+    to the 0-5 V swing."""
+    assert amplifier_v(0.1, 0.05, 100.0, 0.0, 0.0, 2.5) == pytest.approx(3.0, abs=1e-12)   # 0.1 A -> +0.5 V
+    assert amplifier_v(-0.2, 0.05, 100.0, 0.0, 0.0, 2.5) == pytest.approx(1.5, abs=1e-12)
+    assert amplifier_v(0.1, 0.05, 100.0, 0.002, 25e-6, 2.5) == pytest.approx(2.5 + 100.2 * (0.005 + 25e-6))
+    assert amplifier_v(0.0, 0.05, 100.0, 0.0, 0.0, 2.5) == 2.5
+    assert amplifier_v(1.0, 0.05, 100.0, 0.0, 0.0, 2.5) == 5.0 and amplifier_v(-1.0, 0.05, 100.0, 0.0, 0.0, 2.5) == 0.0
+
+
+def test_current_sense_rc_section_is_the_exact_first_order_step():
+    """One held-input step of tau dv/dt = v_in - v: v_in + (v - v_in) exp(-h/tau)."""
+    import math
+    h, tau = 1e-4, 159e-6
+    d = math.exp(-h / tau)
+    assert rc_step(2.5, 3.0, d) == pytest.approx(3.0 - 0.5 * d, abs=1e-15)
+    v = 2.5
+    for _ in range(int(round(tau / h * 10))):          # ten time constants: settled to 5e-5
+        v = rc_step(v, 3.0, d)
+    assert abs(v - 3.0) < 0.5 * math.exp(-9.5)
+
+
+def test_firmware_current_reading_uses_the_nominal_transfer_and_its_zero():
+    """(code - zero) LSB / (G_nom R_sh,nom): 5 V/A nominal, 10-bit 5 V ADC (0.977 mA per code)."""
+    lsb = 5.0 / 1024
+    assert firmware_current_a(612.0, 512.0, lsb, 5.0) == pytest.approx(100 * lsb / 5.0, abs=1e-15)
+    assert firmware_current_a(511.5, 511.5, lsb, 5.0) == 0.0
+    assert firmware_current_a(412.0, 512.0, lsb, 5.0) == pytest.approx(-0.09765625, abs=1e-15)
+
+
+def test_the_current_chain_reads_a_held_current_within_its_worst_case():
+    """A nominal plant held at a steady current: the firmware's reading lies within the chain's
+    worst-case error of the true current, and a unit with a 1 % high shunt and +0.2 % gain reads
+    about 1.2 % high (the firmware knows only the nominal transfer)."""
+    import dataclasses
+    from ebraille_sim.physics.current_sense import worst_case_error_a
+    from ebraille_sim.physics.params import CurrentSenseParams, DeviceParams
+    from ebraille_sim.plant.loop import make_plant
+    for cs in (CurrentSenseParams(), CurrentSenseParams(shunt_error=0.01, gain_error=0.002, offset_v=25e-6)):
+        dev = dataclasses.replace(DeviceParams(), current_sense=cs)
+        plant = make_plant([dev], seeds=[7])
+        plant.set_finger(-1e-3)                         # pressed into the pulp at the end stop: stalled
+        reads, trues = [], []
+        for _ in range(300):
+            plant.advance(1.5)
+            reads.append(plant.state[0, S.current_meas_a])
+            trues.append(plant.state[0, S.current_a])
+        i_true, i_read = float(np.mean(trues[-100:])), float(np.mean(reads[-100:]))
+        assert i_true > 0.02
+        assert abs(i_read - i_true) <= worst_case_error_a(cs, i_true)
+        if cs.shunt_error:
+            assert i_read / i_true - 1.0 == pytest.approx(0.012, abs=0.006)
 
 
 def test_one_kernel_step_is_exactly_the_composition_of_the_law_functions():

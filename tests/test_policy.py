@@ -63,7 +63,7 @@ def test_policy_in_a_1khz_loop_matches_the_200hz_env_exactly():
     loop_forces, loop_commands = [], []
     for k in range(2500):
         sp = ep.setpoint_n[k // 5]
-        u = ctrl.update(float(st[S.force_est_n]), sp, 1e-3, float(st[S.current_a]))
+        u = ctrl.update(float(st[S.force_est_n]), sp, 1e-3, float(st[S.current_meas_a]))
         plant.advance(u)
         if k % 5 == 0:
             loop_commands.append(u)
@@ -90,7 +90,7 @@ def test_supervised_policy_sees_the_applied_command_as_in_the_env_safety_layer()
     ctrl.reset(force_est_n=float(st[S.force_est_n]), setpoint_n=0.7)
     loop_forces, loop_applied = [], []
     for k in range(400):
-        u = ctrl.update(float(st[S.force_est_n]), ep.setpoint_n[k], 5e-3, float(st[S.current_a]))
+        u = ctrl.update(float(st[S.force_est_n]), ep.setpoint_n[k], 5e-3, float(st[S.current_meas_a]))
         assert inner._z[Z_PREV_ACTION] == pytest.approx(max(-1.0, min(1.0, u / 6.0)), abs=1e-15)
         plant.advance(u)
         loop_applied.append(u)
@@ -143,7 +143,7 @@ def test_policy_metadata_carries_a_non_default_current_scale(tmp_path):
     for _ in range(3):
         obs, *_ = env.step(np.array([0.5], np.float32))
     st = env.plant.state[0]
-    current_a = float(st[S.current_a])
+    current_a = float(st[S.current_meas_a])
     assert abs(current_a) > 0.01 and obs[6] == pytest.approx(current_a / (6.0 / 15.0), rel=1e-6)
 
     meta = read_metadata(_write_meta(tmp_path, env=env.config.policy_metadata()))

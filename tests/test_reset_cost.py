@@ -106,7 +106,7 @@ def test_caches_change_no_trajectory():
         warm = episodes(kw, opts, (0, 11))
         for seed in (0, 11):
             _assert_same(cold[name][seed], warm[seed], f"{name}, seed {seed}")
-    assert any(flags.any() for flags in (cold["default"][s]["flags"] for s in (0, 11)))    # episodes ended
+    assert any(flags.any() for flags in (cold[name][s]["flags"] for name in cold for s in (0, 11)))   # episodes ended
     for name, kw, steps in (("vec", {}, 1500), ("vec1k", {"control_rate_hz": 1000.0}, 600)):
         warm = vector_episodes(kw, 3, steps)
         _assert_same(cold_vec[name], warm, name)
@@ -141,7 +141,8 @@ def test_compiled_envelope_equals_the_configs_laws_bit_for_bit():
         c = SupervisorConfig.for_device(dev)
         v_max = c.speed_limit_m_per_s
         speeds = [v_max * k / 32 for k in range(33)] + [1.05 * v_max]
-        currents = [c.current_for_force_a(max(c.drive_force_limit_n(v), 0.0)) for v in speeds[:33]]
+        currents = [c.current_for_force_a(max(c.drive_force_limit_n(v), 0.0)) * (1.0 - c.sense_gain_error_max)
+                    - c.sense_error_a for v in speeds[:33]]
         currents.append(-c.friction_current_a)
         out = np.empty(2 * ENVELOPE_POINTS)
         _envelope_table(c, out)
@@ -245,7 +246,8 @@ def test_reset_header_is_shared_read_only_and_each_supervisor_gets_a_copy():
     with pytest.raises(ValueError):
         template[SV.cut_t] = 0.0
     assert ha is not template and ha.flags.writeable
-    assert ha[SV.current_limit_a] == a.current_limit_a and hb[SV.current_limit_a] == b.current_limit_a
+    assert ha[SV.current_limit_a] == a.sensed_limit_a(a.current_limit_a)
+    assert hb[SV.current_limit_a] == b.sensed_limit_a(b.current_limit_a)
     assert ha[SV.cut_t] == -math.inf and math.isnan(ha[SV.stuck_ref_n])
     ha[:] = 7.0                                               # a caller's copy, not the template
     assert _initial_state(a)[SV.cut_t] == -math.inf

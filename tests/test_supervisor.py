@@ -263,7 +263,8 @@ def test_envelope_limits_the_command_to_the_current_limit_at_rest():
     sup.reset(force_est_n=1.0, setpoint_n=1.0)
     consistent(sup, 1.0, 1.0, 100)
     c = sup.config
-    assert sup.u_prev == pytest.approx(c.motor_resistance_ohm * c.current_limit_a, rel=1e-6)
+    # the limit applies to the board's reading of the current, derated by the chain's worst case
+    assert sup.u_prev == pytest.approx(c.motor_resistance_ohm * c.sensed_limit_a(c.current_limit_a), rel=1e-6)
 
 
 def test_envelope_brakes_above_the_speed_limit():
@@ -325,18 +326,20 @@ def test_motor_pushing_without_motion_or_contact_is_stopped():
 
 def test_at_the_current_limit_a_push_the_estimate_accounts_for_is_a_hold_not_a_stall():
     """A board at rest at the current limit: a jam when the push at the lower edge of the friction
-    band (2.87 N at the limit) exceeds the estimate by more than ``implausible_n``, a hold of a
-    high force (creeping forward against the break-away friction) when the estimate shows it."""
+    band (2.63 N at the limit as the board reads it, 54.8 mA) exceeds the estimate by more than
+    ``implausible_n``, a hold of a high force (creeping forward against the break-away friction)
+    when the estimate shows it."""
     c = SupervisorConfig()
-    f_rest = c.push_force_n(c.current_limit_a, c.friction_breakaway_ratio, -c.weight_n) - c.guide_static_n
-    assert f_rest == pytest.approx(2.87, abs=0.01)
+    i_read = c.sensed_limit_a(c.current_limit_a)
+    f_rest = c.push_force_n(i_read, c.friction_breakaway_ratio, -c.weight_n) - c.guide_static_n
+    assert f_rest == pytest.approx(2.63, abs=0.01)
     for f, fault in [(f_rest - c.implausible_n + 0.05, None), (1.0, "motor_stalled")]:
         sup = Supervisor(Const(6.0))
         sup.reset(force_est_n=f, setpoint_n=c.force_cap_n)
         consistent(sup, f, c.force_cap_n, 1000)                   # 1 s at the limit, no motion
         assert sup.fault == fault, (f, sup.events)
         if fault is None:
-            assert sup.u_prev == pytest.approx(c.motor_resistance_ohm * c.current_limit_a, rel=1e-6)
+            assert sup.u_prev == pytest.approx(c.motor_resistance_ohm * i_read, rel=1e-6)
         else:
             assert sup.events[0][0] == pytest.approx(c.stall_time_s, abs=0.005)
 

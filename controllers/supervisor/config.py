@@ -15,6 +15,7 @@ import numpy as np
 from controllers.supervisor.layout import _pack
 from ebraille_sim.base.validation import check_bool, check_keys, check_number, replace_fields
 from ebraille_sim.physics import limits
+from ebraille_sim.physics.current_sense import worst_case_error_a
 from ebraille_sim.physics.fingertip import compression_at_force_m, tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import DeviceParams, FINGERS, TACTILE_FORCE_MAX_N
 
@@ -92,6 +93,8 @@ def device_limits(device: DeviceParams) -> dict:
         "stuck_travel_m": 2.0 * dt.backlash_m + ESTIMATOR_PERIOD_S * _speed_limit(b, rb, rm),
         "first_contact_travel_m": DESIGN_GAP_M + compression_at_force_m(
             SAFE_FORCE_N, soft.stiffness_b_n_per_m, soft.exponent_m_per_m),
+        "sense_gain_error_max": device.current_sense.gain_error_max + device.current_sense.shunt_tolerance,
+        "sense_error_a": worst_case_error_a(device.current_sense, 0.0),
     }
 
 
@@ -154,6 +157,12 @@ class SupervisorConfig:
     """m_b g, N: weight of the board, counted as pushing (hand upside down) [D]."""
     back_emf_v_s_per_m: float = None  # type: ignore[assignment]
     """kE N/r, V s/m: back-EMF per rack speed [D]."""
+    sense_gain_error_max: float = _NOMINAL.current_sense.gain_error_max + _NOMINAL.current_sense.shunt_tolerance
+    """Largest relative gain error of the board's current reading: the amplifier's gain error and
+    the shunt's tolerance at their bounds (:class:`~ebraille_sim.physics.params.CurrentSenseParams`)."""
+    sense_error_a: float = worst_case_error_a(_NOMINAL.current_sense, 0.0)
+    """Largest absolute error of one current reading beyond the gain error, A: zeroing residual,
+    round-down and noise (:func:`ebraille_sim.physics.current_sense.worst_case_error_a` at 0 A)."""
     pinion_mass_kg: float = None  # type: ignore[assignment]
     """J (N/r)^2, kg: rotor inertia at the rack line [D]."""
     board_mass_kg: float = None  # type: ignore[assignment]
@@ -313,6 +322,12 @@ class SupervisorConfig:
         return limits.push_force_bound_n(current_a, self.push_force_per_a_n, 1.0, 1.0,
                                          friction_scale * self.friction_current_a * self.push_force_per_a_n,
                                          self.weight_n if weight_n is None else weight_n)
+
+    def sensed_limit_a(self, true_limit_a: float) -> float:
+        """The reading at which the worst-case sensor still means at most ``true_limit_a`` of true
+        current, A: ``i (1 - e_gain) - e_abs`` (a reading high by the gain error and the
+        absolute error; the safety bounds hold with the worst unit of the chain)."""
+        return true_limit_a * (1.0 - self.sense_gain_error_max) - self.sense_error_a
 
     def current_for_force_a(self, force_n: float) -> float:
         """Current at which :meth:`push_force_n` equals ``force_n``, A."""

@@ -54,8 +54,12 @@ def _envelope_into(out, v_max, pinion_mass_kg, board_mass_kg, gear_efficiency, e
 
 
 def _envelope_table(c, out: np.ndarray) -> None:
-    """Write :func:`_envelope` of ``c`` into ``out`` (length ``2 * ENVELOPE_POINTS``) in one compiled call."""
+    """Write the envelope of ``c`` into ``out`` (length ``2 * ENVELOPE_POINTS``): speeds, then the
+    current limits as the board reads them (:meth:`SupervisorConfig.sensed_limit_a` of the true
+    limits :func:`_envelope_into` computes in one compiled call)."""
     _envelope_into(out, c.speed_limit_m_per_s, c.pinion_mass_kg, c.board_mass_kg, c.gear_efficiency,
                    c.envelope_force_n, c.reader_b_n_per_m, c.reader_m_per_m, c.push_force_per_a_n,
                    c.friction_current_a, c.weight_n,
                    _envelope_memo(c.envelope_force_n, c.reader_b_n_per_m, c.reader_m_per_m))
+    n = ENVELOPE_POINTS
+    out[n:2 * n - 1] = out[n:2 * n - 1] * (1.0 - c.sense_gain_error_max) - c.sense_error_a

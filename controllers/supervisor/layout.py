@@ -105,7 +105,8 @@ def _pack(c) -> np.ndarray:
         "soft_m_per_m": c.soft_m_per_m, "release_window_s": c.release_window_s,
         "travel_follow_s": c.travel_follow_s, "implausible_n": c.implausible_n,
         "first_contact_travel_m": c.first_contact_travel_m, "contact_current_a": c.current_for_force_a(c.contact_on_n),
-        "stall_fraction": c.stall_fraction, "current_limit_a": c.current_limit_a, "stall_time_s": c.stall_time_s,
+        "stall_fraction": c.stall_fraction, "current_limit_a": c.sensed_limit_a(c.current_limit_a),
+        "stall_time_s": c.stall_time_s,
         "push_force_per_a_n": c.push_force_per_a_n,
         "breakaway_friction_n": c.friction_breakaway_ratio * c.friction_current_a * c.push_force_per_a_n,
         "push_weight_n": -c.weight_n, "guide_static_n": c.guide_static_n, "impact_mass_kg": c.impact_mass_kg,
@@ -149,7 +150,7 @@ def _initial_state(c) -> np.ndarray:
     """The header of the state array after a reset (the ring buffers are empty by their counts):
     :func:`_reset_header` with the configuration's current limit."""
     h = _reset_header().copy()
-    h[SV.current_limit_a] = c.current_limit_a
+    h[SV.current_limit_a] = c.sensed_limit_a(c.current_limit_a)
     return h
 
 

@@ -440,6 +440,79 @@ class CircuitParams(_Checked):
         return float(2 ** self.adc_bits - 1)
 
 
+INA240 = "[R] TI INA240 datasheet (SBOS662), electrical characteristics"
+
+
+@dataclass(frozen=True)
+class CurrentSenseParams(_Checked):
+    """The board's motor-current sensing chain (:mod:`ebraille_sim.physics.current_sense`):
+    low-side shunt, bidirectional current-sense amplifier, RC anti-alias filter, the
+    microcontroller's ADC, and the firmware's zeroing at rest.
+
+    ``gain_error``, ``shunt_error`` and ``offset_v`` are the unit's own (0 for the nominal
+    board; a population draws them within the ``*_max`` and ``shunt_tolerance`` bounds); the
+    firmware knows only the nominal ``gain_v_per_v`` and ``shunt_ohm``."""
+    shunt_ohm: float = _pos(0.05, "ohm", "[D] +/-0.5 A into the amplifier's +/-2.5 V half range at 100 V/V "
+                            "(stall current 0.28 A of the Faulhaber drive)")
+    shunt_tolerance: float = _nn(0.01, "-", "[R] 1 % current-sense resistor (e.g. Vishay WSL2512 series)")
+    shunt_error: float = sourced(0.0, "-", "[E] this unit's shunt deviation; nominal board 0", lo=-0.05, hi=0.05)
+    gain_v_per_v: float = _pos(100.0, "V/V", INA240 + ": INA240A3 gain")
+    gain_error_max: float = _nn(0.002, "-", INA240 + ": gain error +/-0.20 % max")
+    gain_error: float = sourced(0.0, "-", "[E] this unit's gain error; nominal board 0", lo=-0.05, hi=0.05)
+    offset_max_v: float = _nn(25e-6, "V", INA240 + ": input offset +/-25 uV max")
+    offset_v: float = sourced(0.0, "V", "[E] this unit's input offset; nominal board 0", lo=-1e-3, hi=1e-3)
+    reference_v: float = _pos(2.5, "V", INA240 + ": output midpoint from REF1/REF2 at mid-supply of 5 V")
+    filter_tau_s: float = _pos(159e-6, "s", "[D] each RC anti-alias section 1.6 kOhm x 100 nF (corner 1.0 kHz)")
+    filter_stages: int = _pos(2, "-", "[D] two buffered RC sections: the 20 kHz PWM ripple under one LSB "
+                              "(ebraille_sim.physics.current_sense)")
+    adc_bits: int = _pos(10, "bit", "[R] ATmega328 10-bit ADC (the FSR's converter)")
+    adc_ref_v: float = _pos(5.0, "V", "[R] ATmega328 AVcc reference")
+    adc_noise_lsb: float = _nn(0.5, "LSB", "[E] within the ATmega328's +/-2 LSB absolute accuracy [R]")
+    zero_samples: int = _pos(64, "-", "[E] conversions averaged by the start-up zeroing at rest")
+    pwm_hz: float = _pos(20000.0, "Hz", "[E] H-bridge PWM frequency above hearing")
+
+    def __post_init__(self):
+        super().__post_init__()
+        for name, lo, hi in (("adc_bits", 1, ADC_BITS_MAX), ("zero_samples", 1, 1_000_000), ("filter_stages", 1, 2)):
+            v = check_number(f"CurrentSenseParams.{name}", getattr(self, name), lo=lo, hi=hi, integer=True)
+            object.__setattr__(self, name, v)
+        for name in ("shunt_error", "gain_error", "offset_v"):
+            f = next(f for f in dataclasses.fields(self) if f.name == name)
+            check_number(f"CurrentSenseParams.{name}", getattr(self, name), lo=f.metadata["lo"], hi=f.metadata["hi"])
+        if abs(self.gain_error) > self.gain_error_max or abs(self.shunt_error) > self.shunt_tolerance \
+                or abs(self.offset_v) > self.offset_max_v:
+            raise ValueError("CurrentSenseParams: the unit's gain_error, shunt_error and offset_v must lie within "
+                             "gain_error_max, shunt_tolerance and offset_max_v")
+        if not self.reference_v < self.adc_ref_v:
+            raise ValueError(f"CurrentSenseParams.reference_v = {self.reference_v:g} V must lie inside the ADC range "
+                             f"0-{self.adc_ref_v:g} V")
+        if self.gain_v_per_v * self.offset_max_v >= min(self.reference_v, self.adc_ref_v - self.reference_v):
+            raise ValueError("CurrentSenseParams.offset_max_v: the amplified offset would leave the ADC range")
+
+    @property
+    def nominal_v_per_a(self) -> float:
+        """The transfer the firmware assumes, ``G_nom R_sh,nom`` (V/A)."""
+        return self.gain_v_per_v * self.shunt_ohm
+
+    @property
+    def adc_lsb_v(self) -> float:
+        return self.adc_ref_v / (2 ** self.adc_bits)
+
+    @property
+    def adc_max_code(self) -> float:
+        return float(2 ** self.adc_bits - 1)
+
+    @property
+    def lsb_a(self) -> float:
+        """Current of one ADC step through the nominal transfer, A."""
+        return self.adc_lsb_v / self.nominal_v_per_a
+
+    @property
+    def range_a(self) -> float:
+        """Largest current of either sign the chain reads before its output leaves the ADC range, A."""
+        return min(self.reference_v, self.adc_ref_v - self.reference_v) / self.nominal_v_per_a
+
+
 @dataclass(frozen=True)
 class EstimatorParams(_Checked):
     """In-loop force estimator: anti-alias filter, decimation, block-oriented model.
@@ -529,6 +602,7 @@ class DeviceParams:
     finger: FingerParams = FingerParams()
     fsr: FSRParams = FSRParams()
     circuit: CircuitParams = CircuitParams()
+    current_sense: CurrentSenseParams = CurrentSenseParams()
     estimator: EstimatorParams = EstimatorParams()
     rates: RateParams = RateParams()
     driver_supply_v: float = 6.0

@@ -107,8 +107,8 @@ def period(state, params, inputs, n_sub, kind, cstate, cparams, u_ext, u_max, su
     """One closed-loop control period ``k`` of one device; returns ``(status, command_v)``.
 
     Writes period ``k``'s varying inputs (``inputs[slots[j]] = table[j, k]``), reads the
-    fed-back force (state slot ``i_feedback``) and the motor current at the end of the
-    previous period, decides the command (:func:`command`), clips it to ``+/- u_max`` (an env's
+    fed-back force (state slot ``i_feedback``) and the firmware's reading of the motor current
+    (``S.current_meas_a``, through the board's sensing chain) at the end of the previous period, decides the command (:func:`command`), clips it to ``+/- u_max`` (an env's
     action range; ``inf`` for none: the driver clips to its supply inside the plant), holds it
     and advances the plant by ``n_sub`` physics steps.  A non-finite command, or an unsupervised
     built-in controller handed a non-finite input, returns its status with the plant not
@@ -117,7 +117,7 @@ def period(state, params, inputs, n_sub, kind, cstate, cparams, u_ext, u_max, su
     for j in range(slots.shape[0]):
         inputs[int(slots[j])] = table[j, k]
     f = state[i_feedback]
-    cur = state[S.current_a]
+    cur = state[S.current_meas_a]             # the firmware's reading (physics.current_sense), not the plant's
     if not math.isfinite(cur):
         cur = math.nan
     if not supervised and kind != KIND_EXTERNAL and not (math.isfinite(f) and math.isfinite(sp)):
@@ -181,7 +181,7 @@ def run(states, params, inputs, n_sub, kinds, cstates, cparams, u_ext, supervise
                     q = (k + 1) // every - 1
                     kept[r, ROW.command_v, q] = u
                     kept[r, ROW.fsr_voltage_v, q] = st[S.fsr_voltage_v]
-                    kept[r, ROW.motor_current_a, q] = st[S.current_a]
+                    kept[r, ROW.motor_current_a, q] = st[S.current_a]   # plant truth: the trace's record
                     kept[r, ROW.board_pos_m, q] = st[S.board_pos_m]
                     kept[r, ROW.energy_j, q] = st[S.energy_j]
 

@@ -40,6 +40,7 @@ from ebraille_sim.base.compiled import njit
 
 from ebraille_sim.estimation.blockmodels import estimator_step
 from ebraille_sim.estimation.firmware import biquad_step, creep_compensated_v, hysteresis_compensated_v, tared_v
+from ebraille_sim.physics.current_sense import NOISE_INDEX_OFFSET, amplifier_v, rc_step, sample_current_a
 from ebraille_sim.physics.drivetrain import (end_stop, friction_velocity_update, gear_loss_n, loaded_friction_n,
                                              mesh_force, shaft_speed_rad_per_s, stribeck, viscous_force_n,
                                              weight_along_n)
@@ -100,8 +101,33 @@ def sensor_sample(s, p, u):
 
 
 @njit(cache=True, inline="always")
+def current_sense_substep(s, p):
+    """The motor-current chain at the physics rate: the amplifier's image of the armature
+    current through the RC sections (:mod:`ebraille_sim.physics.current_sense`)."""
+    v = amplifier_v(s[S.current_a], p[P.isense_shunt_ohm], p[P.isense_gain], 0.0, p[P.isense_offset_v],
+                    p[P.isense_ref_v])
+    s[S.isense_count] += 1.0
+    s[S.isense_filter1_v] = rc_step(s[S.isense_filter1_v], v, p[P.isense_decay])
+    if p[P.isense_stages] > 1.0:
+        s[S.isense_filter2_v] = rc_step(s[S.isense_filter2_v], s[S.isense_filter1_v], p[P.isense_decay])
+    else:
+        s[S.isense_filter2_v] = s[S.isense_filter1_v]
+
+
+@njit(cache=True, inline="always")
+def current_sample(s, p):
+    """The firmware's one conversion of the motor current at the end of a control period (its noise
+    indexed by the physics steps so far: the reading at a time is the same at any control rate)."""
+    noise = noise_v(p[P.isense_noise_v], p[P.seed], NOISE_INDEX_OFFSET + s[S.isense_count])
+    s[S.current_meas_a] = sample_current_a(s[S.isense_filter2_v], noise, p[P.isense_zero_code], p[P.isense_lsb_v],
+                                           p[P.isense_max_code], p[P.isense_nominal_v_per_a])
+
+
+@njit(cache=True, inline="always")
 def sensor_substep(s, p, u, contact_force_n):
-    """FSR mechanical lag at the physics rate; an ADC sample when one is due."""
+    """FSR mechanical lag and the current chain's filter at the physics rate; an FSR ADC sample
+    when one is due."""
+    current_sense_substep(s, p)
     s[S.fsr_force_lagged_n] = lag_step(s[S.fsr_force_lagged_n], contact_force_n, p[P.fsr_lag_alpha])
     s[S.sensor_phase] += 1.0
     if s[S.sensor_phase] >= p[P.substeps_per_sensor]:
@@ -163,6 +189,8 @@ def advance(s, p, u, n_sub):
     for _ in range(n_sub):
         mechanics_substep(s, p, u)
         sensor_substep(s, p, u, s[S.contact_force_n])
+    if n_sub > 0:
+        current_sample(s, p)
 
 
 @njit(cache=True)

@@ -29,6 +29,7 @@ import collections
 from ebraille_sim.estimation import blockmodels as _est
 from ebraille_sim.estimation import firmware as _fw
 from ebraille_sim.estimation.blockmodels import MAX_BREAKPOINTS, MAX_TF_LEN
+from ebraille_sim.physics import current_sense as _isense
 from ebraille_sim.physics import drivetrain as _drivetrain
 from ebraille_sim.physics import fingertip as _fingertip
 from ebraille_sim.physics import fsr as _fsr
@@ -85,14 +86,14 @@ STATE_BLOCKS = (
     _motor.STATE_SLOTS, _drivetrain.STATE_SLOTS, _fingertip.STATE_SLOTS, _fsr.STATE_SLOTS,
     _fw.ANTIALIAS_SLOTS, LOOP_STATE_SLOTS[:2], _noise.STATE_SLOTS, _est.OUTPUT_SLOTS,
     _motor.ENERGY_SLOTS, LOOP_STATE_SLOTS[2:], _fw.TARE_SLOTS, _fsr.HYSTERESIS_SLOTS, _fsr.CREEP_SLOTS, _est.FILTER_SLOTS,
-    _fw.CREEP_COMP_SLOTS, _fw.HYSTERESIS_COMP_SLOTS,
+    _fw.CREEP_COMP_SLOTS, _fw.HYSTERESIS_COMP_SLOTS, _isense.STATE_SLOTS,
 )
 """The modules' slot declarations in state-vector order."""
 
 STATE_OWNERS = {"motor": _motor.OWNED_STATE_SLOTS, "drivetrain": _drivetrain.OWNED_STATE_SLOTS,
                 "fingertip": _fingertip.OWNED_STATE_SLOTS, "fsr": _fsr.OWNED_STATE_SLOTS,
                 "noise": _noise.OWNED_STATE_SLOTS, "firmware": _fw.OWNED_STATE_SLOTS,
-                "estimator": _est.OWNED_STATE_SLOTS,
+                "estimator": _est.OWNED_STATE_SLOTS, "current_sense": _isense.OWNED_STATE_SLOTS,
                 "loop": LOOP_STATE_SLOTS}
 """Every state slot by the module that declares it."""
 
@@ -126,6 +127,9 @@ PARAM_NAMES = [
     # the estimator's hysteresis compensation (the device's nominal FSR)
     "est_hyst_comp", "comp_fsr_k_ohm", "comp_hyst_halfwidth", "comp_hyst_deadband_v",
     "comp_hyst_follow_v", "comp_hyst_turn_v", "comp_turn_alpha",
+    # the motor-current sensing chain: the unit's transfer, the filter, the ADC, the firmware's constants
+    "isense_shunt_ohm", "isense_gain", "isense_offset_v", "isense_ref_v", "isense_decay", "isense_stages",
+    "isense_lsb_v", "isense_max_code", "isense_noise_v", "isense_zero_code", "isense_nominal_v_per_a",
     "seed",
 ] + [f"creep_a{j}" for j in range(N_CREEP)] + [f"comp_creep_a{j}" for j in range(N_CREEP)] \
   + [f"play_w{j}" for j in range(N_PLAYS)] + [f"play_weight{j}" for j in range(N_PLAYS)] \

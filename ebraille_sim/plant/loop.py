@@ -42,7 +42,7 @@ from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import (MAX_BREAKPOINTS, MAX_TF_LEN, N_INPUT, N_PARAM, N_PLAYS, N_STATE, P, S, U)
 
-__all__ = ["Plant", "make_plant", "PLANT_BACKENDS", "pack_params", "pack_devices", "initial_state",
+__all__ = ["Plant", "make_plant", "reseed", "PLANT_BACKENDS", "pack_params", "pack_devices", "initial_state",
            "check_step", "check_sensor_rates", "load_estimator"]
 
 
@@ -163,8 +163,35 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     p[P.est_nyquist_average] = 1.0 if e.nyquist_average else 0.0
     _pack_creep_compensation(p, e, dt_sensor)
     _pack_hysteresis_compensation(p, e, c, s, float(r.sensor_rate_hz))
-    p[P.seed] = float(seed)
+    _pack_current_sense(p, device.current_sense, h)
+    reseed(p, device, seed)
     return p
+
+
+def reseed(p: np.ndarray, device: DeviceParams, seed: float) -> None:
+    """Give a packed parameter row the sensor seed ``seed``: the seed of the device's noise and
+    what was measured with that noise (the current chain's zero, :func:`ebraille_sim.physics.current_sense.zero_code`)."""
+    from ebraille_sim.physics.current_sense import zero_code
+    cs = device.current_sense
+    p[P.seed] = float(seed)
+    p[P.isense_zero_code] = zero_code(cs, float(seed), cs.adc_lsb_v, cs.adc_max_code)
+
+
+def _pack_current_sense(p: np.ndarray, cs, h_s: float) -> None:
+    """The motor-current chain (:mod:`ebraille_sim.physics.current_sense`): the unit's true
+    transfer (shunt and gain with their errors, input offset), the RC sections' decay per physics
+    step, the ADC, and what the firmware knows: the nominal transfer (its zero, measured with
+    the device's noise, is written by :func:`reseed`)."""
+    p[P.isense_shunt_ohm] = cs.shunt_ohm * (1.0 + cs.shunt_error)
+    p[P.isense_gain] = cs.gain_v_per_v * (1.0 + cs.gain_error)
+    p[P.isense_offset_v] = cs.offset_v
+    p[P.isense_ref_v] = cs.reference_v
+    p[P.isense_decay] = math.exp(-h_s / cs.filter_tau_s)
+    p[P.isense_stages] = float(cs.filter_stages)
+    p[P.isense_lsb_v] = cs.adc_lsb_v
+    p[P.isense_max_code] = cs.adc_max_code
+    p[P.isense_noise_v] = cs.adc_noise_lsb * cs.adc_lsb_v
+    p[P.isense_nominal_v_per_a] = cs.nominal_v_per_a
 
 
 _PLAY_STATE_SLOTS = np.array([S[f"play_{j}"] for j in range(N_PLAYS)], dtype=np.intp)
@@ -378,6 +405,10 @@ def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None
     s[S.comp_hyst_x] = lf
     s[_COMP_PLAY_STATE_SLOTS] = lf
     _estimator_steady_state(s, p, v_read - s[S.tare_v])
+    v_rest = p[P.isense_ref_v] + p[P.isense_gain] * p[P.isense_offset_v]       # no current: the filters settled
+    s[S.isense_filter1_v] = v_rest
+    s[S.isense_filter2_v] = v_rest
+    s[S.current_meas_a] = 0.0
     return s
 
 

@@ -266,10 +266,14 @@ def _sensor_sequence(s, p, u, forces_n, n_sub):
     """The lumped sensor chain over consecutive pymunk steps, each spanning ``n_sub`` physics steps.
 
     ``forces_n[k]`` is the force that loads the FSR during pymunk step ``k``; the
-    ``contact_force_n`` slot is left at the last of them.
+    ``contact_force_n`` slot is left at the last of them.  The firmware then reads the motor
+    current once (:func:`ebraille_sim.plant.kernel.current_sample`), as at the end of every
+    control period of the lumped plant.
     """
     for k in range(forces_n.shape[0]):
         kernel.advance_sensor_only(s, p, u, forces_n[k], n_sub)
+    if forces_n.shape[0] > 0:
+        kernel.current_sample(s, p)
 
 
 class _Mechanism:

@@ -348,7 +348,7 @@ def scalar_step(state, inputs, ws, k, action):
     else:
         mode = fault = 0.0
     ft = state[S.contact_force_n]
-    r, v, term = post_step(_part(ws, P_Z), c, state[S.force_est_n], ft, state[S.current_a],
+    r, v, term = post_step(_part(ws, P_Z), c, state[S.force_est_n], ft, state[S.current_meas_a],
                            setpoint[k], setpoint[k + 1], a, _part(ws, P_OBS).view(np.float32)[:N_OBS])
     return (r, term, ft, state[S.force_est_n], setpoint[k + 1], inputs[U.command_v], v, (k + 1) * ws[W_DT], mode,
             fault)
@@ -800,7 +800,7 @@ class ContactForceEnv(gym.Env):
                                  f"{self._sup.min_control_period_s:g} s the safety supervisor is sized for")
             self._sv, self._svcfg = self._sup.compiled()
         reset_features(self._z, fe)
-        write_observation(self._z, self._c, fe, ep.setpoint_n[0], float(self._st[S.current_a]), self._obs)
+        write_observation(self._z, self._c, fe, ep.setpoint_n[0], float(self._st[S.current_meas_a]), self._obs)
         if self.render_mode is not None:
             self._history = {"t_s": [0.0], "force_true_n": [float(self._st[S.contact_force_n])],
                              "force_est_n": [fe], "setpoint_n": [float(ep.setpoint_n[0])]}
@@ -914,7 +914,7 @@ class ContactForceEnv(gym.Env):
         ft = float(st[S.contact_force_n])
         if not math.isfinite(ft):
             raise FloatingPointError("the simulation diverged (non-finite contact force)")
-        r, v, term = post_step(self._z, self._c, float(st[S.force_est_n]), ft, float(st[S.current_a]),
+        r, v, term = post_step(self._z, self._c, float(st[S.force_est_n]), ft, float(st[S.current_meas_a]),
                                ep.setpoint_n[k], ep.setpoint_n[k + 1], a, self._obs)
         info = self._info(v)
         if self._history is not None:

@@ -173,7 +173,7 @@ def step_row(i, state, params, inputs, z, c, slots, counts, tables, setpoint, n_
         return
     if safety:
         a = u / scale
-    r, v, term = post_step(z[i], c[i], state[i, S.force_est_n], state[i, S.contact_force_n], state[i, S.current_a],
+    r, v, term = post_step(z[i], c[i], state[i, S.force_est_n], state[i, S.contact_force_n], state[i, S.current_meas_a],
                            setpoint[i, k], setpoint[i, k + 1], a, obs[i])
     reward[i] = r
     violation[i] = v
@@ -327,7 +327,7 @@ class ContactForceVectorEnv(VectorEnv):
             self._n_steps[i] = min(n, self.max_episode_steps)
             fe = float(self.state[i, S.force_est_n])
             reset_features(self._z[i], fe)
-            write_observation(self._z[i], self._c[i], fe, ep.setpoint_n[0], float(self.state[i, S.current_a]),
+            write_observation(self._z[i], self._c[i], fe, ep.setpoint_n[0], float(self.state[i, S.current_meas_a]),
                               self._obs[i])
             self.episodes[i] = ep
             if self.config.safety:

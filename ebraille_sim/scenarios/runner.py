@@ -326,7 +326,7 @@ def _raise_row(rows, r: int, ctrl) -> None:
     if status == BAD_CONTROLLER_INPUT:
         # the controller's own check names the bad argument
         st = rows.states[r]
-        ctrl.update(float(st[rows.i_feedback]), rows.setpoints[r, k], rows.dt, float(st[S.current_a]) if k else 0.0)
+        ctrl.update(float(st[rows.i_feedback]), rows.setpoints[r, k], rows.dt, float(st[S.current_meas_a]) if k else 0.0)
         raise ValueError(f"non-finite controller input at control period {k}")
     if status == BAD_COMMAND:
         raise ValueError(f"command_v must be finite, got {value}")
@@ -392,7 +392,7 @@ def python_periods(plant, controllers: list, sp: np.ndarray, profiles: list, i_f
     updates = [c.update for c in controllers]
     varying = [(U[name], arr) for name, arr in profiles[0].items()] if not lumped else None
     fes = st[:, i_fb].tolist()
-    ias = st[:, S.current_a].tolist()
+    ias = st[:, S.current_meas_a].tolist()                  # the firmware's reading of the current
     live = list(range(m))
     wall0 = time.perf_counter()
     for k in range(k0, k0 + n):
@@ -421,7 +421,7 @@ def python_periods(plant, controllers: list, sp: np.ndarray, profiles: list, i_f
             if not live:
                 break
         fes = st[:, i_fb].tolist()
-        ias = st[:, S.current_a].tolist()
+        ias = st[:, S.current_meas_a].tolist()
     wall = time.perf_counter() - wall0
     if errors is not None:
         errors[:] = errs
@@ -452,7 +452,7 @@ def _python_plant_period(plant, varying: list, rows, k: int, c: float) -> None:
         kept = rows.kept[0]
         kept[ROW.command_v, q] = c
         kept[ROW.fsr_voltage_v, q] = st[S.fsr_voltage_v]
-        kept[ROW.motor_current_a, q] = st[S.current_a]
+        kept[ROW.motor_current_a, q] = st[S.current_a]         # plant truth: the trace's record
         kept[ROW.board_pos_m, q] = st[S.board_pos_m]
         kept[ROW.energy_j, q] = st[S.energy_j]
 
@@ -649,7 +649,8 @@ def _plant_rows(spec, run, cache: dict) -> tuple:
         hit = cache[key] = (plant.state[0].copy(), plant.params[0].copy(), plant.inputs[0].copy(), plant.substeps,
                             spec.device)
     state, params, inputs = hit[0].copy(), hit[1].copy(), hit[2].copy()
-    params[P.seed] = float(run.sensor_seed)
+    from ebraille_sim.plant.loop import reseed
+    reseed(params, spec.device, run.sensor_seed)
     inputs[U.finger_pos_m] = spec.finger.gap_m
     return state, params, inputs, hit[3]
 

@@ -185,6 +185,7 @@ class DeviceSpec:
     finger_overrides: dict | None = _key(None, "-", "overrides", target=_params.FingerParams)
     fsr_overrides: dict | None = _key(None, "-", "overrides", target=_params.FSRParams)
     circuit_overrides: dict | None = _key(None, "-", "overrides", target=_params.CircuitParams)
+    current_sense_overrides: dict | None = _key(None, "-", "overrides", target=_params.CurrentSenseParams)
 
 
 @dataclass(frozen=True)
@@ -372,6 +373,7 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
         finger = _params.replace_checked(finger, **dev.get("finger_overrides", {}))
         fsr = _params.replace_checked(fsr, **dev.get("fsr_overrides", {}))
         circuit = _params.replace_checked(circuit, **dev.get("circuit_overrides", {}))
+        current_sense = _params.replace_checked(_params.CurrentSenseParams(), **dev.get("current_sense_overrides", {}))
         r = _params.RateParams(
             control_rate_hz=rates.get("control_hz", r0.control_hz),
             sensor_rate_hz=rates.get("sensor_hz", r0.sensor_hz),
@@ -399,7 +401,7 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
         angle = math.radians(dev.get("hand_orientation_deg", d0.hand_orientation_deg))
         g = _params.STANDARD_GRAVITY_M_PER_S2 * math.cos(angle)
         device = _params.DeviceParams(motor=motor, drivetrain=drivetrain, finger=finger, fsr=fsr,
-                                      circuit=circuit, estimator=e, rates=r,
+                                      circuit=circuit, current_sense=current_sense, estimator=e, rates=r,
                                       driver_supply_v=dev.get("driver_supply_v", motor.nominal_voltage_v),
                                       gravity_m_per_s2=g)
         _check_rates(device)
