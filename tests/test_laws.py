@@ -36,7 +36,7 @@ from ebraille_sim.physics.params import (FINGERS, FSRS, MOTORS, CircuitParams, D
                                          EstimatorParams, FSRParams)
 from ebraille_sim.plant import kernel, layout
 from ebraille_sim.plant.layout import N_INPUT, P, S, U
-from ebraille_sim.plant.loop import Plant, check_step, initial_state, pack_params
+from ebraille_sim.plant.lumped import Plant, check_step, initial_state, pack_params
 
 FAULHABER = MOTORS["faulhaber_0816_006sr"]
 NOMINAL = FINGERS["nominal"]
@@ -654,7 +654,7 @@ def test_estimator_rate_is_the_models_own():
 
 
 def test_importing_the_plant_does_not_import_scipy_signal():
-    code = "import sys, ebraille_sim.plant.loop, ebraille_sim.plant.kernel; print('scipy.signal' in sys.modules)"
+    code = "import sys, ebraille_sim.plant.lumped, ebraille_sim.plant.kernel; print('scipy.signal' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 

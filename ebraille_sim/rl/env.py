@@ -766,7 +766,8 @@ class ContactForceEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         opt = validate_options(options, self.config.safe_force_n)
-        from ebraille_sim.plant.loop import Plant, make_plant
+        from ebraille_sim.plant.backends import make_plant
+        from ebraille_sim.plant.lumped import Plant
         ep = draw_episode(self.next_episode_seed(seed), self.config, opt)
         dev = ep.device
         self.plant = make_plant([dev], [ep.sensor_seed], backend=self.config.backend,
