@@ -12,7 +12,7 @@ figure the copy exists for is measured with both, interleaved so both see the sa
 * ``csv``: trace.csv formatted in compiled code (:mod:`ebraille_sim.tools.csvformat`)
   against Python's ``%`` formatting of the same rows, for a 60 s steady_90wpm run, beside
   the run itself;
-* ``butter``: the anti-alias filter designed by hand (``plant.loop._antialias_filter``)
+* ``butter``: the anti-alias filter designed by hand (``plant.lumped._antialias_filter``)
   against ``scipy.signal.butter``: one design per (cutoff, rate) pair, and the import of
   ``scipy.signal`` in a fresh interpreter that has imported the package and the kernel.
 
@@ -232,7 +232,7 @@ def _timed(fn) -> float:
 def butter_table(repeat: int) -> dict:
     """The hand design against scipy.signal.butter: one call each, and scipy.signal's import."""
     import scipy.signal
-    from ebraille_sim.plant.loop import _antialias_filter
+    from ebraille_sim.plant.lumped import _antialias_filter
     fc, fs = 120.0, 1000.0
     bb, aa = scipy.signal.butter(2, fc, fs=fs)
     mine = _antialias_filter.__wrapped__(fc, fs)

@@ -226,7 +226,7 @@ def replay_estimate(device, force_n: np.ndarray, dt_s: float) -> np.ndarray:
     """The estimate of ``device``'s sensor chain fed ``force_n`` (held over each period ``dt_s``)."""
     from ebraille_sim.plant.kernel import advance_sensor_only
     from ebraille_sim.plant.layout import N_INPUT, S, U
-    from ebraille_sim.plant.loop import initial_state, pack_params
+    from ebraille_sim.plant.lumped import initial_state, pack_params
     p = pack_params(device, 0)
     s = initial_state(device, p)
     u = np.zeros(N_INPUT)

@@ -25,11 +25,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ebraille_sim.plant.mechanism import PymunkPlant, draw_snapshot, recording  # noqa: E402
+from ebraille_sim.plant.pymunk.plant import PymunkPlant  # noqa: E402
+from ebraille_sim.plant.pymunk.recording import Recorder  # noqa: E402
 from ebraille_sim.scenarios.mechanism_section import load_mechanism_scenario  # noqa: E402
 from ebraille_sim.physics.params import DeviceParams  # noqa: E402
 from ebraille_sim.scenarios.runner import run_scenario  # noqa: E402
 from ebraille_sim.scenarios.spec import load_scenario  # noqa: E402
+from ebraille_sim.tools.mechanism_drawing import draw_snapshot  # noqa: E402
 
 OUT = pathlib.Path(__file__).resolve().parent / "figures" / "mechanism"
 STANDARD = ["steady_60wpm", "steady_90wpm", "steady_120wpm", "setpoint_steps", "contact_onset"]
@@ -42,8 +44,8 @@ def rms_rel(a, b, sp):
 
 def offcentre_figure():
     spec = load_mechanism_scenario("offcentre_press")
-    with recording(every_s=0.005) as rec:
-        pm = run_scenario(spec, backend="pymunk")
+    rec = Recorder(every_s=0.005)
+    pm = run_scenario(spec, backend="pymunk", recorder=rec)
     lu = run_scenario(spec)
     fr = rec.frames[1:]
     t = np.array([f["t_s"] for f in fr])

@@ -16,7 +16,7 @@ from ebraille_sim.plant import kernel  # noqa: E402
 from ebraille_sim.estimation.calibration import static_error_table  # noqa: E402
 from ebraille_sim.physics.fingertip import relaxation_function  # noqa: E402
 from ebraille_sim.plant.layout import N_INPUT, S, U  # noqa: E402
-from ebraille_sim.plant.loop import Plant, initial_state, pack_params  # noqa: E402
+from ebraille_sim.plant.lumped import Plant, initial_state, pack_params  # noqa: E402
 from ebraille_sim.estimation.paper_models import paper_model  # noqa: E402
 from ebraille_sim.physics.params import (FINGERS, CircuitParams, DeviceParams, DriveTrainParams, FSRParams,  # noqa: E402
                                  RateParams)

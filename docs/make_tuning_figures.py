@@ -39,7 +39,7 @@ from ebraille_sim.analysis.margins import analyse_loop  # noqa: E402
 from ebraille_sim.analysis.plant_model import continuous_model, operating_point  # noqa: E402
 from ebraille_sim.analysis.plots import plot_bode, plot_nyquist  # noqa: E402
 from ebraille_sim.analysis.sampled import linearize, sampled_front  # noqa: E402
-from ebraille_sim.plant.loop import Plant  # noqa: E402
+from ebraille_sim.plant.lumped import Plant  # noqa: E402
 from ebraille_sim.physics.params import DeviceParams  # noqa: E402
 from ebraille_sim.scenarios.runner import run_scenario  # noqa: E402
 from ebraille_sim.scenarios.spec import load_scenario  # noqa: E402

@@ -8,7 +8,7 @@ estimator, a controller or a scenario::
 
 Commit the rewritten files with the change and say in the commit message why they moved.
 
-Golden trajectories: one file per backend of :data:`ebraille_sim.plant.loop.PLANT_BACKENDS`,
+Golden trajectories: one file per backend of :data:`ebraille_sim.plant.backends.PLANT_BACKENDS`,
 ``tests/data/golden/<backend>.npz``: the first :data:`DURATION_S` seconds of the
 :data:`SCENARIO` scenario with seed :data:`SEED` (approach from a 2 mm gap, contact and the
 first reading at 1.5 N), one sample per control period, float64 columns :data:`COLUMNS` plus
@@ -48,7 +48,7 @@ at most 1.5e-8 N and the pymunk one by 1.8e-5 N, 1.6e-7 A and 1.7 nm, with the s
 in every sample.  A physics change shows: 0.01 % stiffer pulp moves the true force by 22 mN.
 One ADC code that flips (the analogue voltage on the other side of a code edge) moves the true
 force by up to 7 mN and fails the comparison: check the physics tests
-(``test_plant_physics.py``, ``test_mechanism.py``) on that platform and regenerate.
+(``test_plant_physics.py``, ``test_pymunk_model.py``) on that platform and regenerate.
 """
 
 
@@ -81,7 +81,7 @@ def read_golden(backend: str) -> dict:
 
 
 def main(argv: list[str]) -> int:
-    from ebraille_sim.plant.loop import PLANT_BACKENDS
+    from ebraille_sim.plant.backends import PLANT_BACKENDS
     backends = argv or list(PLANT_BACKENDS)
     unknown = [b for b in backends if b not in PLANT_BACKENDS]
     if unknown:

@@ -126,7 +126,7 @@ def test_no_import_cycles():
     ("ebraille_sim.physics.motor", "ebraille_sim.plant.kernel"),          # upward
     ("controllers.pid", "ebraille_sim.scenarios.runner"),                 # controllers above estimation
     ("ebraille_sim.rl.env", "ebraille_sim.analysis.margins"),              # between peers
-    ("ebraille_sim.plant.loop", "ebraille_sim"),                          # the package front door
+    ("ebraille_sim.plant.lumped", "ebraille_sim"),                          # the package front door
 ])
 def test_the_checker_reports_a_forbidden_import(importer, imported):
     """The rule itself can fail: a real import graph with one forbidden edge added is reported."""
@@ -199,7 +199,7 @@ def test_the_filter_designs_without_scipy_signal_are_scipys_to_the_last_bit():
     import scipy.signal
 
     from ebraille_sim.estimation.registry import load_estimator
-    from ebraille_sim.plant.loop import _antialias_filter, _unit_step_state
+    from ebraille_sim.plant.lumped import _antialias_filter, _unit_step_state
     for fc, fs in ((20.0, 1000.0), (40.0, 1000.0), (5.0, 100.0), (200.0, 1000.0), (1.0, 10000.0), (33.3, 777.0)):
         b, a = scipy.signal.butter(2, fc, fs=fs)
         mb, ma = _antialias_filter(fc, fs)

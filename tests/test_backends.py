@@ -3,7 +3,7 @@
 Golden trajectories
 -------------------
 ``tests/data/golden/<backend>.npz`` holds, for every backend of
-:data:`ebraille_sim.plant.loop.PLANT_BACKENDS`, the first 3 s of the ``contact_onset``
+:data:`ebraille_sim.plant.backends.PLANT_BACKENDS`, the first 3 s of the ``contact_onset``
 scenario with seed 3 in closed loop (true force, estimate, FSR voltage, command, motor
 current, board position, one sample per control period).  A fresh run must reproduce every
 column within the absolute tolerance of ``make_golden.TOLERANCES``, each named by the
@@ -42,7 +42,7 @@ import pytest
 import controllers
 from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.plant.layout import N_INPUT, N_PARAM, N_STATE, S, U
-from ebraille_sim.plant.loop import PLANT_BACKENDS, make_plant
+from ebraille_sim.plant.backends import PLANT_BACKENDS, make_plant
 from make_golden import COLUMNS, DURATION_S, SCENARIO, SEED, TOLERANCES, golden_path, golden_run, read_golden
 
 BACKENDS = list(PLANT_BACKENDS)

@@ -353,7 +353,7 @@ def test_out_problems_are_one_line_before_any_work(command, tmp_path, capsys, mo
 # ---------------------------------------------------------------- --backend, --animate
 
 def test_backend_help_lists_the_plant_backends(capsys):
-    from ebraille_sim.plant.loop import PLANT_BACKENDS
+    from ebraille_sim.plant.backends import PLANT_BACKENDS
     assert cli(["run", "--help"]) == 0
     text = " ".join(capsys.readouterr().out.split())
     assert "--backend {" + ",".join(PLANT_BACKENDS) + "}" in text

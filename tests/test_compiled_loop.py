@@ -173,7 +173,7 @@ def test_a_non_finite_external_command_stops_its_row_only():
     """The engine refuses a non-finite command of one row (status BAD_COMMAND, the row's plant not
     advanced in that period) and steps the other rows."""
     spec, _, run, _ = runner.prepare_run("steady_90wpm", "pid", duration_s=0.05)
-    from ebraille_sim.plant.loop import make_plant
+    from ebraille_sim.plant.backends import make_plant
     plant = make_plant([spec.device, spec.device], seeds=[1, 1])
     n = 4
     sp = np.full((2, n), 1.0)

@@ -237,7 +237,7 @@ def _held_estimates(section, creep_compensation=True, preload=True, seconds=20.0
     from ebraille_sim.base.validation import replace_checked
     from ebraille_sim.plant import kernel
     from ebraille_sim.plant.layout import N_INPUT, S, U
-    from ebraille_sim.plant.loop import initial_state, pack_params
+    from ebraille_sim.plant.lumped import initial_state, pack_params
     dev = dataclasses.replace(NOMINAL, estimator=replace_checked(NOMINAL.estimator,
                                                                  creep_compensation=creep_compensation))
     t = np.arange(0, int(round(seconds / DT))) * DT

@@ -19,7 +19,7 @@ from ebraille_sim.estimation.paper_models import paper_model
 from ebraille_sim.estimation.resample import continuous_equivalent, resample, split_rate
 from ebraille_sim.physics.params import DeviceParams, EstimatorParams
 from ebraille_sim.plant.layout import P
-from ebraille_sim.plant.loop import check_sensor_rates, pack_params
+from ebraille_sim.plant.lumped import check_sensor_rates, pack_params
 from ebraille_sim.scenarios.spec import ScenarioError, parse_scenario
 
 FAST = "paper:wiener:5@1000"
@@ -177,7 +177,7 @@ def test_loop_analysis_handles_the_1khz_estimator_and_matches_the_nonlinear_plan
     estimated force within 10 % of the final change, every millisecond."""
     from ebraille_sim.analysis.margins import analyse_loop
     from ebraille_sim.analysis.sampled import linearize
-    from ebraille_sim.plant.loop import Plant
+    from ebraille_sim.plant.lumped import Plant
     from controllers.pid import PID, DEFAULT_PID
     base = DeviceParams()
     dev = dataclasses.replace(

@@ -37,7 +37,7 @@ from ebraille_sim.physics.params import (FINGERS, FSRS, MOTORS, CircuitParams, D
                                          EstimatorParams, FSRParams)
 from ebraille_sim.plant import kernel, layout
 from ebraille_sim.plant.layout import N_INPUT, P, S, U
-from ebraille_sim.plant.loop import Plant, check_step, initial_state, pack_params
+from ebraille_sim.plant.lumped import Plant, check_step, initial_state, pack_params
 
 FAULHABER = MOTORS["faulhaber_0816_006sr"]
 NOMINAL = FINGERS["nominal"]
@@ -643,7 +643,7 @@ def test_the_current_chain_reads_a_held_current_within_its_worst_case():
     import dataclasses
     from ebraille_sim.physics.current_sense import worst_case_error_a
     from ebraille_sim.physics.params import CurrentSenseParams, DeviceParams
-    from ebraille_sim.plant.loop import make_plant
+    from ebraille_sim.plant.backends import make_plant
     for cs in (CurrentSenseParams(), CurrentSenseParams(shunt_error=0.01, gain_error=0.002, offset_v=25e-6)):
         dev = dataclasses.replace(DeviceParams(), current_sense=cs)
         plant = make_plant([dev], seeds=[7])
@@ -719,7 +719,7 @@ def test_estimator_rate_is_the_models_own():
 
 
 def test_importing_the_plant_does_not_import_scipy_signal():
-    code = "import sys, ebraille_sim.plant.loop, ebraille_sim.plant.kernel; print('scipy.signal' in sys.modules)"
+    code = "import sys, ebraille_sim.plant.lumped, ebraille_sim.plant.kernel; print('scipy.signal' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 

@@ -8,7 +8,7 @@ from ebraille_sim.physics.drivetrain import mesh_force
 from ebraille_sim.physics.fingertip import elastic_force
 from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.plant.layout import P
-from ebraille_sim.plant.loop import pack_params
+from ebraille_sim.plant.lumped import pack_params
 
 
 @pytest.mark.parametrize("force", [0.5, 1.0, 2.0])

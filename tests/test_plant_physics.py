@@ -7,7 +7,7 @@ import pytest
 from ebraille_sim.physics.drivetrain import reflected
 from ebraille_sim.physics.fingertip import relaxation_function
 from ebraille_sim.plant.layout import S
-from ebraille_sim.plant.loop import Plant
+from ebraille_sim.plant.lumped import Plant
 from ebraille_sim.physics.params import (DRIVETRAINS, FINGERS, FSRS, MOTORS, CircuitParams, DeviceParams,
                                  DriveTrainParams, EstimatorParams, FingerParams, RateParams, describe, source_of)
 

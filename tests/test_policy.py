@@ -14,7 +14,7 @@ from controllers.features import Z_PREV_ACTION
 from controllers.policy import POLICY_FORMAT, PolicyController, load_policy, read_metadata
 from ebraille_sim.rl.env import ContactForceEnv, EnvConfig
 from ebraille_sim.plant.layout import S
-from ebraille_sim.plant.loop import Plant
+from ebraille_sim.plant.lumped import Plant
 from ebraille_sim.physics.params import DeviceParams, RateParams
 
 

@@ -278,31 +278,31 @@ def test_a_reused_workspace_starts_each_episode_with_a_clear_supervisor_state():
 
 
 def test_estimator_steady_state_is_cached_per_parameters_and_input_and_read_only():
-    from ebraille_sim.plant import loop
+    from ebraille_sim.plant import lumped
     from ebraille_sim.plant.layout import N_STATE, P
-    loop._steady_state_slots.cache_clear()
+    lumped._steady_state_slots.cache_clear()
     devices = sample_devices(8, 3)
-    params = [loop.pack_params(d, 1.0) for d in devices]
+    params = [lumped.pack_params(d, 1.0) for d in devices]
     for p in params:
         for u0 in (0.0, -0.0, 0.37):
             want, got = np.full(N_STATE, 5.0), np.full(N_STATE, 5.0)
-            loop._fill_estimator_steady_state(want, p, u0)
-            loop._estimator_steady_state(got, p, u0)
+            lumped._fill_estimator_steady_state(want, p, u0)
+            lumped._estimator_steady_state(got, p, u0)
             assert want.tobytes() == got.tobytes()            # -0.0 kept apart from 0.0
-    info = loop._steady_state_slots.cache_info()
+    info = lumped._steady_state_slots.cache_info()
     assert info.misses == 3 and info.hits == 6                # one estimator and filter for every unit
-    slots, values = loop._steady_state_slots(params[0][loop._STEADY_HEAD].tobytes(),
-                                             params[0][loop._STEADY_MODEL].tobytes(), (0.0).hex())
+    slots, values = lumped._steady_state_slots(params[0][lumped._STEADY_HEAD].tobytes(),
+                                               params[0][lumped._STEADY_MODEL].tobytes(), (0.0).hex())
     assert not slots.flags.writeable and not values.flags.writeable
     with pytest.raises(ValueError):
         values[0] = 1.0
     other = params[0].copy()
     other[P.aa_b0] *= 1.5                                     # another filter: computed afresh
     a, b = np.zeros(N_STATE), np.zeros(N_STATE)
-    loop._estimator_steady_state(a, other, 0.37)
-    loop._fill_estimator_steady_state(b, other, 0.37)
+    lumped._estimator_steady_state(a, other, 0.37)
+    lumped._fill_estimator_steady_state(b, other, 0.37)
     assert a.tobytes() == b.tobytes()
-    assert loop._steady_state_slots.cache_info().misses == 4
+    assert lumped._steady_state_slots.cache_info().misses == 4
 
 
 def test_compiled_cell_index_equals_the_searchsorted_lookup():

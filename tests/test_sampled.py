@@ -12,7 +12,7 @@ from ebraille_sim.analysis.sampled import (_lift, compensation_model, creep_mode
                                            sensor_models)
 from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.plant.layout import P
-from ebraille_sim.plant.loop import Plant, pack_params
+from ebraille_sim.plant.lumped import Plant, pack_params
 
 COULOMB = dataclasses.replace(
     DeviceParams(), motor=dataclasses.replace(DeviceParams().motor, breakaway_ratio=1.0),
@@ -69,7 +69,7 @@ def _sensor_chain_after_a_hold(dev, force_n: float, hold: int, after: int, slot:
     film, then ``force_n`` for ``after`` samples; the state ``slot`` at each of those."""
     from ebraille_sim.plant import kernel
     from ebraille_sim.plant.layout import N_INPUT, S
-    from ebraille_sim.plant.loop import initial_state
+    from ebraille_sim.plant.lumped import initial_state
     n_sub = int(round(dev.rates.physics_rate_hz / dev.rates.sensor_rate_hz))
     p = pack_params(dev, 0.0)
     s = initial_state(dev, p)

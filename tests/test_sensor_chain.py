@@ -11,7 +11,7 @@ from ebraille_sim.estimation.calibration import calibrate_r2, loading_branch_fac
 from ebraille_sim.physics.fsr import static_resistance, static_voltage
 from ebraille_sim.physics.fsr import FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE
 from ebraille_sim.plant.layout import N_INPUT, S, U
-from ebraille_sim.plant.loop import initial_state, pack_params
+from ebraille_sim.plant.lumped import initial_state, pack_params
 from ebraille_sim.estimation.paper_models import paper_model
 from ebraille_sim.physics.params import FSRS, CircuitParams, DeviceParams, EstimatorParams, FSRParams, RateParams
 

@@ -167,7 +167,7 @@ def test_same_seed_same_model_exactly(wiener_truth):
 
 def test_model_saves_and_loads_as_in_loop_estimator(tmp_path, wiener_fit):
     from ebraille_sim.estimation.registry import load_estimator
-    from ebraille_sim.plant.loop import pack_params
+    from ebraille_sim.plant.lumped import pack_params
     from ebraille_sim.physics.params import DeviceParams
 
     path = tmp_path / "w5.json"

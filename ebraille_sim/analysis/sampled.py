@@ -69,7 +69,7 @@ def creep_model(device: DeviceParams = DeviceParams()) -> control.StateSpace:
     with the input ``x`` the instantaneous voltage deviation (slope times ``dF_l``, which
     scales the force deviation the terms follow by a constant), the model is
     ``zeta+ = a zeta + (1-a) x``, ``y = x + w sum_i (a_i zeta_i + (1-a_i) x)``, with the
-    weight ``w`` and decays ``a_i`` that :func:`ebraille_sim.plant.loop.pack_params` packs.
+    weight ``w`` and decays ``a_i`` that :func:`ebraille_sim.plant.lumped.pack_params` packs.
     Its gain is ``1 + w sum_i (1 - a_i)`` at the Nyquist frequency and ``1 + N w`` at DC.
     """
     fsr = device.fsr

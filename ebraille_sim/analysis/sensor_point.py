@@ -61,14 +61,14 @@ def compensation_point(device: DeviceParams, raw_v: float, estimate_n: float, lo
     """The kernel's creep compensation at an operating point, and its partial derivatives.
 
     Evaluates :func:`ebraille_sim.estimation.firmware.creep_compensated_v` itself with the
-    parameters :func:`ebraille_sim.plant.loop.pack_params` packs, its creep terms having
+    parameters :func:`ebraille_sim.plant.lumped.pack_params` packs, its creep terms having
     followed ``estimate_n`` for ``load_time_s`` (``z_i = F (1 - a_i^k)``).  Returns
     ``(v_out, d/dv, d/dF_est, d/dz_i, a_i)``; the derivatives are central differences of
     that function (it is smooth away from the load threshold and the rails).
     """
     from ebraille_sim.estimation.firmware import creep_compensated_v
     from ebraille_sim.plant.layout import N_CREEP, P
-    from ebraille_sim.plant.loop import pack_params
+    from ebraille_sim.plant.lumped import pack_params
     p = pack_params(device, 0.0)
     a = np.array([p[P[f"comp_creep_a{j}"]] for j in range(N_CREEP)])
     k = int(round(load_time_s * device.rates.sensor_rate_hz))

@@ -18,7 +18,7 @@ used when Matplotlib is not loaded in this process yet; False draws the figure h
 
 
 class _Backends:
-    """The names of :data:`ebraille_sim.plant.loop.PLANT_BACKENDS`, read when argparse asks."""
+    """The names of :data:`ebraille_sim.plant.backends.PLANT_BACKENDS`, read when argparse asks."""
 
     def _names(self) -> list:
         from ebraille_sim.plant.backends import PLANT_BACKENDS
@@ -150,7 +150,7 @@ def _not_overwriting(args, out, anim) -> None:
 def _draw(frames, path, con):
     """Draw the recorded frames to ``path``; returns the file (or frame folder) written."""
     from ebraille_sim.commands import FrameProgress
-    from ebraille_sim.plant.mechanism import write_animation
+    from ebraille_sim.tools.mechanism_drawing import write_animation
     bar = FrameProgress("drawing frames", enabled=con.progress)
     try:
         return write_animation(frames, path, fps=25.0, progress=bar)
@@ -211,9 +211,10 @@ def _run(args, plotter) -> int:
     if not sup_on:
         print(f"warning: safety supervisor {sup_source}", file=sys.stderr)
 
-    def simulate():
+    def simulate(recorder=None):
         return run_scenario(spec, controller=ctrl, seed=args.seed, duration_s=args.duration,
-                            backend=args.backend, supervised=not args.no_supervisor, trace_every=every)
+                            backend=args.backend, supervised=not args.no_supervisor, trace_every=every,
+                            recorder=recorder)
 
     frames = None
     inside = anim is not None and not args.animate           # the default: animation.gif in the run folder
@@ -221,9 +222,9 @@ def _run(args, plotter) -> int:
     with claim_out_dir(out, RUN_OWNED) as target:
         _not_overwriting(args, out, anim)
         if anim is not None:
-            from ebraille_sim.plant.mechanism import recording
-            with recording(every_s=1.0 / 25.0) as rec:
-                result = simulate()
+            from ebraille_sim.plant.pymunk.recording import Recorder
+            rec = Recorder(every_s=1.0 / 25.0)
+            result = simulate(rec)
             frames = rec.frames
         else:
             result = simulate()

@@ -35,7 +35,7 @@ __all__ = [
 FIRMWARE_FSR = FSRS["nominal"]
 """The FSR model the estimator's creep and hysteresis compensations assume (the firmware does
 not know the individual unit's parameters; the hysteresis compensation takes the unit's
-measured loop width, :mod:`ebraille_sim.plant.loop`)."""
+measured loop width, :mod:`ebraille_sim.plant.lumped`)."""
 
 ANTIALIAS_SLOTS = ("aa_z1", "aa_z2")
 """State slots of the anti-alias biquad (direct form II transposed)."""

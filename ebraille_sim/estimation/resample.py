@@ -25,7 +25,7 @@ For ``"paper:wiener:5"`` this is ``G(s) = -0.192 (s + 5.35) / (s + 5.96)``; at 1
 pole is ``0.942^(1/10)`` and the block has one sample of direct feedthrough.  Which rates
 suit a device is a property of the device: the estimator period must be a whole number of
 sensor periods (:func:`resample` checks it when given the sensor rate;
-:func:`ebraille_sim.plant.loop.check_sensor_rates` checks it for every device).
+:func:`ebraille_sim.plant.lumped.check_sensor_rates` checks it for every device).
 
 Estimator names carry the rate after ``@``: ``"paper:wiener:5@1000"`` is
 ``resample(paper_model("wiener", 5), 1000.0)`` (:func:`ebraille_sim.estimation.registry.load_estimator`).

@@ -9,7 +9,7 @@ Every parameter set is a frozen dataclass whose field names carry SI units
 ``[E]``  engineering estimate (the reasoning is named; calibrate before trusting).
 
 Derived quantities (reflected mass, reflected friction, Prony decay factors...)
-are computed by properties or by :func:`ebraille_sim.plant.loop.pack_params`, never stored.
+are computed by properties or by :func:`ebraille_sim.plant.lumped.pack_params`, never stored.
 The static helpers here (``elastic_force_n``, ``resistance_ohm``, ``divider_v``...) call
 the very law functions of :mod:`~ebraille_sim.physics.fingertip` and
 :mod:`~ebraille_sim.physics.fsr` that the compiled loop runs.
@@ -520,7 +520,7 @@ class EstimatorParams(_Checked):
     The estimator runs at its model's own sample rate, ``1/dt_s`` of the block model (the
     paper's models: 100 Hz, the rate they were identified at); there is no separate rate
     setting.  The sensor rate must be a whole multiple of it
-    (:func:`ebraille_sim.plant.loop.pack_params` raises otherwise).
+    (:func:`ebraille_sim.plant.lumped.pack_params` raises otherwise).
     """
     model: str = _p("paper:wiener:5", "-", "seed paper, Appendix 2-3, fifth-order Wiener")
     antialias_cutoff_hz: float = _pos(20.0, "Hz", "[E] the paper band-limited its data below 40 Hz; "

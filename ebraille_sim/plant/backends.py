@@ -7,10 +7,12 @@ from __future__ import annotations
 
 __all__ = ["PLANT_BACKENDS", "make_plant"]
 
-PLANT_BACKENDS: dict = {"lumped": "ebraille_sim.plant.loop:Plant", "pymunk": "ebraille_sim.plant.mechanism:PymunkPlant"}
+PLANT_BACKENDS: dict = {"lumped": "ebraille_sim.plant.lumped:Plant",
+                        "pymunk": "ebraille_sim.plant.pymunk.plant:PymunkPlant"}
 """Plant classes by backend name, as ``"module:Class"``; each class provides
 ``from_devices(devices, seeds, board_pos_m=None, models=None)`` and the :class:`Plant`
-interface (``advance``, ``set_finger``, ``set_input``, ``state``/``params``/``inputs``)."""
+interface (``advance``, ``set_finger``, ``set_input``, ``state``/``params``/``inputs``); a
+backend may take more keywords (the pymunk plant's ``recorder``)."""
 
 
 def make_plant(devices, seeds, backend: str = "lumped", **kwargs):

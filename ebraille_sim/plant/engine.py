@@ -37,7 +37,7 @@ One row, the default PID unsupervised, 0.2 s at 200 Hz:
 >>> import numpy as np
 >>> from controllers import make
 >>> from ebraille_sim.physics.params import DeviceParams
->>> from ebraille_sim.plant.loop import make_plant
+>>> from ebraille_sim.plant.backends import make_plant
 >>> from ebraille_sim.plant.layout import S
 >>> plant = make_plant([DeviceParams()], seeds=[1])
 >>> kind, cs, cp = make("pid").compiled()

@@ -31,7 +31,7 @@ Per physics step ``h`` (default 0.1 ms), with the command held over the control 
    sample the block-oriented estimator (:func:`~ebraille_sim.estimation.blockmodels.estimator_step`).
 
 Stability: the semi-implicit step is stable while ``w h < 2`` for the stiffest
-oscillation, the board on the mesh and the pulp; :func:`ebraille_sim.plant.loop.check_step`
+oscillation, the board on the mesh and the pulp; :func:`ebraille_sim.plant.lumped.check_step`
 rejects physics rates that give ``w h > 1``.
 """
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Flat state and parameter vectors shared by the compiled loop kernel.
 
-The loop kernel (:mod:`ebraille_sim.plant.loop`) works on one float64 state vector ``S`` and
+The loop kernel (:mod:`ebraille_sim.plant.lumped`) works on one float64 state vector ``S`` and
 one float64 parameter vector ``P`` per device, so that a single device and a batch of
 ``n`` devices (arrays of shape ``(n, N_STATE)`` and ``(n, N_PARAM)``) run the same
 compiled code.  This module names every slot once; nothing else hard-codes an index.

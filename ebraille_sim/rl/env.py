@@ -155,7 +155,7 @@ trained with the layer on is therefore evaluated with it on, as in a scenario ru
 | `disturbances`         | bool  | True      | finger drift, tremor and supply sag                    |
 | `effort_weight`        | float | 0.1       | ``w_u``                                                |
 | `violation_weight`     | float | 1.0       | ``w_v``                                                |
-| `backend`              | str   | "lumped"  | plant model for :func:`ebraille_sim.plant.loop.make_plant`   |
+| `backend`              | str   | "lumped"  | plant model for :func:`ebraille_sim.plant.backends.make_plant`|
 | `base_device`          | DeviceParams | nominal | centre of the population                        |
 | `safety`               | bool  | True      | safety layer: the supervisor shapes every command      |
 
@@ -766,7 +766,8 @@ class ContactForceEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         opt = validate_options(options, self.config.safe_force_n)
-        from ebraille_sim.plant.loop import Plant, make_plant
+        from ebraille_sim.plant.backends import make_plant
+        from ebraille_sim.plant.lumped import Plant
         ep = draw_episode(self.next_episode_seed(seed), self.config, opt)
         dev = ep.device
         self.plant = make_plant([dev], [ep.sensor_seed], backend=self.config.backend,

@@ -21,7 +21,7 @@ at 0.09-0.60 times one thread (``benchmarks/bench_env.py`` prints this table), w
 no fixed rule serves.
 
 Sub-env ``i`` is exactly the scalar env reset with seed ``seed + i`` (or ``seeds[i]``): the
-same episode draws, the same packed rows (built by :meth:`ebraille_sim.plant.loop.Plant.from_devices`)
+same episode draws, the same packed rows (built by :meth:`ebraille_sim.plant.lumped.Plant.from_devices`)
 and the same compiled step; ``tests/test_vector_env.py`` checks trajectories agree to 1e-9.
 
 Autoreset follows Gymnasium's ``AutoresetMode.NEXT_STEP``: the step after a sub-env
@@ -296,7 +296,7 @@ class ContactForceVectorEnv(VectorEnv):
     def _load_rows(self, rows, options: dict) -> None:
         """Draw the next episode of every sub-env in ``rows`` and write their rows, each as the
         scalar env's reset; the supervisors' buffers are widened at most once per call."""
-        from ebraille_sim.plant.loop import initial_state, pack_params
+        from ebraille_sim.plant.lumped import initial_state, pack_params
         rows = [int(i) for i in rows]
         eps = []
         for i in rows:

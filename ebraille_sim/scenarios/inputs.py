@@ -301,7 +301,7 @@ def _base_setpoint(spec: ScenarioSpec, t_s: np.ndarray) -> np.ndarray:
 
 
 def base_input_row(device, gap_m: float) -> np.ndarray:
-    """Constant plant inputs of a run: the rows :func:`ebraille_sim.plant.loop.pack_devices`
+    """Constant plant inputs of a run: the rows :func:`ebraille_sim.plant.lumped.pack_devices`
     fills (gravity along the travel, driver supply), the finger at ``gap_m``, all else 0."""
     row = np.zeros(N_INPUT)
     row[U.gravity_along_m_per_s2] = -device.gravity_m_per_s2

@@ -2,7 +2,7 @@
 
 Press offset, finger tilt and hand roll over time become per-period plant inputs
 (``press_offset_m``, ``finger_tilt_rad``, ``gravity_lateral_m_per_s2``), which the 2-D
-mechanism (:mod:`ebraille_sim.plant.mechanism`) reads; the lumped plant ignores them.
+mechanism (:mod:`ebraille_sim.plant.pymunk`) reads; the lumped plant ignores them.
 """
 from __future__ import annotations
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ebraille_sim.plant.layout import S, U
-from ebraille_sim.plant.loop import make_plant
+from ebraille_sim.plant.backends import make_plant
 from ebraille_sim.plant.engine import KEPT
 from ebraille_sim.scenarios.inputs import build_run_inputs, refresh_phases
 from ebraille_sim.scenarios.metrics import compute_metrics
@@ -132,7 +132,7 @@ def prepare_run(scenario, controller=None, seed: int | None = None, duration_s: 
 
 def run_scenario(scenario, controller=None, seed: int | None = None, duration_s: float | None = None,
                  backend: str = "lumped", device=None, trace_every: int | None = 1,
-                 supervised: bool = True) -> RunResult:
+                 supervised: bool = True, recorder=None) -> RunResult:
     """Simulate a scenario in closed loop.
 
     Parameters
@@ -147,7 +147,7 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     duration_s : float, optional
         Overrides the scenario's duration.
     backend : str
-        Plant model: ``"lumped"`` or another name in :data:`ebraille_sim.plant.loop.PLANT_BACKENDS`.
+        Plant model: ``"lumped"`` or another name in :data:`ebraille_sim.plant.backends.PLANT_BACKENDS`.
     device : DeviceParams, optional
         Replaces the scenario's device (e.g. a reader drawn by
         :func:`ebraille_sim.scenarios.population.sample_devices`).
@@ -161,6 +161,11 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
         False switches the safety supervisor off for this run (recorded in
         ``RunResult.supervisor``); True (default) leaves the scenario's choice, which is on
         unless the file sets ``[supervisor] enabled = false``.
+    recorder : Recorder, optional
+        With the pymunk backend, handed to the plant it builds
+        (:class:`ebraille_sim.plant.pymunk.recording.Recorder`: snapshots of the mechanism for
+        drawing); it reads the plant and changes nothing in the run.  The lumped plant, whose
+        periods run in one compiled call, takes none.
 
     Returns
     -------
@@ -169,30 +174,35 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     if trace_every is not None and (isinstance(trace_every, bool) or not isinstance(trace_every, (int, np.integer))
                                     or trace_every < 1):
         raise ValueError(f"trace_every must be a whole number >= 1 or None, got {trace_every!r}")
+    if recorder is not None and backend == "lumped":
+        raise ValueError("a recorder records the pymunk mechanism; use backend='pymunk' with it, not 'lumped'")
     spec, seed, run, ctrl = prepare_run(scenario, controller, seed, duration_s, device)
     supervisor_choice(spec, supervised)
     if trace_every == 1:
-        return _simulate(spec, seed, run, ctrl, backend, supervised)
-    return _simulate_lean(spec, seed, run, ctrl, backend, trace_every, supervised, release_inputs=True)
+        return _simulate(spec, seed, run, ctrl, backend, supervised, recorder)
+    return _simulate_lean(spec, seed, run, ctrl, backend, trace_every, supervised, release_inputs=True,
+                          recorder=recorder)
 
 
-def _simulate(spec, seed, run, ctrl, backend: str, supervised: bool = True) -> RunResult:
+def _simulate(spec, seed, run, ctrl, backend: str, supervised: bool = True, recorder=None) -> RunResult:
     """Closed loop of one prepared run, one control period per Python iteration, full trace."""
-    sp, f_true, f_est, kept, _, wall, name, wrapped = _closed_loop(spec, run, ctrl, backend, 1, supervised)
+    sp, f_true, f_est, kept, _, wall, name, wrapped = _closed_loop(spec, run, ctrl, backend, 1, supervised,
+                                                                   recorder)
     tr = {"force_true_n": f_true, "force_est_n": f_est, **kept}
     return _with_supervisor(_finish(spec, seed, run, tr, sp, wall, name), spec, supervised, wrapped)
 
 
-def _plant_for(spec, run, backend: str):
+def _plant_for(spec, run, backend: str, recorder=None):
+    extra = {} if recorder is None else {"recorder": recorder}
     try:
-        plant = make_plant([spec.device], seeds=[run.sensor_seed], backend=backend)
+        plant = make_plant([spec.device], seeds=[run.sensor_seed], backend=backend, **extra)
     except (ValueError, FileNotFoundError) as exc:
         raise ScenarioError(f"{spec.source}: {exc}") from None
     plant.set_finger(spec.finger.gap_m)
     return plant
 
 
-def _closed_loop(spec, run, ctrl, backend: str, every: int | None, supervised: bool):
+def _closed_loop(spec, run, ctrl, backend: str, every: int | None, supervised: bool, recorder=None):
     """The control loop of one prepared run: the true and estimated force at every period
     (the metrics need them), the other trace columns at every ``every``-th (None: not at all).
 
@@ -200,12 +210,14 @@ def _closed_loop(spec, run, ctrl, backend: str, every: int | None, supervised: b
     plant runs all its periods in one call of the loop engine (:func:`ebraille_sim.plant.engine.run`);
     any other goes through :func:`python_periods`.
 
+    ``recorder`` is handed to the plant (:func:`_plant_for`).
+
     Returns ``(setpoint, force_true, force_est, kept columns, energy at the end (J), wall s,
     controller name, the wrapped controller)``.
     """
     n = run.n_steps
     sp = run.setpoint_n[:n]                       # read only: a view, not a copy
-    plant = _plant_for(spec, run, backend)
+    plant = _plant_for(spec, run, backend, recorder)
     # a reference controller that declares ``feedback = "true_force"`` (controllers.bounds) is fed
     # the true contact force instead of the estimate; every other controller sees the estimate
     i_fb = _feedback_slot(ctrl)
@@ -233,7 +245,7 @@ def _feedback_slot(ctrl) -> int:
 
 def _is_lumped(plant) -> bool:
     """Whether ``plant`` is the compiled lumped plant (the loop engine steps its rows)."""
-    from ebraille_sim.plant.loop import Plant
+    from ebraille_sim.plant.lumped import Plant
     return type(plant) is Plant
 
 
@@ -458,14 +470,14 @@ def _python_plant_period(plant, varying: list, rows, k: int, c: float) -> None:
 
 
 def _simulate_lean(spec, seed, run, ctrl, backend: str, every: int | None, supervised: bool = True,
-                   release_inputs: bool = False) -> RunResult:
+                   release_inputs: bool = False, recorder=None) -> RunResult:
     """:func:`_simulate` keeping the true and estimated force at every period and the other
     trace columns at every ``every``-th period (None: not at all); the same metrics.
 
     ``release_inputs`` empties ``run.profiles`` once the loop has run (for a run whose inputs
     nobody else holds: a long session's metrics then run without them in memory)."""
     sp, f_true, f_est, kept, energy_end, wall, name, wrapped = _closed_loop(spec, run, ctrl, backend, every,
-                                                                            supervised)
+                                                                            supervised, recorder)
     dt, n = run.dt_s, run.n_steps
     if release_inputs:
         run.profiles.clear()                      # the metrics do not read them: free them first
@@ -649,7 +661,7 @@ def _plant_rows(spec, run, cache: dict) -> tuple:
         hit = cache[key] = (plant.state[0].copy(), plant.params[0].copy(), plant.inputs[0].copy(), plant.substeps,
                             spec.device)
     state, params, inputs = hit[0].copy(), hit[1].copy(), hit[2].copy()
-    from ebraille_sim.plant.loop import reseed
+    from ebraille_sim.plant.lumped import reseed
     reseed(params, spec.device, run.sensor_seed)
     inputs[U.finger_pos_m] = spec.finger.gap_m
     return state, params, inputs, hit[3]

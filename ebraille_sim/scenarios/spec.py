@@ -418,18 +418,18 @@ def _check_rates(device: _params.DeviceParams) -> None:
 
     * the sensor rate is a whole multiple of the estimator model's rate and the anti-alias
       cutoff lies below the sensor's Nyquist frequency
-      (:func:`ebraille_sim.plant.loop.check_sensor_rates`);
+      (:func:`ebraille_sim.plant.lumped.check_sensor_rates`);
     * the control rate is at least the estimator's rate: the controller acts on force
       estimates, and a loop slower than them discards estimates while the drive moves
       within a few mechanical time constants of the motor (6.5 ms for the Faulhaber 0816);
     * the physics rate resolves the stiff mesh/pulp contact
-      (:func:`ebraille_sim.plant.loop.check_step`).
+      (:func:`ebraille_sim.plant.lumped.check_step`).
 
     The plant repeats the first and last check when it is built; here they reject a file
     before anything runs.
     """
     from ebraille_sim.estimation.registry import load_estimator
-    from ebraille_sim.plant.loop import check_sensor_rates, check_step
+    from ebraille_sim.plant.lumped import check_sensor_rates, check_step
     model = load_estimator(device.estimator.model)
     check_sensor_rates(device, model)
     est_hz = 1.0 / model.dt_s

@@ -249,7 +249,7 @@ def check_estimator_model(settings: dict) -> None:
     (one-line ``ValueError``)."""
     from ebraille_sim.base.validation import replace_checked
     from ebraille_sim.estimation.registry import load_estimator
-    from ebraille_sim.plant.loop import check_sensor_rates
+    from ebraille_sim.plant.lumped import check_sensor_rates
     from ebraille_sim.scenarios.spec import load_scenario
     model = load_estimator(str(settings["model"]))
     seen = set()

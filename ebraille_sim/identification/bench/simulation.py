@@ -21,7 +21,7 @@ from ebraille_sim.identification.bench.records import BenchRecord, condition
 from ebraille_sim.physics.noise import seed_from
 from ebraille_sim.plant.kernel import advance_sensor_only
 from ebraille_sim.plant.layout import N_INPUT, S, U
-from ebraille_sim.plant.loop import initial_state, pack_params
+from ebraille_sim.plant.lumped import initial_state, pack_params
 
 __all__ = ["run_profile", "run_profiles", "seed_sequence"]
 

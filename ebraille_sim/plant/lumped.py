@@ -42,8 +42,7 @@ from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import (MAX_BREAKPOINTS, MAX_TF_LEN, N_INPUT, N_PARAM, N_PLAYS, N_STATE, P, S, U)
 
-__all__ = ["Plant", "make_plant", "reseed", "PLANT_BACKENDS", "pack_params", "pack_devices", "initial_state",
-           "check_step", "check_sensor_rates", "load_estimator"]
+__all__ = ["Plant", "pack_params", "pack_devices", "initial_state", "reseed", "check_step", "check_sensor_rates"]
 
 
 def check_step(device: DeviceParams, max_force_n: float = 10.0) -> float:
@@ -600,5 +599,3 @@ class Plant:
     def time_s(self):
         return self._col("time_s")
 
-
-from ebraille_sim.plant.backends import PLANT_BACKENDS, make_plant  # noqa: E402  (re-exported here)

@@ -1,8 +1,9 @@
-"""The device as a 2-D pymunk mechanism behind the :class:`~ebraille_sim.plant.loop.Plant` interface.
+"""The pymunk model of one device: bodies, joints, the per-step physics outside Chipmunk.
 
 The lumped plant (:mod:`ebraille_sim.plant.kernel`) moves the drive train and the board as one
-body on a line.  Here the same device is a planar linkage in the cross-section of the
-finger (``x`` across the finger, ``y`` along the board travel, toward the pulp)::
+body on a line.  :class:`Mechanism` builds the same device as a planar linkage in the
+cross-section of the finger (``x`` across the finger, ``y`` along the board travel, toward
+the pulp)::
 
             finger (kinematic body: gap, tilt, lateral offset of the press)
         ~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~~
@@ -32,7 +33,10 @@ Bodies and constraints
   The spring part is applied as a force on the rack's tooth line, ``mesh_offset_m`` inboard
   of the rod axis (its moment on the rack is carried by the two bushings as side loads);
   the damping part is a DampedSpring between the pinion and the rack, switched on while
-  the teeth are in contact and solved implicitly by Chipmunk.
+  the teeth are in contact and solved implicitly by Chipmunk.  The spring is linearly
+  implicit: while the teeth touch, its damping is ``c + k h``, and the spring force from the
+  old position plus an implicit damper ``k h`` is the backward-Euler step ``F = k x_new``,
+  stable at any step (its extra damping acts on the parasitic ~400 Hz mesh mode only).
 * **motor**: the armature current is advanced by :func:`ebraille_sim.physics.motor.current_step`
   with the pinion speed; the force ``kM i N/r`` drives the pinion body.
 * **friction**: Stribeck (:func:`ebraille_sim.physics.drivetrain.stribeck`) on the pinion (brush
@@ -53,7 +57,8 @@ Bodies and constraints
   Prony (QLV) relaxation of :mod:`ebraille_sim.physics.fingertip`, scaled by the strip's share of
   the contact area, to the local compression ``d = rest_length - dist`` (the signed
   Chipmunk convention: positive pushes the anchors apart).  A strip beyond the board edge
-  does not touch the board.
+  does not touch the board.  These springs stay explicit; the step they allow is
+  :func:`ebraille_sim.plant.pymunk.geometry.check_mechanism_step`'s.
 * **gravity**: ``Space.gravity = (gravity_lateral, gravity_along)`` acts on the racks and
   the board; the pinion body's reflected inertia is not a weight, so it is compensated.
 
@@ -70,55 +75,39 @@ divider, noise, ADC, anti-alias filter, estimator) over the device physics steps
 pymunk step spans, once per control period; the ``contact_force_n`` slot then holds the
 true total force.
 
-Step size
----------
-Chipmunk's joints are solved implicitly; springs and body forces are explicit.  The
-mesh spring is made linearly implicit: while the teeth touch, its damping is ``c + k h``,
-and the spring force from the old position plus an implicit damper ``k h`` is the
-backward-Euler step ``F = k x_new``, stable at any step (its extra damping acts on the
-parasitic ~400 Hz mesh mode only).  The pulp springs stay explicit:
-:func:`check_mechanism_step` computes the stiffest mode of the racks and board on the
-pulp (mesh in its gap, fully relaxed 3 N contact, w = 2049 rad/s with the pulp's
-c0 = 0.15) and rejects ``w h > 1``.  The default 5 kHz (a whole multiple of the 1 kHz
-control rate) gives ``w h = 0.41``; the modes the force loop sees (the pulp against the
-reflected inertia) have ``w h`` near 0.01.  ``physics_rate_hz =
-10000`` runs the mechanism at the lumped plant's own step.
-
 Examples
 --------
 >>> from ebraille_sim.physics.params import DeviceParams
->>> plant = PymunkPlant.from_devices([DeviceParams()], seeds=[1])
->>> plant.set_finger(1.0e-3)
->>> for _ in range(300):
-...     plant.advance(3.0)
->>> bool(plant.contact_force_n[0] > 0.0)
-True
+>>> from ebraille_sim.plant.lumped import pack_devices
+>>> from ebraille_sim.plant.pymunk.geometry import MechanismParams
+>>> devices, params, states, inputs = pack_devices([DeviceParams()], [1])
+>>> m = Mechanism(devices[0], MechanismParams(), params[0], states[0][S.board_pos_m])
+>>> m.apply_inputs(inputs[0])
+>>> m.run(states[0], params[0], inputs[0])         # one control period, no command
+>>> m.steps_per_control, round(m.h * 1e6)
+(5, 200)
 """
 from __future__ import annotations
 
-import contextlib
 import math
-from dataclasses import dataclass
 
 import numpy as np
 import pymunk
+
 from ebraille_sim.base.compiled import njit
-from ebraille_sim.base.fields import sourced
 from ebraille_sim.physics.drivetrain import end_stop, mesh_force, stribeck
-from ebraille_sim.physics.fingertip import (contact_force, elastic_force, prony_coefficients, prony_step,
-                                            tangent_stiffness_n_per_m)
+from ebraille_sim.physics.fingertip import contact_force, elastic_force, prony_coefficients, prony_step
 from ebraille_sim.physics.motor import current_decay, current_step
-from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, DeviceParams, check_finite, replace_checked
+from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import P, S, U
-from ebraille_sim.plant.loop import Plant, pack_devices
+from ebraille_sim.plant.pymunk.geometry import MechanismParams, check_mechanism_step
 
-__all__ = ["MechanismParams", "PymunkPlant", "check_mechanism_step", "stiffest_mode_rad_s", "mesh_flank",
-           "draw_snapshot", "draw_mechanism", "recording", "write_animation"]
+__all__ = ["Mechanism", "mesh_flank", "V_MAX"]
 
 # scalar laws, called from Python on the pymunk path (the same code the kernel compiles);
 # the mesh law (drivetrain.mesh_force) picks the loaded flank (mesh_flank) and is set into
-# the mesh DampedSprings by _Mechanism._mesh_state
+# the mesh DampedSprings by Mechanism._mesh_state
 _stribeck = stribeck.py_func
 _elastic = elastic_force.py_func
 _prony_step = prony_step.py_func
@@ -126,129 +115,10 @@ _contact_force = contact_force.py_func
 _current_step = current_step.py_func
 _mesh_force = mesh_force.py_func
 _end_stop = end_stop.py_func
+_cp = pymunk.cp
 
 V_MAX = 10.0
 """Speed (m/s) of the pinion beyond which a run is reported as diverged (no-load speed: 0.06 m/s)."""
-
-MAX_STEP_WH = 1.0
-"""Largest ``w h`` accepted for the stiffest explicit mode (symplectic Euler: stable below 2,
-accurate below 1; the criterion of :func:`ebraille_sim.plant.loop.check_step`)."""
-
-
-@dataclass(frozen=True)
-class MechanismParams:
-    """Geometry of the 2-D mechanism and options of the pymunk model.
-
-    Masses and forces of the drive train (gear ratio, backlash, mesh stiffness, guide
-    friction, travel) come from :class:`~ebraille_sim.physics.params.DriveTrainParams`; only what
-    the lumped model has no use for is here.
-    """
-    rod_spacing_m: float = sourced(
-        21e-3, "m", "[D] board width 19.3 mm plus the 1.7 mm of a rack beside each edge [E]", positive=True)
-    board_width_m: float = sourced(
-        19.3e-3, "m", "[D] FSR 402 overall diameter 18.28 mm [R datasheet] plus 0.5 mm margin each side [E]",
-        positive=True)
-    board_thickness_m: float = sourced(1.6e-3, "m", "[E] standard FR4 board", positive=True)
-    rack_mass_kg: float = sourced(
-        2.0e-3, "kg", "[E] a third of the 6 g moving mass each (rack with its bore and pin); the board, "
-        "display and FSR get the rest", positive=True)
-    rack_length_m: float = sourced(14e-3, "m", "[E] 6 mm travel plus 8 mm of engaged bore", positive=True)
-    rack_width_m: float = sourced(3e-3, "m", "[E] bore for a 2 mm rod plus the teeth", positive=True)
-    bushing_length_m: float = sourced(
-        8e-3, "m", "[E] distance between the two ends of the rack's bore on the rod", positive=True)
-    mesh_offset_m: float = sourced(
-        2.0e-3, "m", "[E] tooth pitch line to rod axis: 1 mm rod radius + 0.5 mm wall + 0.5 mm tooth",
-        nonneg=True)
-    rod_friction_coefficient: float = sourced(
-        0.2, "-", "[R] POM on steel, dry, mu_k = 0.20-0.22 (Stagnoli); the static level uses the "
-        "drive train's guide_breakaway_ratio (0.25/0.2)", nonneg=True)
-    contact_width_m: float = sourced(
-        8e-3, "m", "[D] Hertz contact diameter 2 (3 F R / 4 E*)^(1/3) of a pad R = 8 mm [E], E = 0.1 MPa [R], "
-        "nu = 0.5: 7.1 mm at 1 N, 9.0 mm at 2 N", positive=True)
-    n_contacts: int = sourced(3, "-", "[E] contact strips across the width (2 or more)", positive=True)
-    physics_rate_hz: float = sourced(
-        5000.0, "Hz", "[D] w h = 0.41 for the stiffest explicit mode (pulp on the free board), 0.01 for the "
-        "modes of the force loop (see check_mechanism_step)", positive=True)
-    solver_iterations: int = sourced(10, "-", "[E] Chipmunk's default", positive=True)
-    error_correction_per_step: float = sourced(
-        0.2, "-", "[E] fraction of a joint's position error removed per step (Chipmunk's default, "
-        "10 % per 1/60 s, would take 0.16 s at 2 kHz)", positive=True)
-    fsr_area_model: bool = sourced(True, "-", "[E] strips conduct in parallel: G ~ sum a_j^(1-n) F_j^n")
-    max_regulated_force_n: float = sourced(
-        TACTILE_FORCE_MAX_N, "N", "[R] seed paper: the device regulates 0.2-3 N; used by the step check",
-        positive=True)
-
-    def __post_init__(self):
-        check_finite(self)
-        if int(self.n_contacts) != self.n_contacts or self.n_contacts < 2:
-            raise ValueError(f"MechanismParams.n_contacts must be a whole number >= 2, got {self.n_contacts}")
-        if int(self.solver_iterations) != self.solver_iterations:
-            raise ValueError(f"MechanismParams.solver_iterations must be a whole number, got {self.solver_iterations}")
-        if not self.error_correction_per_step < 1.0:
-            raise ValueError(f"MechanismParams.error_correction_per_step must be in (0, 1), "
-                             f"got {self.error_correction_per_step}")
-        if self.board_width_m > self.rod_spacing_m:
-            raise ValueError(f"MechanismParams.board_width_m ({self.board_width_m:g}) must not exceed "
-                             f"rod_spacing_m ({self.rod_spacing_m:g})")
-
-    def board_mass_kg(self, drivetrain) -> float:
-        """Board + display + FSR: the drive train's moving mass less the two racks, kg."""
-        m = drivetrain.moving_mass_kg - 2.0 * self.rack_mass_kg
-        if not m > 0:
-            raise ValueError(f"two racks of {self.rack_mass_kg:g} kg weigh more than the moving mass "
-                             f"{drivetrain.moving_mass_kg:g} kg of the drive train")
-        return m
-
-    def contact_offsets_m(self) -> np.ndarray:
-        """Centres of the contact strips relative to the press centre, m, shape (n_contacts,)."""
-        n = int(self.n_contacts)
-        w = self.contact_width_m
-        return (np.arange(n) + 0.5) * (w / n) - 0.5 * w
-
-
-def stiffest_mode_rad_s(device: DeviceParams, mech: MechanismParams) -> float:
-    """Largest angular frequency (rad/s) of the racks + board on the meshes and the pulp.
-
-    Coordinates: the two rack heights, the pinion held (its reflected inertia is 500 times
-    the moving mass).  The board follows the racks (pin and slot): centre ``(yA + yB)/2``,
-    tilt ``(yB - yA)/s``.  Each mesh has half the mesh stiffness; each contact strip the
-    tangent stiffness ``(b + m Fe)/n`` at the elastic force ``Fe = F_max / c0`` of a fully
-    relaxed contact at ``max_regulated_force_n``.
-    """
-    d, f = device.drivetrain, device.finger
-    s = mech.rod_spacing_m
-    mr = mech.rack_mass_kg
-    mb = mech.board_mass_kg(d)
-    ib = mb * (mech.board_width_m ** 2 + mech.board_thickness_m ** 2) / 12.0
-    mass = mr * np.eye(2) + mb / 4.0 * np.ones((2, 2)) + ib / s ** 2 * np.array([[1.0, -1.0], [-1.0, 1.0]])
-    k_tan = tangent_stiffness_n_per_m(mech.max_regulated_force_n / f.relax_weight_inf,
-                                      f.stiffness_b_n_per_m, f.exponent_m_per_m)
-    stiff = np.zeros((2, 2))
-    n = int(mech.n_contacts)
-    for x in mech.contact_offsets_m():
-        a = np.array([0.5 - x / s, 0.5 + x / s])
-        stiff += k_tan / n * np.outer(a, a)
-    lam = np.linalg.eigvals(np.linalg.solve(mass, stiff)).real
-    return float(math.sqrt(max(lam.max(), 0.0)))
-
-
-def check_mechanism_step(device: DeviceParams, mech: MechanismParams) -> float:
-    """``w h`` of the stiffest explicit mode of the mechanism; raise if above :data:`MAX_STEP_WH`."""
-    w = stiffest_mode_rad_s(device, mech)
-    wh = w / mech.physics_rate_hz
-    if wh > MAX_STEP_WH:
-        need = w / MAX_STEP_WH
-        raise ValueError(f"mechanism physics_rate_hz {mech.physics_rate_hz:g} is too low for its stiffest "
-                         f"mode (w = {w:.0f} rad/s, w h = {wh:.2f} > {MAX_STEP_WH}); use at least {need:.0f} Hz "
-                         f"(a whole divisor of the device physics rate)")
-    return wh
-
-
-# --------------------------------------------------------------------------------------
-# one device
-# --------------------------------------------------------------------------------------
-
-_cp = pymunk.cp
 
 
 def mesh_flank(dx_m: float, half_gap_m: float) -> int:
@@ -276,7 +146,7 @@ def _sensor_sequence(s, p, u, forces_n, n_sub):
         kernel.current_sample(s, p)
 
 
-class _Mechanism:
+class Mechanism:
     """The pymunk space of one device and the per-step physics outside Chipmunk."""
 
     L_REF = 10e-3       # anchor separation of the mesh and contact constraints, m
@@ -636,327 +506,3 @@ class _Mechanism:
             out["force_est_n"] = float(s[S.force_est_n])
             out["force_true_n"] = float(s[S.contact_force_n])
         return out
-
-
-# --------------------------------------------------------------------------------------
-# the plant
-# --------------------------------------------------------------------------------------
-
-_RECORDERS: list = []
-
-
-class PymunkPlant(Plant):
-    """``n`` devices simulated as pymunk mechanisms, with the :class:`~ebraille_sim.plant.loop.Plant` interface.
-
-    ``state``, ``params`` and ``inputs`` have the lumped layout (:mod:`ebraille_sim.plant.layout`);
-    after every :meth:`advance` the state slots the runner reads (contact force, estimate,
-    FSR voltage, current, board position, energy, time) are current.  Inputs beyond the
-    lumped ones: ``press_offset_m`` (lateral offset of the press centre from the board
-    centre), ``finger_tilt_rad`` (pulp surface tilt relative to the board) and
-    ``gravity_lateral_m_per_s2``.
-    """
-
-    mechanisms: list
-    mech: MechanismParams
-
-    @classmethod
-    def from_devices(cls, devices, seeds, board_pos_m=None, models=None, mechanism=None,
-                     **overrides) -> "PymunkPlant":
-        """Build ``len(devices)`` mechanisms.
-
-        Parameters
-        ----------
-        devices, seeds, board_pos_m, models
-            As :meth:`ebraille_sim.plant.loop.Plant.from_devices`.
-        mechanism : MechanismParams, optional
-            Geometry and model options (default :class:`MechanismParams`).
-        **overrides
-            Field changes of ``mechanism`` (e.g. ``mesh="elastic"``, ``physics_rate_hz=10000``);
-            an unknown name is an error that lists the allowed ones.
-        """
-        mech = mechanism if mechanism is not None else MechanismParams()
-        if overrides:
-            mech = replace_checked(mech, **overrides)
-        devices, params, states, inputs = pack_devices(devices, seeds, board_pos_m, models)
-        rates = devices[0].rates
-        mechs = [_Mechanism(dvc, mech, pk, sk[S.board_pos_m]) for dvc, pk, sk in zip(devices, params, states)]
-        plant = cls(np.array(states), np.array(params), inputs, rates.substeps_per_control,
-                    1.0 / rates.control_rate_hz, devices)
-        plant.mechanisms = mechs
-        plant.mech = mech
-        for m_k, u_k in zip(mechs, inputs):
-            m_k.apply_inputs(u_k)
-        for rec in _RECORDERS:
-            rec.attach(plant)
-        return plant
-
-    def advance(self, command_v) -> None:
-        """Advance every device by one control period with ``command_v`` (V) held."""
-        if len(self.mechanisms) == 1 and isinstance(command_v, (float, int)):
-            c = float(command_v)
-            if not math.isfinite(c):
-                raise ValueError(f"command_v must be finite, got {c}")
-            self.inputs[0, U.command_v] = c
-        else:
-            cmd = np.broadcast_to(np.asarray(command_v, dtype=float), (self.n,))
-            if not np.all(np.isfinite(cmd)):
-                raise ValueError("command_v must be finite for every device")
-            self.inputs[:, U.command_v] = cmd
-        for k, mech in enumerate(self.mechanisms):
-            mech.run(self.state[k], self.params[k], self.inputs[k])
-        for rec in _RECORDERS:
-            rec.after_step(self)
-
-    def set_pose(self, press_offset_m=None, finger_tilt_rad=None) -> None:
-        """Lateral offset of the press centre (m) and tilt of the pulp surface (rad)."""
-        if press_offset_m is not None:
-            self.inputs[:, U.press_offset_m] = press_offset_m
-        if finger_tilt_rad is not None:
-            self.inputs[:, U.finger_tilt_rad] = finger_tilt_rad
-
-    @property
-    def tilt_rad(self) -> np.ndarray:
-        """Board tilt of every device, rad, shape (n,)."""
-        return np.array([m.tilt_rad for m in self.mechanisms])
-
-    @property
-    def rack_friction_n(self) -> np.ndarray:
-        """Guide friction on racks A and B during the last step, N, shape (n, 2)."""
-        return np.array([m.rack_friction_n for m in self.mechanisms])
-
-    @property
-    def rack_friction_limit_n(self) -> np.ndarray:
-        """Break-away (stuck) or kinetic friction level of racks A and B, N, shape (n, 2)."""
-        return np.array([m.rack_friction_limit_n for m in self.mechanisms])
-
-    @property
-    def side_load_n(self) -> np.ndarray:
-        """Sum of the two bushing side loads of racks A and B, N, shape (n, 2)."""
-        return np.array([m.side_load_n for m in self.mechanisms])
-
-    def snapshot(self, k: int = 0) -> dict:
-        """Plain-float picture of device ``k`` (see :func:`draw_snapshot`)."""
-        snap = self.mechanisms[k].snapshot(self.state[k])
-        snap["geometry"] = self.mech
-        snap["device"] = self.devices[k]
-        return snap
-
-    def render(self, k: int = 0, size_px=(480, 360)) -> np.ndarray:
-        """RGB picture of device ``k``, uint8 array of shape (height, width, 3)."""
-        return draw_snapshot(self.snapshot(k), size_px=size_px)
-
-
-# --------------------------------------------------------------------------------------
-# recording and drawing
-# --------------------------------------------------------------------------------------
-
-class _Recorder:
-    def __init__(self, every_s: float, device_index: int):
-        if not (math.isfinite(every_s) and every_s > 0):
-            raise ValueError(f"recording interval must be a positive number of seconds, got {every_s}")
-        self.every_s = every_s
-        self.k = device_index
-        self.frames: list[dict] = []
-        self.plants: list = []
-        self._next = 0.0
-
-    def attach(self, plant) -> None:
-        self.plants.append(plant)
-        self.frames.append(plant.snapshot(self.k))
-        self._next = self.every_s
-
-    def after_step(self, plant) -> None:
-        if plant is not self.plants[-1]:
-            return
-        t = plant.state[self.k, S.time_s]
-        if t >= self._next - 1e-12:
-            self.frames.append(plant.snapshot(self.k))
-            self._next += self.every_s
-
-
-@contextlib.contextmanager
-def recording(every_s: float = 0.04, device_index: int = 0):
-    """Record snapshots of every :class:`PymunkPlant` built inside the ``with`` block.
-
-    Examples
-    --------
-    >>> from ebraille_sim.scenarios.runner import run_scenario
-    >>> with recording(every_s=0.05) as rec:
-    ...     _ = run_scenario("contact_onset", backend="pymunk", duration_s=1.0)
-    >>> len(rec.frames)
-    21
-    """
-    rec = _Recorder(every_s, device_index)
-    _RECORDERS.append(rec)
-    try:
-        yield rec
-    finally:
-        _RECORDERS.remove(rec)
-
-
-def _gear_outline(cx, cy, r, teeth, angle, depth):
-    t = np.linspace(0.0, 2.0 * np.pi, teeth * 8 + 1)
-    rr = r + depth * 0.5 * np.sign(np.sin(teeth * (t - angle)))
-    return cx + rr * np.cos(t), cy + rr * np.sin(t)
-
-
-def draw_snapshot(snap: dict, size_px=(480, 360), tilt_gain: float = 20.0) -> np.ndarray:
-    """Draw one mechanism snapshot; returns an RGB uint8 array (height, width, 3).
-
-    Lengths are drawn to scale in millimetres, except the board tilt, which is magnified
-    ``tilt_gain`` times (it is a few milliradians) and labelled so.
-    """
-    import matplotlib
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Circle, Polygon, Rectangle
-    geo: MechanismParams = snap["geometry"]
-    dev: DeviceParams = snap["device"]
-    mm = 1e3
-    w_px, h_px = size_px
-    fig = Figure(figsize=(w_px / 100.0, h_px / 100.0), dpi=100)
-    canvas = FigureCanvasAgg(fig)
-    ax = fig.add_axes((0.02, 0.1, 0.96, 0.88))
-    s = geo.rod_spacing_m * mm
-    travel = (dev.drivetrain.travel_max_m - dev.drivetrain.travel_min_m) * mm
-    y0 = dev.drivetrain.travel_min_m * mm
-    # frame and rods
-    ax.add_patch(Rectangle((-0.5 * s - 3, y0 - geo.rack_length_m * mm - 4), s + 6, 1.5, color="0.35"))
-    for x in (-0.5 * s, 0.5 * s):
-        ax.plot([x, x], [y0 - geo.rack_length_m * mm - 2.5, y0 + travel + 1.5], color="0.55", lw=2)
-    # racks
-    cmap = matplotlib.colormaps["viridis"]
-    fmax = max(1e-9, 0.3)
-    for i, (x, yr) in enumerate(zip((-0.5 * s, 0.5 * s), snap["rack_y_m"])):
-        yr *= mm
-        fric = snap["rack_friction_n"][i]
-        ax.add_patch(Rectangle((x - 0.5 * geo.rack_width_m * mm, yr - geo.rack_length_m * mm),
-                               geo.rack_width_m * mm, geo.rack_length_m * mm,
-                               color=cmap(min(abs(fric) / fmax, 1.0)), ec="k", lw=0.6))
-        ax.text(x, yr - geo.rack_length_m * mm - 1.2, f"{fric:.2f} N", ha="center", va="top", fontsize=7)
-    # pinion (drawn on the shaft, rotated by its travel / r)
-    r = dev.drivetrain.pinion_radius_m * mm
-    yc = y0 - 0.5 * geo.rack_length_m * mm
-    ang = snap["pinion_y_m"] * mm / r
-    gx, gy = _gear_outline(0.0, yc, r, 16, ang, 0.35)
-    ax.fill(gx, gy, color="#c9a227", ec="k", lw=0.6)
-    ax.plot([0.0, r * 0.8 * math.cos(ang)], [yc, yc + r * 0.8 * math.sin(ang)], color="k", lw=1)
-    ax.plot([-0.5 * s + 0.5 * geo.rack_width_m * mm, -r], [yc, yc], color="0.4", lw=0.8, ls=":")
-    ax.plot([r, 0.5 * s - 0.5 * geo.rack_width_m * mm], [yc, yc], color="0.4", lw=0.8, ls=":")
-    # board (tilt magnified)
-    th = snap["tilt_rad"] * tilt_gain
-    bx, by = snap["board_x_m"] * mm, snap["board_y_m"] * mm
-    wb, tb = geo.board_width_m * mm, geo.board_thickness_m * mm
-    c, sn = math.cos(th), math.sin(th)
-    corners = [(-0.5 * wb, 0.0), (0.5 * wb, 0.0), (0.5 * wb, -tb), (-0.5 * wb, -tb)]
-    pts = [(bx + c * px - sn * py, by + sn * px + c * py) for px, py in corners]
-    ax.add_patch(Polygon(pts, closed=True, color="#2e7d32", ec="k", lw=0.6))
-    for col in (-0.5, 0.5):                         # display electrodes (two columns)
-        px = col * 2.34
-        ax.add_patch(Circle((bx + c * px, by + sn * px + 0.25), 0.72, color="#ffb300", ec="k", lw=0.4))
-    # finger: a pad of radius PAD_RADIUS_MM about the press centre, flattened where the board presses it
-    fy = snap["finger_y_m"] * mm
-    xc = snap["press_offset_m"] * mm
-    tt = math.tan(snap["finger_tilt_rad"])
-    xs = np.linspace(xc - 9.0, xc + 9.0, 121)
-    free = fy + (xs - xc) * tt + (xs - xc) ** 2 / (2.0 * PAD_RADIUS_MM)
-    board_top = by + (xs - bx) * math.tan(th)
-    on_board = np.abs(xs - bx) <= 0.5 * wb
-    surf = np.where(on_board, np.maximum(free, board_top), free)
-    ax.fill_between(xs, surf, fy + 9.0, color="#f4c7a1", ec="#a0522d", lw=0.8)
-    fmax_c = max(max(snap["contact_force_n"]), 1e-9)
-    for xcj, fj in zip(snap["contact_x_m"], snap["contact_force_n"]):
-        xcj *= mm
-        if fj > 0:
-            y_c = by + (xcj - bx) * math.tan(th)
-            ax.annotate("", xy=(xcj, y_c), xytext=(xcj, y_c + 0.8 + 3.0 * fj / fmax_c),
-                        arrowprops=dict(arrowstyle="->", color="#b71c1c", lw=1.2))
-    ax.set_xlim(-0.5 * s - 6, 0.5 * s + 6)
-    ax.set_ylim(y0 - geo.rack_length_m * mm - 5, y0 + travel + 10)
-    ax.set_aspect("equal")
-    ax.axis("off")
-    label = (f"t {snap['t_s']:.3f} s   F {snap.get('force_true_n', sum(snap['contact_force_n'])):.2f} N"
-             f"   est {snap.get('force_est_n', float('nan')):.2f} N   tilt {snap['tilt_rad'] * 1e3:.2f} mrad"
-             f" (drawn x{tilt_gain:g})")
-    fig.text(0.02, 0.03, label, fontsize=7)
-    canvas.draw()
-    buf = np.asarray(canvas.buffer_rgba())
-    return np.ascontiguousarray(buf[:, :, :3])
-
-
-def draw_mechanism(plant: PymunkPlant, k: int = 0, size_px=(480, 360)) -> np.ndarray:
-    """RGB picture (height, width, 3) of device ``k`` of a :class:`PymunkPlant`."""
-    return plant.render(k, size_px)
-
-
-def write_animation(frames: list, path, fps: float = 25.0, size_px=(480, 360), progress=None):
-    """Write recorded snapshots as a GIF (Pillow) or, without Pillow, as numbered PNG frames.
-
-    Parameters
-    ----------
-    frames : list of dict
-        Snapshots from :func:`recording`.
-    path : path
-        The GIF; without Pillow, the folder ``path`` without its suffix receives
-        ``frame_00000.png`` ... (earlier ``frame_*.png`` there are removed first).
-    fps : float
-        Frames per second of the GIF.
-    size_px : (int, int)
-        Width and height of a frame, px.
-    progress : callable, optional
-        Called as ``progress(done, total)`` after each frame is drawn.
-
-    Returns
-    -------
-    pathlib.Path
-        The path written (the GIF, or the folder of PNG frames).
-    """
-    import pathlib
-    path = pathlib.Path(path)
-    if not frames:
-        raise ValueError("no frames to animate")
-    try:
-        import PIL  # noqa: F401
-        have_pillow = True
-    except ModuleNotFoundError:
-        have_pillow = False
-    images = []
-    for f in frames:
-        images.append(draw_snapshot(f, size_px=size_px))
-        if progress is not None:
-            progress(len(images), len(frames))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if have_pillow:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.animation as animation
-        import matplotlib.pyplot as plt
-        fig = plt.figure(figsize=(size_px[0] / 100.0, size_px[1] / 100.0), dpi=100)
-        ax = fig.add_axes((0, 0, 1, 1))
-        ax.axis("off")
-        im = ax.imshow(images[0])
-
-        def update(i):
-            im.set_data(images[i])
-            return (im,)
-        anim = animation.FuncAnimation(fig, update, frames=len(images), blit=True)
-        out = path if path.suffix.lower() == ".gif" else path.with_suffix(".gif")
-        anim.save(str(out), writer=animation.PillowWriter(fps=fps))
-        plt.close(fig)
-        return out
-    import matplotlib.image as mpimg
-    folder = path.with_suffix("")
-    folder.mkdir(parents=True, exist_ok=True)
-    for old in folder.glob("frame_*.png"):
-        old.unlink()
-    for i, img in enumerate(images):
-        mpimg.imsave(folder / f"frame_{i:05d}.png", img)
-    return folder
-
-
-# --------------------------------------------------------------------------------------
-# the [mechanism] scenario section
-# --------------------------------------------------------------------------------------
-
-PAD_RADIUS_MM = 8.0
-"""Fingertip pad radius used for drawing, mm [E] (as in the Hertz estimate of contact_width_m)."""
