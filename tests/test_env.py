@@ -247,6 +247,29 @@ def test_reward_formula_and_termination_past_the_safe_force():
             break
     assert term and not trunc and info["force_true_n"] > 3.0
     assert seen_violation
+    # Gymnasium's convention: no step after termination without a reset (one line), then a reset works
+    with pytest.raises(RuntimeError, match=r"ended \(terminated or truncated\); call reset\(\)") as err:
+        env.step(np.ones(1, np.float32))
+    assert "\n" not in str(err.value)
+    env.reset(seed=2)
+    assert env.step(np.zeros(1, np.float32))[0].shape == (7,)
+
+
+def test_a_step_after_termination_is_refused_on_the_python_path_too():
+    """The step through the per-period shim (a plant without compiled rows) keeps the same rule."""
+    from ebraille_sim.rl.env import C_CMD_SCALE, HeldCommand
+    env = ContactForceEnv(randomize_device=False, safety=False)
+    env.reset(seed=1, options={"disturbances": False, "gap_m": 0.5e-3, "setpoint_n": 1.0,
+                               "device": DeviceParams(finger=FINGERS["stiff"])})
+    env._ws = None
+    env._agent = HeldCommand(None, env._c[C_CMD_SCALE])
+    for _ in range(2000):
+        _, _, term, trunc, _ = env.step(np.ones(1, np.float32))
+        if term:
+            break
+    assert term and not trunc
+    with pytest.raises(RuntimeError, match="call reset"):
+        env.step(np.ones(1, np.float32))
 
 
 def test_a_pid_drives_the_env_to_its_setpoint():

@@ -866,7 +866,7 @@ class ContactForceEnv(gym.Env):
             a = check_action(action)
         k = self._k
         if k >= self._n_steps:
-            raise RuntimeError("the episode has ended; call reset()")
+            raise RuntimeError("the episode has ended (terminated or truncated); call reset() before step()")
         r, term, ft, fe, sp, cv, v, t, mode, fault = self._step_fn(self._st, self._inp, ws, k, a)
         self._k = k = k + 1
         if ft - ft != 0.0:                                      # inf or nan
@@ -882,7 +882,10 @@ class ContactForceEnv(gym.Env):
                     "supervisor_mode": _MODE_NAMES[mode], "supervisor_fault": _FAULT_NAMES[fault]}
         if self._history is not None:
             self._record(info, ft)
-        return self._obs.copy(), r, term, k >= self._n_steps, info
+        truncated = k >= self._n_steps
+        if term:
+            self._n_steps = k                                   # a step after termination is refused
+        return self._obs.copy(), r, term, truncated, info
 
     def _record(self, info: dict, force_true_n: float) -> None:
         h = self._history
@@ -902,8 +905,8 @@ class ContactForceEnv(gym.Env):
         a = -1.0 if a < -1.0 else (1.0 if a > 1.0 else a)
         ep = self.episode
         k = self._k
-        if k >= ep.n_steps:
-            raise RuntimeError("the episode has ended; call reset()")
+        if k >= self._n_steps:
+            raise RuntimeError("the episode has ended (terminated or truncated); call reset() before step()")
         scale = self._c[C_CMD_SCALE]
         self._agent.command_v = a * scale
         python_periods(self.plant, [self._agent], ep.setpoint_n[None, :ep.n_steps], [ep.run.profiles], S.force_est_n, None, 1,
@@ -920,7 +923,10 @@ class ContactForceEnv(gym.Env):
         info = self._info(v)
         if self._history is not None:
             self._record(info, ft)
-        return self._obs.copy(), float(r), bool(term), self._k >= ep.n_steps, info
+        truncated = self._k >= self._n_steps
+        if term:
+            self._n_steps = self._k                             # a step after termination is refused
+        return self._obs.copy(), float(r), bool(term), truncated, info
 
     # -- rendering ---------------------------------------------------------------------------
     def render(self):
