@@ -179,3 +179,21 @@ def test_transcription_decisions_recorded():
     b1_rows = [loc for loc in locations if loc.startswith("Appendix 2") and loc.endswith(", b1")]
     assert len(b1_rows) == 12
     assert all(d.read_as and d.reason and d.printed for d in TRANSCRIPTION_DECISIONS)
+
+
+def test_the_two_readings_of_the_papers_delay_differ_by_one_sample():
+    """The paper prints no nk: nk = 0 (its notation read literally) and nk = 1 (MATLAB's
+    convention, the default) give the same model shifted by one 10 ms sample."""
+    import numpy as np
+    from ebraille_sim.estimation.registry import load_estimator
+    m1, m0 = load_estimator("paper:wiener:5"), load_estimator("paper:wiener:5:nk0")
+    assert (m1.linear.nk, m0.linear.nk) == (1, 0) and load_estimator("paper:wiener:5:nk1").linear.nk == 1
+    u = np.concatenate([np.zeros(5), np.linspace(0.0, 1.0, 200)])
+    y1, y0 = m1.simulate(u)[0], m0.simulate(u)[0]
+    np.testing.assert_allclose(y1[1:], y0[:-1], atol=1e-12)
+    assert abs(y1[100] - y0[100]) > 1e-3
+    for bad in ("paper:wiener:5:nk2", "paper:wiener:5:delay"):
+        with pytest.raises(ValueError, match="nk0"):
+            load_estimator(bad)
+    with pytest.raises(ValueError, match="nk must be one of 0, 1"):
+        paper_model("wiener", 5, nk=3)

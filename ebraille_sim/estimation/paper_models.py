@@ -68,15 +68,22 @@ SAMPLE_TIME_S = 0.01
 
 #: Input delay of all models, samples.
 #:
-#: The paper does not print ``nk``. ``nk = 1`` is MATLAB's default for
+#: The paper does not print ``nk``; read literally, its notation ``B(z^-1)`` with a
+#: printed ``b0`` gives ``nk = 0``.  ``nk = 1`` is MATLAB's default for
 #: ``idnlhw``/``oe`` orders and matches the paper's remark that the first
 #: ``nk`` coefficients of ``B`` are zeros while every printed ``b0`` is
 #: non-zero (the printed list starts after the delay). ``nk`` only shifts the
 #: output by one sample (10 ms): it changes neither the poles, the zeros, the
 #: DC gain nor any static map, so the fifth-order Wiener consistency check
 #: (DC gain -0.192 maps 0-1.19 V onto the output breakpoint span
-#: [-0.229, 0]) holds for any ``nk`` and cannot decide it.
+#: [-0.229, 0]) holds for any ``nk`` and cannot decide it.  The choice is 10 ms of
+#: estimator delay (docs/identification.md gives its effect on the loop): the default is
+#: ``NK`` and the other reading is ``nk=0`` of :func:`paper_model` (model spec
+#: ``"paper:wiener:5:nk0"``).
 NK = 1
+NK_READINGS = (0, 1)
+"""The two readings of the paper's input delay (samples): its notation read literally, and
+MATLAB's convention."""
 
 #: Absolute tolerance on ``B(1)`` and ``F(1)`` for detecting a common
 #: ``(1 - z^-1)`` factor. Each printed coefficient carries a rounding error of
@@ -316,16 +323,16 @@ def _nl(table: dict[tuple[str, int], _Breakpoints], key: tuple[str, int]) -> Pie
     return None if bp is None else PiecewiseLinear(*bp)
 
 
-def _reduced(kind: str, order: int, cancel_unit_root: bool) -> tuple[LinearBF, LinearBF, int]:
+def _reduced(kind: str, order: int, cancel_unit_root: bool, nk: int = NK) -> tuple[LinearBF, LinearBF, int]:
     b, f = _LINEAR_BLOCKS[(kind, order)]
-    raw = LinearBF(b=b, f=f, nk=NK)
+    raw = LinearBF(b=b, f=f, nk=nk)
     if not cancel_unit_root:
         return raw, raw, 0
     reduced, count = raw.cancel_unit_roots(UNIT_ROOT_TOL)
     return raw, reduced, count
 
 
-def paper_model(kind: str, order: int, cancel_unit_root: bool = True) -> BlockModel:
+def paper_model(kind: str, order: int, cancel_unit_root: bool = True, nk: int = NK) -> BlockModel:
     """One of the paper's identified voltage-to-force estimators.
 
     Parameters
@@ -339,12 +346,15 @@ def paper_model(kind: str, order: int, cancel_unit_root: bool = True) -> BlockMo
         within ``UNIT_ROOT_TOL`` (default). With False the printed
         coefficients are used as they are; most models then carry a pole at
         ``z = 1`` and their simulated output drifts.
+    nk : {0, 1}, optional
+        Input delay in samples (:data:`NK_READINGS`): the paper prints none; 1 (default) is
+        MATLAB's convention, 0 the paper's notation read literally.
 
     Returns
     -------
     BlockModel
         Input: detrended FSR voltage (V); output: detrended force (N);
-        ``dt_s = 0.01``; ``nk = 1``.
+        ``dt_s = 0.01``; ``nk`` as given.
 
     Raises
     ------
@@ -358,8 +368,10 @@ def paper_model(kind: str, order: int, cancel_unit_root: bool = True) -> BlockMo
     [0.967, 0.942, 0.59, 0.121]
     """
     kind, order = _check_key(kind, order)
-    _, linear, _ = _reduced(kind, order, cancel_unit_root)
-    suffix = "" if cancel_unit_root else " (as printed)"
+    if isinstance(nk, bool) or nk not in NK_READINGS:
+        raise ValueError(f"nk must be one of {', '.join(map(str, NK_READINGS))} (the paper's two readings), got {nk!r}")
+    _, linear, _ = _reduced(kind, order, cancel_unit_root, int(nk))
+    suffix = ("" if cancel_unit_root else " (as printed)") + ("" if nk == NK else f", nk = {nk}")
     return BlockModel(
         linear=linear,
         input_nl=_nl(_INPUT_BREAKPOINTS, (kind, order)),
