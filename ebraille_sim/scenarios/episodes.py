@@ -260,7 +260,7 @@ class EpisodeDistribution:
             The episode's seed; one child per component (module docstring).
         fixed : dict, optional
             Components to fix instead of drawing, keys :data:`FIXED_KEYS` (validated by
-            the caller, :func:`ebraille_sim.rl.env.validate_options`): ``device`` (its
+            the caller, :func:`ebraille_sim.rl.episode.validate_options`): ``device`` (its
             rates are replaced by the episodes'), ``passage``, ``first_character``
             (character offset of the excerpt in the passage text), ``wpm``,
             ``setpoint_n`` and ``setpoint_steps`` (``(time_s, force_n)`` pairs),
