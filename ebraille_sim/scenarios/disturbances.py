@@ -111,7 +111,8 @@ def band_limited_noise(t_s: np.ndarray, f_lo_hz: float, f_hi_hz: float, rms: flo
 
     Synthesised in the frequency domain (independent complex Gaussian bins inside the
     band, zero outside) over a record long enough to hold at least four periods of
-    ``f_lo_hz``, scaled to the RMS ``rms`` over that record, then cut to ``len(t_s)``.
+    ``f_lo_hz``, scaled to the RMS ``rms`` over that record (computed from the spectrum,
+    Parseval's theorem), then cut to ``len(t_s)``.
 
     Parameters
     ----------
@@ -145,13 +146,17 @@ def band_limited_noise(t_s: np.ndarray, f_lo_hz: float, f_hi_hz: float, rms: flo
     i0, i1 = _band_bins(n_rec, dt, f_lo_hz, f_hi_hz)
     spec = np.zeros(n_rec // 2 + 1, dtype=complex)
     k = max(i1 - i0, 0)
-    spec[i0:i0 + k] = rng.standard_normal(k) + 1j * rng.standard_normal(k)
-    x = np.fft.irfft(spec, n_rec)
-    del spec                                   # a long run's spectrum is as large as its record
-    s = float(np.std(x))
+    bins = spec[i0:i0 + k]
+    bins.real = rng.standard_normal(k)
+    bins.imag = rng.standard_normal(k)
+    # the record's RMS from its spectrum (Parseval: no bin at 0 or at the Nyquist frequency, so
+    # the mean is 0 and each bin stands for itself and its conjugate): 2 sum |X_i|^2 / n_rec^2
+    s = math.sqrt(2.0 * float(np.vdot(bins, bins).real)) / n_rec
     if not s > 0:
         return np.zeros(n)
-    return x[:n] * (rms / s)
+    x = np.fft.irfft(spec, n_rec)[:n]
+    x *= rms / s
+    return x
 
 
 def _band_bins(n_rec: int, dt: float, f_lo_hz: float, f_hi_hz: float) -> tuple[int, int]:
