@@ -101,6 +101,15 @@ def test_noise_record_shorter_than_the_band_period_keeps_its_rms_on_average():
         D.band_limited_noise(t, 100.0, 600.0, 1.0, np.random.default_rng(0))
 
 
+def test_noise_is_scaled_to_its_rms_over_the_record():
+    """The RMS taken from the spectrum (Parseval) is the record's: a run as long as the record
+    has the RMS asked for, to round-off, whether the record has an even or odd length."""
+    for n in (8000, 8001):                       # the 0.1-1 Hz record at 200 Hz is 40 s = 8000 samples
+        x = D.band_limited_noise(np.arange(n) * 5e-3, 0.1, 1.0, 1e-4, np.random.default_rng(n))
+        assert x.size == n and np.std(x) == pytest.approx(1e-4, rel=1e-12)
+        assert abs(np.mean(x)) < 1e-18
+
+
 def test_strap_slips_are_minimum_jerk_steps():
     _, x = profiles({"strap_slip": {"at_s": [10.0, 20.0], "displacement_m": 0.2e-3, "duration_s": 0.04}})[
         "finger_pos_m"]
