@@ -154,10 +154,10 @@ def test_fixed_components_do_not_shift_the_others():
 
 
 def test_each_drawn_value_follows_its_own_variate():
-    """One generator per episode and per device: widening one range moves that value only,
-    and the episode's device is the population's draw of the same variates."""
-    from ebraille_sim.scenarios.population import PopulationSpec, device_from_variates, device_variates
-    u, z = device_variates(np.random.default_rng(4))
+    """Widening one range moves that value only, for a device and for an episode; the
+    episode's device is the population's draw of the episode seed's first child."""
+    from ebraille_sim.scenarios.population import PopulationSpec, device_from_variates, device_variates, sample_device
+    u, z = device_variates(np.random.SeedSequence(4))
     a = device_from_variates(u, z, PopulationSpec(calibrate=False))
     b = device_from_variates(u, z, PopulationSpec(calibrate=False, gear_efficiency=(0.6, 0.9)))
     assert b.drivetrain.gear_efficiency == pytest.approx(0.6 + 0.3 * u[6], rel=1e-12)
@@ -166,11 +166,10 @@ def test_each_drawn_value_follows_its_own_variate():
     assert (a.finger, a.fsr, a.motor) == (b.finger, b.fsr, b.motor)
     free = EpisodeDistribution().draw(np.random.SeedSequence(9))
     wide = EpisodeDistribution(wpm_range=(30.0, 300.0), gap_range_m=(0.1e-3, 2e-3)).draw(np.random.SeedSequence(9))
-    assert wide.device == free.device and wide.seed == free.seed and wide.setpoint == free.setpoint
+    assert wide.device == free.device and wide.seed == free.seed and wide.sections == free.sections
+    assert [f for _, f in wide.setpoint.steps] == [f for _, f in free.setpoint.steps]   # times follow the length
     assert wide.reading.wpm != free.reading.wpm and wide.finger != free.finger
-    rng = np.random.default_rng(np.random.SeedSequence(9))
-    rng.integers(0, 2 ** 52)                                   # the run seed comes first
-    drawn = device_from_variates(*device_variates(rng))
+    drawn = sample_device(np.random.SeedSequence(9).spawn(1)[0])
     assert free.device == dataclasses.replace(drawn, driver_supply_v=free.device.driver_supply_v)
     assert free.device.driver_supply_v <= drawn.driver_supply_v        # a sag or the full supply
 

@@ -88,7 +88,9 @@ excerpt as ``[reading]`` text, a ``[setpoint]`` with steps, the ``[finger]`` gap
 ``[disturbances]`` section with the scenario models and the drawn device.  The episode's
 arrays come from :func:`ebraille_sim.scenarios.inputs.build_run_inputs`, the function the
 scenario runner uses, so ``run_scenario(env.episode.spec)`` replays the same episode
-(``tests/test_episodes.py``).  Each component has its own fixed draws of the episode's one generator, so fixing one never shifts another:
+(``tests/test_episodes.py``).  The device comes from the episode seed's first child, every
+other component from fixed draws of one generator of its second, so fixing one never shifts
+another:
 
 ==============  ===========================================================  ==========
 component       draw                                                         source

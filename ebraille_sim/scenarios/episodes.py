@@ -11,14 +11,14 @@ excursions, a Li-ion ``battery``) and the drawn device.  Arrays are made from th
 :func:`ebraille_sim.scenarios.inputs.build_run_inputs`, the function the scenario runner
 uses, so an episode and a scenario run of the same spec see the same inputs.
 
-Seeds: one NumPy ``Generator`` of the episode's ``SeedSequence`` draws, in this order and
-always all of them, the run seed (the spec's ``seed``: sensor noise and disturbance
-realisations), the device's variates
-(:func:`~ebraille_sim.scenarios.population.device_variates`) and one uniform variate per
-drawn scalar (passage, excerpt start, rate, number of setpoint levels, gap, tremor, drift,
-battery or not, state of charge, sag; then ``max_setpoint_levels`` levels and one fewer step
-times).  Every drawn value is a fixed function of its own variate, so fixing a component
-(``fixed`` of :meth:`draw`) or changing one range shifts no other draw.
+Seeds: the episode's ``SeedSequence`` spawns two children.  The first draws the device
+(:func:`~ebraille_sim.scenarios.population.sample_device`: the draw of a population sweep's
+reader).  One NumPy ``Generator`` of the second draws, in this order and always all of them,
+the run seed (the spec's ``seed``: sensor noise and disturbance realisations) and one uniform
+variate per drawn scalar (passage, excerpt start, rate, number of setpoint levels, gap,
+tremor, drift, battery or not, state of charge, sag; then ``max_setpoint_levels`` levels and
+one fewer step times).  Every drawn value is a fixed function of its own variate, so fixing
+a component (``fixed`` of :meth:`draw`) or changing one range shifts no other draw.
 
 ==============  ===========================================================  ==========
 component       draw                                                         source
@@ -272,7 +272,7 @@ class EpisodeDistribution:
         Parameters
         ----------
         seed_sequence : numpy.random.SeedSequence
-            The episode's seed; one generator of it draws every component (module docstring).
+            The episode's seed (module docstring: what each of its children draws).
         fixed : dict, optional
             Components to fix instead of drawing, keys :data:`FIXED_KEYS` (validated by
             the caller, :func:`ebraille_sim.rl.episode.validate_options`): ``device`` (its
@@ -289,24 +289,25 @@ class EpisodeDistribution:
             Source ``"episode"``, ``duration_s`` None (the run ends with the excerpt).
         """
         from ebraille_sim.scenarios.passages import list_passages
-        from ebraille_sim.scenarios.population import device_from_variates, device_variates
+        from ebraille_sim.scenarios.population import sample_device
         from ebraille_sim.scenarios.reading import mean_dwell_s
 
         opt = fixed or {}
         unknown = set(opt) - set(FIXED_KEYS)
         if unknown:
             raise ValueError(f"unknown fixed component {sorted(unknown)[0]!r}; allowed: {', '.join(FIXED_KEYS)}")
-        # one generator, a fixed number of draws per component in a fixed order (module docstring)
-        rng = np.random.default_rng(seed_sequence)
+        # the device from the first child, every other component from one generator of the
+        # second: a fixed number of draws in a fixed order (module docstring)
+        ss_dev, ss_rest = seed_sequence.spawn(2)
+        rng = np.random.default_rng(ss_rest)
         run_seed = int(rng.integers(0, 2 ** 52))
-        u_dev, z_dev = device_variates(rng)
         levels_max = self.max_setpoint_levels
         u = rng.random(_N_EPISODE_UNIFORMS + 2 * levels_max - 1).tolist()
         base = self.base_device
         if "device" in opt:
             dev = dataclasses.replace(opt["device"], rates=base.rates)
         elif self.population is not None:
-            dev = device_from_variates(u_dev, z_dev, self.population, base)
+            dev = sample_device(ss_dev, self.population, base)
         else:
             dev = base
 

@@ -1,8 +1,8 @@
 """Populations of readers, FSR units and drive trains: stated distributions, seeded draws.
 
-Each device is drawn from a :class:`PopulationSpec` with one NumPy ``Generator``: a fixed
-number of variates (:data:`DEVICE_UNIFORMS` uniforms, then :data:`DEVICE_NORMALS` standard
-normals, :func:`device_variates`), each parameter a fixed function of its own variate
+Each device is drawn from a :class:`PopulationSpec` with NumPy ``Generator`` s: every
+component (reader, sensor, motor, drive train) has its own child ``SeedSequence``
+(:func:`device_variates`), and each parameter is a fixed function of its own variate
 (:func:`device_from_variates`), so that changing one distribution does not change the draws
 of another.  Distributions and their
 sources:
@@ -38,7 +38,6 @@ True
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from dataclasses import dataclass
 
@@ -107,36 +106,37 @@ DEVICE_UNIFORMS = ("finger_b_scale", "finger_m_scale", "relax_c0", "fsr_exponent
 (``finger_b_scale`` and ``guide_coulomb_n`` log-uniform, the others uniform)."""
 DEVICE_NORMALS = ("fsr_k_sigma_ln", "motor_r_sigma", "motor_k_sigma")
 """The :class:`PopulationSpec` spreads of a device's standard normal variates, in their order."""
-_LOG_UNIFORM = np.array([name in ("finger_b_scale", "guide_coulomb_n") for name in DEVICE_UNIFORMS])
 
 
-@functools.lru_cache(maxsize=64)
-def _ranges(spec: PopulationSpec) -> tuple[np.ndarray, np.ndarray]:
-    """Low ends and widths of the uniform variates' ranges (logarithms for the log-uniform ones)."""
-    lo = np.array([getattr(spec, name)[0] for name in DEVICE_UNIFORMS], dtype=float)
-    hi = np.array([getattr(spec, name)[1] for name in DEVICE_UNIFORMS], dtype=float)
-    with np.errstate(divide="ignore"):
-        lo[_LOG_UNIFORM] = np.log(lo[_LOG_UNIFORM])
-        hi[_LOG_UNIFORM] = np.log(hi[_LOG_UNIFORM])
-    return lo, hi - lo
+def device_variates(seed_sequence) -> tuple[list, list]:
+    """The random numbers of one device: the uniforms on [0, 1) of :data:`DEVICE_UNIFORMS` and
+    the standard normals of :data:`DEVICE_NORMALS`, in their orders.  Each component draws
+    from its own child of ``seed_sequence`` (reader, FSR unit, motor, drive train:
+    ``seed_sequence.spawn(4)``), so that a component's draws do not depend on another's."""
+    r_f, r_s, r_m, r_d = (np.random.default_rng(c) for c in seed_sequence.spawn(4))
+    u_f = r_f.random(3).tolist()                        # pulp b, m, c0
+    z_k = float(r_s.standard_normal())                  # FSR: k, then exponent, hysteresis, creep
+    u_s = r_s.random(3).tolist()
+    z_m = r_m.standard_normal(2).tolist()               # motor R, kM
+    u_d = r_d.random(3).tolist()                        # gear efficiency, guide friction, backlash
+    return u_f + u_s + u_d, [z_k] + z_m
 
 
-def device_variates(rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """The random numbers of one device: ``len(DEVICE_UNIFORMS)`` uniforms on [0, 1), then
-    ``len(DEVICE_NORMALS)`` standard normals, from ``rng`` in one call each."""
-    return rng.random(len(DEVICE_UNIFORMS)), rng.standard_normal(len(DEVICE_NORMALS))
-
-
-def device_from_variates(u: np.ndarray, z: np.ndarray, spec: PopulationSpec = PopulationSpec(),
+def device_from_variates(u, z, spec: PopulationSpec = PopulationSpec(),
                          base: DeviceParams = DeviceParams()) -> DeviceParams:
     """The device of the variates ``u`` and ``z`` (:func:`device_variates`) under ``spec``, around
     ``base``: every drawn value is a fixed function of its own variate, so changing one
     distribution changes no other component's value (recalibrated when ``spec.calibrate``)."""
-    lo, width = _ranges(spec)
-    x = lo + width * u                                  # rng.uniform(lo, hi)'s formula, vectorised
-    x[_LOG_UNIFORM] = np.exp(x[_LOG_UNIFORM])
-    (b_scale, m_scale, c0, fsr_n, fsr_hyst, fsr_creep, gear_eff, guide_n, backlash) = x.tolist()
-    z_k, z_r, z_km = z.tolist()
+    x = []
+    for name, v in zip(DEVICE_UNIFORMS, u):
+        lo, hi = getattr(spec, name)
+        if name in ("finger_b_scale", "guide_coulomb_n"):        # log-uniform
+            lo, hi = math.log(lo), math.log(hi)
+            x.append(math.exp(lo + (hi - lo) * v))
+        else:
+            x.append(lo + (hi - lo) * v)                          # Generator.uniform's formula
+    (b_scale, m_scale, c0, fsr_n, fsr_hyst, fsr_creep, gear_eff, guide_n, backlash) = x
+    z_k, z_r, z_km = z
     f, s, m, d = base.finger, base.fsr, base.motor, base.drivetrain
     rest = f.relax_weight_1 + f.relax_weight_2 + f.relax_weight_3
     k = (1.0 - c0) / rest
@@ -161,16 +161,16 @@ def sample_device(rng_or_seed, spec: PopulationSpec = PopulationSpec(), base: De
     """One device (reader + FSR unit + motor + drive train) drawn from ``spec``.
 
     ``rng_or_seed`` is an int, a ``SeedSequence`` (NumPy's or a
-    :class:`~ebraille_sim.base.seeds.SeedNode`) or a ``Generator``; one generator of that
-    seed draws the device's variates (:func:`device_variates`, :func:`device_from_variates`).
+    :class:`~ebraille_sim.base.seeds.SeedNode`) or a ``Generator`` (which draws the seed);
+    :func:`device_variates` of that seed, :func:`device_from_variates` of those.
     """
     if isinstance(rng_or_seed, np.random.Generator):
-        rng = rng_or_seed
+        ss = SeedNode(int(rng_or_seed.integers(0, 2**63)))
     elif isinstance(rng_or_seed, ISpawnableSeedSequence):
-        rng = np.random.default_rng(rng_or_seed)
+        ss = rng_or_seed
     else:
-        rng = np.random.default_rng(SeedNode(int(rng_or_seed)))
-    return device_from_variates(*device_variates(rng), spec, base)
+        ss = SeedNode(int(rng_or_seed))
+    return device_from_variates(*device_variates(ss), spec, base)
 
 
 def sample_devices(seed: int, n: int, spec: PopulationSpec = PopulationSpec(),
