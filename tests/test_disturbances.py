@@ -101,6 +101,24 @@ def test_noise_record_shorter_than_the_band_period_keeps_its_rms_on_average():
         D.band_limited_noise(t, 100.0, 600.0, 1.0, np.random.default_rng(0))
 
 
+def test_noise_is_scaled_to_its_rms_over_the_record():
+    """The RMS taken from the spectrum (Parseval) is the record's: a run as long as the record
+    has the RMS asked for, to round-off, whether the record has an even or odd length."""
+    for n in (1440, 1215):                       # records of their own length (2^5 3^2 5 and 3^5 5)
+        x = D.band_limited_noise(np.arange(n) * 5e-3, 8.0, 12.0, 1e-4, np.random.default_rng(n))
+        assert x.size == n and np.std(x) == pytest.approx(1e-4, rel=1e-12)
+        assert abs(np.mean(x)) < 1e-18
+
+
+def test_noise_records_have_fast_lengths():
+    """A run of a prime number of periods synthesises its noise over the next record whose
+    length has no prime factor above 5, and keeps the RMS asked for over it."""
+    assert [D.fast_length(n) for n in (1, 7, 1399, 1441, 8000, 8001)] == [1, 8, 1440, 1458, 8000, 8100]
+    x = D.band_limited_noise(np.arange(1399) * 5e-3, 8.0, 12.0, 1e-4, np.random.default_rng(3))
+    y = D.band_limited_noise(np.arange(1440) * 5e-3, 8.0, 12.0, 1e-4, np.random.default_rng(3))
+    assert np.array_equal(x, y[:1399]) and np.std(y) == pytest.approx(1e-4, rel=1e-12)
+
+
 def test_strap_slips_are_minimum_jerk_steps():
     _, x = profiles({"strap_slip": {"at_s": [10.0, 20.0], "displacement_m": 0.2e-3, "duration_s": 0.04}})[
         "finger_pos_m"]

@@ -153,6 +153,27 @@ def test_fixed_components_do_not_shift_the_others():
         dist.draw(np.random.SeedSequence(5), {"speed": 1.0})
 
 
+def test_each_drawn_value_follows_its_own_variate():
+    """Widening one range moves that value only, for a device and for an episode; the
+    episode's device is the population's draw of the episode seed's first child."""
+    from ebraille_sim.scenarios.population import PopulationSpec, device_from_variates, device_variates, sample_device
+    u, z = device_variates(np.random.SeedSequence(4))
+    a = device_from_variates(u, z, PopulationSpec(calibrate=False))
+    b = device_from_variates(u, z, PopulationSpec(calibrate=False, gear_efficiency=(0.6, 0.9)))
+    assert b.drivetrain.gear_efficiency == pytest.approx(0.6 + 0.3 * u[6], rel=1e-12)
+    assert a.drivetrain.gear_efficiency == pytest.approx(0.5 + 0.2 * u[6], rel=1e-12)
+    assert dataclasses.replace(b.drivetrain, gear_efficiency=a.drivetrain.gear_efficiency) == a.drivetrain
+    assert (a.finger, a.fsr, a.motor) == (b.finger, b.fsr, b.motor)
+    free = EpisodeDistribution().draw(np.random.SeedSequence(9))
+    wide = EpisodeDistribution(wpm_range=(30.0, 300.0), gap_range_m=(0.1e-3, 2e-3)).draw(np.random.SeedSequence(9))
+    assert wide.device == free.device and wide.seed == free.seed and wide.sections == free.sections
+    assert [f for _, f in wide.setpoint.steps] == [f for _, f in free.setpoint.steps]   # times follow the length
+    assert wide.reading.wpm != free.reading.wpm and wide.finger != free.finger
+    drawn = sample_device(np.random.SeedSequence(9).spawn(1)[0])
+    assert free.device == dataclasses.replace(drawn, driver_supply_v=free.device.driver_supply_v)
+    assert free.device.driver_supply_v <= drawn.driver_supply_v        # a sag or the full supply
+
+
 def test_bad_distributions_are_one_line_errors():
     for kwargs, text in [({"wpm_range": (120.0, 60.0)}, "low <= high"),
                          ({"passages": ("nope",)}, "not one of"),

@@ -2,8 +2,9 @@
 
 A :class:`numpy.random.SeedSequence` hashes its entropy and spawn key into a pool of 32-bit
 words when it is made, and hashes the pool again for every state it generates; both run
-element by element in NumPy's own code, about 5 us each.  An episode makes some twenty of
-them (one per component, one per generator), so :class:`SeedNode` computes the same pool and
+element by element in NumPy's own code, about 5 us each.  An env reset makes about a dozen
+of them (the episode's seed and its two children, the device's four, the run's three, one per
+disturbance), so :class:`SeedNode` computes the same pool and
 the same words (NumPy's documented algorithm, ``SeedSequence.mix_entropy`` and
 ``generate_state``) in one compiled call each, and only when asked.  A node is a
 ``SeedSequence`` for every purpose of NumPy's generators (``numpy.random.default_rng(node)``,
@@ -13,9 +14,9 @@ the same words (NumPy's documented algorithm, ``SeedSequence.mix_entropy`` and
 (``tests/test_seeds.py`` compares them with NumPy's over many entropies and keys).
 
 What it buys (``python benchmarks/bench_replicas.py``, NumPy's ``SeedSequence`` in its place in
-the same run, 2-core machine): a reset of the default env 514 us with nodes, 569 us with
-NumPy's sequences (55 us, 11 % of the reset, 10 env steps); a seed of three children and
-their generators 12 us against 46 us.
+the same run, 2-core machine at a load average of about 3): a reset of the default env 411 us
+with nodes, 480 us with NumPy's sequences (69 us, 17 % of the reset, 14 env steps); a seed of
+three children and their generators 7 us against 43 us.
 
 Examples
 --------

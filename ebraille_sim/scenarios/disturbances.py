@@ -110,8 +110,10 @@ def band_limited_noise(t_s: np.ndarray, f_lo_hz: float, f_hi_hz: float, rms: flo
     """Stationary Gaussian noise with a flat spectrum in ``[f_lo_hz, f_hi_hz]``.
 
     Synthesised in the frequency domain (independent complex Gaussian bins inside the
-    band, zero outside) over a record long enough to hold at least four periods of
-    ``f_lo_hz``, scaled to the RMS ``rms`` over that record, then cut to ``len(t_s)``.
+    band, zero outside) over a record long enough to hold ``len(t_s)`` samples, four periods
+    of ``f_lo_hz`` and four of the band's width, of the next length with no prime factor
+    above 5 (:func:`fast_length`), scaled to the RMS ``rms`` over that record (computed from
+    the spectrum, Parseval's theorem), then cut to ``len(t_s)``.
 
     Parameters
     ----------
@@ -141,17 +143,46 @@ def band_limited_noise(t_s: np.ndarray, f_lo_hz: float, f_hi_hz: float, rms: flo
                          f"the lower edge and of the band width) = {rec_s / dt:.4g} samples at {1 / dt:g} Hz, "
                          f"above the bound of {MAX_NOISE_RECORD_SAMPLES:.4g} samples "
                          f"(~{MAX_NOISE_RECORD_SAMPLES * 40 / 1e9:.2g} GB); widen the band or lower the control rate")
-    n_rec = max(n, int(math.ceil(4.0 / (max(f_lo_hz, 1e-3) * dt))), int(math.ceil(4.0 / ((f_hi_hz - f_lo_hz) * dt))))
+    n_rec = fast_length(max(n, int(math.ceil(4.0 / (max(f_lo_hz, 1e-3) * dt))),
+                            int(math.ceil(4.0 / ((f_hi_hz - f_lo_hz) * dt)))))
     i0, i1 = _band_bins(n_rec, dt, f_lo_hz, f_hi_hz)
     spec = np.zeros(n_rec // 2 + 1, dtype=complex)
     k = max(i1 - i0, 0)
-    spec[i0:i0 + k] = rng.standard_normal(k) + 1j * rng.standard_normal(k)
-    x = np.fft.irfft(spec, n_rec)
-    del spec                                   # a long run's spectrum is as large as its record
-    s = float(np.std(x))
+    bins = spec[i0:i0 + k]
+    bins.real = rng.standard_normal(k)
+    bins.imag = rng.standard_normal(k)
+    # the record's RMS from its spectrum (Parseval: no bin at 0 or at the Nyquist frequency, so
+    # the mean is 0 and each bin stands for itself and its conjugate): 2 sum |X_i|^2 / n_rec^2
+    s = math.sqrt(2.0 * float(np.vdot(bins, bins).real)) / n_rec
     if not s > 0:
         return np.zeros(n)
-    return x[:n] * (rms / s)
+    x = np.fft.irfft(spec, n_rec)[:n]
+    x *= rms / s
+    return x
+
+
+@functools.lru_cache(maxsize=1024)
+def fast_length(n: int) -> int:
+    """The smallest length ``>= n`` whose only prime factors are 2, 3 and 5: an FFT size that
+    NumPy's FFT transforms in a few passes of small radices (a record of a prime length takes
+    it five to six times as long: 1399 points 57 us, 1400 points 9 us).  Remembered per
+    length (an env's episodes have a few hundred lengths).
+
+    >>> fast_length(1399), fast_length(1400), fast_length(8000)
+    (1440, 1440, 8000)
+    """
+    best = 1 << max(int(n) - 1, 0).bit_length()          # the next power of two
+    p5 = 1
+    while p5 < best:
+        p35 = p5
+        while p35 < best:
+            q = p35
+            while q < n:
+                q *= 2
+            best = min(best, q)
+            p35 *= 3
+        p5 *= 5
+    return best
 
 
 def _band_bins(n_rec: int, dt: float, f_lo_hz: float, f_hi_hz: float) -> tuple[int, int]:

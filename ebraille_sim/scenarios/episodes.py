@@ -11,10 +11,14 @@ excursions, a Li-ion ``battery``) and the drawn device.  Arrays are made from th
 :func:`ebraille_sim.scenarios.inputs.build_run_inputs`, the function the scenario runner
 uses, so an episode and a scenario run of the same spec see the same inputs.
 
-Seeds: the episode's ``SeedSequence`` spawns one child per component, in the order
-device, run seed (the spec's ``seed``: sensor noise and disturbance realisations),
-reading, setpoint, finger, supply.  Fixing a component (``fixed`` of :meth:`draw`)
-consumes no draws of the others.
+Seeds: the episode's ``SeedSequence`` spawns two children.  The first draws the device
+(:func:`~ebraille_sim.scenarios.population.sample_device`: the draw of a population sweep's
+reader).  One NumPy ``Generator`` of the second draws, in this order and always all of them,
+the run seed (the spec's ``seed``: sensor noise and disturbance realisations) and one uniform
+variate per drawn scalar (passage, excerpt start, rate, number of setpoint levels, gap,
+tremor, drift, battery or not, state of charge, sag; then ``max_setpoint_levels`` levels and
+one fewer step times).  Every drawn value is a fixed function of its own variate, so fixing
+a component (``fixed`` of :meth:`draw`) or changing one range shifts no other draw.
 
 ==============  ===========================================================  ==========
 component       draw                                                         source
@@ -116,6 +120,17 @@ def _excerpt(text: str, start: int, n_cells: int) -> str:
     while end < len(src) and not src[end].isspace():
         end += 1
     return src[:end]
+
+
+(_U_PASSAGE, _U_START, _U_WPM, _U_LEVELS, _U_GAP, _U_TREMOR, _U_DRIFT, _U_BATTERY, _U_SOC, _U_SAG) = range(10)
+_N_EPISODE_UNIFORMS = 10
+"""Slots of an episode's uniform variates (module docstring); the setpoint's levels and step
+times follow them (``max_setpoint_levels`` and one fewer)."""
+
+
+def _index(u: float, n: int) -> int:
+    """The index in ``range(n)`` of the uniform variate ``u`` on [0, 1)."""
+    return min(int(u * n), n - 1)
 
 
 _DRAWN_KEYS = {"tremor": "rms_m", "pressing": "rms_m", "battery": "soc_start"}
@@ -257,10 +272,10 @@ class EpisodeDistribution:
         Parameters
         ----------
         seed_sequence : numpy.random.SeedSequence
-            The episode's seed; one child per component (module docstring).
+            The episode's seed (module docstring: what each of its children draws).
         fixed : dict, optional
             Components to fix instead of drawing, keys :data:`FIXED_KEYS` (validated by
-            the caller, :func:`ebraille_sim.rl.env.validate_options`): ``device`` (its
+            the caller, :func:`ebraille_sim.rl.episode.validate_options`): ``device`` (its
             rates are replaced by the episodes'), ``passage``, ``first_character``
             (character offset of the excerpt in the passage text), ``wpm``,
             ``setpoint_n`` and ``setpoint_steps`` (``(time_s, force_n)`` pairs),
@@ -273,7 +288,6 @@ class EpisodeDistribution:
         ScenarioSpec
             Source ``"episode"``, ``duration_s`` None (the run ends with the excerpt).
         """
-        from ebraille_sim.physics.noise import seed_from
         from ebraille_sim.scenarios.passages import list_passages
         from ebraille_sim.scenarios.population import sample_device
         from ebraille_sim.scenarios.reading import mean_dwell_s
@@ -282,7 +296,13 @@ class EpisodeDistribution:
         unknown = set(opt) - set(FIXED_KEYS)
         if unknown:
             raise ValueError(f"unknown fixed component {sorted(unknown)[0]!r}; allowed: {', '.join(FIXED_KEYS)}")
-        ss_dev, ss_run, ss_read, ss_sp, ss_finger, ss_supply = seed_sequence.spawn(6)
+        # the device from the first child, every other component from one generator of the
+        # second: a fixed number of draws in a fixed order (module docstring)
+        ss_dev, ss_rest = seed_sequence.spawn(2)
+        rng = np.random.default_rng(ss_rest)
+        run_seed = int(rng.integers(0, 2 ** 52))
+        levels_max = self.max_setpoint_levels
+        u = rng.random(_N_EPISODE_UNIFORMS + 2 * levels_max - 1).tolist()
         base = self.base_device
         if "device" in opt:
             dev = dataclasses.replace(opt["device"], rates=base.rates)
@@ -290,49 +310,42 @@ class EpisodeDistribution:
             dev = sample_device(ss_dev, self.population, base)
         else:
             dev = base
-        run_seed = int(seed_from(ss_run))
 
         # reading: passage, excerpt start at a word start of its text, rate
-        rng = np.random.default_rng(ss_read)
         names = self.passages or tuple(list_passages())
-        passage = names[int(rng.integers(len(names)))]
-        passage = opt.get("passage", passage)
+        passage = opt.get("passage", names[_index(u[_U_PASSAGE], len(names))])
         text, starts = _passage(passage)
-        first = starts[int(rng.integers(len(starts)))]
-        first = opt.get("first_character", first)
+        first = opt.get("first_character", starts[_index(u[_U_START], len(starts))])
         if first >= len(text):
             raise ValueError(f"option 'first_character' = {first} is out of range [0, {len(text) - 1}] "
                              f"for passage {passage!r}")
-        wpm = float(opt.get("wpm", rng.uniform(*self.wpm_range)))
+        lo, hi = self.wpm_range
+        wpm = float(opt.get("wpm", lo + (hi - lo) * u[_U_WPM]))
         n_cells = self.episode_characters
         reading = ReadingSpec(passage=passage, text=_excerpt(text, first, n_cells), wpm=wpm,
                               start_s=float(self.reading_start_s), max_characters=n_cells)
         t_end_s = self.reading_start_s + n_cells * mean_dwell_s(wpm)
 
         # setpoint: levels and step times
-        rng = np.random.default_rng(ss_sp)
-        n_levels = int(rng.integers(1, self.max_setpoint_levels + 1))
-        levels = rng.uniform(*self.setpoint_range_n, size=n_levels)
+        n_levels = 1 + _index(u[_U_LEVELS], levels_max)
+        lo, hi = self.setpoint_range_n
+        levels = [lo + (hi - lo) * x for x in u[_N_EPISODE_UNIFORMS:_N_EPISODE_UNIFORMS + n_levels]]
         t_lo = self.reading_start_s
         t_hi = max(t_lo, t_end_s - self.step_end_margin_s)
-        times = np.sort(rng.uniform(t_lo, t_hi, size=n_levels - 1))
+        times = sorted(t_lo + (t_hi - t_lo) * x for x in u[_N_EPISODE_UNIFORMS + levels_max:
+                                                            _N_EPISODE_UNIFORMS + levels_max + n_levels - 1])
         if "setpoint_n" in opt or "setpoint_steps" in opt:
             steps = tuple((float(t), float(f)) for t, f in opt.get("setpoint_steps", ()))
             setpoint = SetpointSpec(force_n=float(opt.get("setpoint_n", levels[0])), steps=steps)
         else:
-            setpoint = SetpointSpec(force_n=float(levels[0]),
-                                    steps=tuple((float(t), float(f)) for t, f in zip(times, levels[1:])))
+            setpoint = SetpointSpec(force_n=levels[0], steps=tuple(zip(times, levels[1:])))
 
-        # finger: gap, tremor and slow drift
-        rng = np.random.default_rng(ss_finger)
-        gap = float(rng.uniform(*self.gap_range_m))
-        tremor_rms = float(rng.uniform(*self.tremor_rms_range_m))
-        drift_rms = float(rng.uniform(*self.drift_rms_range_m))
-        # supply: a sagging regulated supply or one Li-ion cell
-        rng = np.random.default_rng(ss_supply)
-        on_battery = bool(rng.random() < self.battery_probability)
-        soc = float(rng.uniform(*self.battery_soc_range))
-        sag = float(rng.uniform(*self.supply_sag_range))
+        # finger: gap, tremor and slow drift; supply: a sagging regulated supply or one Li-ion cell
+        gap, tremor_rms, drift_rms, soc, sag = (
+            lo + (hi - lo) * u[i] for i, (lo, hi) in
+            ((_U_GAP, self.gap_range_m), (_U_TREMOR, self.tremor_rms_range_m), (_U_DRIFT, self.drift_rms_range_m),
+             (_U_SOC, self.battery_soc_range), (_U_SAG, self.supply_sag_range)))
+        on_battery = u[_U_BATTERY] < self.battery_probability
         disturb = self.disturbances and opt.get("disturbances", True)
         if not disturb:
             tremor_rms = drift_rms = sag = 0.0

@@ -1,8 +1,10 @@
 """Populations of readers, FSR units and drive trains: stated distributions, seeded draws.
 
-Each device is drawn from a :class:`PopulationSpec` with a NumPy ``Generator``; every
-component (reader, sensor, motor, drive train) has its own child ``SeedSequence`` so that
-changing one distribution does not change the draws of another.  Distributions and their
+Each device is drawn from a :class:`PopulationSpec` with NumPy ``Generator`` s: every
+component (reader, sensor, motor, drive train) has its own child ``SeedSequence``
+(:func:`device_variates`), and each parameter is a fixed function of its own variate
+(:func:`device_from_variates`), so that changing one distribution does not change the draws
+of another.  Distributions and their
 sources:
 
 ==========================  ==========================  =========================================
@@ -46,7 +48,7 @@ from numpy.random.bit_generator import ISpawnableSeedSequence
 from ebraille_sim.base.seeds import SeedNode
 from ebraille_sim.base.validation import check_bool, check_number, check_pair, replace_fields
 from ebraille_sim.estimation.calibration import calibrate_device
-from ebraille_sim.physics.params import FINGERS, DeviceParams, replace_checked
+from ebraille_sim.physics.params import DeviceParams, replace_checked
 
 
 @dataclass(frozen=True)
@@ -98,45 +100,60 @@ _FSR_SOURCES = tuple((f, _DRAWN) for f in ("resistance_at_1n_ohm", "exponent", "
 """The ``sources`` of a drawn FSR unit."""
 
 
-def _log_uniform(rng, lo, hi):
-    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+DEVICE_UNIFORMS = ("finger_b_scale", "finger_m_scale", "relax_c0", "fsr_exponent", "fsr_hysteresis",
+                   "fsr_creep_per_decade", "gear_efficiency", "guide_coulomb_n", "backlash_m")
+"""The :class:`PopulationSpec` ranges a device draws from, in the order of its uniform variates
+(``finger_b_scale`` and ``guide_coulomb_n`` log-uniform, the others uniform)."""
+DEVICE_NORMALS = ("fsr_k_sigma_ln", "motor_r_sigma", "motor_k_sigma")
+"""The :class:`PopulationSpec` spreads of a device's standard normal variates, in their order."""
 
 
-def sample_finger(rng: np.random.Generator, spec: PopulationSpec, base=FINGERS["nominal"]):
-    """A reader's pulp drawn around ``base``."""
-    b = base.stiffness_b_n_per_m * _log_uniform(rng, *spec.finger_b_scale)
-    m = base.exponent_m_per_m * float(rng.uniform(*spec.finger_m_scale))
-    c0 = float(rng.uniform(*spec.relax_c0))
-    rest = base.relax_weight_1 + base.relax_weight_2 + base.relax_weight_3
+def device_variates(seed_sequence) -> tuple[list, list]:
+    """The random numbers of one device: the uniforms on [0, 1) of :data:`DEVICE_UNIFORMS` and
+    the standard normals of :data:`DEVICE_NORMALS`, in their orders.  Each component draws
+    from its own child of ``seed_sequence`` (reader, FSR unit, motor, drive train:
+    ``seed_sequence.spawn(4)``), so that a component's draws do not depend on another's."""
+    r_f, r_s, r_m, r_d = (np.random.default_rng(c) for c in seed_sequence.spawn(4))
+    u_f = r_f.random(3).tolist()                        # pulp b, m, c0
+    z_k = float(r_s.standard_normal())                  # FSR: k, then exponent, hysteresis, creep
+    u_s = r_s.random(3).tolist()
+    z_m = r_m.standard_normal(2).tolist()               # motor R, kM
+    u_d = r_d.random(3).tolist()                        # gear efficiency, guide friction, backlash
+    return u_f + u_s + u_d, [z_k] + z_m
+
+
+def device_from_variates(u, z, spec: PopulationSpec = PopulationSpec(),
+                         base: DeviceParams = DeviceParams()) -> DeviceParams:
+    """The device of the variates ``u`` and ``z`` (:func:`device_variates`) under ``spec``, around
+    ``base``: every drawn value is a fixed function of its own variate, so changing one
+    distribution changes no other component's value (recalibrated when ``spec.calibrate``)."""
+    x = []
+    for name, v in zip(DEVICE_UNIFORMS, u):
+        lo, hi = getattr(spec, name)
+        if name in ("finger_b_scale", "guide_coulomb_n"):        # log-uniform
+            lo, hi = math.log(lo), math.log(hi)
+            x.append(math.exp(lo + (hi - lo) * v))
+        else:
+            x.append(lo + (hi - lo) * v)                          # Generator.uniform's formula
+    (b_scale, m_scale, c0, fsr_n, fsr_hyst, fsr_creep, gear_eff, guide_n, backlash) = x
+    z_k, z_r, z_km = z
+    f, s, m, d = base.finger, base.fsr, base.motor, base.drivetrain
+    rest = f.relax_weight_1 + f.relax_weight_2 + f.relax_weight_3
     k = (1.0 - c0) / rest
-    return replace_checked(base, name="drawn", sources=_FINGER_SOURCES, stiffness_b_n_per_m=b, exponent_m_per_m=m, relax_weight_inf=c0,
-                           relax_weight_1=base.relax_weight_1 * k, relax_weight_2=base.relax_weight_2 * k,
-                           relax_weight_3=1.0 - c0 - base.relax_weight_1 * k - base.relax_weight_2 * k)
-
-
-def sample_fsr(rng: np.random.Generator, spec: PopulationSpec, base):
-    """An FSR unit drawn around ``base``."""
-    k = base.resistance_at_1n_ohm * float(math.exp(rng.normal(0.0, spec.fsr_k_sigma_ln)))
-    return replace_checked(base, name="drawn", sources=_FSR_SOURCES, resistance_at_1n_ohm=k,
-                           exponent=float(rng.uniform(*spec.fsr_exponent)),
-                           hysteresis_fraction=float(rng.uniform(*spec.fsr_hysteresis)),
-                           creep_per_decade=float(rng.uniform(*spec.fsr_creep_per_decade)))
-
-
-def sample_motor(rng: np.random.Generator, spec: PopulationSpec, base):
-    """A motor drawn around ``base`` (winding resistance and the motor constant)."""
-    r = base.resistance_ohm * max(0.5, 1.0 + spec.motor_r_sigma * float(rng.normal()))
-    kscale = max(0.5, 1.0 + spec.motor_k_sigma * float(rng.normal()))
-    return replace_checked(base, name=base.name, resistance_ohm=r,
-                           torque_constant_nm_per_a=base.torque_constant_nm_per_a * kscale,
-                           back_emf_v_s_per_rad=base.back_emf_v_s_per_rad * kscale)
-
-
-def sample_drivetrain(rng: np.random.Generator, spec: PopulationSpec, base):
-    """A drive train drawn around ``base`` (gear efficiency, guide friction, backlash)."""
-    return replace_checked(base, name=base.name, gear_efficiency=float(rng.uniform(*spec.gear_efficiency)),
-                           guide_coulomb_n=_log_uniform(rng, *spec.guide_coulomb_n),
-                           backlash_m=float(rng.uniform(*spec.backlash_m)))
+    finger = replace_checked(f, name="drawn", sources=_FINGER_SOURCES, stiffness_b_n_per_m=f.stiffness_b_n_per_m * b_scale,
+                             exponent_m_per_m=f.exponent_m_per_m * m_scale, relax_weight_inf=c0,
+                             relax_weight_1=f.relax_weight_1 * k, relax_weight_2=f.relax_weight_2 * k,
+                             relax_weight_3=1.0 - c0 - f.relax_weight_1 * k - f.relax_weight_2 * k)
+    fsr = replace_checked(s, name="drawn", sources=_FSR_SOURCES,
+                          resistance_at_1n_ohm=s.resistance_at_1n_ohm * math.exp(spec.fsr_k_sigma_ln * z_k),
+                          exponent=fsr_n, hysteresis_fraction=fsr_hyst, creep_per_decade=fsr_creep)
+    kscale = max(0.5, 1.0 + spec.motor_k_sigma * z_km)
+    motor = replace_checked(m, name=m.name, resistance_ohm=m.resistance_ohm * max(0.5, 1.0 + spec.motor_r_sigma * z_r),
+                            torque_constant_nm_per_a=m.torque_constant_nm_per_a * kscale,
+                            back_emf_v_s_per_rad=m.back_emf_v_s_per_rad * kscale)
+    drivetrain = replace_checked(d, name=d.name, gear_efficiency=gear_eff, guide_coulomb_n=guide_n, backlash_m=backlash)
+    dev = replace_fields(base, finger=finger, fsr=fsr, motor=motor, drivetrain=drivetrain)
+    return calibrate_device(dev) if spec.calibrate else dev
 
 
 def sample_device(rng_or_seed, spec: PopulationSpec = PopulationSpec(), base: DeviceParams = DeviceParams()
@@ -144,8 +161,8 @@ def sample_device(rng_or_seed, spec: PopulationSpec = PopulationSpec(), base: De
     """One device (reader + FSR unit + motor + drive train) drawn from ``spec``.
 
     ``rng_or_seed`` is an int, a ``SeedSequence`` (NumPy's or a
-    :class:`~ebraille_sim.base.seeds.SeedNode`) or a ``Generator``; components draw from
-    child seeds so that each component's draw is independent of the others' distributions.
+    :class:`~ebraille_sim.base.seeds.SeedNode`) or a ``Generator`` (which draws the seed);
+    :func:`device_variates` of that seed, :func:`device_from_variates` of those.
     """
     if isinstance(rng_or_seed, np.random.Generator):
         ss = SeedNode(int(rng_or_seed.integers(0, 2**63)))
@@ -153,11 +170,7 @@ def sample_device(rng_or_seed, spec: PopulationSpec = PopulationSpec(), base: De
         ss = rng_or_seed
     else:
         ss = SeedNode(int(rng_or_seed))
-    r_f, r_s, r_m, r_d = (np.random.default_rng(c) for c in ss.spawn(4))
-    dev = replace_fields(base, finger=sample_finger(r_f, spec, base.finger),
-                              fsr=sample_fsr(r_s, spec, base.fsr), motor=sample_motor(r_m, spec, base.motor),
-                              drivetrain=sample_drivetrain(r_d, spec, base.drivetrain))
-    return calibrate_device(dev) if spec.calibrate else dev
+    return device_from_variates(*device_variates(ss), spec, base)
 
 
 def sample_devices(seed: int, n: int, spec: PopulationSpec = PopulationSpec(),
