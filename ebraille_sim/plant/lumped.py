@@ -465,7 +465,8 @@ def _fill_estimator_steady_state(s: np.ndarray, p: np.ndarray, u0: float) -> Non
 
 _LAST_ROWS: list = []
 """The parts (objects), estimator model and board position of the device packed last, its
-parameter row (seed 0) and its initial state (:func:`_device_rows`)."""
+parameter row (seed 0; :func:`reseed` gives it each device's seed) and its initial state
+(:func:`_device_rows`)."""
 
 
 def _device_rows(device: DeviceParams, seed: float, model, board_pos_m) -> tuple[np.ndarray, np.ndarray]:
@@ -473,9 +474,10 @@ def _device_rows(device: DeviceParams, seed: float, model, board_pos_m) -> tuple
     packed when ``device`` shares every part with it (the same objects of its motor, drive
     train, finger, FSR, circuit, estimator and rates, the same model object and board
     position): the nominal device of every episode, with its supply sagged or not (neither row
-    reads the supply or the gravity), packs once.  Only the seed slot differs."""
-    key = (device.motor, device.drivetrain, device.finger, device.fsr, device.circuit, device.estimator,
-           device.rates, model, board_pos_m)
+    reads the supply or the gravity), packs once.  Only the seed and what was measured with the
+    device's noise differ (:func:`reseed`)."""
+    key = (device.motor, device.drivetrain, device.finger, device.fsr, device.circuit, device.current_sense,
+           device.estimator, device.rates, model, board_pos_m)
     last = _LAST_ROWS
     if last and all(a is b for a, b in zip(last[0], key)):
         p, st = last[1].copy(), last[2].copy()
@@ -483,7 +485,7 @@ def _device_rows(device: DeviceParams, seed: float, model, board_pos_m) -> tuple
         p = pack_params(device, 0.0, model)
         st = initial_state(device, p, board_pos_m)
         last[:] = [key, p.copy(), st.copy()]
-    p[P.seed] = float(seed)
+    reseed(p, device, seed)
     return p, st
 
 
