@@ -42,8 +42,8 @@ def clear_caches() -> None:
             for obj in list(vars(module).values()):
                 if isinstance(obj, functools._lru_cache_wrapper):
                     obj.cache_clear()
-    from ebraille_sim.plant import loop
-    loop._LAST_ROWS.clear()                                # the rows of the device packed last
+    from ebraille_sim.plant import lumped
+    lumped._LAST_ROWS.clear()                                # the rows of the device packed last
 
 
 def episodes(kw: dict, options, seeds, steps: int = 600) -> dict:
@@ -312,22 +312,22 @@ def test_a_device_sharing_the_last_ones_parts_copies_its_rows_and_no_other_does(
     objects (the nominal device with its supply sagged); a drawn device packs afresh; the
     copies equal fresh packing and a user changing a returned row changes no later plant."""
     from ebraille_sim.base.validation import replace_fields
-    from ebraille_sim.plant import loop
+    from ebraille_sim.plant import lumped
     base = DeviceParams()
-    loop._LAST_ROWS.clear()
-    first = loop.Plant.from_devices([base], [3.0])
-    first.params[0, loop.P.motor_r_ohm] = 99.0                 # not the cache's row
+    lumped._LAST_ROWS.clear()
+    first = lumped.Plant.from_devices([base], [3.0])
+    first.params[0, lumped.P.motor_r_ohm] = 99.0                 # not the cache's row
     sagged = replace_fields(base, driver_supply_v=5.1)
-    again = loop.Plant.from_devices([sagged], [7.0])
-    fresh_p = loop.pack_params(sagged, 7.0)
+    again = lumped.Plant.from_devices([sagged], [7.0])
+    fresh_p = lumped.pack_params(sagged, 7.0)
     np.testing.assert_array_equal(again.params[0], fresh_p)
-    np.testing.assert_array_equal(again.state[0], loop.initial_state(sagged, fresh_p))
-    assert loop._LAST_ROWS[0][0] is base.motor
+    np.testing.assert_array_equal(again.state[0], lumped.initial_state(sagged, fresh_p))
+    assert lumped._LAST_ROWS[0][0] is base.motor
     drawn = sample_devices(4, 1)[0]
-    other = loop.Plant.from_devices([drawn], [7.0])
-    np.testing.assert_array_equal(other.params[0], loop.pack_params(drawn, 7.0))
-    assert other.params[0, loop.P.finger_b_n_per_m] != again.params[0, loop.P.finger_b_n_per_m]
-    assert loop._LAST_ROWS[0][2] is drawn.finger
+    other = lumped.Plant.from_devices([drawn], [7.0])
+    np.testing.assert_array_equal(other.params[0], lumped.pack_params(drawn, 7.0))
+    assert other.params[0, lumped.P.finger_b_n_per_m] != again.params[0, lumped.P.finger_b_n_per_m]
+    assert lumped._LAST_ROWS[0][2] is drawn.finger
 
 
 def test_compiled_cell_index_equals_the_searchsorted_lookup():
