@@ -298,6 +298,19 @@ def test_disabled_supervisor_returns_the_inner_command_unchanged(seed):
     np.testing.assert_array_equal(sup._sv, before)
 
 
+def test_disabled_supervisor_leaves_the_inner_controller_as_it_is_without_it():
+    """A PID behind a disabled supervisor gives the bare PID's commands, a reset on a setpoint
+    above the cap included (an enabled supervisor resets its inner controller on the clipped
+    setpoint, 2.7 N, that it will pass it)."""
+    f, sp, dt, _, _ = inputs(3, 1000, "none")
+    bare, wrapped = make("pid"), Supervisor(make("pid"), SupervisorConfig(enabled=False))
+    for c in (bare, wrapped):
+        c.reset(force_est_n=3.0, setpoint_n=3.5)
+    for k in range(1000):
+        if math.isfinite(f[k]) and math.isfinite(sp[k]):
+            assert bare.update(f[k], sp[k], dt[k]) == wrapped.update(f[k], sp[k], dt[k]), k
+
+
 def _header(sup):
     return sup.compiled()[0][:N_HEADER].copy()
 
