@@ -190,16 +190,16 @@ def test_rated_current_holds_theta_at_zero():
 
 def test_contact_lost_freeze_back_off_hold_then_regained_resume():
     """In contact at 1 N, an estimate of 0.05 N (< 0.1 N) with the setpoint asking for contact
-    freezes: -2 V while t - t0 <= 50 ms (periods 0..51: 51/1024 = 49.8 ms), then 0 V.  0.9 N within
-    the back-off does not resume.  After it, 0.5 N right after 0.9 N is falling (the estimate
-    30/1024 s earlier is higher): held until that is 0.5 N too (period 52 + 30 = 82); then the
+    freezes: -2 V while t - t0 <= 50 ms (periods 0..51: 51/1024 = 49.8 ms), then 0 V.  0.51 N within
+    the back-off does not resume.  After it, 0.5 N right after 0.51 N is falling (the estimate
+    30/1024 s earlier is higher, by 2 %): held until that is 0.5 N too (period 52 + 30 = 82); then the
     inner controller is reset to 0 V and takes over at the next period."""
     sup = make(1.0, slew_v_per_s=1e6)
     settle(sup, 1.0)
     t0 = sup.t + DT
     out = drive(sup, 1, 0.05)
     assert out == [-2.0] and sup.mode == "freeze" and sup.freeze_t0 == t0
-    out += drive(sup, 51, 0.9)
+    out += drive(sup, 51, 0.51)
     assert out == [-2.0] * 52 and sup.mode == "freeze"
     out = drive(sup, 30, 0.5)                      # periods 52..81
     assert out == [0.0] * 30 and sup.mode == "freeze"
