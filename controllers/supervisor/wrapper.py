@@ -105,10 +105,12 @@ class Supervisor:
         self._sv[:_N_HEADER] = self._sv0
 
     def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
-        """Clear faults and detectors and reset the inner controller bumplessly."""
+        """Clear faults and detectors and reset the inner controller bumplessly (on the setpoint it
+        will be given: clipped to ``force_cap_n - cap_margin_n``, unchanged when disabled)."""
         self._clear()
         self._sv[SV.u_prev] = float(command_v) if math.isfinite(command_v) else 0.0
-        self.inner.reset(force_est_n=force_est_n, setpoint_n=min(setpoint_n, self._sp_max), command_v=command_v)
+        sp = min(setpoint_n, self._sp_max) if self.config.enabled else setpoint_n
+        self.inner.reset(force_est_n=force_est_n, setpoint_n=sp, command_v=command_v)
 
     @property
     def _sp_max(self) -> float:
