@@ -567,9 +567,8 @@ def _substep_by_hand(s, p, u):
     s[S.time_s] += h
     # the motor-current chain's two RC sections on the amplifier's image of the new current
     va = amplifier_v(i, p[P.isense_shunt_ohm], p[P.isense_gain], 0.0, p[P.isense_offset_v], p[P.isense_ref_v])
-    s[S.isense_count] += 1.0
     s[S.isense_filter1_v] = rc_step(s[S.isense_filter1_v], va, p[P.isense_decay])
-    s[S.isense_filter2_v] = rc_step(s[S.isense_filter2_v], s[S.isense_filter1_v], p[P.isense_decay])
+    s[S.isense_filter2_v] = rc_step(s[S.isense_filter2_v], s[S.isense_filter1_v], p[P.isense_decay2])
     # sensor: lag, then (due) a sample and (due) an estimate
     s[S.fsr_force_lagged_n] = lag_step(s[S.fsr_force_lagged_n], fc, p[P.fsr_lag_alpha])
     s[S.sensor_phase] = 0.0
@@ -599,6 +598,7 @@ def _substep_by_hand(s, p, u):
                                       P.est_out_x0, P.est_out_y0, int(p[P.est_n_out]),
                                       p[P.est_nyquist_average] > 0.0, p[P.est_clamp] > 0.0)
     # the end of the control period: the firmware reads the current once
+    s[S.isense_count] += 1.0
     noise = noise_v(p[P.isense_noise_v], p[P.seed], NOISE_INDEX_OFFSET + s[S.isense_count])
     s[S.current_meas_a] = firmware_current_a(adc_code(s[S.isense_filter2_v] + noise, p[P.isense_lsb_v],
                                                       p[P.isense_max_code]),

@@ -106,12 +106,9 @@ def current_sense_substep(s, p):
     current through the RC sections (:mod:`ebraille_sim.physics.current_sense`)."""
     v = amplifier_v(s[S.current_a], p[P.isense_shunt_ohm], p[P.isense_gain], 0.0, p[P.isense_offset_v],
                     p[P.isense_ref_v])
-    s[S.isense_count] += 1.0
-    s[S.isense_filter1_v] = rc_step(s[S.isense_filter1_v], v, p[P.isense_decay])
-    if p[P.isense_stages] > 1.0:
-        s[S.isense_filter2_v] = rc_step(s[S.isense_filter2_v], s[S.isense_filter1_v], p[P.isense_decay])
-    else:
-        s[S.isense_filter2_v] = s[S.isense_filter1_v]
+    v1 = rc_step(s[S.isense_filter1_v], v, p[P.isense_decay])
+    s[S.isense_filter1_v] = v1
+    s[S.isense_filter2_v] = rc_step(s[S.isense_filter2_v], v1, p[P.isense_decay2])   # decay2 = 0: one section
 
 
 @njit(cache=True, inline="always")
@@ -189,6 +186,7 @@ def advance(s, p, u, n_sub):
     for _ in range(n_sub):
         mechanics_substep(s, p, u)
         sensor_substep(s, p, u, s[S.contact_force_n])
+    s[S.isense_count] += n_sub
     if n_sub > 0:
         current_sample(s, p)
 
@@ -206,3 +204,4 @@ def advance_sensor_only(s, p, u, contact_force_n, n_sub):
     for _ in range(n_sub):
         s[S.contact_force_n] = contact_force_n
         sensor_substep(s, p, u, contact_force_n)
+    s[S.isense_count] += n_sub

@@ -186,7 +186,7 @@ def _pack_current_sense(p: np.ndarray, cs, h_s: float) -> None:
     p[P.isense_offset_v] = cs.offset_v
     p[P.isense_ref_v] = cs.reference_v
     p[P.isense_decay] = math.exp(-h_s / cs.filter_tau_s)
-    p[P.isense_stages] = float(cs.filter_stages)
+    p[P.isense_decay2] = p[P.isense_decay] if cs.filter_stages == 2 else 0.0    # 0: the second passes the first
     p[P.isense_lsb_v] = cs.adc_lsb_v
     p[P.isense_max_code] = cs.adc_max_code
     p[P.isense_noise_v] = cs.adc_noise_lsb * cs.adc_lsb_v
