@@ -97,8 +97,9 @@ def test_missing_baseline_and_bad_names(suite, capsys):
     err = capsys.readouterr().err
     assert err.startswith("error: unknown scenario 'nope'") and err.count("\n") == 1
     (suite / "baselines" / "contact_onset.json").write_text("{not json")
-    assert cli(["regress", "--scenarios", str(suite), "--only", "contact_onset"]) == 1
-    assert "is not valid JSON" in capsys.readouterr().out
+    assert cli(["regress", "--scenarios", str(suite), "--only", "contact_onset"]) == 2      # bad input, not a check
+    err = capsys.readouterr().err
+    assert err.startswith("error: baseline") and "not valid JSON" in err and err.count("\n") == 1
 
 
 def test_every_shipped_scenario_has_a_baseline():

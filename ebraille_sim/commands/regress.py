@@ -5,7 +5,7 @@ NAME = "regress"
 JSON_FILE = True
 HELP = "run every scenario in scenarios/ and compare the metrics with scenarios/baselines/ (exit 1 if any moved)"
 EPILOG = ("exit status: 0 when every scenario matches its baseline and criteria, 1 when any moved, "
-          "failed a criterion or has no baseline, 2 for bad input")
+          "failed a criterion or has no baseline, 2 for bad input (including a baseline file that cannot be read)")
 
 
 def add_arguments(p):
@@ -65,9 +65,9 @@ def _check_inputs(args) -> None:
     if not files:
         where = args.scenarios if args.scenarios is not None else "the scenario folder"
         raise UserError(f"no scenario files (*.toml) in {short(str(where))}; nothing to check")
-    from ebraille_sim.base.files import check_regular
+    from ebraille_sim.base.files import check_regular, read_json
     from ebraille_sim.tools.regress import baseline_path
-    for f in files:                  # a baseline that is a FIFO or a device is refused before the runs
+    for f in files:                  # a baseline that cannot be read (a FIFO, a device, too large, too deep) is refused before the runs
         b = (pathlib.Path(args.baselines) / f"{pathlib.Path(f).stem}.json" if args.baselines is not None
              else baseline_path(f))
         if os.path.lexists(b):
@@ -76,6 +76,8 @@ def _check_inputs(args) -> None:
                     raise ValueError(f"baseline {short(str(b))} is a symbolic link; ebraille-sim replaces only "
                                      f"regular files")
                 check_regular(b, "baseline")
+                if not args.update:
+                    read_json(b, "baseline")
             except (ValueError, FileNotFoundError) as exc:
                 raise UserError(str(exc)) from None
     if args.only:
