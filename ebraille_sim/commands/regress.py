@@ -80,13 +80,12 @@ def _check_inputs(args) -> None:
                     read_json(b, "baseline")
             except (ValueError, FileNotFoundError) as exc:
                 raise UserError(str(exc)) from None
-    if args.only:
-        from ebraille_sim.scenarios.spec import load_scenario
-        for f in files:
-            try:
-                load_scenario(f)
-            except (ValueError, FileNotFoundError) as exc:
-                raise UserError(f"--only: {exc}") from None
+    from ebraille_sim.scenarios.spec import load_scenario
+    for f in files:                  # every scenario (and the files it reads) is read before the runs
+        try:
+            load_scenario(f)
+        except (ValueError, FileNotFoundError) as exc:
+            raise UserError(f"--only: {exc}" if args.only else str(exc)) from None
     if args.controller is not None:
         try:
             controllers.make(args.controller)
