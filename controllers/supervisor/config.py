@@ -95,6 +95,7 @@ def device_limits(device: DeviceParams) -> dict:
             SAFE_FORCE_N, soft.stiffness_b_n_per_m, soft.exponent_m_per_m),
         "sense_gain_error_max": device.current_sense.gain_error_max + device.current_sense.shunt_tolerance,
         "sense_error_a": worst_case_error_a(device.current_sense, 0.0),
+        "powered_current_a": worst_case_error_a(device.current_sense, 0.0) + 0.5e-3,
     }
 
 
@@ -229,10 +230,11 @@ class SupervisorConfig:
     implausible_n: float = 0.5
     """Margin by which the force the current implies may exceed the estimate [E]."""
     implausible_s: float = 0.2
-    powered_current_a: float = 0.5e-3
-    """Smallest motor current that shows the driver powers the motor [E] (a few counts of a
-    current sense that resolves tens of microamperes): the back-EMF speed counts as travel only
-    above it.  A cut supply draws no current, and its command would read as speed; a motor
+    powered_current_a: float = worst_case_error_a(_NOMINAL.current_sense, 0.0) + 0.5e-3
+    """Smallest reading of the motor current that shows the driver powers the motor [D]: 0.5 mA
+    above the largest reading of a motor at rest (the sensing chain's worst case at 0 A,
+    :func:`~ebraille_sim.physics.current_sense.worst_case_error_a`, 3.1 mA), so that the chain's
+    zero error and noise never read as power: the back-EMF speed counts as travel only above it.  A cut supply draws no current, and its command would read as speed; a motor
     that moves while drawing less than its friction current (the finger pushing the board back
     as the drive retracts) is counted, so the travel integral follows a force loop that
     hunts back and forth."""

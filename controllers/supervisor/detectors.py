@@ -114,10 +114,13 @@ def _envelope_cap(sv, cfg, u, cur):
 
 @njit(cache=True, inline="always")
 def _rest_push_lower_edge_n(cfg, cur):
-    """Least force (N) that the drive at current ``cur`` applies to the finger when nothing else
-    takes it: the steady push bound with break-away friction, the weight against the push and the
-    guide rods' break-away friction (the lower edge of the friction band)."""
-    return (limits.push_force_bound_n(cur, cfg[CF.push_force_per_a_n], 1.0, 1.0, cfg[CF.breakaway_friction_n],
+    """Least force (N) that the drive applies to the finger when nothing else takes it, for a
+    current READ as ``cur``: the least true current that reading allows (the sensing chain's worst
+    case, ``(cur - e_abs) / (1 + e_gain)``) through the steady push bound with break-away friction,
+    the weight against the push and the guide rods' break-away friction (the lower edge of the
+    friction band).  A sensor that reads a little high never accuses the FSR."""
+    cur_lo = (cur - cfg[CF.sense_error_a]) / (1.0 + cfg[CF.sense_gain_error_max])
+    return (limits.push_force_bound_n(cur_lo, cfg[CF.push_force_per_a_n], 1.0, 1.0, cfg[CF.breakaway_friction_n],
                                       cfg[CF.push_weight_n]) - cfg[CF.guide_static_n])
 
 

@@ -58,7 +58,7 @@ _CFG_SCALARS = ("force_cap_n", "cap_margin_n", "sp_max_n", "slew_v_per_s", "rate
                 "implausible_s", "out_of_range_n", "stuck_response_s", "stuck_emf_v", "stuck_command_v",
                 "drop_window_s", "drop_n", "drop_keep_fraction", "backoff_s", "contact_loss_timeout_s", "retract_v", "watchdog_timeout_s",
                 "retract_s", "retract_moving_s", "max_retract_s", "min_dt_s", "events_base", "events_cap",
-                "envelope_n", "envelope_base", "state_len")
+                "envelope_n", "envelope_base", "state_len", "sense_error_a", "sense_gain_error_max")
 
 
 def _record(kind: str, names, start: int = 0):
@@ -105,6 +105,7 @@ def _pack(c) -> np.ndarray:
         "soft_m_per_m": c.soft_m_per_m, "release_window_s": c.release_window_s,
         "travel_follow_s": c.travel_follow_s, "implausible_n": c.implausible_n,
         "first_contact_travel_m": c.first_contact_travel_m, "contact_current_a": c.current_for_force_a(c.contact_on_n),
+        "sense_error_a": c.sense_error_a, "sense_gain_error_max": c.sense_gain_error_max,
         "stall_fraction": c.stall_fraction, "current_limit_a": c.sensed_limit_a(c.current_limit_a),
         "stall_time_s": c.stall_time_s,
         "push_force_per_a_n": c.push_force_per_a_n,
