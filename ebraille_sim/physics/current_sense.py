@@ -46,6 +46,7 @@ import math
 
 from ebraille_sim.base.compiled import njit
 from ebraille_sim.physics.fsr import adc_code
+from ebraille_sim.physics.noise import normal_at
 
 STATE_SLOTS = ("isense_filter1_v", "isense_filter2_v", "isense_count", "current_meas_a")
 """State slots of the chain: the two RC sections' output voltages, the physics steps so far (the
@@ -102,13 +103,18 @@ def zero_code(cs, sensor_seed: float, lsb_v: float, max_code: float) -> float:
 
     The conversions use noise indices just below :data:`NOISE_INDEX_OFFSET` (their own part of
     the device's noise sequence)."""
-    from ebraille_sim.physics.noise import normal_at
     v0 = amplifier_v(0.0, cs.shunt_ohm, cs.gain_v_per_v, cs.gain_error, cs.offset_v, cs.reference_v)
-    n = int(cs.zero_samples)
+    return _mean_code_at_rest(v0, cs.adc_noise_lsb * lsb_v, float(sensor_seed), int(cs.zero_samples), lsb_v,
+                              max_code)
+
+
+@njit(cache=True)
+def _mean_code_at_rest(v0, noise_rms_v, seed, n, lsb_v, max_code):
+    """Mean of ``n`` conversions of ``v0`` plus the device's noise at indices below
+    :data:`NOISE_INDEX_OFFSET` (one compiled call: every env reset packs a zero)."""
     total = 0.0
     for k in range(n):
-        noise = cs.adc_noise_lsb * lsb_v * normal_at(sensor_seed, NOISE_INDEX_OFFSET - 1.0 - k)
-        total += adc_code(v0 + noise, lsb_v, max_code)
+        total += adc_code(v0 + noise_rms_v * normal_at(seed, NOISE_INDEX_OFFSET - 1.0 - k), lsb_v, max_code)
     return total / n
 
 
