@@ -44,7 +44,7 @@ __all__ = ["Controller", "PID", "PIDConfig", "available", "make", "register"]
 
 _CONFIG_SUFFIXES = (".toml", ".json")
 _POLICY_PREFIX = "policy:"
-_FILE_KEYS = ("controller", "gains")
+_FILE_KEYS = ("name", "description", "controller", "firmware", "gains", "benchmark", "check")
 
 _REGISTRY: dict[str, Callable[..., Controller]] = {}
 
@@ -118,8 +118,10 @@ def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
     Parameters
     ----------
     name_or_path : str or path-like
-        A name from :func:`available`, a path to a ``.toml`` / ``.json``
-        file holding ``{"controller": name, "gains": {...}}``, or
+        A name from :func:`available`, a shipped design's name
+        (:mod:`controllers.designs`), a path to a ``.toml`` / ``.json``
+        file holding ``{"controller": name, "gains": {...}}`` (a design file:
+        its ``firmware`` is applied by the scenario runner, not here), or
         ``"policy:PATH"`` for a policy saved by ``ebraille-sim train`` or by
         Stable-Baselines3's ``model.save`` with its metadata beside it
         (:mod:`controllers.policy`; needs the ``rl`` extra).
@@ -147,7 +149,7 @@ def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
     >>> make("lqr")
     Traceback (most recent call last):
     ...
-    ValueError: unknown controller 'lqr'; available: actuator_bound, lqg, pid, pid_dob, pid_feedforward, pid_friction, pid_scheduled (or give a path to a .toml/.json config file)
+    ValueError: unknown controller 'lqr'; available: actuator_bound, lqg, pid, pid_dob, pid_feedforward, pid_friction, pid_scheduled; designs: dob_100hz, dob_hold_1khz, dob_learn_1khz (or give a path to a .toml/.json config file)
     """
     spec = os.fspath(name_or_path)
     if spec.startswith(_POLICY_PREFIX):
@@ -155,6 +157,10 @@ def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
         return load_policy(spec[len(_POLICY_PREFIX):], **overrides)
     if spec in _REGISTRY:
         return _REGISTRY[spec](**overrides)
+    from controllers.designs import designs
+    if spec in designs():
+        d = designs()[spec]
+        return make(d.controller, **{**d.gains, **overrides})
     if spec.lower().endswith(_CONFIG_SUFFIXES):
         data = _load_config_file(spec)
         name = data["controller"]
@@ -165,7 +171,7 @@ def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
         kwargs = {**data.get("gains", {}), **overrides}
         return _REGISTRY[name](**kwargs)
     raise ValueError(
-        f"unknown controller {spec!r}; available: {', '.join(available())}"
+        f"unknown controller {spec!r}; available: {', '.join(available())}; designs: {', '.join(designs())}"
         " (or give a path to a .toml/.json config file)"
     )
 

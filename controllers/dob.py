@@ -78,10 +78,9 @@ the estimate is within ``hold_band_fraction`` of it.  Outside a hold it would sl
 term is added after the PID's clamp and anti-windup, which do not see it: in a hold it is a
 fraction of a volt.  The previous command is taken as the voltage applied: where the drive
 cannot apply it (a sagging cell below the command) the back-EMF reads high and the damping
-takes off more than the board's speed asks.  Gains file ``docs/figures/benchmark_fast/pid_dob_hold.json`` (``kv``
-0.5 on ``pid_dob_fast_8.json``'s gains) with the 1 kHz estimator path and the hysteresis
-compensation's turn test (docs/benchmark.md); the study that chose it is
-``python docs/make_dob_tuning.py --hold-damping``.
+takes off more than the board's speed asks.  The shipped design ``dob_hold_1khz``
+(:mod:`controllers.designs`: ``kv`` 0.5 on the 1 kHz firmware preset ``fast_1khz``, the
+estimator at the control rate with the hysteresis compensation's turn test) uses it.
 
 **Refresh learning (off by default).**  In refresh reading every character is pressed, held
 and released again, and the loop meets each press with the same estimate delay: the force
@@ -91,9 +90,8 @@ sags through the hold while the estimate still shows the press, or a stiff pulp 
 dwell after dwell; while the pattern is recognised the hold damping uses
 ``refresh_hold_damping_v_per_v`` (a press that has just stopped rings; a hold in steady reading
 has a finger moving the board, which strong damping would fight).  Without a recognised
-pattern the controller is exactly the one without learning.  Gains file
-``docs/figures/benchmark_fast/pid_dob_learn.json`` (``pid_dob_hold.json`` with gain 0.25 and
-``kv`` 1.5 in refresh); the study is ``python docs/make_dob_tuning.py --refresh-learning``.
+pattern the controller is exactly the one without learning.  The shipped design
+``dob_learn_1khz`` is ``dob_hold_1khz`` with gain 0.25 and ``kv`` 1.5 in refresh.
 
 Examples
 --------

@@ -16,6 +16,9 @@ the run's description (scenario, seed, duration, backend).  ``tests/test_backend
 reruns the same scenario and compares every column within its absolute tolerance in
 :data:`TOLERANCES`, which names the physics it guards.
 
+Design checks: the ``[check]`` metrics of the shipped designs (``ebraille_sim/data/designs``),
+a nominal run of the named scenario with the design on its firmware.
+
 Scenario baselines: ``scenarios/baselines/<name>.json``, the metrics of every shipped
 scenario, rewritten as ``ebraille-sim regress --update`` does (checked by ``ebraille-sim
 regress`` within the tolerances of :data:`ebraille_sim.tools.regress.TOLERANCES`).
@@ -97,9 +100,37 @@ def main(argv: list[str]) -> int:
             errors = [r.note for r in check.rows if r.status == "error"]
             print(f"{check.baseline}: " + ("written" if check.updated else f"not written: {errors[0]}"))
             failed += not check.updated
+        for path in write_design_checks():
+            print(f"{path}: [check] written")
         if failed:
             return 1
     return 0
+
+
+def design_check_run(design) -> dict:
+    """The ``[check]`` metrics of a shipped design: its scenario on the nominal reader, the
+    design on its own firmware (``run SCENARIO --controller NAME``)."""
+    from ebraille_sim.scenarios.runner import run_scenario
+    res = run_scenario(design.check["scenario"], controller=design.name, trace_every=None)
+    return {k: float(res.metrics[k]) for k in design.check if k != "scenario"}
+
+
+def write_design_checks() -> list:
+    """Rewrite the ``[check]`` values of every shipped design that has one (3 decimals)."""
+    import re
+
+    from controllers.designs import designs
+    out = []
+    for d in designs().values():
+        if not d.check:
+            continue
+        path = pathlib.Path(d.source)
+        text = path.read_text(encoding="utf-8")
+        for k, v in design_check_run(d).items():
+            text = re.sub(rf"(?m)^{re.escape(k)} = .*$", f"{k} = {v:.3f}", text)
+        path.write_text(text, encoding="utf-8")
+        out.append(path)
+    return out
 
 
 if __name__ == "__main__":

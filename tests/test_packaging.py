@@ -93,6 +93,10 @@ def test_wheel_ships_the_library_and_its_baselines(wheel):
     shipped = {n[len("ebraille_sim/library/"):] for n in names if n.startswith("ebraille_sim/library/")}
     assert shipped == _library_files()
     assert "ebraille_sim/data/passages/default.txt" in names and "controllers/pid.py" in names
+    root = pathlib.Path(__file__).resolve().parents[1] / "ebraille_sim" / "data"
+    for kind in ("firmware", "designs"):                  # the named firmware presets and designs
+        files = {p.name for p in (root / kind).glob("*.toml")}
+        assert files and {f"ebraille_sim/data/{kind}/{f}" for f in files} <= names
     assert not any(n.startswith("scenarios/") for n in names)                     # no top-level package
     with zipfile.ZipFile(wheel) as z:
         assert z.read("ebraille_sim/library/baselines/steady_90wpm.json") == \
@@ -149,6 +153,11 @@ def test_installed_wheel_runs_the_shipped_library_from_any_folder(wheel, tmp_pat
     lib = {s["name"]: s for s in doc["scenarios"]}
     assert pathlib.Path(lib["steady_90wpm"]["file"]).is_relative_to(venv) and lib["steady_90wpm"]["from"] == "library"
     assert len(lib) == len(list(SCEN.glob("*.toml")))
+    from controllers.designs import designs
+    from ebraille_sim.estimation.presets import firmware_presets
+    assert {d["name"] for d in doc["designs"]} == set(designs())
+    assert {f["name"] for f in doc["firmware"]} == set(firmware_presets())
+    assert all(isinstance(e["score"], float) for e in doc["designs"] + doc["firmware"])
 
     r = cli("run", "steady_90wpm", "--duration", "3", "--no-plot", "--out", str(tmp_path / "run"))
     assert r.returncode == 0, r.stdout + r.stderr

@@ -1,8 +1,9 @@
-"""``ebraille-sim list``: the shipped scenarios, controllers, presets and estimator models."""
+"""``ebraille-sim list``: the shipped scenarios, controllers, firmware presets, designs, device presets and
+estimator models."""
 from __future__ import annotations
 
 NAME = "list"
-HELP = "list scenarios, controllers, device presets and estimator models"
+HELP = "list scenarios, controllers, firmware presets, designs, device presets and estimator models"
 
 
 def add_arguments(p):
@@ -18,7 +19,9 @@ def catalogue() -> dict:
     else the one-line reason it cannot be loaded.
     """
     import controllers
+    from controllers.designs import designs
     from ebraille_sim.estimation.paper_models import KINDS, ORDERS
+    from ebraille_sim.estimation.presets import firmware_presets
     from ebraille_sim.physics import params
     from ebraille_sim.plant.backends import PLANT_BACKENDS
     from ebraille_sim.scenarios.spec import library_dir, list_scenarios, load_scenario, resolve_scenario_path
@@ -42,7 +45,17 @@ def catalogue() -> dict:
         "device_presets": {"motor": list(params.MOTORS), "drivetrain": list(params.DRIVETRAINS),
                            "finger": list(params.FINGERS), "fsr": list(params.FSRS)},
         "estimator_models": [f"paper:{k}:{o}" for k in KINDS for o in ORDERS],
+        "firmware": [{"name": f.name, "description": f.description, "score": f.score,
+                      "settings": dict(f.estimator), "benchmark": dict(f.benchmark)}
+                     for f in firmware_presets().values()],
+        "designs": [{"name": d.name, "description": d.description, "score": d.score,
+                     "controller": d.controller, "firmware": d.firmware, "gains": dict(d.gains),
+                     "benchmark": dict(d.benchmark)} for d in designs().values()],
     }
+
+
+def _score(v) -> str:
+    return f"{v:6.2f}" if isinstance(v, (int, float)) else "     -"
 
 
 def main(args) -> int:
@@ -63,6 +76,13 @@ def main(args) -> int:
         print(f"  {name}")
     print("  (or a gains file: .toml/.json with controller = NAME and a [gains] table,")
     print("   or policy:PATH for a policy saved by 'ebraille-sim train', extra: rl)")
+    print("firmware presets (score: the best design on it, benchmark points):")
+    for f in cat["firmware"]:
+        print(f"  {f['name']:<24} {_score(f['score'])}  {f['description']}")
+    print("designs (--controller NAME runs one on its firmware):")
+    for d in cat["designs"]:
+        print(f"  {d['name']:<24} {_score(d['score'])}  {d['controller']} on {d['firmware'] or 'any firmware'}: "
+              f"{d['description']}")
     print("plant backends:")
     print("  " + ", ".join(cat["plant_backends"]))
     print("device presets:")

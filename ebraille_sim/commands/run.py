@@ -199,6 +199,11 @@ def _run(args, plotter) -> int:
     every = trace_every(spec, args)
     out, anim = _targets(args, spec)
     try:
+        from ebraille_sim.scenarios.runner import design_firmware
+        from ebraille_sim.scenarios.spec import with_firmware
+        firmware = design_firmware(spec.controller.name if args.controller is None else args.controller)
+        if firmware is not None:
+            spec = with_firmware(spec, firmware)        # a design runs on its own firmware
         ctrl = make_controller(spec, args.controller)
     except (ValueError, FileNotFoundError, TypeError) as exc:
         if args.controller is None:
@@ -242,10 +247,13 @@ def _run(args, plotter) -> int:
             _draw(frames, tmp, con)
         written.append(anim)
     doc = metrics_document(result, ctrl, gains_file)
+    doc["firmware"] = firmware
     doc["out"] = str(out)
     doc["files"] = [str(p) for p in written]
     con.result(doc)
     con.say(summary_table(result, gains_file))
+    if firmware is not None:
+        con.say(f"firmware {firmware} (the design's)")
     con.say("\nwrote " + ", ".join(str(p) for p in written)
             + (f" ({len(frames)} frames)" if frames is not None else ""))
     failures = failed_criteria(result)

@@ -20,7 +20,7 @@ from ebraille_sim.plant.backends import make_plant
 from ebraille_sim.plant.engine import KEPT
 from ebraille_sim.scenarios.inputs import build_run_inputs, refresh_phases
 from ebraille_sim.scenarios.metrics import compute_metrics
-from ebraille_sim.scenarios.spec import ScenarioError, ScenarioSpec, load_scenario
+from ebraille_sim.scenarios.spec import ScenarioError, ScenarioSpec, load_scenario, with_firmware
 
 TRACE_COLUMNS = ["t_s", "setpoint_n", "force_true_n", "force_est_n", "fsr_voltage_v", "command_v",
                  "motor_current_a", "board_pos_m", "energy_j", "char_index", "character"]
@@ -112,13 +112,35 @@ def wrap_controller(spec: ScenarioSpec, ctrl, dt_s: float, supervised: bool = Tr
     return ctrl
 
 
+def design_firmware(controller) -> str | None:
+    """The firmware preset of the design ``controller`` names (a shipped design's name or a design
+    file with a ``firmware`` key), or None (no design, or a design without a firmware).  A name
+    that is no design, or a file that cannot be read, gives None here and its error when the
+    controller is made."""
+    import os
+    if not isinstance(controller, (str, os.PathLike)):
+        return None
+    from controllers.designs import designs, get_design, is_design_file
+    name = os.fspath(controller)
+    if name not in designs() and not is_design_file(name):
+        return None
+    try:
+        return get_design(name).firmware
+    except (ValueError, FileNotFoundError, OSError):
+        return None
+
+
 def prepare_run(scenario, controller=None, seed: int | None = None, duration_s: float | None = None,
-                device=None) -> tuple:
+                device=None, firmware=None) -> tuple:
     """The spec, seed, run inputs and (unwrapped) controller of one run of :func:`run_scenario`."""
     spec = scenario if isinstance(scenario, ScenarioSpec) else load_scenario(scenario)
     if device is not None:
         import dataclasses
         spec = dataclasses.replace(spec, device=device)
+    if firmware is None:                          # a design runs on its own firmware
+        firmware = design_firmware(spec.controller.name if controller is None else controller)
+    if firmware is not None:
+        spec = with_firmware(spec, firmware)
     if duration_s is not None:
         if not (math.isfinite(duration_s) and duration_s > 0):
             raise ScenarioError(f"duration_s must be a positive finite number, got {duration_s}")
@@ -132,7 +154,7 @@ def prepare_run(scenario, controller=None, seed: int | None = None, duration_s: 
 
 def run_scenario(scenario, controller=None, seed: int | None = None, duration_s: float | None = None,
                  backend: str = "lumped", device=None, trace_every: int | None = 1,
-                 supervised: bool = True, recorder=None) -> RunResult:
+                 supervised: bool = True, recorder=None, firmware=None) -> RunResult:
     """Simulate a scenario in closed loop.
 
     Parameters
@@ -140,8 +162,9 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
     scenario : str, path or ScenarioSpec
         Scenario file, shipped scenario name, or a parsed spec.
     controller : str, path or Controller, optional
-        Overrides the scenario's controller (a registered name, a gains file, or an object
-        implementing :class:`controllers.Controller`).
+        Overrides the scenario's controller (a registered name, a design's name or file, a
+        gains file, or an object implementing :class:`controllers.Controller`).  A design
+        (:mod:`controllers.designs`) runs on its own firmware preset.
     seed : int, optional
         Overrides the scenario's master seed.  The same seed gives the same trace, exactly.
     duration_s : float, optional
@@ -167,6 +190,10 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
         drawing); it reads the plant and changes nothing in the run.  The lumped plant, whose
         periods run in one compiled call, takes none.
 
+    firmware : str, optional
+        A firmware preset (:mod:`ebraille_sim.estimation.presets`) or preset file whose
+        estimator settings replace the scenario's (default: the design's, else the scenario's).
+
     Returns
     -------
     RunResult
@@ -176,7 +203,7 @@ def run_scenario(scenario, controller=None, seed: int | None = None, duration_s:
         raise ValueError(f"trace_every must be a whole number >= 1 or None, got {trace_every!r}")
     if recorder is not None and backend == "lumped":
         raise ValueError("a recorder records the pymunk mechanism; use backend='pymunk' with it, not 'lumped'")
-    spec, seed, run, ctrl = prepare_run(scenario, controller, seed, duration_s, device)
+    spec, seed, run, ctrl = prepare_run(scenario, controller, seed, duration_s, device, firmware)
     supervisor_choice(spec, supervised)
     if trace_every == 1:
         return _simulate(spec, seed, run, ctrl, backend, supervised, recorder)
@@ -560,7 +587,7 @@ def run_batch(runs: list, keep_traces: bool = True) -> list:
     ----------
     runs : list of dict
         Keyword arguments of :func:`run_scenario` per run (``scenario``, ``controller``,
-        ``seed``, ``duration_s``, ``device``; no ``backend``).
+        ``seed``, ``duration_s``, ``device``, ``firmware``; no ``backend``).
     keep_traces : bool
         False returns every result with an empty trace (its metrics unchanged): a sweep
         keeps only metrics, so the batch's traces are not copied out.
@@ -602,6 +629,8 @@ def _with_controller_copy(kw: dict, made: dict) -> dict:
     name = kw.get("controller")
     if not isinstance(name, str):
         return kw
+    if kw.get("firmware") is None and design_firmware(name) is not None:
+        kw = {**kw, "firmware": design_firmware(name)}      # the design's firmware, kept with its copy
     if name not in made:
         try:
             proto = make_controller(None, name)

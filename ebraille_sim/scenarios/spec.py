@@ -49,6 +49,7 @@ except ModuleNotFoundError:  # Python < 3.11
 from ebraille_sim.base.fields import sourced
 from ebraille_sim.base.validation import check_bool, check_choice, check_keys, check_number
 from ebraille_sim.physics import params as _params
+from ebraille_sim.estimation.presets import firmware_presets as _firmware_presets
 
 
 class ScenarioError(ValueError):
@@ -198,7 +199,11 @@ class RatesSpec:
 
 @dataclass(frozen=True)
 class EstimatorSpec:
-    """``[estimator]``: overrides of :class:`ebraille_sim.physics.params.EstimatorParams` (None keeps its value)."""
+    """``[estimator]``: overrides of :class:`ebraille_sim.physics.params.EstimatorParams` (None keeps its value).
+
+    ``firmware`` names a firmware preset (:mod:`ebraille_sim.estimation.presets`): its settings
+    come first, and the section's other keys replace them."""
+    firmware: str | None = _key(None, "-", "choice", choices=tuple(sorted(_firmware_presets())))
     model: str | None = _key(None, "-", "str")
     antialias_cutoff_hz: float | None = _key(None, "Hz", "float", lo=0, hi=1e5, lo_open=True)
     tare_at_start: bool | None = _key(None, "-", "bool")
@@ -378,6 +383,9 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
             control_rate_hz=rates.get("control_hz", r0.control_hz),
             sensor_rate_hz=rates.get("sensor_hz", r0.sensor_hz),
             physics_rate_hz=rates.get("physics_hz", r0.physics_hz))
+        if "firmware" in est:
+            est = {**_firmware_presets()[est["firmware"]].estimator,
+                   **{k: v for k, v in est.items() if k != "firmware"}}
         e = _params.replace_checked(_params.EstimatorParams(), **{
             k2: est[k1] for k1, k2 in (("model", "model"), ("antialias_cutoff_hz", "antialias_cutoff_hz"),
                                        ("tare_at_start", "tare_at_start"),
@@ -442,6 +450,21 @@ def _check_rates(device: _params.DeviceParams) -> None:
                          f"{1.0 / r.control_rate_hz / device.motor.mechanical_time_constant_s:.3g} mechanical "
                          f"time constants of the motor, {tau_ms:.3g} ms, during which the drive runs unchecked)")
     check_step(device)
+
+
+def with_firmware(spec: "ScenarioSpec", firmware) -> "ScenarioSpec":
+    """``spec`` running on a firmware preset (a name or a preset file): the preset's estimator
+    settings replace the scenario's; a preset whose rates do not suit the scenario's device is
+    a one-line :class:`ScenarioError`."""
+    from ebraille_sim.estimation.presets import get_firmware
+    fw = get_firmware(firmware)
+    try:
+        device = dataclasses.replace(spec.device, estimator=_params.replace_checked(spec.device.estimator,
+                                                                                   **fw.estimator))
+        _check_rates(device)
+    except ValueError as exc:
+        raise ScenarioError(f"{spec.source}: firmware {fw.name!r}: {exc}") from None
+    return dataclasses.replace(spec, device=device)
 
 
 def _check_gap(source: str, finger: FingerSpec, device: _params.DeviceParams) -> None:

@@ -1,0 +1,136 @@
+"""The shipped library of firmware presets and designs: what it holds, how a design runs on
+its own firmware, and that a user's design file works the same way."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+import controllers
+from controllers.designs import DESIGN_KEYS, designs, get_design
+from ebraille_sim.estimation.presets import firmware_presets, get_firmware
+from ebraille_sim.physics.params import EstimatorParams
+from ebraille_sim.scenarios.runner import design_firmware, run_scenario
+from ebraille_sim.scenarios.spec import ScenarioError, load_scenario, parse_scenario, with_firmware
+
+
+def test_every_shipped_design_names_a_controller_a_firmware_and_a_measured_score():
+    assert designs(), "no shipped design"
+    for name, d in designs().items():
+        assert name not in controllers.available()
+        assert d.controller in controllers.available()
+        assert d.firmware in firmware_presets()
+        assert d.description and isinstance(d.score, float) and 0 < d.score <= 100
+        assert d.benchmark["command"].startswith("ebraille-sim benchmark ")
+        controllers.make(name)                       # the gains are the family's
+    for name, f in firmware_presets().items():
+        assert f.description and f.benchmark["design"] in designs()
+        assert designs()[f.benchmark["design"]].firmware == name
+        assert f.score == designs()[f.benchmark["design"]].score
+
+
+def test_the_best_design_is_the_firmware_presets_best():
+    best = max(designs().values(), key=lambda d: d.score)
+    assert firmware_presets()[best.firmware].benchmark["design"] == best.name
+
+
+def test_a_design_runs_on_its_own_firmware_and_reproduces_its_check():
+    """``run SCENARIO --controller NAME``: the design's firmware replaces the scenario's; the
+    nominal run reproduces the stored metric within one character in 185."""
+    d = get_design("dob_learn_1khz")
+    res = run_scenario(d.check["scenario"], controller=d.name, trace_every=None)
+    assert res.metrics["char_in_band_fraction"] == pytest.approx(d.check["char_in_band_fraction"], abs=0.006)
+    plain = run_scenario(d.check["scenario"], controller=controllers.make(d.name), trace_every=None)
+    # the same gains on the scenario's own (100 Hz) firmware are a different device
+    assert plain.metrics["char_in_band_fraction"] != res.metrics["char_in_band_fraction"]
+
+
+def test_a_firmware_preset_sets_the_estimator_as_its_keys_do():
+    spec = load_scenario("refresh_120wpm")
+    fast = with_firmware(spec, "fast_1khz")
+    want = dict(get_firmware("fast_1khz").estimator)
+    for k, v in want.items():
+        assert getattr(fast.device.estimator, k) == v
+    named = parse_scenario({"name": "x", "estimator": {"firmware": "fast_1khz"}})
+    keys = parse_scenario({"name": "x", "estimator": want})
+    assert named.device.estimator == keys.device.estimator
+    # a key of the section replaces the preset's
+    own = parse_scenario({"name": "x", "estimator": {"firmware": "fast_1khz", "hysteresis_turn_lsb": 3.0}})
+    assert own.device.estimator.hysteresis_turn_lsb == 3.0
+    assert own.device.estimator.model == want["model"]
+
+
+def test_the_default_firmware_preset_is_the_default_estimator():
+    e = EstimatorParams()
+    for k, v in get_firmware("paper_100hz").estimator.items():
+        assert getattr(e, k) == v
+
+
+def test_a_user_design_file_runs_as_the_shipped_design(tmp_path):
+    d = get_design("dob_learn_1khz")
+    mine = tmp_path / "mine.json"
+    mine.write_text(json.dumps({"controller": d.controller, "firmware": d.firmware, "gains": d.gains}))
+    assert design_firmware(str(mine)) == "fast_1khz"
+    a = run_scenario("refresh_120wpm", controller=str(mine), duration_s=3.0, trace_every=None)
+    b = run_scenario("refresh_120wpm", controller=d.name, duration_s=3.0, trace_every=None)
+    drop = ("real_time_factor",)                     # wall time
+    assert {k: v for k, v in a.metrics.items() if k not in drop} == {k: v for k, v in b.metrics.items() if k not in drop}
+
+
+@pytest.mark.parametrize("data, needle", [
+    ({"controller": "pid", "colour": 1}, "colour"),
+    ({"controller": 3}, "controller"),
+    ({"controller": "pid", "firmware": "nosuch"}, "nosuch"),
+    ({"controller": "pid", "benchmark": {"score": float("nan")}}, "score"),
+    ({"controller": "pid", "check": {"scenario": "x", "char_in_band_fraction": "a"}}, "char_in_band_fraction"),
+])
+def test_a_bad_design_file_is_one_line_naming_it(tmp_path, data, needle):
+    p = tmp_path / "d.json"
+    p.write_text(json.dumps(data))
+    with pytest.raises(ValueError) as exc:
+        get_design(str(p))
+    assert needle in str(exc.value) and "\n" not in str(exc.value)
+    assert set(data) - set(DESIGN_KEYS) <= {"colour"}
+
+
+def test_a_design_file_with_an_unknown_family_is_refused_when_made(tmp_path):
+    p = tmp_path / "d.toml"
+    p.write_text('controller = "nosuch"\n')
+    with pytest.raises(ValueError, match="unknown controller 'nosuch'"):
+        controllers.make(str(p))
+
+
+def test_an_unknown_firmware_in_a_scenario_is_one_line():
+    with pytest.raises(ScenarioError) as exc:
+        parse_scenario({"name": "x", "estimator": {"firmware": "fast_2khz"}})
+    assert "fast_2khz" in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_a_firmware_whose_rates_do_not_suit_the_scenario_is_refused():
+    spec = parse_scenario({"name": "x", "rates": {"control_hz": 200.0, "sensor_hz": 200.0}})
+    with pytest.raises(ScenarioError, match="fast_1khz"):
+        with_firmware(spec, "fast_1khz")
+
+
+def test_list_json_has_firmware_and_design_arrays(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "ebraille_sim", "list", "--json"], capture_output=True,
+                         text=True, check=True, cwd=tmp_path)
+    cat = json.loads(out.stdout)
+    for key in ("firmware", "designs"):
+        assert isinstance(cat[key], list) and cat[key]
+        for e in cat[key]:
+            assert e["name"] and e["description"] and isinstance(e["score"], float)
+    assert {d["name"] for d in cat["designs"]} == set(designs())
+
+
+def test_run_with_a_design_name_from_any_folder(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "ebraille_sim", "run", "refresh_120wpm", "--controller",
+                          "dob_learn_1khz", "--json", "--trace", "none", "--no-plot", "--out", str(tmp_path / "r")],
+                         capture_output=True, text=True, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    doc = json.loads(out.stdout)
+    assert doc["firmware"] == "fast_1khz"
+    assert doc["metrics"]["char_in_band_fraction"] == pytest.approx(
+        get_design("dob_learn_1khz").check["char_in_band_fraction"], abs=0.006)
