@@ -8,7 +8,9 @@ to hold in memory.  A numeric mutation is generated only where it breaks a decla
 its key (the scenario schema, the disturbance and fault tables, the parameter dataclasses),
 so a mutation that happens to be legal is never produced (and never counted as a pass).
 
-Most cases are checked in-process (parse, validate, build the run's inputs and controller);
+The default test command checks a seeded sample of :data:`N_SAMPLE` (every category and
+every shipped scenario at least once); the whole table runs with ``-m fuzz_table``.
+Cases are checked in-process (parse, validate, build the run's inputs and controller);
 a seeded sample of :data:`N_CLI` goes through ``python -m ebraille_sim run FILE --out DIR``,
 which must exit 2 with exactly one ``error:`` line on stderr and write nothing.
 """
@@ -340,6 +342,30 @@ def generate() -> list[Case]:
 
 CASES = generate()
 
+N_SAMPLE = 300
+"""Cases the default test command checks: every category and every shipped scenario at least
+once, the rest a seeded draw.  The whole table runs under the ``fuzz_table`` marker
+(``pytest -m fuzz_table tests/test_fuzz.py``; CI runs it)."""
+
+
+def _sample() -> list:
+    rng = random.Random(SEED + 2)
+    groups: dict = {}
+    for c in CASES:
+        groups.setdefault(c.name.split(":")[-1], []).append(c)
+    chosen = {rng.choice(v).name for _, v in sorted(groups.items())}
+    for path in SHIPPED:
+        if not any(n.startswith(f"{path.stem}:") for n in chosen):
+            chosen.add(rng.choice([c.name for c in CASES if c.name.startswith(f"{path.stem}:")]))
+    rest = [c.name for c in CASES if c.name not in chosen]
+    chosen |= set(rng.sample(rest, N_SAMPLE - len(chosen)))
+    return [c for c in CASES if c.name in chosen]
+
+
+SAMPLE = _sample()
+_IN_SAMPLE = {c.name for c in SAMPLE}
+TABLE = [pytest.param(c, id=c.name, marks=() if c.name in _IN_SAMPLE else pytest.mark.fuzz_table) for c in CASES]
+
 
 def validate(raw: bytes) -> None:
     """Everything a run checks before its first period, in-process."""
@@ -374,7 +400,13 @@ def test_the_generator_never_produces_a_legal_numeric_mutation():
     assert "steady_90wpm:reading.wpm:fraction" not in names and "steady_90wpm:seed:fraction" in names
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+def test_the_sample_covers_every_category_and_scenario_and_is_a_few_hundred():
+    assert len(SAMPLE) == N_SAMPLE
+    assert {c.name.split(":")[-1] for c in SAMPLE} == {c.name.split(":")[-1] for c in CASES}
+    assert {c.name.split(":")[0] for c in SAMPLE} == {p.stem for p in SHIPPED}
+
+
+@pytest.mark.parametrize("case", TABLE)
 def test_malformed_scenario_is_rejected_in_one_line(case):
     with pytest.raises(ValueError) as info:
         validate(case.raw)
