@@ -20,14 +20,25 @@ Printed per rate (over the readers): ``w h`` of the stiffest oscillation, the me
 largest over readers of the largest |error| of the true force (mN), of its RMS error (mN),
 of the largest |error| of the estimate (mN) and the share of periods whose ADC code differs.
 
+With ``--population N`` it compares closed-loop metrics instead: ``N`` readers drawn with
+``--seed`` each run the scenario (its PID and safety supervisor) at every rate of
+``--rates`` (:func:`ebraille_sim.scenarios.runner.run_batch`), and per rate and metric it
+prints the median and ``CVaR_0.1`` of the loss (the mean of the worst tenth: the largest
+RMS errors and peaks, the smallest in-band fractions) with bootstrap standard errors
+(``--boot`` resamples).  The current chain's noise is indexed by physics steps, so two rates
+read different noise realisations: their metrics agree when the differences lie within the
+sampling noise, not to the last digit.
+
 Run:  python benchmarks/physics_step_accuracy.py [--scenario steady_90wpm] [--duration 12]
       [--readers 7] [--rates 5000 10000 20000] [--reference 100000] [--json FILE]
+      python benchmarks/physics_step_accuracy.py --population 200 [--rates 5000 10000]
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
 import json
+import math
 import statistics
 
 import numpy as np
@@ -66,6 +77,67 @@ def replay(spec, run, device, physics_rate_hz: float, command_v: np.ndarray):
     return out, wh
 
 
+POPULATION_METRICS = (("force_rmse_n", True), ("in_band_fraction", False), ("char_in_band_fraction", False),
+                      ("peak_force_n", True))
+"""Metrics of the population comparison, each with whether a larger value is the loss."""
+
+
+def _median_cvar(x: np.ndarray, larger_is_loss: bool, boot: int, rng) -> dict:
+    """Median and CVaR_0.1 of the loss of ``x`` with bootstrap standard errors."""
+    def stats(v):
+        w = np.sort(v if larger_is_loss else -v)[::-1]
+        k = max(1, int(math.ceil(0.1 * w.size)))
+        cvar = float(np.mean(w[:k]))
+        return float(np.median(v)), cvar if larger_is_loss else -cvar
+    med, cvar = stats(x)
+    b = np.array([stats(x[rng.integers(0, x.size, x.size)]) for _ in range(boot)])
+    return {"median": med, "median_se": float(np.std(b[:, 0])), "cvar10": cvar, "cvar10_se": float(np.std(b[:, 1]))}
+
+
+def population(a) -> dict:
+    """The closed-loop metrics of ``a.population`` drawn readers at each physics rate."""
+    spec0, _, _, _ = runner.prepare_run(a.scenario, duration_s=a.duration)
+    readers = sample_devices(a.seed, a.population, base=spec0.device)
+    r0 = spec0.device.rates
+    out = {}
+    per_reader = {}
+    print(f"{a.scenario}, {a.duration:g} s, {a.population} readers drawn with seed {a.seed}, the scenario's "
+          f"controller and supervisor; medians and CVaR_0.1 of the loss, +/- bootstrap standard errors")
+    for rate in a.rates:
+        rates = RateParams(control_rate_hz=r0.control_rate_hz, sensor_rate_hz=r0.sensor_rate_hz,
+                           physics_rate_hz=rate)
+        runs = [{"scenario": spec0, "duration_s": a.duration, "device": dataclasses.replace(d, rates=rates)}
+                for d in readers]
+        res = runner.run_batch(runs, keep_traces=False)
+        bad = [r for r in res if isinstance(r, Exception)]
+        if bad:
+            print(f"{rate:>8g} Hz: {len(bad)} runs failed, e.g. {bad[0]}")
+            continue
+        rng = np.random.default_rng(1)
+        row = {}
+        for name, larger in POPULATION_METRICS:
+            x = np.array([r.metrics[name] for r in res], dtype=float)
+            row[name] = _median_cvar(x, larger, a.boot, rng)
+        out[str(rate)] = row
+        per_reader[rate] = {name: np.array([r.metrics[name] for r in res], dtype=float)
+                            for name, _ in POPULATION_METRICS}
+        print(f"{rate:>8g} Hz  " + "  ".join(
+            f"{name} {v['median']:.4f}+/-{v['median_se']:.4f} (CVaR {v['cvar10']:.4f}+/-{v['cvar10_se']:.4f})"
+            for name, v in row.items()), flush=True)
+    ref = r0.physics_rate_hz
+    if ref in per_reader:
+        print(f"the same readers against the default {ref:g} Hz: median and largest |difference| per reader")
+        for rate, m in per_reader.items():
+            if rate == ref:
+                continue
+            d = {name: np.abs(m[name] - per_reader[ref][name]) for name in m}
+            out[str(rate)]["paired_vs_default"] = {name: {"median_abs": float(np.median(v)), "max_abs": float(np.max(v))}
+                                                   for name, v in d.items()}
+            print(f"{rate:>8g} Hz  " + "  ".join(f"{name} {np.median(v):.4f} / {np.max(v):.4f}"
+                                                 for name, v in d.items()), flush=True)
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="steady_90wpm")
@@ -74,10 +146,19 @@ def main(argv=None):
     ap.add_argument("--seed", type=int, default=20261128)
     ap.add_argument("--rates", type=float, nargs="+", default=[2000.0, 5000.0, 10000.0, 20000.0])
     ap.add_argument("--reference", type=float, default=100000.0)
+    ap.add_argument("--population", type=int, default=0)
+    ap.add_argument("--boot", type=int, default=1000)
     ap.add_argument("--json", default=None)
     a = ap.parse_args(argv)
-    if a.readers < 0 or not a.duration > 0:
-        ap.error("--readers must be >= 0 and --duration positive")
+    if a.readers < 0 or a.population < 0 or not a.duration > 0:
+        ap.error("--readers and --population must be >= 0 and --duration positive")
+    if a.population:
+        doc = population(a)
+        if a.json:
+            with open(a.json, "w") as fh:
+                json.dump({"scenario": a.scenario, "duration_s": a.duration, "readers": a.population,
+                           "seed": a.seed, "per_rate": doc}, fh, indent=2)
+        return 0
     spec0, _, run, _ = runner.prepare_run(a.scenario, duration_s=a.duration)
     devices = [spec0.device] + sample_devices(a.seed, a.readers, base=spec0.device)
     rows = {rate: [] for rate in a.rates}
