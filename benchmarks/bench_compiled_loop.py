@@ -7,7 +7,7 @@ For 60 s of ``steady_90wpm`` with the built-in PID, without and with the safety 
 * the wall time of the whole call and of its control loop, with the loop in one call of the
   loop engine (:func:`ebraille_sim.plant.engine.run`) and with one Python iteration per control
   period (the shim of Python controllers, :func:`ebraille_sim.scenarios.runner.python_periods`);
-* two references measured in the same rounds:
+* three references measured in the same rounds:
 
   - the all-compiled loop: physics, estimator, PID and trace of the same run in one compiled
     call (the control loop of the unsupervised compiled run, without building the inputs,
@@ -15,7 +15,13 @@ For 60 s of ``steady_90wpm`` with the built-in PID, without and with the safety 
     (the same work with the supervisor's compiled period in it);
   - the kernel alone: the same number of physics steps in one call of
     :func:`ebraille_sim.plant.kernel.advance` with the command held, i.e. the plant without
-    any controller, which no loop can beat.
+    any controller, which no loop can beat;
+  - the kernel per period: the same steps in one call of ``kernel.advance`` per control
+    period from one compiled loop, the command held (what a loop that sets a command every
+    period cannot avoid).
+
+The last line splits ``run_scenario``'s time (supervised, the default) over the kernel alone
+into its loop and the rest (inputs, plant, metrics).
 
 Each round times every row once, one after the other, and the ratios are those of each round's
 own times (their median is printed): on a shared machine the speed of the whole machine
@@ -33,6 +39,7 @@ import statistics
 import time
 
 import ebraille_sim
+from ebraille_sim.base.compiled import njit
 from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import U
 from ebraille_sim.scenarios import runner
@@ -58,6 +65,24 @@ def _kernel_only(duration_s: float) -> float:
     return time.perf_counter() - t0
 
 
+@njit(cache=True)
+def _advance_periods(s, p, u, n_sub, n_periods):
+    for _ in range(n_periods):
+        kernel.advance(s, p, u, n_sub)
+
+
+def _kernel_per_period(duration_s: float) -> float:
+    """The same physics steps as :func:`_kernel_only`, one call of ``kernel.advance`` per control
+    period from one compiled loop (the command held): the least any loop that sets a command
+    per period can cost."""
+    spec, _, run, _ = runner.prepare_run("steady_90wpm", duration_s=duration_s)
+    plant = runner._plant_for(spec, run, "lumped")
+    plant.inputs[0, U.command_v] = 1.0
+    t0 = time.perf_counter()
+    _advance_periods(plant.state[0], plant.params[0], plant.inputs[0], plant.substeps, run.n_steps)
+    return time.perf_counter() - t0
+
+
 ROWS = (("compiled loop", True, False), ("per-period loop", False, False),
         ("compiled, supervised", True, True), ("per-period, supervised", False, True))
 
@@ -74,10 +99,12 @@ def main(argv=None):
         _run(0.2, compiled)
         _run(0.2, compiled, True)
     _kernel_only(0.2)
+    _kernel_per_period(0.2)
     rounds = []
     for _ in range(a.repeat):
         r = {label: _run(a.duration, compiled, supervised) for label, compiled, supervised in ROWS}
         r["kernel alone"] = _kernel_only(a.duration)
+        r["kernel per period"] = _kernel_per_period(a.duration)
         rounds.append(r)
     med = statistics.median
     rows = {label: {"total_s": med(r[label][0] for r in rounds), "loop_s": med(r[label][1] for r in rounds)}
@@ -99,6 +126,16 @@ def main(argv=None):
               f"{of_kernel[label]:>15.2f}")
     print(f"{'all-compiled loop':>22} {'':>8} {loop_ref:>8.3f}")
     print(f"{'kernel alone':>22} {'':>8} {bound:>8.3f}")
+    print(f"{'kernel per period':>22} {'':>8} {med(r['kernel per period'] for r in rounds):>8.3f}")
+    sup = "compiled, supervised"
+    over = {"total": med(r[sup][0] / r["kernel alone"] for r in rounds),
+            "loop": med(r[sup][1] / r["kernel alone"] for r in rounds),
+            "outside_loop": med((r[sup][0] - r[sup][1]) / r["kernel alone"] for r in rounds),
+            "kernel_per_period": med(r["kernel per period"] / r["kernel alone"] for r in rounds)}
+    doc["supervised_over_kernel"] = over
+    print(f"run_scenario (supervised) / kernel alone: {over['total']:.2f}x (target <= 1.3) = its loop "
+          f"{over['loop']:.2f}x + outside the loop (inputs, plant, metrics) {over['outside_loop']:.2f}x; "
+          f"the kernel called once per period alone {over['kernel_per_period']:.2f}x")
     print(f"per-period / compiled loop: {rows['per-period loop']['loop_s'] / rows['compiled loop']['loop_s']:.2f}x "
           f"unsupervised, {rows['per-period, supervised']['loop_s'] / rows['compiled, supervised']['loop_s']:.2f}x "
           f"supervised; run_scenario (supervised) = {of_own['compiled, supervised']:.2f} of its own compiled loop, "

@@ -27,7 +27,10 @@ and unwrapped: ``--repeat`` (3) rounds in the same process, each measuring the t
 interleaved (500 steps of one, then of the other, ``--seconds`` each in all;
 :func:`interleaved_steps_per_s`), with wrappers, then unwrapped; the medians of the rounds'
 ratios.  On a machine shared with other jobs the rates drift by a factor of 2 between figures
-measured one after the other; interleaved, both envs see the same load.
+measured one after the other; interleaved, both envs see the same load.  Then the parts of
+one step without resets (:func:`step_breakdown`: the kernel's substeps of one step, the
+compiled step, ``step()`` unwrapped and wrapped, Pendulum-v1), at the default physics rate
+and at 5 kHz, with the ratio an env spending nothing beyond its physics would reach.
 
 With ``--only-resets`` only the reset figures, each the median of ``--repeat`` (3) timings in
 the same process: the scalar env's reset in ms and in env steps (steps and resets
@@ -259,6 +262,60 @@ def only_resets(seconds: float, n_envs: int, repeat: int) -> dict:
     return out
 
 
+def step_breakdown(seconds: float, chunk: int = 500, **kwargs) -> dict:
+    """Microseconds per step, without resets, of the parts of the single env's step and of
+    Pendulum-v1, timed interleaved in chunks of ``chunk`` calls for about ``seconds`` each:
+
+    * ``kernel``: :func:`ebraille_sim.plant.kernel.advance` of one env step's physics
+      substeps alone (on a copy of an episode's plant rows, the command held);
+    * ``compiled_step``: the env's one compiled call per step (loop engine period, safety
+      supervisor, reward, observation) as :meth:`ContactForceEnv.step` calls it;
+    * ``unwrapped`` and ``wrapped``: ``env.step`` of the env itself and of ``gym.make``'s;
+    * ``pendulum`` and ``pendulum_unwrapped``.
+
+    ``bound_ratio`` is ``pendulum / kernel``: the ratio to Pendulum-v1 (with wrappers) of an
+    env that spent nothing beyond its physics substeps.  ``kwargs`` go to ``gym.make``."""
+    from ebraille_sim.plant import kernel
+    env = gym.make(ENV_ID, **kwargs)
+    uw = env.unwrapped
+    pend = gym.make("Pendulum-v1")
+    a = np.full(1, 0.1, np.float32)
+
+    def fresh():                       # a 60 wpm episode (1400 steps at 200 Hz) held at a small command
+        env.reset(seed=0, options={"wpm": 60.0})
+    fresh()
+    pend.reset(seed=0)                 # stepped on past its TimeLimit's 200 steps (truncated, not refused)
+    for _ in range(400):               # the kernel's rows taken in contact, 2 s into the episode
+        env.step(a)
+    s, p, u = uw._st.copy(), uw.plant.params[0].copy(), uw._inp.copy()
+    n_sub = uw.config.substeps
+    calls = {
+        "kernel": lambda: kernel.advance(s, p, u, n_sub),
+        "compiled_step": lambda: uw._step_fn(uw._st, uw._inp, uw._ws, uw._k, 0.1),
+        "unwrapped": lambda: uw.step(a),
+        "wrapped": lambda: env.step(a),
+        "pendulum": lambda: pend.step(a),
+        "pendulum_unwrapped": lambda: pend.unwrapped.step(a),
+    }
+    spent = {k: 0.0 for k in calls}
+    count = {k: 0 for k in calls}
+    for f in calls.values():          # warm-up (compilation, caches)
+        f()
+    while min(spent.values()) < seconds:
+        for key, f in calls.items():
+            if uw._n_steps - uw._k <= chunk:
+                fresh()               # outside the clock
+            t0 = time.perf_counter()
+            for _ in range(chunk):
+                f()
+            spent[key] += time.perf_counter() - t0
+            count[key] += chunk
+    out = {f"{k}_us": 1e6 * spent[k] / count[k] for k in calls}
+    out["bound_ratio"] = out["pendulum_us"] / out["kernel_us"]
+    out["ratio_no_resets"] = out["pendulum_us"] / out["wrapped_us"]
+    return out
+
+
 def only_single(seconds: float, repeat: int) -> dict:
     """The single env against Pendulum-v1, with wrappers and unwrapped: ``repeat`` rounds of
     the two envs stepped interleaved (:func:`interleaved_steps_per_s`), and the medians of the
@@ -284,6 +341,14 @@ def only_single(seconds: float, repeat: int) -> dict:
     runs_raw = ", ".join(f"{r['ratio_unwrapped']:.2f}" for r in rounds)
     print(f"single env / Pendulum-v1, median of {repeat} rounds: with wrappers {out['ratio']:5.2f} "
           f"(runs: {runs}), unwrapped {out['ratio_unwrapped']:5.2f} (runs: {runs_raw})")
+    from ebraille_sim.physics.params import DeviceParams, RateParams
+    for label, kwargs in (("breakdown", {}),
+                          ("breakdown_5khz", {"base_device": DeviceParams(rates=RateParams(physics_rate_hz=5000.0))})):
+        b = out[label] = step_breakdown(seconds, **kwargs)
+        print(f"step parts, no resets{' (physics at 5 kHz)' if kwargs else ''}, us: kernel {b['kernel_us']:.2f}, "
+              f"compiled step {b['compiled_step_us']:.2f}, unwrapped {b['unwrapped_us']:.2f}, wrapped "
+              f"{b['wrapped_us']:.2f}; Pendulum-v1 {b['pendulum_us']:.2f} (unwrapped {b['pendulum_unwrapped_us']:.2f}); "
+              f"ratio {b['ratio_no_resets']:.2f}, with nothing but the physics {b['bound_ratio']:.2f}", flush=True)
     print(f"load average (1 min) at end {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     return out
 
