@@ -283,9 +283,10 @@ def test_a_session_preload_reads_like_a_fresh_film_when_the_firmware_followed_th
     fresh = _held_estimates({})
     # the film crept for 2 h and the firmware's compensation advanced by the same session
     np.testing.assert_allclose(_held_estimates(two_hours), fresh, rtol=5e-3)
-    # a firmware that had not followed it would read the crept film 2-6 % high
+    # a firmware that had not followed it would read the crept film 6-9 % high (the creep goes on
+    # for days: 2 h of it is 9-10 % more conductance than 2-19 s)
     stale = _held_estimates(two_hours, preload=False) / fresh
-    assert np.all((stale > 1.02) & (stale < 1.06))
+    assert np.all((stale > 1.055) & (stale < 1.095))
     # without any creep compensation the crept film reads high too
     raw = _held_estimates(two_hours, creep_compensation=False) / _held_estimates({}, creep_compensation=False)
     assert np.all(raw > 1.015)
