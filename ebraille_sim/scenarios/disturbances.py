@@ -416,7 +416,7 @@ class FSRDrift:
 
     The sensor model's resistance under a held force, ``c(t)``
     (:func:`ebraille_sim.physics.fsr.held_resistance_factor`: conductance rising about
-    2.7 % per decade, datasheet < 5 % per decade), is advanced by the offset: the run sees
+    2.1-2.4 % per decade for days, datasheet < 5 % per decade), is advanced by the offset: the run sees
     ``c(t_off + t)`` instead of ``c(t)``.  Folded into the temperature input (module
     docstring).  The firmware has followed the same session: its creep compensation predicts
     with its own law (:data:`ebraille_sim.estimation.firmware.FIRMWARE_FSR`) advanced by
