@@ -8,9 +8,11 @@ whose supervisor latched a fault (and which faults), and the estimate's bias, th
 ``force_est - force_true`` over the reading window (median, 5th and 95th percentile of the readers).
 
 Session: ``everyday_session`` on its own (nominal) reader for ``--session`` s (0 skips it), with
-the same bias and in-band fraction per 10-minute window.
+the same bias and in-band fraction per 10-minute window (``--session-unit``: see
+:data:`SESSION_UNITS`).
 
 Run:  python docs/make_fsr_population.py [--readers 200] [--seed 4242] [--duration 12] [--session 7200]
+      [--session-unit nominal|uncompensated|creep_5pct] [--scenarios ...]
 """
 from __future__ import annotations
 
@@ -61,9 +63,27 @@ def population(name: str, readers: int, seed: int, duration_s: float) -> dict:
             "bias_p95_n": float(np.percentile(bias, 95))}
 
 
-def session(duration_s: float) -> list[dict]:
+SESSION_UNITS = {
+    "nominal": {},
+    "uncompensated": {"estimator": {"creep_compensation": False}},
+    "creep_5pct": {"fsr": {"creep_per_decade": 0.05}},
+}
+"""The session's reader: the scenario's nominal one; the same without the firmware's creep
+compensation (the creep as the estimate sees it); a unit at the population's top creep rate
+(5 %/decade of the crept force) under the nominal firmware law."""
+
+
+def session(duration_s: float, unit: str = "nominal") -> list[dict]:
+    import dataclasses
+    from ebraille_sim.physics.params import replace_checked
     spec = load_scenario(ROOT / "scenarios" / "everyday_session.toml")
-    res = run_scenario(spec, duration_s=duration_s)
+    change = SESSION_UNITS[unit]
+    dev = spec.device
+    if "fsr" in change:
+        dev = dataclasses.replace(dev, fsr=replace_checked(dev.fsr, **change["fsr"]))
+    if "estimator" in change:
+        dev = dataclasses.replace(dev, estimator=replace_checked(dev.estimator, **change["estimator"]))
+    res = run_scenario(spec, duration_s=duration_s, device=dev)
     tr = res.trace
     t, f, fe, sp = tr["t_s"], tr["force_true_n"], tr["force_est_n"], tr["setpoint_n"]
     ok = np.abs(f - sp) <= spec.setpoint.band_fraction * sp
@@ -85,6 +105,7 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=12.0)
     ap.add_argument("--session", type=float, default=7200.0)
     ap.add_argument("--scenarios", nargs="*", default=list(SCENARIOS))
+    ap.add_argument("--session-unit", choices=sorted(SESSION_UNITS), default="nominal")
     a = ap.parse_args(argv)
     print(f"| scenario | readers | share in band >= 0.9 | in-band p10 | min | latched faults | "
           f"estimate bias median [p5, p95] (N) |")
@@ -98,10 +119,10 @@ def main(argv=None) -> int:
               f"{r['bias_p95_n']:+.4f}] |", flush=True)
         print(f"  ({time.time() - t0:.0f} s wall, errors {r['errors']})", file=sys.stderr, flush=True)
     if a.session > 0:
-        print(f"\neveryday_session, nominal reader, {a.session:.0f} s\n")
+        print(f"\neveryday_session, {a.session_unit} reader, {a.session:.0f} s\n")
         print("| window (min) | in band | estimate bias (N) | mean force (N) |")
         print("|---|---|---|---|")
-        for row in session(a.session):
+        for row in session(a.session, a.session_unit):
             print(f"| {row['window_min']} | {row['in_band']:.3f} | {row['bias_n']:+.4f} | {row['force_mean_n']:.3f} |"
                   + (f" fault: {row['fault']}" if row.get("fault") else ""), flush=True)
     return 0
