@@ -122,7 +122,7 @@ def test_linear_estimate_with_creep_compensation_is_the_finite_difference_of_the
     hold, after, df = 20000, 3000, 1e-3
     last = {}
     for comp in (True, False):
-        dev = dataclasses.replace(base, fsr=dataclasses.replace(base.fsr, noise_v_rms=0.0),
+        dev = dataclasses.replace(base, fsr=dataclasses.replace(base.fsr, noise_v_rms=0.0, press_repeatability=0.0),
                                   circuit=dataclasses.replace(base.circuit, adc_bits=24),
                                   estimator=dataclasses.replace(base.estimator, creep_compensation=comp))
         op = operating_point(dev, 1.0, check=False)
@@ -144,12 +144,12 @@ def test_linear_sensor_creep_is_the_finite_difference_of_the_kernel():
     recovered film, 1 N held 20 s, then 1 N plus 1 or 2 mN for 5 s (noise off, 24-bit ADC;
     one-sided in the pressing direction, as the linearisation: a small decrease stays inside
     the hysteresis plays; Richardson-extrapolated).
-    A creep frozen at its 20-s value (the slope of the 20-s loading voltage) reads 8.7 % high
+    A creep frozen at its 20-s value (the slope of the 20-s loading voltage) reads 8.1 % high
     20 ms after the step; the dynamic terms match to 0.3 % at every sample after the 1.5 ms
     mechanical lag has settled."""
     from ebraille_sim.estimation.calibration import loading_voltage
     base = DeviceParams()
-    dev = dataclasses.replace(base, fsr=dataclasses.replace(base.fsr, noise_v_rms=0.0),
+    dev = dataclasses.replace(base, fsr=dataclasses.replace(base.fsr, noise_v_rms=0.0, press_repeatability=0.0),
                               circuit=dataclasses.replace(base.circuit, adc_bits=24))
     op = operating_point(dev, 1.0, check=False)
     hold, after, df = 20000, 5000, 1e-3
@@ -162,9 +162,9 @@ def test_linear_sensor_creep_is_the_finite_difference_of_the_kernel():
     assert np.max(np.abs(sim[k0:] - lin[k0:]) / lin[k0:]) < 3e-3
     frozen = (loading_voltage(1.0 + df, dev.fsr, dev.circuit, 20.0)
               - loading_voltage(1.0 - df, dev.fsr, dev.circuit, 20.0)) / (2 * df)
-    assert frozen / sim[k0] == pytest.approx(1.087, abs=0.005)
-    # the fast terms have crept within 5 s; the 10 s and 100 s terms give the rest at DC (1 + N w)
-    assert sim[-1] / sim[k0] == pytest.approx(1.068, abs=0.005)
+    assert frozen / sim[k0] == pytest.approx(1.081, abs=0.005)
+    # the fast terms have crept within 5 s; the terms from 10 s to 10^6 s give the rest at DC (1 + N w)
+    assert sim[-1] / sim[k0] == pytest.approx(1.063, abs=0.005)
 
 
 def test_pid_statespace_reproduces_pid_recursions():

@@ -16,7 +16,12 @@ from ebraille_sim.estimation.paper_models import paper_model
 from ebraille_sim.physics.params import FSRS, CircuitParams, DeviceParams, EstimatorParams, FSRParams, RateParams
 
 
-def _sensor(fsr=FSRParams(), circuit=CircuitParams(), estimator=EstimatorParams(), rates=RateParams(), seed=0):
+def _sensor(fsr=FSRParams(), circuit=CircuitParams(), estimator=EstimatorParams(), rates=RateParams(), seed=0,
+            scatter=False):
+    """A device's packed sensor chain at rest; without ``scatter`` the film's press-to-press draw is
+    off (the laws here are checked on the central press; the draw has its own test in test_laws)."""
+    if not scatter:
+        fsr = dataclasses.replace(fsr, press_repeatability=0.0)
     dev = DeviceParams(fsr=fsr, circuit=circuit, estimator=estimator, rates=rates)
     p = pack_params(dev, seed)
     s = initial_state(dev, p)
@@ -39,7 +44,8 @@ def test_divider_voltage_at_a_known_resistance():
     assert c.divider_v(10e3) == pytest.approx(2.5, abs=1e-15)
     assert c.divider_v(30e3) == pytest.approx(1.25, abs=1e-15)
     # nominal FSR at 1 N is 10 kOhm (power law k at 1 N)
-    assert static_resistance(1.0, FSRS["nominal"]) == pytest.approx(1 / (1 / 10e3 + 1e-7), rel=1e-12)
+    # (the turn-on region leaves 1/(1 + 0.1^4) of the law at 1 N)
+    assert static_resistance(1.0, FSRS["nominal"]) == pytest.approx(1 / (1 / 10e3 / (1 + 1e-4) + 1e-7), rel=1e-12)
 
 
 def test_adc_reads_the_static_divider_voltage_without_noise_or_memory_effects():
@@ -101,12 +107,12 @@ def test_creep_recovers_after_unloading_and_remembers_a_short_pause():
     _hold(s, p, u, 0.0, 1.0)                      # short pause: most of the creep remains
     _hold(s, p, u, 1.5, 0.05)
     g_short = _path_conductance(s, fsr, c)
-    _hold(s, p, u, 0.0, 1500.0)                   # long rest: recovered
+    _hold(s, p, u, 0.0, 1500.0)                   # long rest: recovered but for the slow terms (0.2 %)
     _hold(s, p, u, 1.5, 0.05)
     g_rest = _path_conductance(s, fsr, c)
     assert g_crept / g_fresh - 1 > 0.05
     assert g_short / g_fresh - 1 > 0.04
-    assert g_rest / g_fresh == pytest.approx(1.0, abs=2e-3)
+    assert g_rest / g_fresh == pytest.approx(1.0, abs=3e-3)
 
 
 def test_creep_makes_the_dc_gain_exceed_the_10_hz_gain_by_5_to_32_percent():
@@ -127,9 +133,12 @@ def test_creep_makes_the_dc_gain_exceed_the_10_hz_gain_by_5_to_32_percent():
     x = np.column_stack([np.ones_like(t), np.sin(2 * np.pi * 10 * t), np.cos(2 * np.pi * 10 * t)])
     coef = np.linalg.lstsq(x[1000:], g[1000:], rcond=None)[0]
     amp = math.hypot(coef[1], coef[2])
-    g_held = 1 / static_resistance(1.5, fsr, load_time_s=1e4) - 1 / fsr.standoff_resistance_ohm
-    dc_slope = fsr.exponent * g_held / 1.5          # d G / d F of the fully crept film
-    assert amp / 0.01 / dc_slope == pytest.approx(abs(h10) / abs(h0), rel=0.03)
+    # the creep terms slower than the 1000 s preload have not filled: the operating point is the
+    # film crept for 1000 s, and around it a 10 Hz change sees |H(10 Hz)| of the law's slope
+    from ebraille_sim.physics.fsr import creep_gain
+    g_held = 1 / static_resistance(1.5, fsr, load_time_s=1001.0) - 1 / fsr.standoff_resistance_ohm
+    slope = fsr.exponent * g_held / (1.5 * creep_gain(1001.0, fsr))    # d G / d F_c at that point
+    assert amp / 0.01 / slope == pytest.approx(abs(h10), rel=0.03)
 
 
 def test_temperature_offset_shifts_resistance_by_the_coefficient():
@@ -243,14 +252,17 @@ def _held_estimates(fsr, estimator, force_n, times_s=(2.0, 10.0, 30.0, 60.0)):
 def test_creep_compensation_inverts_the_creep_of_a_sensor_with_its_parameters(force_n):
     """A held force on a sensor whose creep equals the firmware's nominal law: compensated to the
     un-crept film (reference hold ~0), the estimate equals the one of a sensor without creep to
-    2e-4 relative at 2-60 s (that one's static error, up to 14 %, is the estimator's own); without
+    1e-3 relative at 2-60 s (6e-4: the prediction runs on the estimate, not the film's force) (that one's static error, up to 14 %, is the estimator's own); without
     the compensation the creep makes it read 9-15 % higher and drift by > 2.5 % from 2 to 60 s."""
     nominal = FSRParams(noise_v_rms=0.0)
     comp = _held_estimates(nominal, EstimatorParams(creep_compensation=True, creep_reference_hold_s=1e-6), force_n)
-    no_creep = _held_estimates(dataclasses.replace(nominal, creep_per_decade=0.0),
+    # the creep-free film keeps the nominal film's play operators (the loop the creep does not make)
+    from ebraille_sim.physics.fsr import play_loop_fraction
+    no_creep = _held_estimates(dataclasses.replace(nominal, creep_per_decade=0.0,
+                                                   hysteresis_fraction=play_loop_fraction(nominal)),
                                EstimatorParams(creep_compensation=False), force_n)
     crept = _held_estimates(nominal, EstimatorParams(creep_compensation=False), force_n)
-    np.testing.assert_allclose(comp, no_creep, rtol=2e-4)
+    np.testing.assert_allclose(comp, no_creep, rtol=1e-3)
     assert np.all(crept / no_creep > 1.06)
     assert crept[-1] / crept[0] - 1.0 > 0.025
 
@@ -326,7 +338,8 @@ def _fast_firmware(turn_lsb):
 def test_turn_test_reads_a_relaxation_the_deadband_holds_and_keeps_a_standing_force(seed):
     """On the 1 kHz firmware with its noise: a press to 1.15 N in 20 ms that relaxes to 1.0 N
     over 60 ms (the pulp at a standing board) is read more than 4 % high behind the plain
-    deadband, under 3 % with the turn test; at a standing 1.5 N after a 50 ms press the two
+    deadband (5.1-5.6 %), more than a point less with the turn test (3.7-4.2 %: the creep's 3.2
+    points of the film's 10 % loop are not the play loop the firmware inverts); at a standing 1.5 N after a 50 ms press the two
     estimates agree to 6 mN and the turn test's is as still (no noise ratchet)."""
     reads = {}
     for turn in (0.0, 1.75):
@@ -349,7 +362,7 @@ def test_turn_test_reads_a_relaxation_the_deadband_holds_and_keeps_a_standing_fo
             steady.append(s[S["force_est_n"]])
         reads[turn] = (np.mean(held[-50:]), np.mean(steady), np.ptp(steady))
     assert reads[0.0][0] > 1.04
-    assert reads[1.75][0] < 1.03
+    assert reads[1.75][0] < min(1.045, reads[0.0][0] - 0.01)
     assert abs(reads[1.75][1] - reads[0.0][1]) < 0.006
     assert reads[1.75][2] <= max(reads[0.0][2], 0.001)
 

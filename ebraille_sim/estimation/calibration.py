@@ -64,7 +64,9 @@ def measured_hysteresis_fraction(fsr, force_n: float = 1.0, peak_n: float = 2.0,
     leg) and without creep, through the plant's own hysteresis and conduction laws
     (:func:`ebraille_sim.physics.fsr.hysteresis`, :func:`ebraille_sim.physics.fsr.conductance_s`);
     the stand-off path is left out, as a measurement at 1 N would subtract it.  For the play
-    model the result is the unit's ``hysteresis_fraction`` up to the 1 mN offset of its log.
+    model the result is the unit's rate-independent loop
+    (:func:`ebraille_sim.physics.fsr.play_loop_fraction`: its datasheet ``hysteresis_fraction``
+    less the creep's share) up to the 1 mN offset of its log.
     """
     from ebraille_sim.physics.fsr import N_PLAYS, conductance_s, hysteresis, log_force
     widths, weights = play_widths(fsr)
@@ -72,7 +74,8 @@ def measured_hysteresis_fraction(fsr, force_n: float = 1.0, peak_n: float = 2.0,
     s = np.full(N_PLAYS, log_force(0.0))
 
     def g(f_eff):
-        return conductance_s(f_eff, fsr.resistance_at_1n_ohm, fsr.exponent, 0.0, 1.0)
+        return conductance_s(f_eff, fsr.resistance_at_1n_ohm, fsr.exponent, 0.0, 1.0, fsr.actuation_force_n,
+                             fsr.turn_on_steepness)
 
     for f in np.linspace(0.0, force_n, steps):
         f_eff = hysteresis(float(f), s, 0, p, 0, N_PLAYS, N_PLAYS)

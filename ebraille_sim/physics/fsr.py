@@ -6,24 +6,32 @@ Chain, in the order the signal passes (each block from its physics):
    (1-2 ms rise, Interlink integration guide), advanced at the physics rate.
 2. **Hysteresis.** A Prandtl-Ishlinskii sum of ``N_PLAYS`` play operators acting on
    ``ln(F + F_eps)``: relative, rate-independent, and with a major loop whose loading
-   branch has the higher resistance by ``h`` = (R_F+ - R_F-)/R_F+ (10 %, datasheet).
-   The play widths grow linearly and sum (weighted) to ``-ln(1-h)/(2n)``.  Its central
-   (initial) branch is the static curve the estimator is calibrated on.
-3. **Power-law conduction with stand-off.** ``G = 1/R_so + F_c^n / (k c_temp)``:
-   the tunnelling/contact path conducts ~F^n (Interlink: roughly 1/R in force), in
-   parallel with the >10 MOhm unloaded film.
+   branch has the higher resistance by ``h_p`` = (R_F+ - R_F-)/R_F+.  The datasheet's +10 %
+   is measured at 1000 g with the creep included, so the plays carry what the creep does not
+   (:func:`play_loop_fraction`, 7.05 % for the nominal film; :func:`datasheet_hysteresis`
+   measures the whole loop the datasheet's way).  The play widths grow linearly and sum
+   (weighted) to ``-ln(1-h_p)/(2n)``.  Its central (initial) branch is the static curve the
+   estimator is calibrated on.
+3. **Power-law conduction with stand-off and turn-on.** ``G = 1/R_so + F_c^n T(F_c) / (k c)``:
+   the tunnelling/contact path conducts ~F^n (Interlink: roughly 1/R in force), scaled below
+   the actuation force by the turn-on ``T(F) = 1/(1 + (F_a/F)^m)``, in parallel with the
+   >10 MOhm unloaded film; ``c`` is the resistance factor of temperature and press.
 4. **Creep (hereditary).**  The polymer's strain creeps under a held force and recovers
    when the force is removed (a generalized Kelvin/Burgers solid, Paredes-Madrid et al.
    2017), so the force the conduction law sees is
    ``F_c = F_eff + w sum_i z_i``, ``dz_i/dt = (F_eff - z_i)/tau_i``, with ``N_CREEP``
-   retardation times spaced one per decade from ``tau_min`` to ``tau_max`` (10 ms-100 s)
+   retardation times spaced one per decade from ``tau_min`` to ``tau_max`` (10 ms-11.6 days)
    and the weight ``w`` per decade.  Under a constant force the conductance therefore
-   *rises*, by about ``n w`` per decade of time (Interlink: < 5 % per decade), and a step
-   in force reaches the conduction law at once while the creep follows (a force change at
-   10 Hz sees less of the creep than a held one).  The creep term acts only while the film
-   touches the electrodes (lagged force above ``load_threshold_n``); the states keep their
-   memory and relax towards the applied force (recovery) at all times.
-5. **Temperature.** ``c_temp = 1 + alpha dT`` (datasheet: -15 % at +85 C).
+   *rises*, by about ``n w`` per decade of time for days (Interlink: < 5 % per decade;
+   Sensitronics: 12 % in 48 h), and a step in force reaches the conduction law at once while
+   the creep follows (a force change at 10 Hz sees less of the creep than a held one).  The
+   creep term acts only while the film touches the electrodes (lagged force above
+   ``load_threshold_n``); the states keep their memory and relax towards the applied force
+   (recovery) at all times.
+5. **Temperature and press.** ``c = c_T c_P``: ``c_T = 1 + alpha dT`` with one coefficient
+   above the calibration temperature and one below (datasheet: -15 % at +85 C, -5 % at -40 C);
+   ``c_P = exp(sigma z)``, one standard normal ``z`` drawn per press (single-part
+   repeatability, datasheet 2 %).
 6. **Divider** (paper eq. 1), FSR to the supply, R2 to ground: ``V = Vs R2/(R2 + R)``.
 7. **Electrical noise** (Gaussian, from a counter-based generator, see :mod:`ebraille_sim.physics.noise`),
    **ADC** quantisation to ``bits`` with clipping at the rails, sampled at the sensor rate.
@@ -43,6 +51,7 @@ import math
 import numpy as np
 
 from ebraille_sim.base.compiled import njit
+from ebraille_sim.physics.noise import normal_at
 
 
 N_PLAYS = 4
@@ -54,11 +63,27 @@ F_EPS_N = 1e-3
 INVERSE_HYSTERESIS_TOL = 1e-12
 """Output change (ln N) below which :func:`inverse_hysteresis` holds its input: rounding, not force."""
 
-N_CREEP = 5
-"""Retardation terms of the hereditary creep (one per decade of time, each one state slot)."""
+N_CREEP = 9
+"""Retardation terms of the hereditary creep (one per decade of time from 10 ms to 10^6 s, 11.6
+days, each one state slot)."""
 
-STATE_SLOTS = ("fsr_force_lagged_n", "fsr_voltage_v", "fsr_code")
-"""State slots of the film and the ADC: lagged force, quantised voltage, code."""
+PRESS_INDEX_OFFSET = float(2 ** 51)
+"""Offset of the press-to-press draws in the device's counter-based noise sequence
+(:mod:`ebraille_sim.physics.noise`): above the FSR samples' indices and the current chain's
+(``2**50`` on), so no two streams share a number."""
+
+HYSTERESIS_TEST_FORCE_N = 9.80665
+"""Force at which the datasheet states its hysteresis (its specifications are taken at 1000 g), N."""
+
+HYSTERESIS_TEST_PEAK_N = 2.0 * 9.80665
+"""Peak of the load cycle that measures the hysteresis at :data:`HYSTERESIS_TEST_FORCE_N` (2 kg), N."""
+
+HYSTERESIS_TEST_RAMP_S = 1.0
+"""Duration of each leg (0 to the peak, the peak back to 0) of that load cycle, s."""
+
+STATE_SLOTS = ("fsr_force_lagged_n", "fsr_voltage_v", "fsr_code", "fsr_pressed", "fsr_press_count", "fsr_press_z")
+"""State slots of the film and the ADC: lagged force, quantised voltage, code; whether the film
+is pressed (1) or not (0), the presses so far and the standard normal draw of the present press."""
 
 CREEP_SLOTS = tuple(f"creep_{j}_n" for j in range(N_CREEP))
 """State slots of the creep terms (hereditary force, N)."""
@@ -138,9 +163,71 @@ def held_creep_gain(hold_s, weight, tau_min_s, tau_max_s, n_terms):
 
 
 @njit(cache=True, inline="always")
-def temperature_factor(temp_offset_k, tempco_per_k):
-    """Resistance factor of a temperature offset, ``1 + alpha dT``."""
-    return 1.0 + tempco_per_k * temp_offset_k
+def temperature_factor(temp_offset_k, tempco_hot_per_k, tempco_cold_per_k):
+    """Resistance factor of a temperature offset from the calibration temperature,
+    ``1 + alpha dT`` with ``alpha`` the warm side's coefficient for ``dT >= 0`` and the cold
+    side's below (the datasheet's two points, -15 % at +85 C and -5 % at -40 C, both falls)."""
+    if temp_offset_k >= 0.0:
+        return 1.0 + tempco_hot_per_k * temp_offset_k
+    return 1.0 + tempco_cold_per_k * temp_offset_k
+
+
+@njit(cache=True)
+def _temperature_scale(offsets_k, tempco_hot_per_k, tempco_cold_per_k):
+    out = np.empty(offsets_k.size)
+    for i in range(offsets_k.size):
+        out[i] = temperature_factor(offsets_k[i], tempco_hot_per_k, tempco_cold_per_k)
+    return out
+
+
+def temperature_scale(offsets_k, fsr) -> np.ndarray:
+    """:func:`temperature_factor` of an FSR at each of the temperature offsets ``offsets_k`` (K, array)."""
+    x = np.ascontiguousarray(offsets_k, dtype=float).ravel()
+    return _temperature_scale(x, float(fsr.temperature_coeff_per_k), float(fsr.temperature_coeff_cold_per_k))
+
+
+def temperature_offset_k(factor, tempco_hot_per_k: float, tempco_cold_per_k: float):
+    """The temperature offset (K) whose :func:`temperature_factor` is ``factor`` (float or array).
+
+    The law falls on both sides of the calibration temperature, so a factor below 1 has two
+    offsets; the warm one is returned (the warm side's coefficient must be negative), and a
+    factor above 1, which no temperature gives, is refused."""
+    f = np.asarray(factor, dtype=float)
+    if tempco_hot_per_k >= 0.0 or np.any(f > 1.0):
+        raise ValueError("temperature_offset_k: the factor must be at most 1 and the warm coefficient negative "
+                         f"(got factor up to {float(np.max(f)):g}, coefficient {tempco_hot_per_k:g} 1/K)")
+    del tempco_cold_per_k                       # the warm branch is the one returned
+    out = (f - 1.0) / tempco_hot_per_k
+    return float(out) if np.ndim(out) == 0 else out
+
+
+@njit(cache=True, inline="always")
+def turn_on_factor(force_n, actuation_n, steepness):
+    """Fraction of the power-law conduction that a force reaches (the turn-on region):
+    ``1 / (1 + (F_a / F)^m)``, one half at the actuation force ``F_a``, ``F^m / F_a^m`` well
+    below it (the film barely touches its electrodes) and 1 well above it."""
+    if force_n <= 0.0:
+        return 0.0
+    return 1.0 / (1.0 + (actuation_n / force_n) ** steepness)
+
+
+@njit(cache=True, inline="always")
+def press_scatter(f_lagged_n, threshold_n, s, pressed, count, z, seed, sigma):
+    """Resistance factor of the present press (single-part repeatability), ``exp(sigma z)``.
+
+    A press starts when the lagged force rises above ``threshold_n`` (the film meets its
+    electrodes); each start draws a new standard normal ``z`` from the device's counter-based
+    sequence, number :data:`PRESS_INDEX_OFFSET` + presses so far (``s[count]``), kept in
+    ``s[z]`` for the rest of the press; ``s[pressed]`` is 1 while pressed.  Before the first
+    press ``z`` = 0."""
+    if f_lagged_n > threshold_n:
+        if s[pressed] == 0.0:
+            s[pressed] = 1.0
+            s[count] += 1.0
+            s[z] = normal_at(seed, PRESS_INDEX_OFFSET + s[count])
+    else:
+        s[pressed] = 0.0
+    return math.exp(sigma * s[z])
 
 
 @njit(cache=True, inline="always")
@@ -227,11 +314,13 @@ def inverse_hysteresis(l_out, x_prev, s, play0, p, width0, weight0, n_plays):
 
 
 @njit(cache=True, inline="always")
-def conductance_s(force_eff_n, k_ohm, n, g_standoff_s, scale):
-    """Film conductance (S): stand-off path in parallel with the power-law path."""
+def conductance_s(force_eff_n, k_ohm, n, g_standoff_s, scale, actuation_n, steepness):
+    """Film conductance (S): stand-off path in parallel with the power-law path, which the
+    turn-on region (:func:`turn_on_factor`) scales below the actuation force; ``scale``
+    multiplies the path's resistance (temperature, press scatter)."""
     if force_eff_n <= 0.0:
         return g_standoff_s
-    return g_standoff_s + force_eff_n ** n / (k_ohm * scale)
+    return g_standoff_s + force_eff_n ** n * turn_on_factor(force_eff_n, actuation_n, steepness) / (k_ohm * scale)
 
 
 @njit(cache=True, inline="always")
@@ -284,13 +373,88 @@ def adc_voltage(code, lsb_v):
     return code * lsb_v
 
 
-def play_widths(fsr) -> tuple[list[float], list[float]]:
-    """Play widths (in ln N) and weights giving the FSR's hysteresis fraction."""
-    total = fsr.hysteresis_log_halfwidth
+def play_loop_widths(play_fraction: float, exponent: float) -> tuple[list[float], list[float]]:
+    """Play widths (in ln N) and weights whose major loop is ``(R_F+ - R_F-)/R_F+ = play_fraction``
+    through the power law of exponent ``exponent``: total half-width ``-ln(1-h)/(2n)``."""
+    total = -math.log(1.0 - play_fraction) / (2.0 * exponent)
     weights = [1.0 / N_PLAYS] * N_PLAYS
     base = [(j + 1) for j in range(N_PLAYS)]
     norm = sum(w * b for w, b in zip(weights, base))
     return [total * b / norm for b in base], weights
+
+
+def play_widths(fsr) -> tuple[list[float], list[float]]:
+    """Play widths (in ln N) and weights of an FSR: its rate-independent loop
+    (:func:`play_loop_fraction`)."""
+    return play_loop_widths(play_loop_fraction(fsr), fsr.exponent)
+
+
+def _ramp_creep_terms(fsr) -> tuple[np.ndarray, np.ndarray]:
+    """Creep states ``z_i / F_peak`` of a recovered film at the two passes through
+    :data:`HYSTERESIS_TEST_FORCE_N` of the datasheet's load cycle (a triangle 0 ->
+    :data:`HYSTERESIS_TEST_PEAK_N` -> 0, each leg :data:`HYSTERESIS_TEST_RAMP_S`), from the exact
+    solution of ``dz/dt = (F - z)/tau`` for a ramp of rate ``r``: rising
+    ``z = r (t - tau (1 - e^(-t/tau)))``; falling, ``t'`` after the peak where ``z = z_p``,
+    ``z = F_p - r t' + r tau - (F_p + r tau - z_p) e^(-t'/tau)``."""
+    taus = np.array(creep_taus_s(fsr.creep_tau_min_s, fsr.creep_tau_max_s))
+    t_r = HYSTERESIS_TEST_RAMP_S
+    r = 1.0 / t_r                                          # per unit peak force
+    t_up = HYSTERESIS_TEST_FORCE_N / HYSTERESIS_TEST_PEAK_N * t_r
+    z_up = r * (t_up + taus * np.expm1(-t_up / taus))
+    z_peak = r * (t_r + taus * np.expm1(-t_r / taus))
+    t_dn = t_r - t_up                                      # time after the peak of the falling pass
+    z_dn = 1.0 - r * t_dn + r * taus - (1.0 + r * taus - z_peak) * np.exp(-t_dn / taus)
+    return z_up, z_dn
+
+
+def creep_loop_fraction(fsr) -> float:
+    """``(R_F+ - R_F-)/R_F+`` at 1 kg that the creep alone gives in the datasheet's load cycle:
+    the film creeps between the rising and the falling pass, so the falling pass reads the lower
+    resistance (conduction ``~F_c^n``, ``F_c = F + w sum z_i``; see :func:`_ramp_creep_terms`)."""
+    w = creep_term_weight(fsr.creep_per_decade, fsr.creep_tau_min_s, fsr.creep_tau_max_s)
+    z_up, z_dn = _ramp_creep_terms(fsr)
+    x = HYSTERESIS_TEST_FORCE_N / HYSTERESIS_TEST_PEAK_N
+    return 1.0 - ((x + w * z_up.sum()) / (x + w * z_dn.sum())) ** fsr.exponent
+
+
+def play_loop_fraction(fsr) -> float:
+    """The rate-independent (play operator) loop of an FSR: its datasheet hysteresis
+    ``hysteresis_fraction``, measured with the creep, less the creep's share,
+    ``1 - (1 - h)/(1 - h_creep)`` (:func:`creep_loop_fraction`; 0 when the creep alone makes the
+    loop)."""
+    return max(0.0, 1.0 - (1.0 - fsr.hysteresis_fraction) / (1.0 - creep_loop_fraction(fsr)))
+
+
+def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: float = 1e-3) -> float:
+    """``(R_F+ - R_F-)/R_F+`` at :data:`HYSTERESIS_TEST_FORCE_N`, measured the datasheet's way on a
+    recovered film: the force rises linearly to :data:`HYSTERESIS_TEST_PEAK_N` in ``ramp_s`` and
+    falls back in as long, sampled every ``dt_s`` through the plant's own laws (mechanical lag,
+    :func:`hysteresis`, :func:`creep_force`, :func:`conductance_s`); the stand-off path is left out
+    and the resistances at the force are interpolated between samples."""
+    widths, weights = play_widths(fsr)
+    p = np.array(list(widths) + list(weights)
+                 + [creep_decay(dt_s, tau) for tau in creep_taus_s(fsr.creep_tau_min_s, fsr.creep_tau_max_s)])
+    s = np.zeros(N_PLAYS + N_CREEP)
+    s[:N_PLAYS] = log_force(0.0)
+    w = creep_term_weight(fsr.creep_per_decade, fsr.creep_tau_min_s, fsr.creep_tau_max_s)
+    a_lag = lag_alpha(dt_s, fsr.mechanical_lag_s)
+    n = int(round(ramp_s / dt_s))
+    force = np.concatenate([np.linspace(0.0, HYSTERESIS_TEST_PEAK_N, n + 1), np.linspace(HYSTERESIS_TEST_PEAK_N, 0.0,
+                                                                                       n + 1)[1:]])
+    f_lag = 0.0
+    res = np.empty(force.size)
+    lagged = np.empty(force.size)
+    for i, f in enumerate(force):
+        f_lag = lag_step(f_lag, float(f), a_lag)
+        f_eff = hysteresis(f_lag, s, 0, p, 0, N_PLAYS, N_PLAYS)
+        f_c = creep_force(f_eff, f_lag, s, N_PLAYS, p, 2 * N_PLAYS, w, fsr.load_threshold_n, N_CREEP)
+        res[i] = 1.0 / conductance_s(f_c, fsr.resistance_at_1n_ohm, fsr.exponent, 0.0, 1.0, fsr.actuation_force_n,
+                                     fsr.turn_on_steepness)
+        lagged[i] = f_lag
+    peak = int(np.argmax(lagged))
+    r_up = np.interp(HYSTERESIS_TEST_FORCE_N, lagged[:peak + 1], res[:peak + 1])
+    r_dn = np.interp(HYSTERESIS_TEST_FORCE_N, lagged[peak:][::-1], res[peak:][::-1])
+    return float(1.0 - r_dn / r_up)
 
 
 def creep_gain(hold_s, fsr):
@@ -330,8 +494,9 @@ def static_conductance(force_n: float, fsr, load_time_s: float = 0.0, temp_offse
     f = float(force_n)
     if f > fsr.load_threshold_n:
         f *= creep_gain(float(load_time_s), fsr)
-    scale = temperature_factor(float(temp_offset_k), fsr.temperature_coeff_per_k)
-    return conductance_s(f, fsr.resistance_at_1n_ohm, fsr.exponent, 1.0 / fsr.standoff_resistance_ohm, scale)
+    scale = temperature_factor(float(temp_offset_k), fsr.temperature_coeff_per_k, fsr.temperature_coeff_cold_per_k)
+    return conductance_s(f, fsr.resistance_at_1n_ohm, fsr.exponent, 1.0 / fsr.standoff_resistance_ohm, scale,
+                         fsr.actuation_force_n, fsr.turn_on_steepness)
 
 
 def static_resistance(force_n: float, fsr, load_time_s: float = 0.0, temp_offset_k: float = 0.0) -> float:

@@ -358,22 +358,37 @@ class FSRParams(_Checked):
                                        "points 0.2 N-30 k, 1 N-6 k, 10 N-1 k; spread 6-27 k")
     exponent: float = _pos(0.9, "-", "[D] same fit; 0.75-1.0")
     standoff_resistance_ohm: float = _pos(10e6, "ohm", "[R] FSR 402 datasheet: > 10 MOhm unloaded")
-    hysteresis_fraction: float = _nn(0.10, "-", "[R] FSR 402 datasheet: +10 % (R_F+ - R_F-)/R_F+")
+    hysteresis_fraction: float = _nn(0.10, "-", "[R] FSR 402 datasheet: +10 % average (R_F+ - R_F-)/R_F+, "
+                                     "taken at 1000 g, creep included; the play operators carry the part the "
+                                     "creep does not (physics.fsr.play_loop_fraction)")
     creep_per_decade: float = _nn(
-        0.03, "-", "[E] hereditary creep of the crept force per decade of load time; conductance "
-        "rises n x 0.03 = 2.7 %/decade, inside the FSR 402 datasheet's < 5 %/decade [R] (Interlink) "
-        "and near standard FSR ink's 12 % over 48 h = 2.3 %/decade from 1 s [R] (Sensitronics)")
+        0.0275, "-", "[D] hereditary creep of the crept force per decade of load time, such that a held force's "
+        "conductance rises 12 % from 1 s to 48 h (Sensitronics, standard FSR ink at 2 psi [R]: "
+        "drift_log log10(t), t in s); 2.4 %/decade in conductance at 0.1-1 s, 2.1 % at 1000 s, inside the FSR 402 datasheet's "
+        "< 5 % per log10(time) [R]")
     creep_tau_min_s: float = _pos(0.01, "s", "[E] fastest creep term: the film settles in tens of ms "
                                   "after its 1-2 ms mechanical rise [R] Interlink guide")
-    creep_tau_max_s: float = _pos(100.0, "s", "[E] slowest creep term: FSR drift is reported over "
-                                  "seconds to minutes (-10 % within ~5 s, [R] groklab Interlink test; "
-                                  "log-time drift, [R] Interlink, Sensitronics)")
+    creep_tau_max_s: float = _pos(1e6, "s", "[D] slowest creep term, 11.6 days: the log-time law holds over "
+                                  "the datasheet's drift test (1 kg for 35 days [R]) and Sensitronics' 48 h [R]; "
+                                  "one term per decade from creep_tau_min_s")
     load_threshold_n: float = _pos(0.02, "N", "[E] film in contact with the electrodes: below the "
-                                   "0.1 N actuation force [R]; the creep acts only above it")
+                                   "0.1 N actuation force [R]; the creep acts and a press starts above it")
+    actuation_force_n: float = _pos(0.1, "N", "[R] FSR 402 datasheet (2010): actuation force 0.1 N (400-series "
+                                    "sheet: ~0.2 N min); the power-law path conducts half its law there")
+    turn_on_steepness: float = _pos(4.0, "-", "[E] exponent m of the turn-on 1/(1 + (F_a/F)^m): the resistance at "
+                                    "the actuation force is 160 kOhm, above the guide's > 100 kOhm before turn-on "
+                                    "[R], and the power law is met within 6 % from 2 F_a (0.2 N: 45 kOhm; "
+                                    "Adafruit/Interlink table 30 kOhm [R], inside the k spread)")
+    press_repeatability: float = _nn(0.02, "-", "[R] FSR 402 datasheet: single-part force repeatability +/-2 %, "
+                                     "one standard deviation/mean at 1000 g; drawn per press as a resistance "
+                                     "factor exp(sigma z)")
     mechanical_lag_s: float = _pos(1.5e-3, "s", "[R] Interlink integration guide: 1-2 ms mechanical rise")
     noise_v_rms: float = _nn(2e-3, "V", "[E] divider + ADC input noise, about 0.4 LSB of a 10-bit 5 V ADC")
     temperature_coeff_per_k: float = _p(
-        -0.15 / 60.0, "1/K", "[R] datasheet: -15 % resistance at +85 C after 1 h, taken linear from 25 C")
+        -0.15 / 60.0, "1/K", "[D] warm side: datasheet -15 % resistance at +85 C after 1 h [R], linear from 25 C")
+    temperature_coeff_cold_per_k: float = _p(
+        0.05 / 65.0, "1/K", "[D] cold side: datasheet -5 % resistance at -40 C after 1 h [R], linear from 25 C "
+        "(the resistance falls on both sides)")
 
     def __post_init__(self):
         super().__post_init__()
@@ -387,13 +402,15 @@ class FSRParams(_Checked):
 
     @property
     def hysteresis_log_halfwidth(self) -> float:
-        """Total half-width in ln(force) of the play operators: -ln(1-h)/(2 n)."""
-        return -math.log(1.0 - self.hysteresis_fraction) / (2.0 * self.exponent)
+        """Total half-width in ln(force) of the play operators: ``-ln(1-h_play)/(2 n)`` with
+        ``h_play`` the loop left to them (:func:`ebraille_sim.physics.fsr.play_loop_fraction`)."""
+        return -math.log(1.0 - _fsr.play_loop_fraction(self)) / (2.0 * self.exponent)
 
     def resistance_ohm(self, force_n: float) -> float:
-        """Static resistance without hysteresis or creep."""
+        """Static resistance without hysteresis or creep (turn-on region included)."""
         return 1.0 / _fsr.conductance_s(float(force_n), self.resistance_at_1n_ohm, self.exponent,
-                                        1.0 / self.standoff_resistance_ohm, 1.0)
+                                        1.0 / self.standoff_resistance_ohm, 1.0, self.actuation_force_n,
+                                        self.turn_on_steepness)
 
 
 FSRS: dict[str, FSRParams] = {
@@ -541,7 +558,9 @@ class EstimatorParams(_Checked):
     hysteresis_fraction: float | None = _p(None, "-", "[D] the loop the hysteresis compensation inverts: "
                                            "None measures the unit's at assembly (a press to 2 N and a "
                                            "let-down to 1 N, estimation.calibration."
-                                           "measured_hysteresis_fraction); 0.10 is the datasheet's nominal")
+                                           "measured_hysteresis_fraction, its rate-independent part); 0.10 is "
+                                           "the datasheet's nominal, creep included (the part left to the "
+                                           "play operators by the nominal creep law is inverted)")
     hysteresis_deadband_lsb: float = _nn(1.5, "LSB", "[E] after a 5-sample running median, changes of the "
                                          "ADC voltage up to this many counts are taken as noise by the "
                                          "hysteresis compensation (the median removes single noisy samples; "

@@ -23,8 +23,8 @@ Per physics step ``h`` (default 0.1 ms), with the command held over the control 
    end stops (:func:`~ebraille_sim.physics.drivetrain.end_stop`);
 5. fingertip QLV contact force from the new board position
    (:func:`~ebraille_sim.physics.fingertip.prony_step`, :func:`~ebraille_sim.physics.fingertip.contact_force`);
-6. FSR mechanical lag; at every sensor sample the hysteresis, hereditary creep, conduction,
-   divider (or fault), noise and ADC, then the estimator's creep compensation
+6. FSR mechanical lag; at every sensor sample the hysteresis, hereditary creep, temperature
+   and press-to-press factors, conduction with its turn-on, divider (or fault), noise and ADC, then the estimator's creep compensation
    (:func:`~ebraille_sim.estimation.firmware.creep_compensated_v`, when on), the
    hysteresis compensation (:func:`~ebraille_sim.estimation.firmware.hysteresis_compensated_v`,
    when on) and the anti-alias filter; at every estimator
@@ -46,7 +46,7 @@ from ebraille_sim.physics.drivetrain import (end_stop, friction_velocity_update,
                                              weight_along_n)
 from ebraille_sim.physics.fingertip import compression_m, contact_force, elastic_force, prony_step
 from ebraille_sim.physics.fsr import (adc_sample, adc_voltage, conductance_s, creep_force, hysteresis, lag_step,
-                                      sensor_voltage, temperature_factor)
+                                      press_scatter, sensor_voltage, temperature_factor)
 from ebraille_sim.physics.motor import current_step, driver_voltage, electrical_power_w, rack_force_n
 from ebraille_sim.physics.noise import noise_v
 from ebraille_sim.plant.layout import MAX_BREAKPOINTS, MAX_TF_LEN, N_CREEP, N_PLAYS, P, S, U
@@ -72,8 +72,11 @@ def sensor_sample(s, p, u):
     f_eff = hysteresis(f_lag, s, S.play_0, p, P.play_w0, P.play_weight0, N_PLAYS)
     f_c = creep_force(f_eff, f_lag, s, S.creep_0_n, p, P.creep_a0, p[P.fsr_creep_weight], p[P.fsr_load_threshold_n],
                       N_CREEP)
-    scale = temperature_factor(u[U.fsr_temp_offset_k], p[P.fsr_tempco_per_k])
-    g = conductance_s(f_c, p[P.fsr_k_ohm], p[P.fsr_n], p[P.fsr_g_standoff_s], scale)
+    scale = temperature_factor(u[U.fsr_temp_offset_k], p[P.fsr_tempco_per_k], p[P.fsr_tempco_cold_per_k])
+    scale *= press_scatter(f_lag, p[P.fsr_load_threshold_n], s, S.fsr_pressed, S.fsr_press_count, S.fsr_press_z,
+                           p[P.seed], p[P.fsr_press_sigma])
+    g = conductance_s(f_c, p[P.fsr_k_ohm], p[P.fsr_n], p[P.fsr_g_standoff_s], scale, p[P.fsr_actuation_n],
+                      p[P.fsr_turn_on_m])
     fault = int(u[U.fsr_fault])
     v = sensor_voltage(fault, g, p[P.r2_ohm], p[P.divider_supply_v], u[U.fsr_fault_value])
     v += noise_v(p[P.fsr_noise_v], p[P.seed], s[S.sensor_count])

@@ -117,7 +117,8 @@ PARAM_NAMES = [
     "relax_a1", "relax_a2", "relax_a3", "relax_beta1", "relax_beta2", "relax_beta3",
     # FSR and circuit
     "fsr_lag_alpha", "fsr_k_ohm", "fsr_n", "fsr_g_standoff_s", "fsr_creep_weight",
-    "fsr_load_threshold_n", "fsr_tempco_per_k", "fsr_noise_v",
+    "fsr_load_threshold_n", "fsr_tempco_per_k", "fsr_tempco_cold_per_k", "fsr_noise_v", "fsr_actuation_n",
+    "fsr_turn_on_m", "fsr_press_sigma",
     "r2_ohm", "divider_supply_v", "adc_lsb_v", "adc_max_code",
     "aa_b0", "aa_b1", "aa_b2", "aa_a1", "aa_a2",
     "est_len", "est_n_in", "est_n_out", "est_clamp", "est_nyquist_average",

@@ -36,7 +36,8 @@ from ebraille_sim.physics.drivetrain import (mesh_damping_n_s_per_m, reflected_f
                                              shaft_to_rack_per_m)
 from ebraille_sim.physics.fingertip import prony_coefficients, tangent_stiffness_n_per_m
 from ebraille_sim.physics.fsr import (N_CREEP, adc_code, adc_voltage, creep_decay, creep_gain, creep_taus_s,
-                                      creep_term_weight, lag_alpha, log_force, play_widths, static_voltage)
+                                      creep_term_weight, lag_alpha, log_force, play_loop_fraction, play_loop_widths,
+                                      play_widths, static_voltage)
 from ebraille_sim.physics.motor import current_decay
 from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.plant import kernel
@@ -146,6 +147,10 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     p[_CREEP_SLOTS] = _creep_decays(dt_sensor, s.creep_tau_min_s, s.creep_tau_max_s)
     p[P.fsr_load_threshold_n] = s.load_threshold_n
     p[P.fsr_tempco_per_k] = s.temperature_coeff_per_k
+    p[P.fsr_tempco_cold_per_k] = s.temperature_coeff_cold_per_k
+    p[P.fsr_actuation_n] = s.actuation_force_n
+    p[P.fsr_turn_on_m] = s.turn_on_steepness
+    p[P.fsr_press_sigma] = s.press_repeatability
     p[P.fsr_noise_v] = s.noise_v_rms
     p[P.r2_ohm] = c.r2_ohm
     p[P.divider_supply_v] = c.supply_v
@@ -264,15 +269,18 @@ def _fill_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
 def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr, sensor_rate_hz: float) -> None:
     """The estimator's hysteresis compensation: on/off; play operators of the nominal FSR's
     exponent (:data:`~ebraille_sim.estimation.firmware.FIRMWARE_FSR`, whose resistance at 1 N is packed too and whose exponent and
-    stand-off are packed with the creep compensation) with the loop the estimator was given,
-    or, when it was given none, the unit's loop as measured at assembly
+    stand-off are packed with the creep compensation) with the rate-independent part of the loop
+    the estimator was given (a datasheet loop, creep included: its play part by the nominal creep
+    law, :func:`~ebraille_sim.physics.fsr.play_loop_fraction`), or, when it was given none, the
+    unit's rate-independent loop as measured at assembly
     (:func:`ebraille_sim.estimation.calibration.measured_hysteresis_fraction`); the noise
     deadband, the turn test's threshold and following deadband in volts and its average's weight
     per sensor sample.  Given the loop, the slots depend only on the estimator, the ADC's LSB and
     the sensor rate: they are computed once per combination."""
-    h = e.hysteresis_fraction
-    if h is None:
-        h = measured_hysteresis_fraction(fsr) if e.hysteresis_compensation else FIRMWARE_FSR.hysteresis_fraction
+    if e.hysteresis_fraction is not None:
+        h = play_loop_fraction(dataclasses.replace(FIRMWARE_FSR, hysteresis_fraction=e.hysteresis_fraction))
+    else:
+        h = measured_hysteresis_fraction(fsr) if e.hysteresis_compensation else play_loop_fraction(FIRMWARE_FSR)
     slots, values = _hysteresis_compensation_slots(e, float(circuit.adc_lsb_v), h, sensor_rate_hz)
     p[slots] = values
 
@@ -285,7 +293,7 @@ def _hysteresis_compensation_slots(e, adc_lsb_v: float, h, sensor_rate_hz: float
 def _fill_hysteresis_compensation(p: np.ndarray, e, adc_lsb_v: float, h, sensor_rate_hz: float) -> None:
     nominal = FIRMWARE_FSR
     p[P.est_hyst_comp] = 1.0 if e.hysteresis_compensation else 0.0
-    widths, weights = play_widths(dataclasses.replace(nominal, hysteresis_fraction=h))
+    widths, weights = play_loop_widths(h, nominal.exponent)
     for j in range(N_PLAYS):
         p[P[f"comp_play_w{j}"]] = widths[j]
         p[P[f"comp_play_weight{j}"]] = weights[j]

@@ -40,14 +40,16 @@ compression, less force).
 
 **Pre-loaded creep through the temperature input.**  The sensor kernel creeps from a
 recovered film at the start of a run (hereditary creep,
-:func:`ebraille_sim.physics.fsr.creep_force`) and scales the film resistance by
-``(1 + alpha u_T)``, with ``u_T`` the ``fsr_temp_offset_k`` input.  A run that starts
+:func:`ebraille_sim.physics.fsr.creep_force`) and scales the film resistance by the
+temperature law of ``u_T``, the ``fsr_temp_offset_k`` input.  A run that starts
 ``t_off`` into a session of held contact must see the resistance of a film crept for
 ``t_off + t``; for a held force the ratio ``D = c(t_off + t) / c(t)`` of
 :func:`ebraille_sim.physics.fsr.held_resistance_factor` (load taken to start at t = 0,
 which the first contact follows within a few tenths of a second) is folded into the same
-input: ``u_T = ((1 + alpha dT) D - 1) / alpha``, where ``dT`` is the temperature offset of
-``fsr_temperature`` (0 without it).
+input: ``u_T`` is the warm offset whose factor is ``T(dT) D``
+(:func:`ebraille_sim.physics.fsr.temperature_offset_k`), where ``T`` is the temperature law
+(:func:`ebraille_sim.physics.fsr.temperature_factor`, falling on both sides of 25 C) and ``dT``
+the temperature offset of ``fsr_temperature`` (0 without it).
 
 Every parameter, its unit, range and source are listed by :func:`parameter_table` (and in
 ``docs/scenarios.md``); the class docstrings give the equations.
@@ -80,7 +82,7 @@ from ebraille_sim.base.fields import sourced
 from ebraille_sim.base.seeds import child_seed
 from ebraille_sim.base.validation import check_keys, check_number, check_pair
 from ebraille_sim.estimation.firmware import FIRMWARE_FSR
-from ebraille_sim.physics.fsr import held_resistance_factor
+from ebraille_sim.physics.fsr import held_resistance_factor, temperature_offset_k, temperature_scale
 from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2
 from ebraille_sim.scenarios.spec import ScenarioError, check_section_table
 
@@ -414,7 +416,7 @@ class FSRDrift:
 
     The sensor model's resistance under a held force, ``c(t)``
     (:func:`ebraille_sim.physics.fsr.held_resistance_factor`: conductance rising about
-    2.7 % per decade, datasheet < 5 % per decade), is advanced by the offset: the run sees
+    2.1-2.4 % per decade for days, datasheet < 5 % per decade), is advanced by the offset: the run sees
     ``c(t_off + t)`` instead of ``c(t)``.  Folded into the temperature input (module
     docstring).  The firmware has followed the same session: its creep compensation predicts
     with its own law (:data:`ebraille_sim.estimation.firmware.FIRMWARE_FSR`) advanced by
@@ -609,8 +611,8 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
     temp, drift = section.get("fsr_temperature"), section.get("fsr_drift")
     if temp is not None or drift is not None:
         alpha = device.fsr.temperature_coeff_per_k
-        if drift is not None and alpha == 0.0:
-            raise ScenarioError("[disturbances.fsr_drift] needs an FSR with a nonzero temperature_coeff_per_k "
+        if drift is not None and not alpha < 0.0:
+            raise ScenarioError("[disturbances.fsr_drift] needs an FSR with a negative temperature_coeff_per_k "
                                 "(the creep offset is applied through the temperature input)")
         offset, preload = (rows.get(name) for name in ("fsr_temp_offset_k", "est_creep_preload"))
         offset = np.empty(len(t_s)) if offset is None else offset
@@ -625,8 +627,8 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
             if drift is None:
                 offset[a:a + PROFILE_CHUNK] = dtemp
             else:
-                scale = (1.0 + alpha * dtemp) * drift.factor(tc, device.fsr)
-                offset[a:a + PROFILE_CHUNK] = (scale - 1.0) / alpha
+                scale = temperature_scale(dtemp, device.fsr) * drift.factor(tc, device.fsr)
+                offset[a:a + PROFILE_CHUNK] = temperature_offset_k(scale, alpha, device.fsr.temperature_coeff_cold_per_k)
                 preload[a:a + PROFILE_CHUNK] = drift.factor(tc, FIRMWARE_FSR) - 1.0
         built["fsr_temp_offset_k"] = ("set", offset)
         if preload is not None:
