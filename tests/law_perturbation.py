@@ -110,6 +110,12 @@ LAWS = [
      ["test_legibility_impedance_falls_with_the_patch_pressure"]),
     ("stimulator current", "ebraille_sim/scenarios/legibility.py", "_current_a",
      ["test_legibility_stimulator_current_constant_current_and_voltage"]),
+    ("strap transmission", "ebraille_sim/scenarios/disturbances.py", "strap_transmission",
+     ["test_strap_transmission_is_the_relative_motion_of_base_excitation",
+      "test_the_budget_takes_the_finger_motion_through_the_strap"]),
+    ("slip peak force", "controllers/supervisor/motion.py", "slip_peak_force_n",
+     ["test_slip_peak_force_without_the_mesh_is_the_hereditary_integral",
+      "test_the_gear_mesh_gives_way_and_lowers_the_peak"]),
 ]
 
 _RETURN = re.compile(r"^(\s*)return (.+)$")

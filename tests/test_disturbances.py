@@ -27,7 +27,7 @@ def profiles(section, t=T, seed=0, device=NOMINAL):
     ({"wind": {}}, ("unknown key 'wind' in [disturbances]; allowed: battery, fsr_drift, fsr_temperature, "
                     "orientation, pressing, strap_slip, tremor")),
     ({"tremor": {"rms": 1e-5}}, "unknown key 'rms' in [disturbances.tremor]; allowed: band_hz, rms_m, transmission"),
-    ({"tremor": {"rms_m": 0.01}}, "[disturbances.tremor] rms_m = 0.01 is out of range [0, 0.001]"),
+    ({"tremor": {"rms_m": 0.01}}, "[disturbances.tremor] rms_m = 0.01 is out of range [0, 0.0002]"),
     ({"tremor": {"band_hz": [12, 8]}}, "band_hz must have low < high"),
     ({"tremor": {"band_hz": [8]}}, "band_hz must be a pair"),
     ({"strap_slip": {"at_s": 3.0}}, "at_s must be a list of times"),

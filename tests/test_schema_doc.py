@@ -201,7 +201,7 @@ def test_reference_states_units_ranges_defaults_and_sources(rendered):
     assert "| `wpm` | number | 1/min | (0, 1000] | `90` |" in md
     assert "| `force_n` | number | N | (0, 3] | `1` | [R] seed paper: tactile forces" in md
     assert "| `seed` | integer | - | [0, 4503599627370496] | `0` |" in md
-    assert "| `rms_m` | number | m | [0, 0.001] | `1.5e-05` | [R]/[E] Growdon 2000" in md
+    assert "| `rms_m` | number | m | [0, 0.0002] | `1.5e-05` | [R]/[E] Growdon 2000" in md
     assert "| `resistance_ohm` | number | ohm | > 0 | `21.2` | [R] Faulhaber 0816" in md
     assert "| `force_cap_n` | number | N | (0, 4] | `3` |" in md
     assert "| `value_v` (required) | number | V | [-1, 10] | - |" in md

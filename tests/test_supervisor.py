@@ -39,7 +39,7 @@ def test_setpoint_clipped_and_slew_limited():
     sup = Supervisor(inner)
     sup.reset(force_est_n=0.0, setpoint_n=1.0)
     u1 = sup.update(0.0, 3.5, 1e-3)
-    assert inner.seen[-1] == pytest.approx(2.7)
+    assert inner.seen[-1] == pytest.approx(min(2.7, sup.config.slip_setpoint_cap_n))
     assert u1 == pytest.approx(0.6)                 # 600 V/s over 1 ms
     assert run(sup, 0.0, 3.5, n=20) == pytest.approx(5.0)
 

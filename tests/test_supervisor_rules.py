@@ -97,12 +97,14 @@ def test_slew_rate_limit():
 
 
 def test_force_cap_setpoint_clip_and_soft_zone_scaling():
-    """The inner setpoint is clipped to 3.0 - 0.3 = 2.7 N.  In the soft zone [2.7, 3.0] N a push
+    """The inner setpoint is clipped to 3.0 - 0.3 = 2.7 N, or below it to the slip cap (2.675 N for
+    the default 0.1 mm slip, tests/test_body_motion.py).  In the
+    soft zone [2.7, 3.0] N a push
     is scaled by 1 - v, v = (f - 2.7) / 0.3: 2 V at 2.85 N (v = 0.5) gives 1 V, at 2.775 N
     (v = 0.25) 1.5 V; a pull is not scaled; at or above 3.0 N the command is -retract_v = -2 V."""
     sup = make(2.0, f0=0.5, slew_v_per_s=1e6)
     drive(sup, 4, lambda k: jit(k, 0.5), sp=3.5)
-    assert sup.inner.seen[-1] == 3.0 - 0.3
+    assert sup.inner.seen[-1] == min(3.0 - 0.3, sup.config.slip_setpoint_cap_n)
     assert drive(sup, 1, 2.7) == [2.0]
     assert drive(sup, 1, 2.85) == pytest.approx([1.0], rel=1e-9)
     assert drive(sup, 1, 2.775) == pytest.approx([1.5], rel=1e-9)

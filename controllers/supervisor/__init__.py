@@ -11,7 +11,9 @@ Shaping (every period, in this order)
    command again it is reset bumplessly from 0 V and takes over at the next period; a
    non-finite stretch longer than ``watchdog_timeout_s`` is a latched fault.
 2. **Force cap.**  The setpoint passed to the inner controller is clipped to
-   ``force_cap_n - cap_margin_n``.  Inside the soft zone ``[cap - margin, cap]`` a pushing
+   ``force_cap_n - cap_margin_n``, or lower to the setpoint that leaves room for a strap slip
+   toward the board (``slip_headroom_m`` over ``slip_time_s``, :mod:`controllers.supervisor.motion`:
+   2.68 N for the default 0.1 mm in 20 ms).  Inside the soft zone ``[cap - margin, cap]`` a pushing
    command is scaled by ``1 - v`` with ``v`` the degree of violation in [0, 1]; at or
    above the cap the command is ``-retract_v`` until the estimate is back below it.
 3. **Rate limit.**  The command moves at most ``slew_v_per_s`` per second.
@@ -105,10 +107,10 @@ Examples
 >>> from controllers import make
 >>> sup = Supervisor(make("pid"))
 >>> sup.reset(force_est_n=0.0, setpoint_n=1.0)
->>> round(sup.update(0.0, 5.0, 1e-3), 4)      # setpoint clipped to 2.7 N; the PID's first step
-0.0396
+>>> round(sup.update(0.0, 5.0, 1e-3), 4)      # setpoint clipped to 2.68 N; the PID's first step
+0.0393
 >>> round(sup.update(float("nan"), 1.0, 1e-3), 4)   # a NaN estimate: latched fault, retract (slew 0.6 V/ms)
--0.5604
+-0.5607
 >>> sup.fault, sup.mode
 ('fsr_out_of_range', 'retract')
 """

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from controllers.supervisor.layout import _pack
+from controllers.supervisor.motion import design_slip_cap_n
 from ebraille_sim.base.validation import check_bool, check_keys, check_number, replace_fields
 from ebraille_sim.physics import limits
 from ebraille_sim.physics.current_sense import worst_case_error_a
@@ -239,6 +240,32 @@ class SupervisorConfig:
     as the drive retracts) is counted, so the travel integral follows a force loop that
     hunts back and forth."""
     enabled: bool = True
+    # ---- body motion (docs/safety.md, "Body motion"): the room the setpoint leaves for a strap slip ----
+    slip_headroom_m: float = 0.1e-3
+    """Strap slip toward the board that the setpoint leaves room for, m: the largest the wearer's
+    own motion produces ([E] 0.1 mm, :func:`ebraille_sim.scenarios.disturbances.body_motion_budget`).
+    A slip ends before the estimate shows it and the held board draws no current for it, so the
+    standing force must leave the room (:attr:`slip_setpoint_cap_n`)."""
+    slip_time_s: float = 0.02
+    """Duration of the slip the setpoint leaves room for, s: the fastest strap slip ([E] 20 ms);
+    a slower one relaxes more on the way and peaks lower."""
+    mesh_stiffness_n_per_m: float = _NOMINAL.drivetrain.mesh_stiffness_n_per_m
+    """Stiffness of the gear mesh that holds the board, N/m: the board gives way on it as a slip
+    loads the pulp (the drive train's nominal constant, [E] plastic mesh contact 1e4-1e5 N/m)."""
+
+    @functools.cached_property
+    def slip_setpoint_cap_n(self) -> float:
+        """Largest setpoint, N, from which a slip of ``slip_headroom_m`` at constant speed over
+        ``slip_time_s`` brings the fully relaxed design reader, behind the gear mesh, to ``safe_force_n``
+        (:func:`controllers.supervisor.motion.design_slip_cap_n`)."""
+        return design_slip_cap_n(self.safe_force_n, self.slip_headroom_m, self.slip_time_s, self.reader_b_n_per_m,
+                                 self.reader_m_per_m, self.mesh_stiffness_n_per_m)
+
+    @property
+    def setpoint_max_n(self) -> float:
+        """Setpoint the inner controller is given at most, N: ``force_cap_n - cap_margin_n`` or
+        :attr:`slip_setpoint_cap_n`, the lower."""
+        return min(self.force_cap_n - self.cap_margin_n, self.slip_setpoint_cap_n)
 
     def __post_init__(self):
         check_bool("enabled", self.enabled)
@@ -280,6 +307,10 @@ class SupervisorConfig:
                              f"({self.rated_current_a:g})")
         if self.gear_efficiency > 1.0:
             raise ValueError(f"gear_efficiency = {self.gear_efficiency:g} must be at most 1")
+        if self.slip_setpoint_cap_n <= self.contact_on_n:
+            raise ValueError(f"slip_headroom_m = {self.slip_headroom_m:g} m over slip_time_s = {self.slip_time_s:g} s "
+                             f"leaves a setpoint of {self.slip_setpoint_cap_n:.3g} N, not above contact_on_n "
+                             f"({self.contact_on_n:g} N): no force is left for reading")
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], device: DeviceParams | None = None) -> SupervisorConfig:

@@ -95,7 +95,7 @@ def _pack(c) -> np.ndarray:
              "cmd_delay": c.stuck_response_s, "drop_hist": c.drop_window_s}
     min_dt = max(MIN_CONTROL_PERIOD_S, max(spans.values()) / MAX_WINDOW_SAMPLES)
     vals = {
-        "force_cap_n": c.force_cap_n, "cap_margin_n": c.cap_margin_n, "sp_max_n": c.force_cap_n - c.cap_margin_n,
+        "force_cap_n": c.force_cap_n, "cap_margin_n": c.cap_margin_n, "sp_max_n": c.setpoint_max_n,
         "slew_v_per_s": c.slew_v_per_s, "rated_current_sq_a2": c.rated_current_a ** 2,
         "i2t_limit_a2s": c.i2t_limit_a2s, "motor_resistance_ohm": c.motor_resistance_ohm,
         "driver_supply_v": c.driver_supply_v, "back_emf_v_s_per_m": c.back_emf_v_s_per_m,

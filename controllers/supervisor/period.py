@@ -37,7 +37,7 @@ def supervise_begin(sv, cfg, f, sp, dt, cur):
     u : float
         Command, V (NaN for code 1).
     sp_inner : float
-        Setpoint for the inner controller, N (clipped to ``force_cap_n - cap_margin_n``).
+        Setpoint for the inner controller, N (clipped to :attr:`SupervisorConfig.setpoint_max_n`).
     """
     sv[SV.t] += dt
     t = sv[SV.t]

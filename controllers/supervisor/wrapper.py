@@ -106,7 +106,7 @@ class Supervisor:
 
     def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
         """Clear faults and detectors and reset the inner controller bumplessly (on the setpoint it
-        will be given: clipped to ``force_cap_n - cap_margin_n``, unchanged when disabled)."""
+        will be given: clipped to :attr:`SupervisorConfig.setpoint_max_n`, unchanged when disabled)."""
         self._clear()
         self._sv[SV.u_prev] = float(command_v) if math.isfinite(command_v) else 0.0
         sp = min(setpoint_n, self._sp_max) if self.config.enabled else setpoint_n
@@ -114,7 +114,7 @@ class Supervisor:
 
     @property
     def _sp_max(self) -> float:
-        return self.config.force_cap_n - self.config.cap_margin_n
+        return self.config.setpoint_max_n
 
     @property
     def mode(self) -> str:

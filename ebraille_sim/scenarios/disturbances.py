@@ -87,7 +87,7 @@ from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2
 from ebraille_sim.scenarios.spec import ScenarioError, check_section_table
 
 __all__ = ["KINDS", "validate_section", "driven_inputs", "build_inputs", "parameter_table", "band_limited_noise",
-           "minimum_jerk", "strap_transmission", "li_ion_ocv_v", "Tremor", "Pressing", "StrapSlip",
+           "minimum_jerk", "strap_transmission", "body_motion_budget", "li_ion_ocv_v", "Tremor", "Pressing", "StrapSlip",
            "Orientation", "FSRTemperature", "FSRDrift", "Battery"]
 
 G_M_PER_S2 = STANDARD_GRAVITY_M_PER_S2
@@ -225,6 +225,84 @@ def strap_transmission(f_hz: float, frame_mass_kg: float, strap_stiffness_n_per_
     return abs(r * r / complex(1 - r * r, 2 * damping_ratio * r))
 
 
+FRAME_MASS_KG = 0.015
+"""Mass of the finger-worn frame (motor, gearhead, board, battery, case), kg [E]: the mass
+:func:`strap_transmission`'s example assumes."""
+
+STRAP_STIFFNESS_N_PER_M = (5e3, 20e3)
+"""Stiffness of the dorsal strap and nail bed in series, N/m [E] (parameters section 6:
+5-20 N/mm, stiffer than the pulp but not rigid)."""
+
+STRAP_DAMPING_RATIO = 0.2
+"""Damping ratio of the frame on its strap [E] (:func:`strap_transmission`'s default)."""
+
+FINGER_TREMOR_RMS_MAX_M = 200e-6
+"""Largest finger tremor a wearer produces, m RMS: the 30 um mean of physiological finger tremor,
+4-5 fold with the arm extended and more under mental stress ([R] Growdon et al. 2000), taken
+as about 6.7 times the mean [E]."""
+
+READING_ACCEL_MAX_M_PER_S2 = 20.0
+"""Largest acceleration of the hand normal to the board during reading, m/s^2 [E] (2 g: line
+returns and lifts of a finger whose velocity changes many times along a line, [R] Hughes et al.
+2011, Hum Mov Sci 30:711, give no values)."""
+
+SLIP_DEPTH_MAX_M = 0.5e-3
+"""Largest single strap slip, m: a resettling by a fraction of the few millimetres of dorsal
+soft tissue under the strap, 0.1-0.5 mm [E] (:class:`StrapSlip`)."""
+
+SLIP_TOWARD_MAX_M = 0.1e-3
+"""Largest strap slip toward the board (more compression) that the wearer's own motion produces,
+m [E]: the contact force presses the frame onto a finger that tapers toward its tip, so a slip
+under load runs distally and unloads the pulp ([D] the wedge); a slip toward the board needs
+work done on the frame from outside it, and only the dorsal skin dragging the strap back as the
+finger extends does that by itself, a fraction of :data:`SLIP_DEPTH_MAX_M`."""
+
+SLIP_DURATION_MIN_S = 0.02
+"""Shortest strap slip, s [E]: the skin under the strap shears over tens of milliseconds
+(:class:`StrapSlip`'s 30 ms default); 20 ms is the fast end."""
+
+
+def body_motion_budget(frame_mass_kg: float = FRAME_MASS_KG,
+                       strap_stiffness_n_per_m: tuple = STRAP_STIFFNESS_N_PER_M,
+                       damping_ratio: float = STRAP_DAMPING_RATIO) -> dict:
+    """The relative motion between the pulp and the board that a wearer produces with the frame
+    strapped to the finger (docs/safety.md, "Body motion"), SI units.
+
+    The frame rides on the finger through the strap: the finger's own motion reaches the gap
+    only as the frame's inertial lag, :func:`strap_transmission`, worst for the softest strap.
+    Keys: ``tremor_transmission_max`` (over 8-12 Hz) and ``tremor_rms_max_m`` (finger tremor,
+    :data:`FINGER_TREMOR_RMS_MAX_M`) with ``tremor_gap_rms_max_m`` (their product);
+    ``pressing_transmission_max`` (at 1 Hz, the top of :class:`Pressing`'s band) and
+    ``pressing_rms_max_m`` (the schema's largest pressing excursion through it);
+    ``lift_depth_max_m`` (the frame's lag under the largest reading acceleration,
+    twice the static ``m a / k`` for an acceleration that sets in at once) and ``lift_move_min_s``
+    (a quarter period of the frame on the stiffest strap: the fastest rise of that lag);
+    ``slip_depth_max_m``, ``slip_toward_max_m`` (toward the board) and ``slip_duration_min_s``
+    (strap slips, which the strap does not attenuate: the strap itself moves on the skin).
+
+    >>> b = body_motion_budget()
+    >>> round(b["tremor_transmission_max"], 4), round(b["tremor_gap_rms_max_m"] * 1e6, 2)
+    (0.0173, 3.47)
+    >>> round(b["lift_depth_max_m"] * 1e3, 3), round(b["lift_move_min_s"] * 1e3, 2)
+    (0.12, 1.36)
+    """
+    k_lo, k_hi = strap_stiffness_n_per_m
+    t_tremor = max(strap_transmission(f, frame_mass_kg, k_lo, damping_ratio) for f in (8.0, 10.0, 12.0))
+    t_press = strap_transmission(1.0, frame_mass_kg, k_lo, damping_ratio)
+    return {
+        "tremor_transmission_max": t_tremor,
+        "tremor_rms_max_m": FINGER_TREMOR_RMS_MAX_M,
+        "tremor_gap_rms_max_m": t_tremor * FINGER_TREMOR_RMS_MAX_M,
+        "pressing_transmission_max": t_press,
+        "pressing_rms_max_m": t_press * PRESSING_RMS_MAX_M,
+        "lift_depth_max_m": 2.0 * frame_mass_kg * READING_ACCEL_MAX_M_PER_S2 / k_lo,
+        "lift_move_min_s": 0.5 * math.pi * math.sqrt(frame_mass_kg / k_hi),
+        "slip_depth_max_m": SLIP_DEPTH_MAX_M,
+        "slip_toward_max_m": SLIP_TOWARD_MAX_M,
+        "slip_duration_min_s": SLIP_DURATION_MIN_S,
+    }
+
+
 _OCV_SOC = np.array([0.0, 0.05, 0.10, 0.20, 0.30, 0.40, 0.50, 0.60, 0.70, 0.80, 0.90, 1.00])
 _OCV_V = np.array([3.00, 3.45, 3.60, 3.68, 3.73, 3.77, 3.81, 3.86, 3.92, 3.99, 4.07, 4.18])
 """Open-circuit voltage of a LiCoO2/graphite polymer cell against state of charge [E]:
@@ -241,6 +319,12 @@ def li_ion_ocv_v(soc) -> np.ndarray:
 # the disturbances
 # --------------------------------------------------------------------------------------
 
+PRESSING_RMS_MAX_M = 0.7e-3
+"""Largest pressing excursion of the pulp, m RMS [D]: a third of the 2.1 mm that the soft reader's
+pulp compresses between the 0.2 N and 3 N ends of the tactile range ([R] seed paper), so that
+three standard deviations span the range."""
+
+
 @dataclass(frozen=True)
 class Tremor:
     """Physiological tremor of the finger: band-limited Gaussian pulp motion.
@@ -256,14 +340,16 @@ class Tremor:
     the index finger).  Default 15 um RMS [E] within these.
 
     ``transmission`` is the fraction of the finger's motion that appears between the
-    pulp and the board.  1 (default) takes all of it, the bound for a frame that does not
-    follow the finger (anchored on the hand or a loose strap).  A frame strapped firmly to
-    the same phalanx follows the finger and transmits only its inertial lag,
-    :func:`strap_transmission` (0.006 at 10 Hz for a 15 g frame on a 10 N/mm strap [E],
-    strap stiffness 5-20 N/mm from parameters section 6).
+    pulp and the board.  1 (default) takes all of it: a frame that does not follow the
+    finger (anchored elsewhere, a table-top display).  A frame strapped to the same phalanx
+    follows the finger and transmits only its inertial lag, :func:`strap_transmission`
+    (0.006 at 10 Hz for a 15 g frame on a 10 N/mm strap [E], strap stiffness 5-20 N/mm from
+    parameters section 6; at most 0.0173 over 8-12 Hz, :func:`body_motion_budget`); even a
+    strap that holds 3 N within the 6 mm rack travel passes at most 0.20 at 12 Hz.
     """
-    rms_m: float = sourced(15e-6, "m", "[R]/[E] Growdon 2000 ~30 um mean; Carignan 2009 band share",
-                           lo=0.0, hi=1e-3, kind="float")
+    rms_m: float = sourced(15e-6, "m", "[R]/[E] Growdon 2000 ~30 um mean; Carignan 2009 band share; at most "
+                           "200 um (4-5 fold with the arm extended, more under stress)",
+                           lo=0.0, hi=FINGER_TREMOR_RMS_MAX_M, kind="float")
     band_hz: tuple = sourced((8.0, 12.0), "Hz", "[R] Sutton & Sykes 1967; Lakie 2015",
                              lo=0.0, hi=100.0, kind="band")
     transmission: float = sourced(1.0, "-", "[E] 1 = frame does not follow the finger; "
@@ -289,7 +375,8 @@ class Pressing:
     parameters table 1.2) is 0.1 mm RMS [D]; its time scale, from line-length movements
     of a few seconds to word-scale adjustments, gives the band 0.1-1 Hz [E].
     """
-    rms_m: float = sourced(0.1e-3, "m", "[D] 0.15 N RMS [E] / 1.5 N/mm [E]", lo=0.0, hi=2e-3, kind="float")
+    rms_m: float = sourced(0.1e-3, "m", "[D] 0.15 N RMS [E] / 1.5 N/mm [E]; at most a third of the soft "
+                           "reader's 2.1 mm between 0.2 and 3 N [D]", lo=0.0, hi=PRESSING_RMS_MAX_M, kind="float")
     band_hz: tuple = sourced((0.1, 1.0), "Hz", "[E] line- to word-scale adjustments", lo=0.0, hi=20.0, kind="band")
 
     drives = ("finger_pos_m",)
@@ -321,8 +408,8 @@ class StrapSlip:
                                   lo=0.0, hi=60.0, kind="float")
     displacement_m: float = sourced(0.2e-3, "m", "[E] 0.1-0.5 mm resettling of the strap",
                                     lo=-2e-3, hi=2e-3, kind="float")
-    duration_s: float = sourced(0.03, "s", "[E] skin shear under the strap, tens of ms",
-                                lo=1e-3, hi=5.0, kind="float")
+    duration_s: float = sourced(0.03, "s", "[E] skin shear under the strap, tens of ms (at least 10 ms)",
+                                lo=0.01, hi=5.0, kind="float")
     max_offset_m: float = sourced(1e-3, "m", "[E] the strap seats after ~1 mm of slips (tapering finger, "
                                   "stretched skin)", lo=0.0, hi=3e-3, kind="float")
 
