@@ -97,6 +97,10 @@ def test_wheel_ships_the_library_and_its_baselines(wheel):
     for kind in ("firmware", "designs"):                  # the named firmware presets and designs
         files = {p.name for p in (root / kind).glob("*.toml")}
         assert files and {f"ebraille_sim/data/{kind}/{f}" for f in files} <= names
+    policies = {p.relative_to(root).as_posix() for p in (root / "policies").rglob("policy.*")}
+    assert {"policies/ppo/policy.npz", "policies/sac/policy.json"} <= policies      # the shipped learned policies
+    assert {f"ebraille_sim/data/{f}" for f in policies} <= names
+    assert not any(n.endswith(".zip") for n in names)                             # their NumPy actors only
     assert not any(n.startswith("scenarios/") for n in names)                     # no top-level package
     with zipfile.ZipFile(wheel) as z:
         assert z.read("ebraille_sim/library/baselines/steady_90wpm.json") == \
@@ -162,6 +166,9 @@ def test_installed_wheel_runs_the_shipped_library_from_any_folder(wheel, tmp_pat
     r = cli("run", "steady_90wpm", "--duration", "3", "--no-plot", "--out", str(tmp_path / "run"))
     assert r.returncode == 0, r.stdout + r.stderr
     assert json.loads((tmp_path / "run" / "metrics.json").read_text())["scenario"] == "steady_90wpm"
+    r = cli("run", "steady_90wpm", "--duration", "1", "--controller", "policy:ppo", "--no-plot",
+            "--out", str(tmp_path / "run_ppo"))                  # a shipped policy by name, from the wheel
+    assert r.returncode == 0, r.stdout + r.stderr
 
     # a working folder with scenarios of its own does not hide the library or its baselines
     mine = tmp_path / "mine"
