@@ -166,9 +166,10 @@ def test_installed_wheel_runs_the_shipped_library_from_any_folder(wheel, tmp_pat
     r = cli("run", "steady_90wpm", "--duration", "3", "--no-plot", "--out", str(tmp_path / "run"))
     assert r.returncode == 0, r.stdout + r.stderr
     assert json.loads((tmp_path / "run" / "metrics.json").read_text())["scenario"] == "steady_90wpm"
-    r = cli("run", "steady_90wpm", "--duration", "1", "--controller", "policy:ppo", "--no-plot",
-            "--out", str(tmp_path / "run_ppo"))                  # a shipped policy by name, from the wheel
-    assert r.returncode == 0, r.stdout + r.stderr
+    probe = ("import controllers; from controllers.policy import shipped_policies; "
+             "c = controllers.make('policy:ppo'); print(type(c.model).__name__, *sorted(shipped_policies()))")
+    r = subprocess.run([str(venv / "bin" / "python"), "-c", probe], cwd=work, capture_output=True, text=True, env=env)
+    assert r.stdout.split() == ["MlpActor", "ppo", "ppo_hc", "sac"], r.stdout + r.stderr   # shipped policies, by name
 
     # a working folder with scenarios of its own does not hide the library or its baselines
     mine = tmp_path / "mine"
