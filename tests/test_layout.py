@@ -141,3 +141,25 @@ def test_study_scripts_use_public_api_only():
     assert not bad, f"studies use public API only; promote what they need: {bad}"
     for p in scripts:
         assert (p.parent / "README.md").is_file(), f"{p.parent.relative_to(ROOT)} has no README.md"
+
+
+def test_the_choosing_guide_and_the_benchmark_page_quote_the_shipped_library():
+    """Every shipped design and firmware preset is on docs/choosing.md with its library score,
+    and every design on docs/benchmark.md: a re-measured score shows up as a stale page."""
+    from controllers.designs import designs
+    from ebraille_sim.estimation.presets import firmware_presets
+    choosing = (DOCS / "choosing.md").read_text(encoding="utf-8").splitlines()
+    bench = (DOCS / "benchmark.md").read_text(encoding="utf-8").splitlines()
+
+    def row(lines, name, score):
+        return [ln for ln in lines if ln.startswith("|") and f"`{name}`" in ln and f"| {score:.2f} |" in ln]
+
+    stale = []
+    for d in designs().values():
+        stale += [f"choosing.md: {d.name} {d.score}"] * (not row(choosing, d.name, d.score))
+        stale += [f"benchmark.md: {d.name} {d.score}"] * (not row(bench, d.name, d.score))
+    for f in firmware_presets().values():
+        design = f.benchmark.get("design")
+        stale += [f"choosing.md: {f.name} with {design} {f.score}"] * \
+            (not [ln for ln in row(choosing, design, f.score) if f"`{f.name}`" in ln])
+    assert not stale, f"update the pages to the library's scores: {stale}"
