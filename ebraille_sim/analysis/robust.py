@@ -381,13 +381,14 @@ def gains_toml(doc: dict, comment: str = "") -> str:
     text of a TOML gains file for ``controllers.make`` / ``run --controller``; each line of
     ``comment`` becomes a ``#`` line at the top.
 
-    >>> print(gains_toml({"controller": "pid", "gains": {"kp_v_per_n": 1.5, "anti_windup": True}}, "tuned"), end="")
+    >>> doc = {"controller": "pid_scheduled", "gains": {"kp_v_per_n": 1.5, "reference_map": True}}
+    >>> print(gains_toml(doc, "tuned"), end="")
     # tuned
-    controller = "pid"
+    controller = "pid_scheduled"
     <BLANKLINE>
     [gains]
     kp_v_per_n = 1.5
-    anti_windup = true
+    reference_map = true
     """
     lines = [f"# {line}" for line in comment.splitlines()]
     lines += [f'controller = "{doc["controller"]}"', "", "[gains]"]
