@@ -123,8 +123,10 @@ def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
         file holding ``{"controller": name, "gains": {...}}`` (a design file:
         its ``firmware`` is applied by the scenario runner, not here), or
         ``"policy:PATH"`` for a policy saved by ``ebraille-sim train`` or by
-        Stable-Baselines3's ``model.save`` with its metadata beside it
-        (:mod:`controllers.policy`; needs the ``rl`` extra).
+        Stable-Baselines3's ``model.save`` with its metadata beside it, or
+        ``"policy:NAME"`` for a shipped policy (:func:`controllers.policy.shipped_policies`:
+        ``ppo``, ``sac``, ``ppo_hc``; a path that exists wins over a name)
+        (:mod:`controllers.policy`; a ``.zip`` without its ``.npz`` needs the ``rl`` extra).
     **overrides
         Keyword arguments passed to the factory; they take precedence over
         the file's ``gains``. For ``"pid"`` these are :class:`PIDConfig`

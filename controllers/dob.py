@@ -34,7 +34,7 @@ reversal of the pressing is gone from its view.
 
 **Gains.**  ``kp`` 1.75 V/N, ``ki`` 2.5 V/(N s), ``f`` 0.66, ``tau`` 3 ms.  ``f`` is bounded by
 the winding (below); within that, the four values were chosen by a seeded random search
-(docs/make_dob_tuning.py) on a training population that is not the benchmark's (population
+(studies/benchmark/make_dob_tuning.py) on a training population that is not the benchmark's (population
 seed 7, 8 drawn readers, scenario seeds shifted), with the hysteresis-compensated estimator,
 for the best mean over seven scenarios (pressing, an everyday session, onset, reading, steps,
 strap slip, tremor) of the worst reader's in-band and in-band-per-character fractions, and the

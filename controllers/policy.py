@@ -11,6 +11,11 @@ observation depends on):
   to ``model.save``): the metadata is ``PATH.json``, written after training with
   :func:`ebraille_sim.rl.sb3.write_policy_metadata` from the env the model was trained on.
   Without it the load is a one-line error naming the missing file.
+* ``PATH`` is the name of a shipped policy (:func:`shipped_policies`), when no file or
+  folder of that name exists: ``ppo`` and ``sac`` (trained on the default env) and
+  ``ppo_hc`` (PPO trained on the hysteresis-compensated estimator).  They are package data
+  (``ebraille_sim/data/policies/NAME/``: ``policy.json`` and the NumPy actor
+  ``policy.npz``, no ``policy.zip``), so they run deterministically only.
 
 The controller sees only what the microcontroller sees (estimated force, setpoint, time
 step, motor current) and builds the policy's observation with the same compiled function
@@ -45,6 +50,7 @@ Examples
 """
 from __future__ import annotations
 
+import importlib.resources
 import math
 import os
 
@@ -57,7 +63,7 @@ from controllers.features import (CURRENT_SCALE_A, N_OBS, N_Z, Z_PREV_ACTION, co
                                   write_observation)
 
 __all__ = ["ACTOR_FORMAT", "ALGORITHMS", "POLICY_FORMAT", "MlpActor", "PolicyController", "actor_from_sb3",
-           "load_actor", "load_policy", "save_actor"]
+           "load_actor", "load_policy", "save_actor", "shipped_policies", "policy_folder"]
 
 POLICY_FORMAT = "ebraille-sim-policy/1"
 ALGORITHMS = ("ppo", "sac")
@@ -181,16 +187,40 @@ def actor_from_sb3(model) -> MlpActor:
     return MlpActor(weights, biases, acts.pop() if acts else "tanh", squash)
 
 
-def _paths(path: str) -> tuple[str, str]:
+def shipped_policies() -> dict[str, str]:
+    """The shipped policies, ``{name: folder}`` (``ebraille_sim/data/policies/NAME``), sorted by name.
+
+    >>> sorted(shipped_policies())
+    ['ppo', 'ppo_hc', 'sac']
+    """
+    root = importlib.resources.files("ebraille_sim") / "data" / "policies"
+    return {p.name: str(p) for p in sorted(root.iterdir(), key=lambda p: p.name)
+            if p.is_dir() and (p / "policy.json").is_file()}
+
+
+def policy_folder(path) -> str:
+    """The folder of the shipped policy named ``path`` when no file or folder ``path`` (nor
+    ``path.zip``) exists; otherwise ``path`` unchanged (a path that exists wins over a name).
+
+    >>> policy_folder("ppo").endswith("ppo")
+    True
+    """
     path = os.fspath(path)
+    if os.path.exists(path) or os.path.exists(path + ".zip"):
+        return path
+    return shipped_policies().get(path, path)
+
+
+def _paths(path: str) -> tuple[str, str]:
+    path = policy_folder(path)
     if os.path.isdir(path):
         return os.path.join(path, "policy.zip"), os.path.join(path, "policy.json")
     if path.endswith(".zip"):
         return path, path[:-4] + ".json"
     if os.path.isfile(path + ".zip"):
         return path + ".zip", path + ".json"
-    raise ValueError(f"policy path {path!r} must be a folder written by 'ebraille-sim train' or a .zip file "
-                     "saved by Stable-Baselines3")
+    raise ValueError(f"policy path {path!r} must be a folder written by 'ebraille-sim train', a .zip file "
+                     f"saved by Stable-Baselines3 or a shipped policy ({', '.join(shipped_policies())})")
 
 
 def _actor_path(zip_path: str) -> str:
@@ -345,6 +375,9 @@ def load_policy(path, **overrides) -> PolicyController:
     npz_path = _actor_path(zip_path)
     use_actor = det and os.path.isfile(npz_path)
     if not use_actor and not os.path.exists(zip_path):
+        if os.path.isfile(npz_path):
+            raise ValueError(f"policy {zip_path[:-4]} has only its deterministic actor ({npz_path}); "
+                             "deterministic=False needs the Stable-Baselines3 model policy.zip")
         raise FileNotFoundError(f"policy file not found: {zip_path}")
     if not os.path.isfile(json_path):
         raise ValueError(f"policy {zip_path} has no metadata {json_path} (algorithm and env settings it was "

@@ -39,8 +39,8 @@ and forgets, when a dwell is longer than ``max_period_s`` or the pattern changes
 on.  Anything else (a constant setpoint, setpoint steps seconds apart) never switches it on, and
 the loop is then exactly the loop without it.
 
-The numbers were chosen on the training population of docs/make_dob_tuning.py
-(``--refresh-learning``) with ``pid_dob``; docs/benchmark.md has the study.
+The numbers were chosen on the training population of studies/benchmark/make_dob_tuning.py
+(``--refresh-learning``) with ``pid_dob``; studies/benchmark/NOTES.md has the study.
 """
 from __future__ import annotations
 

@@ -92,7 +92,7 @@ class ScheduleConfig:
     The default gains are the design docs/tuning.md recommends (:data:`RECOMMENDED`):
     ``ebraille-sim tune setpoint_steps --population 6 --evaluations 36 --ms-max 2.0`` (family
     ``pid_scheduled``, multi-scenario cost, Ms <= 2.0 for the sliding linearisation at every
-    device and setpoint; reproduced by ``docs/make_tuning_figures.py``, whose
+    device and setpoint; reproduced by ``studies/tuning/make_tuning_figures.py``, whose
     ``gains_ms2.0.toml`` holds the unrounded optimum), rounded to three significant digits,
     with the static reference map on.  Their Ms on the sliding linearisation is at most 1.96
     over the tuning population, and their worst-case in-band fraction is at least the default

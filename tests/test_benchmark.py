@@ -39,6 +39,19 @@ def test_suites_are_fixed_and_plans_cover_every_episode():
         B.plan_episodes(["pid"], std, 0)
 
 
+def test_an_episode_runs_the_suites_scenario_and_readers_drawn_around_its_nominal_device():
+    from ebraille_sim.scenarios.population import sample_devices
+    from ebraille_sim.scenarios.spec import load_scenario
+    fast = {s.key: s for s in B.get_suite("standard").scenarios}["reading_200wpm"]
+    spec, shipped = B.scenario_spec(fast), load_scenario("steady_120wpm")
+    assert (spec.duration_s, spec.reading.wpm, spec.seed) == (12.0, 200.0, shipped.seed)
+    assert spec.reading.passage == shipped.reading.passage and spec.device == shipped.device
+    readers = B.scenario_devices(fast, 4)
+    assert readers[0] == spec.device and readers[1:] == sample_devices(B.POPULATION_SEED, 3, base=spec.device)
+    assert B.scenario_devices(fast, 2) == readers[:2]             # a smaller suite: the same first readers
+    assert len({r.fsr for r in readers}) == 4
+
+
 def test_quick_suite_ranks_the_bounds_beside_the_controller(quick):
     res, s = quick
     assert res.controllers == ["pid", "actuator_bound", "hysteresis_bound", "sensor_bound"]

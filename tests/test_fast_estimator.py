@@ -2,7 +2,7 @@
 
 The conversion (:mod:`ebraille_sim.estimation.resample`), its one-line errors, its accuracy on
 the virtual FSR bench, the closed loop it runs in and the loop analysis of it.  Bounds come
-from the measurements of docs/estimators.md (``python docs/make_estimator_numbers.py``).
+from the measurements of docs/estimators.md (``python studies/estimators/make_estimator_numbers.py``).
 """
 import dataclasses
 import math

@@ -9,7 +9,7 @@ the finger stays at or below 3.5 N (the supervisor's ``safe_force_n``).
 ``FAULTS`` also holds the sensor's plausible lies: a reading fixed at 0.2 V or 0.45 V (a
 stuck code in the force range), and a high-k FSR unit on a device calibrated for the nominal
 unit (it under-reads).  The fast test runs the single faults on the nominal reader at
-60 wpm; the slow one the pairs, 120 wpm and the population.  ``docs/make_safety_table.py``
+60 wpm; the slow one the pairs, 120 wpm and the population.  ``studies/safety/make_safety_table.py``
 writes the table of docs/safety.md from :func:`run_cell`.
 """
 from __future__ import annotations

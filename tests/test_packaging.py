@@ -97,6 +97,10 @@ def test_wheel_ships_the_library_and_its_baselines(wheel):
     for kind in ("firmware", "designs"):                  # the named firmware presets and designs
         files = {p.name for p in (root / kind).glob("*.toml")}
         assert files and {f"ebraille_sim/data/{kind}/{f}" for f in files} <= names
+    policies = {p.relative_to(root).as_posix() for p in (root / "policies").rglob("policy.*")}
+    assert {"policies/ppo/policy.npz", "policies/sac/policy.json"} <= policies      # the shipped learned policies
+    assert {f"ebraille_sim/data/{f}" for f in policies} <= names
+    assert not any(n.endswith(".zip") for n in names)                             # their NumPy actors only
     assert not any(n.startswith("scenarios/") for n in names)                     # no top-level package
     with zipfile.ZipFile(wheel) as z:
         assert z.read("ebraille_sim/library/baselines/steady_90wpm.json") == \
@@ -162,6 +166,10 @@ def test_installed_wheel_runs_the_shipped_library_from_any_folder(wheel, tmp_pat
     r = cli("run", "steady_90wpm", "--duration", "3", "--no-plot", "--out", str(tmp_path / "run"))
     assert r.returncode == 0, r.stdout + r.stderr
     assert json.loads((tmp_path / "run" / "metrics.json").read_text())["scenario"] == "steady_90wpm"
+    probe = ("import controllers; from controllers.policy import shipped_policies; "
+             "c = controllers.make('policy:ppo'); print(type(c.model).__name__, *sorted(shipped_policies()))")
+    r = subprocess.run([str(venv / "bin" / "python"), "-c", probe], cwd=work, capture_output=True, text=True, env=env)
+    assert r.stdout.split() == ["MlpActor", "ppo", "ppo_hc", "sac"], r.stdout + r.stderr   # shipped policies, by name
 
     # a working folder with scenarios of its own does not hide the library or its baselines
     mine = tmp_path / "mine"

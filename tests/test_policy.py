@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import pathlib
 import subprocess
 import sys
 
@@ -10,7 +11,7 @@ import numpy as np
 import pytest
 
 import controllers
-from controllers.features import Z_PREV_ACTION
+from controllers.features import N_OBS, Z_PREV_ACTION
 from controllers.policy import POLICY_FORMAT, PolicyController, load_policy, read_metadata
 from ebraille_sim.rl.env import ContactForceEnv, EnvConfig
 from ebraille_sim.plant.layout import S
@@ -185,20 +186,38 @@ def test_trained_policy_loads_and_runs_a_scenario(tmp_path):
     assert np.all(np.abs(res.trace["command_v"]) <= 6.0)
 
 
-def test_shipped_learned_policies_run_from_numpy_without_pytorch():
-    """The PPO and SAC actors kept in docs/figures/rl load as NumPy MLPs (no PyTorch, no SB3) and
-    hold a supervised steady reading in band."""
-    import pathlib
-    root = pathlib.Path(__file__).resolve().parent.parent / "docs" / "figures" / "rl"
+def test_shipped_learned_policies_run_by_name_from_numpy_without_pytorch(tmp_path):
+    """The shipped PPO and SAC actors (package data) load by name as NumPy MLPs (no PyTorch, no
+    SB3), from any folder, and hold a supervised steady reading in band."""
     code = ("import sys, controllers\n"
             "from ebraille_sim.scenarios.runner import run_scenario\n"
-            f"for name in ('ppo', 'sac'):\n"
-            f"    r = run_scenario('steady_90wpm', controller='policy:' + {str(root)!r} + '/' + name, duration_s=4.0)\n"
+            "for name in ('ppo', 'sac'):\n"
+            "    r = run_scenario('steady_90wpm', controller='policy:' + name, duration_s=4.0)\n"
             "    print(name, r.metrics['in_band_fraction'])\n"
             "print(any(m in sys.modules for m in ('torch', 'stable_baselines3')))\n")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=tmp_path).stdout.split()
     assert out[-1] == "False"
     assert float(out[1]) > 0.8 and float(out[3]) > 0.8
+
+
+def test_a_shipped_policy_name_gives_way_to_a_path_and_runs_deterministic_only(tmp_path, monkeypatch):
+    from controllers.policy import policy_folder, shipped_policies
+    shipped = shipped_policies()
+    assert sorted(shipped) == ["ppo", "ppo_hc", "sac"]
+    for folder in shipped.values():
+        assert {p.name for p in pathlib.Path(folder).iterdir()} >= {"policy.json", "policy.npz"}
+    monkeypatch.chdir(tmp_path)
+    assert policy_folder("ppo") == shipped["ppo"]
+    assert controllers.make("policy:ppo").model.weights[0].shape[1] == N_OBS
+    (tmp_path / "ppo").mkdir()                                # a folder of that name wins: its files are read
+    with pytest.raises(FileNotFoundError, match="policy file not found"):
+        controllers.make("policy:ppo")
+    assert policy_folder("ppo") == "ppo" and policy_folder("not_shipped") == "not_shipped"
+    with pytest.raises(ValueError, match="shipped policy"):
+        controllers.make("policy:not_shipped")
+    with pytest.raises(ValueError, match="only its deterministic actor"):
+        controllers.make(f"policy:{shipped['sac']}", deterministic=False)
 
 
 def test_numpy_actor_equals_sb3_predict_and_bad_files_are_one_line(tmp_path):

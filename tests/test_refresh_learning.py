@@ -146,7 +146,7 @@ def test_bad_learning_settings_one_line(gains, match):
 def test_learning_holds_refresh_characters_a_plain_loop_loses():
     """Closed loop, 1 kHz estimator path with the compensation and its turn test: on a drawn
     reader whose force sags through every hold at 60 wpm (training reader 7 of
-    docs/make_dob_tuning.py), the learning holds most characters the same gains lose."""
+    studies/benchmark/make_dob_tuning.py), the learning holds most characters the same gains lose."""
     import dataclasses
 
     from ebraille_sim.base.validation import replace_checked

@@ -20,8 +20,6 @@ from ebraille_sim.physics.params import DeviceParams, EstimatorParams
 from ebraille_sim.rl.env import ENV_ID, EnvConfig, register_envs
 from ebraille_sim.rl.sb3 import policy_metadata
 
-ROOT = pathlib.Path(__file__).resolve().parent.parent
-
 
 def _compensated() -> DeviceParams:
     d = DeviceParams()
@@ -104,14 +102,16 @@ def test_shipped_policies_record_their_firmware_or_load_without_the_record():
     """The policy trained on the hysteresis-compensated estimator says so (fields added to the
     estimator since, at their defaults, are not in its record); the earlier ones, written before
     the record existed (the default estimator), load as before."""
-    hc = read_metadata(str(ROOT / "docs" / "figures" / "rl" / "ppo_hc" / "policy.json"))
+    from controllers.policy import shipped_policies
+    shipped = shipped_policies()
+    hc = read_metadata(str(pathlib.Path(shipped["ppo_hc"]) / "policy.json"))
     now = dataclasses.asdict(_compensated().estimator)
     rec = hc["training"]["estimator"]
     assert set(rec) <= set(now) and rec == {k: now[k] for k in rec}
     assert {k: now[k] for k in set(now) - set(rec)} == {k: getattr(EstimatorParams(), k) for k in set(now) - set(rec)}
     assert set(now) - set(rec) == {"hysteresis_turn_lsb", "hysteresis_follow_lsb", "hysteresis_turn_time_s"}
     for name in ("ppo", "sac"):
-        meta = read_metadata(str(ROOT / "docs" / "figures" / "rl" / name / "policy.json"))
+        meta = read_metadata(str(pathlib.Path(shipped[name]) / "policy.json"))
         assert "estimator" not in meta["training"]
-        assert controllers.make(f"policy:{ROOT / 'docs' / 'figures' / 'rl' / name}").name == "policy"
-    assert controllers.make(f"policy:{ROOT / 'docs' / 'figures' / 'rl' / 'ppo_hc'}").name == "policy"
+        assert controllers.make(f"policy:{name}").name == "policy"
+    assert controllers.make("policy:ppo_hc").name == "policy"

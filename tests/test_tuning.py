@@ -49,13 +49,13 @@ def test_scenario_cost_rewards_in_band_and_penalises_overshoot():
 
 def test_gains_file_of_a_schedule_round_trips_through_make(tmp_path):
     import controllers
-    from ebraille_sim.analysis.robust import family_config, gains_document
-    from ebraille_sim.commands.tune import _toml
+    from ebraille_sim.analysis.robust import family_config, gains_document, gains_toml
     cfg = family_config("pid_scheduled", 1.5, 6.0, 0.002)
     doc = gains_document(cfg, "pid_scheduled")
     assert doc["controller"] == "pid_scheduled" and doc["gains"]["reference_map"] is True
     path = tmp_path / "gains.toml"
-    path.write_text(_toml(doc))
+    path.write_text(gains_toml(doc, "a schedule\nof two lines"))
+    assert path.read_text().startswith("# a schedule\n# of two lines\ncontroller = ")
     c = controllers.make(str(path))
     assert c.name == "pid_scheduled" and c.config == cfg
     ff = controllers.make(str(path), feedforward=True)
@@ -197,12 +197,11 @@ def test_run_with_a_gains_file_labels_the_run_and_records_the_gains(tmp_path, ca
     import json
 
     from controllers.schedule import ScheduleConfig
-    from ebraille_sim.analysis.robust import gains_document
+    from ebraille_sim.analysis.robust import gains_document, gains_toml
     from ebraille_sim.cli import main as cli
-    from ebraille_sim.commands.tune import _toml
     cfg = ScheduleConfig(kp_v_per_n=0.6, ki_v_per_ns=1.5, kd_vs_per_n=0.0)
     gains = tmp_path / "gains.toml"
-    gains.write_text(_toml(gains_document(cfg, "pid_scheduled"), "a comment line"))
+    gains.write_text(gains_toml(gains_document(cfg, "pid_scheduled"), "a comment line"))
     # 0.3 s ends before reading: the criteria fail (status 1); only the labelling is checked here
     assert cli(["run", "steady_90wpm", "--controller", str(gains), "--duration", "0.3", "--trace", "none",
                 "--no-plot", "--out", str(tmp_path / "r")]) == 1
@@ -221,8 +220,7 @@ def test_tune_scenarios_keep_the_named_scenarios_estimator():
     from ebraille_sim.analysis.robust import standard_scenarios, with_estimator
     from ebraille_sim.commands.tune import _scenarios
     from ebraille_sim.scenarios.spec import load_scenario
-    fast = load_scenario(str(pathlib.Path(__file__).resolve().parent.parent / "docs" / "figures" / "estimators"
-                             / "setpoint_steps_fast.toml"))
+    fast = load_scenario(str(pathlib.Path(__file__).resolve().parent / "data" / "setpoint_steps_fast.toml"))
     est = fast.device.estimator
     assert (est.model, est.antialias_cutoff_hz) == ("paper:wiener:5@1000", 50.0)
     for arg in ("standard", "steady_120wpm,contact_onset_unramped", "single"):

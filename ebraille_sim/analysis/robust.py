@@ -84,8 +84,8 @@ from controllers.pid import DEFAULT_PID, PID, PIDConfig
 __all__ = ["FAMILIES", "TuneScenario", "tuning_population", "standard_scenarios", "unramped",
            "linearisation_points", "population_ms", "evaluate", "evaluate_scenarios", "tracking_cost",
            "scenario_cost", "multi_cost", "summarise", "cvar", "robust_tune", "TuneResult", "scenario_setpoints",
-           "family_config", "family_controller", "family_ms_controller", "gains_document", "friction_band_v",
-           "shipped_config", "KD_OFFSET"]
+           "family_config", "family_controller", "family_ms_controller", "gains_document", "gains_toml",
+           "friction_band_v", "shipped_config", "KD_OFFSET"]
 
 KD_OFFSET = 1e-3
 """kd enters the search as ``ln(kd + KD_OFFSET)``, so that kd = 0 is a finite point."""
@@ -361,6 +361,39 @@ def gains_document(cfg, family: str) -> dict:
         if v is not None:                  # None = derived (e.g. tracking_time_s); TOML has no null
             g[f.name] = v if isinstance(v, (bool, str)) else float(v)
     return {"controller": family, "gains": g}
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, int):
+        return str(v)
+    v = float(v)
+    if math.isinf(v):
+        return "inf" if v > 0 else "-inf"
+    return repr(v)
+
+
+def gains_toml(doc: dict, comment: str = "") -> str:
+    """A gains document (:func:`gains_document`, ``{"controller": name, "gains": {...}}``) as the
+    text of a TOML gains file for ``controllers.make`` / ``run --controller``; each line of
+    ``comment`` becomes a ``#`` line at the top.
+
+    >>> doc = {"controller": "pid_scheduled", "gains": {"kp_v_per_n": 1.5, "reference_map": True}}
+    >>> print(gains_toml(doc, "tuned"), end="")
+    # tuned
+    controller = "pid_scheduled"
+    <BLANKLINE>
+    [gains]
+    kp_v_per_n = 1.5
+    reference_map = true
+    """
+    lines = [f"# {line}" for line in comment.splitlines()]
+    lines += [f'controller = "{doc["controller"]}"', "", "[gains]"]
+    lines += [f"{k} = {_toml_value(v)}" for k, v in doc["gains"].items()]
+    return "\n".join(lines) + "\n"
 
 
 def _gains(cfg) -> tuple[float, float, float]:

@@ -59,6 +59,7 @@ def _score(v) -> str:
 
 
 def main(args) -> int:
+    from controllers.policy import shipped_policies
     from ebraille_sim.commands import console
 
     con = console(args)
@@ -75,7 +76,9 @@ def main(args) -> int:
     for name in cat["controllers"]:
         print(f"  {name}")
     print("  (or a gains file: .toml/.json with controller = NAME and a [gains] table,")
-    print("   or policy:PATH for a policy saved by 'ebraille-sim train', extra: rl)")
+    print("   or policy:PATH for a policy saved by 'ebraille-sim train', extra: rl,")
+    print("   or policy:NAME for a shipped learned policy: "
+          + ", ".join(shipped_policies()) + ")")
     print("firmware presets (score: the best design on it, benchmark points):")
     for f in cat["firmware"]:
         print(f"  {f['name']:<24} {_score(f['score'])}  {f['description']}")

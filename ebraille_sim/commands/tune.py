@@ -64,26 +64,6 @@ def add_arguments(p):
                         "sliding linearisation; e.g. 0.5 for the friction-band relaxation of docs/tuning.md)")
 
 
-def _toml_value(v) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, str):
-        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(v, int):
-        return str(v)
-    v = float(v)
-    if math.isinf(v):
-        return "inf" if v > 0 else "-inf"
-    return repr(v)
-
-
-def _toml(doc: dict, comment: str = "") -> str:
-    lines = [f"# {line}" for line in comment.splitlines()]
-    lines += [f'controller = "{doc["controller"]}"', "", "[gains]"]
-    lines += [f"{k} = {_toml_value(v)}" for k, v in doc["gains"].items()]
-    return "\n".join(lines) + "\n"
-
-
 def _fmt_ms(x: float) -> str:
     return "unstable" if (x is None or x < 0 or not math.isfinite(x)) else f"{x:.2f}"
 
@@ -235,7 +215,8 @@ def main(args) -> int:
     import json
     import pathlib
 
-    from ebraille_sim.analysis.robust import family_ms_controller, gains_document, robust_tune, tuning_population
+    from ebraille_sim.analysis.robust import (family_ms_controller, gains_document, gains_toml, robust_tune,
+                                              tuning_population)
     from ebraille_sim.analysis.margins import analyse_loop
     from ebraille_sim.analysis.plots import plot_bode, plot_nyquist
 
@@ -287,11 +268,11 @@ def main(args) -> int:
         with target.staged() as tmp:
             reason = (f"kept the shipped {res.chosen.family}: {res.selection_reason}\n"
                       "the optimum under the bound is in gains_tuned.toml") if res.selected != "tuned" else ""
-            (tmp / "gains.toml").write_text(_toml(res.gains_file(), reason))
+            (tmp / "gains.toml").write_text(gains_toml(res.gains_file(), reason))
             if res.selected != "tuned":
-                (tmp / "gains_tuned.toml").write_text(_toml(gains_document(res.tuned.config, args.family)))
+                (tmp / "gains_tuned.toml").write_text(gains_toml(gains_document(res.tuned.config, args.family)))
             if "hand" in res.references:
-                (tmp / "gains_hand.toml").write_text(_toml(gains_document(res.references["hand"].config, args.family)))
+                (tmp / "gains_hand.toml").write_text(gains_toml(gains_document(res.references["hand"].config, args.family)))
             (tmp / "report.json").write_text(json.dumps(rep, indent=2, default=float) + "\n")
             (tmp / "report.md").write_text(_markdown(spec, rep, len(pop)))
             plot_bode(analyses, tmp / "bode.png", title=f"gains.toml loop, nominal reader ({spec.name})")

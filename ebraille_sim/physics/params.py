@@ -569,8 +569,8 @@ class EstimatorParams(_Checked):
     hysteresis_turn_lsb: float = _nn(0.0, "LSB", "[E] turn test of the hysteresis compensation: a slow reversal "
                                      "is read once the voltage's exponential average is this many counts back "
                                      "from the median's extreme since the last turn; 0 is off (the plain "
-                                     "deadband).  1.75 on the 1 kHz firmware of docs/benchmark.md, chosen on a "
-                                     "training population (docs/make_dob_tuning.py --hold-damping; "
+                                     "deadband).  1.75 on the fast_1khz firmware preset, chosen on a training "
+                                     "population (the benchmark study's hold-damping search; "
                                      "estimation.firmware.turn_tested_v)")
     hysteresis_follow_lsb: float = _nn(0.5, "LSB", "[E] with the turn test, the deadband a move on in the "
                                        "followed direction passes (at most hysteresis_deadband_lsb; a fast "

@@ -65,7 +65,7 @@ import numpy as np
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
 
 __all__ = ["BenchScenario", "Suite", "SUITES", "SUITE_VERSION", "POPULATION_SEED", "BOUNDS", "cvar_low",
-           "plan_episodes", "estimator_settings", "run_episode", "run_benchmark", "summarise", "score_formula", "format_leaderboard",
+           "scenario_spec", "scenario_devices", "plan_episodes", "estimator_settings", "run_episode", "run_benchmark", "summarise", "score_formula", "format_leaderboard",
            "format_markdown", "results_document", "write_results", "load_results", "compare", "format_compare"]
 
 SUITE_VERSION = 1
@@ -182,20 +182,25 @@ def plan_episodes(controllers, suite: Suite, readers: int | None = None) -> list
 
 
 @functools.lru_cache(maxsize=64)
-def _spec(scenario: str, duration_s: float, wpm):
+def scenario_spec(sc: BenchScenario):
+    """The scenario every episode of ``sc`` runs: the shipped scenario with the suite's
+    duration and, when ``sc.wpm`` is set, its reading rate (each reader's seed is
+    ``seed + 101 * reader``)."""
     from ebraille_sim.scenarios.spec import load_scenario
-    spec = load_scenario(scenario)
-    spec = dataclasses.replace(spec, duration_s=float(duration_s))
-    if wpm is not None:
-        spec = dataclasses.replace(spec, reading=dataclasses.replace(spec.reading, wpm=float(wpm)))
+    spec = load_scenario(sc.scenario)
+    spec = dataclasses.replace(spec, duration_s=float(sc.duration_s))
+    if sc.wpm is not None:
+        spec = dataclasses.replace(spec, reading=dataclasses.replace(spec.reading, wpm=float(sc.wpm)))
     return spec
 
 
 @functools.lru_cache(maxsize=64)
-def _devices(scenario: str, duration_s: float, wpm, n: int):
+def scenario_devices(sc: BenchScenario, readers: int) -> list:
+    """The readers of ``sc`` in a suite of ``readers``: the scenario's nominal device, then
+    ``readers - 1`` drawn from it with :data:`POPULATION_SEED` (the same for every controller)."""
     from ebraille_sim.scenarios.population import sample_devices
-    spec = _spec(scenario, duration_s, wpm)
-    return [spec.device] + sample_devices(POPULATION_SEED, n - 1, base=spec.device)
+    base = scenario_spec(sc).device
+    return [base] + sample_devices(POPULATION_SEED, readers - 1, base=base)
 
 
 def _sensor_bound_metrics(res) -> dict:
@@ -279,8 +284,8 @@ def run_episode(task) -> list[dict]:
     from ebraille_sim.base.validation import replace_checked
     from ebraille_sim.scenarios.runner import run_scenario
     ctrl, sc, reader, n, est = task
-    spec = _spec(sc.scenario, sc.duration_s, sc.wpm)
-    device = _devices(sc.scenario, sc.duration_s, sc.wpm, n)[reader]
+    spec = scenario_spec(sc)
+    device = scenario_devices(sc, n)[reader]
     if est:
         device = dataclasses.replace(device, estimator=replace_checked(device.estimator, **dict(est)))
     seed = spec.seed + 101 * reader
