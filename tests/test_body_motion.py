@@ -1,9 +1,8 @@
 """The wearer's own motion: the relative-motion budget of a strapped frame, the setpoint's room
-for a strap slip, and a CI-sized sample of the body-motion matrix (studies/body_motion/matrix.py)."""
+for a strap slip, and a CI-sized sample of the body-motion matrix (ebraille_sim.tools.body_motion)."""
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import math
 import pathlib
 
@@ -20,10 +19,8 @@ ROOT = pathlib.Path(__file__).resolve().parent.parent
 
 
 def _matrix():
-    spec = importlib.util.spec_from_file_location("body_motion_matrix", ROOT / "studies/body_motion/matrix.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    from ebraille_sim.tools import body_motion
+    return body_motion
 
 
 def test_strap_transmission_is_the_relative_motion_of_base_excitation():

@@ -11,7 +11,7 @@ Session: ``everyday_session`` on its own (nominal) reader for ``--session`` s (0
 the same bias and in-band fraction per 10-minute window (``--session-unit``: see
 :data:`SESSION_UNITS`).
 
-Run:  python docs/make_fsr_population.py [--readers 200] [--seed 4242] [--duration 12] [--session 7200]
+Run:  python studies/fsr/population.py [--readers 200] [--seed 4242] [--duration 12] [--session 7200]
       [--session-unit nominal|uncompensated|creep_5pct] [--scenarios ...]
 """
 from __future__ import annotations
