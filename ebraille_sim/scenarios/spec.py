@@ -186,6 +186,9 @@ class DeviceSpec:
     fsr_overrides: dict | None = _key(None, "-", "overrides", target=_params.FSRParams)
     circuit_overrides: dict | None = _key(None, "-", "overrides", target=_params.CircuitParams)
     current_sense_overrides: dict | None = _key(None, "-", "overrides", target=_params.CurrentSenseParams)
+    calibrate: bool = _key(True, "-", "bool", "true: R2 set at assembly for this FSR unit and estimator (a press to "
+                           "1 N held 20 s, R2 turned until the estimate reads 1 N; drawn units too); false: a "
+                           "miscalibrated unit on purpose, with the circuit's R2")
 
 
 @dataclass(frozen=True)
@@ -273,7 +276,9 @@ _OVERRIDE_TARGET = {f.name: f.metadata["target"] for f in dataclasses.fields(Dev
 
 @dataclass(frozen=True)
 class ScenarioSpec:
-    """A validated scenario.  ``device`` is the fully resolved :class:`DeviceParams`."""
+    """A validated scenario.  ``device`` is the fully resolved :class:`DeviceParams`;
+    ``calibrated`` is the file's ``[device] calibrate`` (units drawn around ``device`` are
+    calibrated, or not, as it is)."""
     name: str
     description: str
     seed: int
@@ -287,6 +292,7 @@ class ScenarioSpec:
     sections: dict = field(default_factory=dict)
     source: str = ""
     base_dir: str = "."
+    calibrated: bool = True
 
 
 def _check_value(src, table, key, value, rule):
@@ -405,12 +411,39 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
                                       driver_supply_v=dev.get("driver_supply_v", motor.nominal_voltage_v),
                                       gravity_m_per_s2=g)
         _check_rates(device)
-        return device
+        return _calibrated(src, device, dev)
     except ScenarioError:
         raise
     except (ValueError, TypeError, KeyError, OSError) as exc:
         msg = str(exc).strip("'\"") if isinstance(exc, KeyError) else str(exc)
         raise ScenarioError(f"{src}: {msg}") from None
+
+
+CALIBRATION_FORCE_N = 1.0
+"""Known load of the assembly calibration, N (the middle of the 0.5-2 N reading range)."""
+CALIBRATION_HOLD_S = 20.0
+"""Hold of the assembly calibration before the estimate is read, s."""
+
+
+def _calibrated(src, device: _params.DeviceParams, dev: dict) -> _params.DeviceParams:
+    """``device`` with the divider calibrated for its FSR unit and estimator at assembly
+    (:func:`ebraille_sim.estimation.calibration.calibrate_device`: the known load
+    :data:`CALIBRATION_FORCE_N` held :data:`CALIBRATION_HOLD_S`), unless ``[device] calibrate
+    = false``.  A given ``[device.circuit_overrides] r2_ohm`` needs ``calibrate = false`` (the
+    calibration would replace it); a unit no R2 in 500-50 000 ohm calibrates keeps its R2,
+    with a :class:`ScenarioWarning`."""
+    if not dev.get("calibrate", DeviceSpec().calibrate):
+        return device
+    if "r2_ohm" in dev.get("circuit_overrides", {}):
+        raise ScenarioError(f"{src}: [device.circuit_overrides] r2_ohm is set by the assembly calibration; "
+                            f"set [device] calibrate = false to run a unit with a given R2")
+    from ebraille_sim.estimation.calibration import calibrate_device
+    out = calibrate_device(device, CALIBRATION_FORCE_N, CALIBRATION_HOLD_S)
+    if out is device:
+        warnings.warn(f"{src}: no R2 in 500-50000 ohm makes the estimator read {CALIBRATION_FORCE_N:g} N on "
+                      f"this FSR unit; the divider keeps R2 = {device.circuit.r2_ohm:g} ohm (uncalibrated)",
+                      ScenarioWarning, stacklevel=4)
+    return out
 
 
 def _check_rates(device: _params.DeviceParams) -> None:
@@ -520,7 +553,7 @@ def parse_scenario(data: dict, source: str = "<scenario>", base_dir: str = ".") 
         finger=finger,
         controller=ControllerSpec(name=ctl.get("name", "pid"), gains=ctl.get("gains", {})),
         criteria=top.get("criteria", {}), sections={k: top[k] for k in DELEGATES if k in top},
-        source=source, base_dir=base_dir)
+        source=source, base_dir=base_dir, calibrated=top.get("device", {}).get("calibrate", DeviceSpec().calibrate))
 
 
 def load_scenario(path) -> ScenarioSpec:

@@ -193,9 +193,10 @@ def _spec(scenario: str, duration_s: float, wpm):
 
 @functools.lru_cache(maxsize=64)
 def _devices(scenario: str, duration_s: float, wpm, n: int):
-    from ebraille_sim.scenarios.population import sample_devices
+    from ebraille_sim.scenarios.population import PopulationSpec, sample_devices
     spec = _spec(scenario, duration_s, wpm)
-    return [spec.device] + sample_devices(POPULATION_SEED, n - 1, base=spec.device)
+    return [spec.device] + sample_devices(POPULATION_SEED, n - 1, PopulationSpec(calibrate=spec.calibrated),
+                                          base=spec.device)
 
 
 def _sensor_bound_metrics(res) -> dict:

@@ -176,7 +176,8 @@ def plan_sweep(scenarios, rates=(), readers: int = 0, controllers=("pid",), seed
                              f"{spec.reading.start_s:g} s (no force metric could be computed); use a duration "
                              f"above {spec.reading.start_s:g} s")
         specs[spec.name] = spec
-        devices[spec.name] = sample_devices(seed, readers, population, base=spec.device) if readers else []
+        drawn = dataclasses.replace(population, calibrate=population.calibrate and spec.calibrated)
+        devices[spec.name] = sample_devices(seed, readers, drawn, base=spec.device) if readers else []
     rate_list = list(rates) or [None]
     reader_list = list(range(readers)) or [-1]
     episodes = []
