@@ -129,3 +129,11 @@ def test_a_population_option_out_of_range_is_one_line_and_writes_nothing(command
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and "--readers" in err[0] and msg in err[0]
     assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("readers", [2.5, 0, -3, True, "8"])
+def test_the_api_refuses_a_reader_count_that_is_no_whole_number_in_one_line(readers):
+    with pytest.raises(ValueError, match=r"^readers must be a whole number >= 1 \(reader 0 is the nominal device\), got"):
+        B.run_benchmark(["pid"], "quick", readers=readers, bounds=False)
+    with pytest.raises(ValueError, match=r"^readers must be a whole number >= 0, got"):
+        S.plan_sweep(["steady_90wpm"], readers=-1 if readers == 0 else readers)

@@ -177,11 +177,18 @@ def get_suite(name: str) -> Suite:
     return SUITES[name]
 
 
+def reader_count(suite: Suite, readers=None) -> int:
+    """Readers per scenario: ``readers`` (a whole number >= 1), or the suite's when None."""
+    if readers is None:
+        return suite.readers
+    if isinstance(readers, bool) or not isinstance(readers, (int, np.integer)) or readers < 1:
+        raise ValueError(f"readers must be a whole number >= 1 (reader 0 is the nominal device), got {readers!r}")
+    return int(readers)
+
+
 def plan_episodes(controllers, suite: Suite, readers: int | None = None) -> list[tuple]:
     """``(controller, scenario index, reader)`` for every episode, in a fixed order."""
-    n = suite.readers if readers is None else int(readers)
-    if n < 1:
-        raise ValueError(f"readers must be >= 1 (reader 0 is the nominal device), got {n}")
+    n = reader_count(suite, readers)
     return [(c, i, r) for c in controllers for i in range(len(suite.scenarios)) for r in range(n)]
 
 
@@ -364,7 +371,7 @@ def run_benchmark(controllers, suite: str | Suite = "standard", readers: int | N
         ctrl_mod.make(c)
     if bounds:
         names += ["actuator_bound", "hysteresis_bound"]
-    n = suite.readers if readers is None else int(readers)
+    n = reader_count(suite, readers)
     tasks = [(c, suite.scenarios[i], r, n, tuple(est.items())) for c, i, r in plan_episodes(names, suite, n)]
     if jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
