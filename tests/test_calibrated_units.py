@@ -4,12 +4,11 @@ import warnings
 import numpy as np
 import pytest
 
-from ebraille_sim.estimation.calibration import steady_estimate
+from ebraille_sim.estimation.calibration import DEFAULT_FORCES_N, DEFAULT_HOLDS_S, steady_estimate
 from ebraille_sim.estimation.registry import cached_model
 from ebraille_sim.physics.params import CircuitParams
 from ebraille_sim.scenarios.runner import run_scenario
-from ebraille_sim.scenarios.spec import (CALIBRATION_FORCE_N, CALIBRATION_HOLD_S, ScenarioError, ScenarioWarning,
-                                         parse_scenario)
+from ebraille_sim.scenarios.spec import ScenarioError, ScenarioWarning, parse_scenario
 from ebraille_sim.tools.sweep import plan_sweep
 
 
@@ -25,16 +24,24 @@ def _held_force(spec):
     return float(np.mean(tr["force_true_n"][w])), float(np.mean(tr["force_est_n"][w]))
 
 
+def _bench_errors(dev, circuit):
+    """Relative errors of the steady estimate at the bench's known loads and holds."""
+    model = cached_model(dev.estimator.model)
+    return np.array([(steady_estimate(model, f, dev.fsr, circuit, h) - f) / f
+                     for f in DEFAULT_FORCES_N for h in DEFAULT_HOLDS_S])
+
+
 @pytest.mark.parametrize("fsr", ["nominal", "low_k", "high_k"])
-def test_every_preset_reads_the_calibration_load_exactly(fsr):
+def test_every_preset_reads_the_bench_loads_as_the_nominal_unit_does(fsr):
     dev = _scenario(fsr).device
-    est = steady_estimate(cached_model(dev.estimator.model), CALIBRATION_FORCE_N, dev.fsr, dev.circuit,
-                          CALIBRATION_HOLD_S)
-    assert est == pytest.approx(CALIBRATION_FORCE_N, abs=2e-3)     # within the ADC's step at 1 N
+    err = _bench_errors(dev, dev.circuit)
+    # the film's creep and the units' curves leave a spread over the loads and holds (the
+    # nominal unit's, with the shipped 1150 ohm: 5.7 % RMS, 13 % at most)
+    assert np.sqrt(np.mean(err ** 2)) < 0.08 and np.max(np.abs(err)) < 0.17
     if fsr != "nominal":                                           # the nominal unit's divider is wrong for it
-        wrong = steady_estimate(cached_model(dev.estimator.model), CALIBRATION_FORCE_N, dev.fsr, CircuitParams(),
-                                CALIBRATION_HOLD_S)
-        assert abs(wrong - CALIBRATION_FORCE_N) > 0.15
+        assert np.mean(np.abs(_bench_errors(dev, CircuitParams()))) > 0.15
+    else:
+        assert dev.circuit.r2_ohm == pytest.approx(CircuitParams().r2_ohm, rel=0.005)
 
 
 def test_a_high_k_unit_holds_the_force_as_the_nominal_unit_does():
@@ -48,18 +55,19 @@ def test_a_high_k_unit_holds_the_force_as_the_nominal_unit_does():
 
 
 def test_a_given_r2_needs_calibrate_false():
-    with pytest.raises(ScenarioError, match=r"r2_ohm is set by the assembly calibration; set \[device\] calibrate"):
+    with pytest.raises(ScenarioError, match=r"r2_ohm is set by the bench calibration; set \[device\] calibrate"):
         _scenario(circuit_overrides={"r2_ohm": 2000.0})
     spec = _scenario(calibrate=False, circuit_overrides={"r2_ohm": 2000.0})
     assert spec.device.circuit.r2_ohm == 2000.0 and spec.calibrated is False
 
 
-def test_a_unit_no_divider_calibrates_keeps_its_r2_with_a_warning():
+def test_a_unit_no_divider_calibrates_gets_the_end_of_the_range_with_a_warning():
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         spec = _scenario("nominal", fsr_overrides={"resistance_at_1n_ohm": 5e6})
-    assert spec.device.circuit.r2_ohm == CircuitParams().r2_ohm
-    assert [str(w.message) for w in caught if w.category is ScenarioWarning][0].count("uncalibrated") == 1
+    assert spec.device.circuit.r2_ohm == pytest.approx(50000.0, rel=0.05)
+    msgs = [str(w.message) for w in caught if w.category is ScenarioWarning]
+    assert len(msgs) == 1 and "the end of the range, and the unit reads off" in msgs[0]
 
 
 def test_drawn_units_follow_the_scenario_calibration():

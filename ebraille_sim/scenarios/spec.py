@@ -186,9 +186,9 @@ class DeviceSpec:
     fsr_overrides: dict | None = _key(None, "-", "overrides", target=_params.FSRParams)
     circuit_overrides: dict | None = _key(None, "-", "overrides", target=_params.CircuitParams)
     current_sense_overrides: dict | None = _key(None, "-", "overrides", target=_params.CurrentSenseParams)
-    calibrate: bool = _key(True, "-", "bool", "true: R2 set at assembly for this FSR unit and estimator (a press to "
-                           "1 N held 20 s, R2 turned until the estimate reads 1 N; drawn units too); false: a "
-                           "miscalibrated unit on purpose, with the circuit's R2")
+    calibrate: bool = _key(True, "-", "bool", "true: R2 set on the bench for this FSR unit and estimator (presses "
+                           "to 0.5-2 N held 5-60 s, least squares; drawn units are trimmed at 1 N held 20 s); "
+                           "false: a miscalibrated unit on purpose, with the circuit's R2")
 
 
 @dataclass(frozen=True)
@@ -419,29 +419,24 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
         raise ScenarioError(f"{src}: {msg}") from None
 
 
-CALIBRATION_FORCE_N = 1.0
-"""Known load of the assembly calibration, N (the middle of the 0.5-2 N reading range)."""
-CALIBRATION_HOLD_S = 20.0
-"""Hold of the assembly calibration before the estimate is read, s."""
-
-
 def _calibrated(src, device: _params.DeviceParams, dev: dict) -> _params.DeviceParams:
-    """``device`` with the divider calibrated for its FSR unit and estimator at assembly
-    (:func:`ebraille_sim.estimation.calibration.calibrate_device`: the known load
-    :data:`CALIBRATION_FORCE_N` held :data:`CALIBRATION_HOLD_S`), unless ``[device] calibrate
-    = false``.  A given ``[device.circuit_overrides] r2_ohm`` needs ``calibrate = false`` (the
-    calibration would replace it); a unit no R2 in 500-50 000 ohm calibrates keeps its R2,
-    with a :class:`ScenarioWarning`."""
+    """``device`` with the divider calibrated on the bench for its FSR unit and estimator
+    (:func:`ebraille_sim.estimation.calibration.bench_calibrate_device`: presses to known loads
+    of 0.5-2 N held 5, 20 and 60 s; the nominal unit's R2 is 1 153 ohm), unless ``[device]
+    calibrate = false``.  A given ``[device.circuit_overrides] r2_ohm`` needs ``calibrate =
+    false`` (the calibration would replace it); a unit whose best R2 lies at the end of the
+    500-50 000 ohm range gets it with a :class:`ScenarioWarning`."""
     if not dev.get("calibrate", DeviceSpec().calibrate):
         return device
     if "r2_ohm" in dev.get("circuit_overrides", {}):
-        raise ScenarioError(f"{src}: [device.circuit_overrides] r2_ohm is set by the assembly calibration; "
+        raise ScenarioError(f"{src}: [device.circuit_overrides] r2_ohm is set by the bench calibration; "
                             f"set [device] calibrate = false to run a unit with a given R2")
-    from ebraille_sim.estimation.calibration import calibrate_device
-    out = calibrate_device(device, CALIBRATION_FORCE_N, CALIBRATION_HOLD_S)
-    if out is device:
-        warnings.warn(f"{src}: no R2 in 500-50000 ohm makes the estimator read {CALIBRATION_FORCE_N:g} N on "
-                      f"this FSR unit; the divider keeps R2 = {device.circuit.r2_ohm:g} ohm (uncalibrated)",
+    from ebraille_sim.estimation.calibration import BENCH_R2_RANGE_OHM, bench_calibrate_device
+    out, inside = bench_calibrate_device(device)
+    if not inside:
+        lo, hi = BENCH_R2_RANGE_OHM
+        warnings.warn(f"{src}: no R2 in {lo:g}-{hi:g} ohm calibrates this FSR unit for its estimator; the divider "
+                      f"gets R2 = {out.circuit.r2_ohm:.4g} ohm, the end of the range, and the unit reads off",
                       ScenarioWarning, stacklevel=4)
     return out
 
