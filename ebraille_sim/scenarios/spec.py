@@ -422,7 +422,8 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
 def _calibrated(src, device: _params.DeviceParams, dev: dict) -> _params.DeviceParams:
     """``device`` with the divider calibrated on the bench for its FSR unit and estimator
     (:func:`ebraille_sim.estimation.calibration.bench_calibrate_device`: presses to known loads
-    of 0.5-2 N held 5, 20 and 60 s; the nominal unit's R2 is 1 153 ohm), unless ``[device]
+    of 0.5-2 N held 5, 20 and 60 s, R2 set to 10 ohm; the nominal unit's is the shipped
+    1 150 ohm), unless ``[device]
     calibrate = false``.  A given ``[device.circuit_overrides] r2_ohm`` needs ``calibrate =
     false`` (the calibration would replace it); a unit whose best R2 lies at the end of the
     500-50 000 ohm range gets it with a :class:`ScenarioWarning`."""
