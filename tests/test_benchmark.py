@@ -35,7 +35,7 @@ def test_suites_are_fixed_and_plans_cover_every_episode():
     assert len(plan) == 2 * len(std.scenarios) * 3 and len(set(plan)) == len(plan)
     with pytest.raises(ValueError, match="unknown suite 'huge'"):
         B.get_suite("huge")
-    with pytest.raises(ValueError, match="readers must be >= 1"):
+    with pytest.raises(ValueError, match="readers must be a whole number >= 1"):
         B.plan_episodes(["pid"], std, 0)
 
 

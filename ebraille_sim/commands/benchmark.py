@@ -26,11 +26,13 @@ def add_arguments(p):
                    help=f"scenario suite: {', '.join(SUITE_NAMES)} (default standard)")
     p.add_argument("--readers", type=whole(1, MAX_READERS), default=None, metavar="N",
                    help=f"readers per scenario: the nominal device and N-1 drawn ones, at most {MAX_READERS} "
-                        "(default: the suite's)")
+                        "(default: the suite's, 64 for standard)")
     p.add_argument("-j", "--jobs", type=whole(1, MAX_JOBS), default=1, metavar="N",
                    help=f"local worker processes, at most {MAX_JOBS} and at most one per episode (default 1)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="Dask scheduler address (e.g. tcp://host:8786): run on that cluster")
     p.add_argument("--out", default=None, metavar="DIR",
-                   help="write benchmark.json (the results file) and leaderboard.md into DIR")
+                   help="write benchmark.json (the results file), leaderboard.md and population.png into DIR")
     p.add_argument("--compare", default=None, metavar="RESULTS.json",
                    help="print the changes against an earlier benchmark.json of the same suite")
     p.add_argument("--no-bounds", action="store_true", help="skip actuator_bound, hysteresis_bound and sensor_bound")
@@ -66,7 +68,8 @@ def main(args) -> int:
     progress = FrameProgress("episodes", enabled=con.progress and not con.json)
     with (claim_out_dir(out, bm.RESULT_FILES) if out is not None else contextlib.nullcontext()) as target:
         result = bm.run_benchmark(args.controllers, suite, readers=args.readers, jobs=args.jobs,
-                                  bounds=not args.no_bounds, progress=progress, estimator=estimator)
+                                  bounds=not args.no_bounds, progress=progress, estimator=estimator,
+                                  scheduler=args.scheduler)
         progress.close()
         summary = bm.summarise(result)
         doc = bm.results_document(result, summary)
@@ -78,6 +81,8 @@ def main(args) -> int:
     con.result({**{k: v for k, v in doc.items() if k != "rows"}, "compare": deltas,
                 "files": [str(f) for f in files]})
     con.say(bm.format_leaderboard(result, summary))
+    con.say("")
+    con.say(bm.format_population(doc["population"]))
     if deltas is not None:
         con.say("")
         con.say(bm.format_compare(deltas))

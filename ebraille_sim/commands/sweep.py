@@ -48,7 +48,8 @@ def main(args) -> int:
     import controllers
 
     from ebraille_sim.commands import UserError, check_duration, check_out_dir, claim_out_dir, console
-    from ebraille_sim.tools.sweep import format_summary, plan_sweep, run_sweep, summarise, write_results
+    from ebraille_sim.tools.sweep import (format_population, format_summary, plan_sweep, population, run_sweep,
+                                         summarise, write_results)
 
     con = console(args)
     if args.jobs is not None and args.jobs < 1:
@@ -81,11 +82,14 @@ def main(args) -> int:
                                                                   figures=not args.no_figures)]
     paths = [out / n for n in names]
     summary = summarise(result, args.loss, args.alpha)
+    pop = population(result)
     failed = sum(1 for r in result.rows if r.get("error"))
     con.result({"episodes": len(result.rows), "failed": failed, "executor": result.executor,
                 "wall_s": round(result.wall_s, 3), "loss": args.loss, "alpha": args.alpha, "summary": summary,
-                "out": str(out), "files": [str(p) for p in paths]})
+                "population": pop, "out": str(out), "files": [str(p) for p in paths]})
     con.say(format_summary(summary))
+    con.say("")
+    con.say(format_population(pop))
     con.say(f"\n{len(result.rows)} episodes ({failed} failed) on {result.executor} in {result.wall_s:.1f} s")
     con.say("wrote " + ", ".join(str(p) for p in paths))
     if failed:

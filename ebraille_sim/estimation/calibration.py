@@ -344,3 +344,36 @@ def calibrate_device_reference(device: DeviceParams, force_n: float = 1.0, hold_
         return device
     log_r2 = scipy.optimize.brentq(err, lo, hi, xtol=1e-6)
     return dataclasses.replace(device, circuit=dataclasses.replace(circuit, r2_ohm=math.exp(log_r2)))
+
+
+BENCH_R2_RANGE_OHM = (500.0, 50000.0)
+"""R2 range of :func:`bench_calibrate_device`, ohm (that of :func:`calibrate_device`)."""
+
+BENCH_R2_STEP_OHM = 10.0
+"""Resolution a technician sets R2 to on the bench, ohm (the shipped 1 150 ohm is the
+nominal unit's 1 153 ohm at this step)."""
+
+
+@functools.lru_cache(maxsize=256)
+def _bench_r2(spec: str, fsr, circuit) -> float:
+    """:func:`calibrate_r2` of one estimator, FSR unit and divider over :data:`BENCH_R2_RANGE_OHM`
+    (cached: the parameters are frozen)."""
+    return calibrate_r2(cached_model(spec), fsr, circuit, r2_range_ohm=BENCH_R2_RANGE_OHM)
+
+
+def bench_calibrate_device(device: DeviceParams) -> tuple[DeviceParams, bool]:
+    """The device with R2 set by the bench protocol of :func:`calibrate_r2` (presses to the
+    known loads :data:`DEFAULT_FORCES_N`, each held :data:`DEFAULT_HOLDS_S`; R2 minimises the
+    mean squared relative error of the steady estimate) for its own FSR unit and estimator,
+    set to the nearest :data:`BENCH_R2_STEP_OHM`, and whether that R2 lies inside :data:`BENCH_R2_RANGE_OHM` (False: within 5 % of an end,
+    where the bounded search stops when the best R2 lies beyond it; the unit reads off).
+
+    >>> from ebraille_sim.physics.params import DeviceParams
+    >>> dev, ok = bench_calibrate_device(DeviceParams())
+    >>> ok, dev.circuit.r2_ohm
+    (True, 1150.0)
+    """
+    best = _bench_r2(device.estimator.model, device.fsr, device.circuit)
+    inside = all(abs(math.log(best / end)) > 0.05 for end in BENCH_R2_RANGE_OHM)
+    r2 = BENCH_R2_STEP_OHM * round(best / BENCH_R2_STEP_OHM)
+    return replace_fields(device, circuit=replace_fields(device.circuit, r2_ohm=r2)), inside

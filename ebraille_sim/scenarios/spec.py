@@ -187,6 +187,9 @@ class DeviceSpec:
     fsr_overrides: dict | None = _key(None, "-", "overrides", target=_params.FSRParams)
     circuit_overrides: dict | None = _key(None, "-", "overrides", target=_params.CircuitParams)
     current_sense_overrides: dict | None = _key(None, "-", "overrides", target=_params.CurrentSenseParams)
+    calibrate: bool = _key(True, "-", "bool", "true: R2 set on the bench for this FSR unit and estimator (presses "
+                           "to 0.5-2 N held 5-60 s, least squares; drawn units are trimmed at 1 N held 20 s); "
+                           "false: a miscalibrated unit on purpose, with the circuit's R2")
 
 
 @dataclass(frozen=True)
@@ -278,7 +281,9 @@ _OVERRIDE_TARGET = {f.name: f.metadata["target"] for f in dataclasses.fields(Dev
 
 @dataclass(frozen=True)
 class ScenarioSpec:
-    """A validated scenario.  ``device`` is the fully resolved :class:`DeviceParams`."""
+    """A validated scenario.  ``device`` is the fully resolved :class:`DeviceParams`;
+    ``calibrated`` is the file's ``[device] calibrate`` (units drawn around ``device`` are
+    calibrated, or not, as it is)."""
     name: str
     description: str
     seed: int
@@ -292,6 +297,7 @@ class ScenarioSpec:
     sections: dict = field(default_factory=dict)
     source: str = ""
     base_dir: str = "."
+    calibrated: bool = True
 
 
 def _check_value(src, table, key, value, rule):
@@ -413,12 +419,35 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
                                       driver_supply_v=dev.get("driver_supply_v", motor.nominal_voltage_v),
                                       gravity_m_per_s2=g)
         _check_rates(device)
-        return device
+        return _calibrated(src, device, dev)
     except ScenarioError:
         raise
     except (ValueError, TypeError, KeyError, OSError) as exc:
         msg = str(exc).strip("'\"") if isinstance(exc, KeyError) else str(exc)
         raise ScenarioError(f"{src}: {msg}") from None
+
+
+def _calibrated(src, device: _params.DeviceParams, dev: dict) -> _params.DeviceParams:
+    """``device`` with the divider calibrated on the bench for its FSR unit and estimator
+    (:func:`ebraille_sim.estimation.calibration.bench_calibrate_device`: presses to known loads
+    of 0.5-2 N held 5, 20 and 60 s, R2 set to 10 ohm; the nominal unit's is the shipped
+    1 150 ohm), unless ``[device]
+    calibrate = false``.  A given ``[device.circuit_overrides] r2_ohm`` needs ``calibrate =
+    false`` (the calibration would replace it); a unit whose best R2 lies at the end of the
+    500-50 000 ohm range gets it with a :class:`ScenarioWarning`."""
+    if not dev.get("calibrate", DeviceSpec().calibrate):
+        return device
+    if "r2_ohm" in dev.get("circuit_overrides", {}):
+        raise ScenarioError(f"{src}: [device.circuit_overrides] r2_ohm is set by the bench calibration; "
+                            f"set [device] calibrate = false to run a unit with a given R2")
+    from ebraille_sim.estimation.calibration import BENCH_R2_RANGE_OHM, bench_calibrate_device
+    out, inside = bench_calibrate_device(device)
+    if not inside:
+        lo, hi = BENCH_R2_RANGE_OHM
+        warnings.warn(f"{src}: no R2 in {lo:g}-{hi:g} ohm calibrates this FSR unit for its estimator; the divider "
+                      f"gets R2 = {out.circuit.r2_ohm:.4g} ohm, the end of the range, and the unit reads off",
+                      ScenarioWarning, stacklevel=4)
+    return out
 
 
 def _check_rates(device: _params.DeviceParams) -> None:
@@ -543,7 +572,7 @@ def parse_scenario(data: dict, source: str = "<scenario>", base_dir: str = ".") 
         finger=finger,
         controller=ControllerSpec(name=ctl.get("name", "pid"), gains=ctl.get("gains", {})),
         criteria=top.get("criteria", {}), sections={k: top[k] for k in DELEGATES if k in top},
-        source=source, base_dir=base_dir)
+        source=source, base_dir=base_dir, calibrated=top.get("device", {}).get("calibrate", DeviceSpec().calibrate))
 
 
 def load_scenario(path) -> ScenarioSpec:

@@ -1,4 +1,5 @@
-"""Run outputs: summary table, metrics.json, the trace (trace.csv or trace.parquet) and force.png.
+"""Run outputs: summary table, metrics.json, the trace (trace.csv or trace.parquet) and force.png;
+population reports of sweeps and benchmarks (:func:`population_summary`).
 
 Files are written into a staging folder beside the target and moved into place only
 when all of them are complete (:func:`ebraille_sim.tools.outputs.staged`), so an
@@ -10,7 +11,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import pathlib
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -320,3 +323,279 @@ def write_outputs(result: RunResult, out_dir, plot: bool = True, trace: str = "c
     with staged(out, RUN_OWNED if clear_stale else ()) as folder:
         names = write_run_files(result, folder, plot, trace, controller, controller_file, backend)
     return [out / n for n in names]
+
+
+# --------------------------------------------------------------------------------------
+# population reports (sweep and benchmark)
+# --------------------------------------------------------------------------------------
+
+IN_BAND_MIN = 0.9
+"""In-band share a reader of a tracking scenario must hold when the scenario names no
+``in_band_min`` of its own (on a refresh scenario: the characters' in-band share, the hold
+windows, :data:`POPULATION_CRITERIA` ``char_in_band_min``)."""
+
+POPULATION_CRITERIA = {"char_in_band_min": ("char_in_band_fraction", "ge")}
+"""Criteria of population reports besides a scenario's ``[criteria]`` keys
+(:data:`ebraille_sim.scenarios.metrics.CRITERIA`): the metric each bounds and how."""
+
+CRITERIA_LABELS = {"in_band_min": "in_band>={:g}", "char_in_band_min": "char_in_band>={:g}",
+                   "peak_force_max_n": "peak<={:g}N", "onset_overshoot_max": "overshoot<={:g}"}
+
+
+@dataclass(frozen=True)
+class PopulationScenario:
+    """What a population report knows of one scenario.
+
+    Attributes
+    ----------
+    criteria : dict
+        ``[criteria]`` keys and limits every reader is checked against
+        (:func:`population_scenario`).
+    fault : bool
+        The scenario injects a fault (a ``[faults]`` section): a latched supervisor fault is
+        its detection there, on any other scenario a false trip.
+    """
+    criteria: dict
+    fault: bool
+
+
+def population_scenario(spec) -> PopulationScenario:
+    """The criteria of a scenario's readers: its own ``[criteria]`` on top of the in-band share
+    :data:`IN_BAND_MIN` (tracking scenarios; of the characters' hold windows on a refresh
+    scenario, whose lift phases lie out of the band by design) and the tactile range's top
+    (:data:`~ebraille_sim.physics.params.TACTILE_FORCE_MAX_N`, every scenario)."""
+    from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
+    fault = "faults" in spec.sections
+    in_band = "char_in_band_min" if spec.reading.mode == "refresh" else "in_band_min"
+    criteria = {} if fault else {in_band: IN_BAND_MIN}
+    criteria["peak_force_max_n"] = TACTILE_FORCE_MAX_N
+    criteria.update(spec.criteria)
+    return PopulationScenario(criteria, fault)
+
+
+def latched_fault(result) -> dict:
+    """Row columns of a run's latched supervisor fault: ``supervisor_fault`` (its name, None
+    without a latch), ``supervisor_fault_s`` (the time it latched, s) and ``reading_s`` (the
+    reading time of the run, s: from the reading's start to the run's end)."""
+    sup = result.supervisor or {}
+    name = sup.get("fault")
+    t = next((float(t_ev) for t_ev, text in sup.get("events", ()) if name and text.startswith(f"fault {name}:")),
+             None)
+    spec = result.spec
+    end = spec.duration_s if spec.duration_s is not None else result.schedule.t_end_s
+    return {"supervisor_fault": name or None, "supervisor_fault_s": t,
+            "reading_s": max(0.0, float(end) - spec.reading.start_s)}
+
+
+def _fails(row: dict, criteria: dict) -> list:
+    """The criteria ``row`` fails (all of them when its episode failed)."""
+    from ebraille_sim.scenarios.metrics import CRITERIA
+    if row.get("error"):
+        return list(criteria)
+    out = []
+    for key, limit in criteria.items():
+        metric, how = CRITERIA[key] if key in CRITERIA else POPULATION_CRITERIA[key]
+        v = row.get(metric)
+        if v is None or not (v <= limit if how == "le" else v >= limit):
+            out.append(key)
+    return out
+
+
+def separating_parameters(rows: list, failed, params) -> list[tuple[str, float]]:
+    """Drawn parameters ordered by how well they separate the failing readers from the others.
+
+    The measure is the area under the ROC curve of the parameter as a failure score (the
+    Mann-Whitney statistic over the two groups, ties counted half): 0.5 does not separate,
+    1 (0) puts every failing reader above (below) every other.  Returned as ``(name, auc)``,
+    the largest ``|auc - 0.5|`` first; empty when either group is empty.
+
+    >>> rows = [{"h": 0.05}, {"h": 0.07}, {"h": 0.14}, {"h": 0.15}]
+    >>> separating_parameters(rows, [False, False, True, True], ["h"])
+    [('h', 1.0)]
+    """
+    from scipy.stats import rankdata
+    failed = np.asarray(failed, dtype=bool)
+    n1, n0 = int(failed.sum()), int((~failed).sum())
+    if n1 == 0 or n0 == 0:
+        return []
+    out = []
+    for p in params:
+        x = np.array([r.get(p, np.nan) for r in rows], dtype=float)
+        if not np.all(np.isfinite(x)):
+            continue
+        ranks = rankdata(x)
+        auc = (ranks[failed].sum() - n1 * (n1 + 1) / 2) / (n1 * n0)
+        out.append((p, float(auc)))
+    return sorted(out, key=lambda pa: (-abs(pa[1] - 0.5), pa[0]))
+
+
+def population_summary(rows: list, scenarios: dict, params, group=("scenario", "controller"),
+                       worst: int = 5) -> list[dict]:
+    """Per group of rows (default: scenario and controller): the share of readers meeting each
+    criterion and all of them, the latches, the false trips and the worst readers.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Episode rows: the metrics, ``error``, the columns of :func:`latched_fault` and the
+        drawn parameters ``params``.
+    scenarios : dict
+        :class:`PopulationScenario` per value of the rows' ``scenario``.
+    params : list of str
+        The drawn parameters shown beside the worst readers and tested for separation.
+    worst : int
+        Worst readers kept per group: those failing the most criteria, then (tracking
+        scenarios) the lowest in-band share or (fault scenarios) the highest peak force.
+
+    Returns
+    -------
+    list of dict
+        ``group`` (the group's values), ``readers``, ``errors``, ``fault`` (a fault
+        scenario), ``criteria`` (key -> limit), ``shares`` (key -> share meeting it, plus
+        ``all``), ``latched`` (episodes ending in a latch), ``false_trips`` (latches on a
+        scenario without a fault), ``false_trip_rate`` (their share of the readers),
+        ``reading_h`` (reading hours), ``false_trips_per_h``, ``worst`` (rows) and
+        ``separating`` (:func:`separating_parameters` of the readers failing a criterion).
+    """
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault(tuple(r[g] for g in group), []).append(r)
+    out = []
+    for key, rs in groups.items():
+        sc = scenarios[rs[0]["scenario"]]
+        fails = [_fails(r, sc.criteria) for r in rs]
+        latched = [bool(r.get("supervisor_fault")) for r in rs]
+        failed = [bool(f) or (lat and not sc.fault) for f, lat in zip(fails, latched)]
+        n = len(rs)
+        shares = {k: sum(k not in f for f in fails) / n for k in sc.criteria}
+        if not sc.fault:
+            shares["no_latch"] = sum(not x for x in latched) / n
+        shares["all"] = sum(not x for x in failed) / n
+        hours = sum(float(r.get("reading_s") or 0.0) for r in rs) / 3600.0
+        trips = 0 if sc.fault else sum(latched)
+
+        def badness(i):
+            r = rs[i]
+            v = r.get("peak_force_n") if sc.fault else r.get(_in_band_metric(sc.criteria))
+            v = (math.inf if sc.fault else -math.inf) if v is None or r.get("error") else float(v)
+            return (-len(fails[i]) - (latched[i] and not sc.fault), -v if sc.fault else v, i)
+
+        order = sorted(range(n), key=badness)[:worst]
+        out.append({"group": dict(zip(group, key)), "readers": n, "errors": sum(1 for r in rs if r.get("error")),
+                    "fault": sc.fault, "criteria": dict(sc.criteria), "shares": shares, "latched": sum(latched),
+                    "false_trips": trips, "false_trip_rate": trips / n, "reading_h": hours,
+                    "false_trips_per_h": trips / hours if hours > 0 else None,
+                    "worst": [dict(rs[i], failed_criteria=fails[i]) for i in order],
+                    "separating": separating_parameters(rs, failed, params)})
+    return out
+
+
+def _in_band_metric(criteria: dict) -> str:
+    """The in-band metric a group's criteria check (the characters' on a refresh scenario)."""
+    return "char_in_band_fraction" if "char_in_band_min" in criteria else "in_band_fraction"
+
+
+def _pct(x: float) -> str:
+    return f"{100 * x:.1f}%"
+
+
+def format_population(summary: list[dict], params, worst_for=None) -> str:
+    """The population report as terminal text: one line per group (share of readers meeting
+    each criterion and all of them, false trips and their rate per reading-hour; on a fault
+    scenario the latches are detections), then the worst readers with their drawn parameters
+    and the parameters that separate the failing readers.  ``worst_for(group)`` (default: every
+    group) chooses the groups whose worst readers are listed."""
+    if not summary:
+        return "(no episodes)"
+    lines = [f"population report: share of readers meeting each criterion (the scenario's [criteria], else "
+             f"in_band >= {IN_BAND_MIN:g}, of the characters on a refresh scenario, and peak <= limit); a latched "
+             f"supervisor fault on a scenario without [faults] is a false trip"]
+    gw = max(len(" ".join(str(v) for v in s["group"].values())) for s in summary)
+    for s in summary:
+        name = " ".join(str(v) for v in s["group"].values())
+        crit = "  ".join(f"{CRITERIA_LABELS.get(k, k + '{:g}').format(v)} {_pct(s['shares'][k])}"
+                         for k, v in s["criteria"].items())
+        if s["fault"]:
+            tail = f"latched {s['latched']}/{s['readers']} (fault scenario)"
+        else:
+            tail = (f"no latch {_pct(s['shares']['no_latch'])}  false trips {s['false_trips']}/{s['readers']} "
+                    f"({_pct(s['false_trip_rate'])}, {_num(s['false_trips_per_h'], '{:.3g}')} per reading-hour)")
+        err = f"  errors {s['errors']}" if s["errors"] else ""
+        lines.append(f"  {name:<{gw}}  readers {s['readers']:>4}  {crit}  all {_pct(s['shares']['all'])}  "
+                     f"{tail}{err}")
+    for s in summary:
+        if worst_for is not None and not worst_for(s["group"]):
+            continue
+        name = " ".join(str(v) for v in s["group"].values())
+        sep = ", ".join(f"{p} {'high' if a > 0.5 else 'low'} (AUC {a:.2f})" for p, a in s["separating"][:3])
+        lines.append(f"worst readers of {name}" + (f"; failures separated by {sep}" if sep else "") + ":")
+        for r in s["worst"]:
+            fault = (f"latched {r['supervisor_fault']} at {r['supervisor_fault_s']:.3f} s"
+                     if r.get("supervisor_fault") and r.get("supervisor_fault_s") is not None
+                     else f"latched {r['supervisor_fault']}" if r.get("supervisor_fault") else "no latch")
+            if r.get("error"):
+                what = f"error: {r['error']}"
+            else:
+                what = (f"in_band {_num(r.get('in_band_fraction'), '{:.3f}')}  char_in_band "
+                        f"{_num(r.get('char_in_band_fraction'), '{:.3f}')}  peak "
+                        f"{_num(r.get('peak_force_n'), '{:.2f}')} N  {fault}")
+            failed = ",".join(r["failed_criteria"]) or "-"
+            drawn = " ".join(f"{p}={r[p]:.4g}" for p in params if r.get(p) is not None)
+            lines.append(f"    reader {r['reader']:>4} seed {r['seed']}: {what}  fails {failed}  {drawn}")
+    return "\n".join(lines)
+
+
+def _num(v, fmt: str) -> str:
+    return "-" if v is None else fmt.format(v)
+
+
+def plot_population(rows: list, summary: list[dict], path, params, panels: int = 3, groups: int = 6):
+    """The in-band share of the readers against the drawn parameters that separate the failing
+    ones (:func:`separating_parameters`; without failures the first of ``params``): one row of
+    panels per tracking group (those with the most failing readers first, at most ``groups``),
+    ``panels`` parameters each.  Every reader is a point (red: fails a criterion, a cross: a
+    false trip); the line is the share of readers at ``in_band >=`` the group's limit per
+    quintile of the parameter.  Returns ``path``."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    tracking = [s for s in summary if not s["fault"]]
+    tracking.sort(key=lambda s: s["shares"]["all"])
+    tracking = tracking[:groups]
+    if not tracking:
+        tracking = summary[:1]
+    fig, axes = plt.subplots(len(tracking), panels, figsize=(4.0 * panels, 2.8 * len(tracking)), squeeze=False)
+    for row_axes, s in zip(axes, tracking):
+        rs = [r for r in rows if all(r.get(k) == v for k, v in s["group"].items())]
+        metric = _in_band_metric(s["criteria"])
+        limit = s["criteria"].get("char_in_band_min", s["criteria"].get("in_band_min", IN_BAND_MIN))
+        chosen = [p for p, _ in s["separating"]][:panels]
+        chosen += [p for p in params if p not in chosen][:panels - len(chosen)]
+        y = np.array([np.nan if r.get("error") or r.get(metric) is None else r[metric] for r in rs], dtype=float)
+        bad = np.array([bool(_fails(r, s["criteria"])) for r in rs])
+        trip = np.array([bool(r.get("supervisor_fault")) for r in rs])
+        auc = dict(s["separating"])
+        name = " ".join(str(v) for v in s["group"].values())
+        for ax, p in zip(row_axes, chosen):
+            x = np.array([r.get(p, np.nan) for r in rs], dtype=float)
+            ok = ~bad & ~trip
+            ax.scatter(x[ok], y[ok], s=8, color="tab:blue", label="meets every criterion")
+            ax.scatter(x[bad & ~trip], y[bad & ~trip], s=10, color="tab:red", label="fails a criterion")
+            ax.scatter(x[trip], np.nan_to_num(y[trip]), s=22, marker="x", color="k", label="latched fault")
+            edges = np.unique(np.quantile(x[np.isfinite(x)], np.linspace(0, 1, 6))) if np.isfinite(x).any() else []
+            if len(edges) > 1:
+                idx = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
+                share = [np.mean(np.nan_to_num(y[idx == i], nan=-1.0) >= limit) if np.any(idx == i) else np.nan
+                         for i in range(len(edges) - 1)]
+                ax.step(edges, share + share[-1:], where="post", color="tab:green", lw=1.2,
+                        label=f"share at >= {limit:g}")
+            ax.set_xlabel(p + (f" (AUC {auc[p]:.2f})" if p in auc else ""), fontsize=8)
+            ax.set_ylim(-0.05, 1.05)
+            ax.grid(lw=0.3)
+        row_axes[0].set_ylabel(f"{name}\n{metric}", fontsize=8)
+    axes[0, 0].legend(fontsize=6, loc="lower left")
+    fig.suptitle("in-band share against the drawn parameters that separate the failing readers", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path

@@ -26,10 +26,13 @@ counts finished episodes.
 
 Results.  One row per episode: the plan columns (``rate_wpm`` is the nominal rate; the
 metric ``wpm`` is the realised one), the reader's drawn parameters, every metric of the
-run, and ``error`` (a one-line message when the episode failed, e.g. a diverged
-simulation; its metrics are then empty).  :func:`write_results` writes ``results.csv``
-(and ``results.parquet`` when pyarrow is installed), ``summary.txt`` and figures (metric
-distributions, worst cases, CVaR).
+run, the supervisor's latched fault (``supervisor_fault``, its time ``supervisor_fault_s``;
+empty without a latch), the reading time ``reading_s``, and ``error`` (a one-line message
+when the episode failed, e.g. a diverged simulation; its metrics are then empty).
+:func:`write_results` writes ``results.csv`` (and ``results.parquet`` when pyarrow is
+installed), ``summary.txt`` (the loss table and the population report, :func:`population`)
+and figures (metric distributions, worst cases, CVaR, the in-band share against the drawn
+parameters that separate the failing readers).
 
 Risk.  For a loss ``L`` (a metric where lower is better, or ``1 - metric`` for the
 fractions where higher is better), ``CVaR_alpha`` is the mean of the worst
@@ -48,6 +51,7 @@ Examples
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import math
@@ -62,7 +66,7 @@ import numpy as np
 from ebraille_sim.tools.parallel import process_context
 
 __all__ = ["Episode", "SweepPlan", "SweepResult", "plan_sweep", "run_sweep", "run_episode", "cvar", "loss_values",
-           "summarise", "identical_results", "write_results", "READER_COLUMNS", "PLAN_COLUMNS"]
+           "summarise", "population", "format_population", "identical_results", "write_results", "READER_COLUMNS", "PLAN_COLUMNS"]
 
 PLAN_COLUMNS = ["episode", "scenario", "rate_wpm", "reader", "controller", "replicate", "seed"]
 READER_COLUMNS = {
@@ -176,7 +180,8 @@ def plan_sweep(scenarios, rates=(), readers: int = 0, controllers=("pid",), seed
                              f"{spec.reading.start_s:g} s (no force metric could be computed); use a duration "
                              f"above {spec.reading.start_s:g} s")
         specs[spec.name] = spec
-        devices[spec.name] = sample_devices(seed, readers, population, base=spec.device) if readers else []
+        drawn = dataclasses.replace(population, calibrate=population.calibrate and spec.calibrated)
+        devices[spec.name] = sample_devices(seed, readers, drawn, base=spec.device) if readers else []
     rate_list = list(rates) or [None]
     reader_list = list(range(readers)) or [-1]
     episodes = []
@@ -210,7 +215,9 @@ def _complete(row: dict, res) -> dict:
     if isinstance(res, Exception):
         row["error"] = (str(res).strip().splitlines() or [type(res).__name__])[0]
         return row
+    from ebraille_sim.tools.report import latched_fault
     row.update(res.metrics)
+    row.update(latched_fault(res))
     row["error"] = ""
     return row
 
@@ -368,24 +375,39 @@ def _run_local(plan, jobs, bar, batch_size):
     return rows
 
 
-def _run_dask(plan, scheduler, bar, batch_size):
+@contextlib.contextmanager
+def dask_client(scheduler):
+    """A ``dask.distributed.Client`` for ``scheduler``: an address (connected here and closed on
+    leaving) or a connected client (left open).  One-line ValueError when dask.distributed is
+    not installed or the scheduler cannot be reached."""
     try:
-        from dask.distributed import Client, as_completed
+        from dask.distributed import Client
     except ImportError:
         raise ValueError("running on a Dask cluster needs dask.distributed: pip install 'ebraille-sim[dist]'") from None
-    own = not isinstance(scheduler, Client)
-    if own:
-        try:
-            client = Client(scheduler, timeout="10s")
-        except (OSError, TimeoutError, ValueError) as exc:
-            msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-            raise ValueError(f"cannot connect to the Dask scheduler {scheduler!r}: {msg}") from None
-    else:
-        client = scheduler
+    if isinstance(scheduler, Client):
+        yield scheduler
+        return
     try:
-        n_workers = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info().get("workers", {}).values()))
-        batches = _batches(plan.episodes,
-                           len(plan.episodes) // batch_size if batch_size else n_workers * TASKS_PER_WORKER)
+        client = Client(scheduler, timeout="10s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        msg = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise ValueError(f"cannot connect to the Dask scheduler {scheduler!r}: {msg}") from None
+    try:
+        yield client
+    finally:
+        client.close()
+
+
+def dask_threads(client) -> int:
+    """The threads of a Dask cluster's workers (at least 1)."""
+    return max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info().get("workers", {}).values()))
+
+
+def _run_dask(plan, scheduler, bar, batch_size):
+    from dask.distributed import as_completed
+    with dask_client(scheduler) as client:
+        batches = _batches(plan.episodes, len(plan.episodes) // batch_size if batch_size
+                           else dask_threads(client) * TASKS_PER_WORKER)
         plan_f = client.scatter(plan, broadcast=True)
         futs = [client.submit(_run_batch, plan_f, b, pure=False) for b in batches]
         rows = []
@@ -394,9 +416,6 @@ def _run_dask(plan, scheduler, bar, batch_size):
             rows.extend(part)
             bar.update(len(part))
         return rows
-    finally:
-        if own:
-            client.close()
 
 
 # --------------------------------------------------------------------------------------
@@ -475,6 +494,22 @@ def summarise(result: SweepResult, loss: str = "force_rmse_n", alpha: float = 0.
     return out
 
 
+def population(result: SweepResult, worst: int = 5) -> list[dict]:
+    """The population report of a sweep per scenario, controller and rate
+    (:func:`ebraille_sim.tools.report.population_summary`): the share of readers meeting each
+    criterion, the latched faults and false trips, the worst readers."""
+    from ebraille_sim.tools.report import population_scenario, population_summary
+    scenarios = {name: population_scenario(spec) for name, spec in result.plan.specs.items()}
+    return population_summary(result.rows, scenarios, list(READER_COLUMNS),
+                              group=("scenario", "controller", "rate_wpm"), worst=worst)
+
+
+def format_population(summary: list[dict]) -> str:
+    """Terminal text of :func:`population` (:func:`ebraille_sim.tools.report.format_population`)."""
+    from ebraille_sim.tools.report import format_population as fmt
+    return fmt(summary, list(READER_COLUMNS))
+
+
 def format_summary(summary: list[dict]) -> str:
     """Plain-text table of :func:`summarise`."""
     if not summary:
@@ -518,12 +553,16 @@ def write_results(result: SweepResult, out_dir, loss: str = "force_rmse_n", alph
     if write_parquet(result, out / "results.parquet"):
         written.append(out / "results.parquet")
     summ = summarise(result, loss, alpha)
+    pop = population(result)
     text = (f"{len(result.rows)} episodes, {result.executor}, wall time {result.wall_s:.1f} s\n"
-            f"loss: {summ[0]['loss'] if summ else loss}; CVaR at alpha = {alpha:g}\n\n" + format_summary(summ) + "\n")
+            f"loss: {summ[0]['loss'] if summ else loss}; CVaR at alpha = {alpha:g}\n\n" + format_summary(summ) + "\n\n"
+            + format_population(pop) + "\n")
     (out / "summary.txt").write_text(text, encoding="utf-8")
     written.append(out / "summary.txt")
     if figures:
+        from ebraille_sim.tools.report import plot_population
         written += plot_results(result, out / "figures", loss, alpha)
+        written.append(plot_population(result.rows, pop, out / "figures" / "population.png", list(READER_COLUMNS)))
     return written
 
 

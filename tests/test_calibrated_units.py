@@ -1,0 +1,80 @@
+"""Every scenario unit is calibrated at assembly unless the file asks for a miscalibrated one."""
+import warnings
+
+import numpy as np
+import pytest
+
+from ebraille_sim.estimation.calibration import DEFAULT_FORCES_N, DEFAULT_HOLDS_S, steady_estimate
+from ebraille_sim.estimation.registry import cached_model
+from ebraille_sim.physics.params import CircuitParams
+from ebraille_sim.scenarios.runner import run_scenario
+from ebraille_sim.scenarios.spec import ScenarioError, ScenarioWarning, parse_scenario
+from ebraille_sim.tools.sweep import plan_sweep
+
+
+def _scenario(fsr="high_k", **device):
+    return parse_scenario({"name": f"steady_{fsr}", "seed": 1, "duration_s": 7.0, "reading": {"wpm": 90},
+                           "device": {"fsr": fsr, **device}}, source="inline")
+
+
+def _held_force(spec):
+    """Mean true and estimated force over the reading after the onset (t > 4 s), N."""
+    tr = run_scenario(spec).trace
+    w = tr["t_s"] > 4.0
+    return float(np.mean(tr["force_true_n"][w])), float(np.mean(tr["force_est_n"][w]))
+
+
+def _bench_errors(dev, circuit):
+    """Relative errors of the steady estimate at the bench's known loads and holds."""
+    model = cached_model(dev.estimator.model)
+    return np.array([(steady_estimate(model, f, dev.fsr, circuit, h) - f) / f
+                     for f in DEFAULT_FORCES_N for h in DEFAULT_HOLDS_S])
+
+
+@pytest.mark.parametrize("fsr", ["nominal", "low_k", "high_k"])
+def test_every_preset_reads_the_bench_loads_as_the_nominal_unit_does(fsr):
+    dev = _scenario(fsr).device
+    err = _bench_errors(dev, dev.circuit)
+    # the film's creep and the units' curves leave a spread over the loads and holds (the
+    # nominal unit's, with the shipped 1150 ohm: 5.7 % RMS, 13 % at most)
+    assert np.sqrt(np.mean(err ** 2)) < 0.08 and np.max(np.abs(err)) < 0.17
+    if fsr != "nominal":                                           # the nominal unit's divider is wrong for it
+        assert np.mean(np.abs(_bench_errors(dev, CircuitParams()))) > 0.15
+    else:
+        assert dev.circuit.r2_ohm == pytest.approx(CircuitParams().r2_ohm, rel=0.005)
+
+
+def test_a_high_k_unit_holds_the_force_as_the_nominal_unit_does():
+    true_hk, est_hk = _held_force(_scenario("high_k"))
+    true_nom, _ = _held_force(_scenario("nominal"))
+    assert est_hk == pytest.approx(1.0, abs=0.01)
+    assert true_hk == pytest.approx(true_nom, abs=0.02)          # the calibration tolerance of the nominal unit
+    assert abs(true_hk - 1.0) < 0.1                                # in the 10 % band
+    true_raw, est_raw = _held_force(_scenario("high_k", calibrate=False))
+    assert est_raw == pytest.approx(1.0, abs=0.01) and true_raw > 1.25   # the uncalibrated unit reads ~30 % low
+
+
+def test_a_given_r2_needs_calibrate_false():
+    with pytest.raises(ScenarioError, match=r"r2_ohm is set by the bench calibration; set \[device\] calibrate"):
+        _scenario(circuit_overrides={"r2_ohm": 2000.0})
+    spec = _scenario(calibrate=False, circuit_overrides={"r2_ohm": 2000.0})
+    assert spec.device.circuit.r2_ohm == 2000.0 and spec.calibrated is False
+
+
+def test_a_unit_no_divider_calibrates_gets_the_end_of_the_range_with_a_warning():
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        spec = _scenario("nominal", fsr_overrides={"resistance_at_1n_ohm": 5e6})
+    assert spec.device.circuit.r2_ohm == pytest.approx(50000.0, rel=0.05)
+    msgs = [str(w.message) for w in caught if w.category is ScenarioWarning]
+    assert len(msgs) == 1 and "the end of the range, and the unit reads off" in msgs[0]
+
+
+def test_drawn_units_follow_the_scenario_calibration():
+    cal = plan_sweep([_scenario("high_k")], readers=3, seed=5)
+    raw = plan_sweep([_scenario("high_k", calibrate=False)], readers=3, seed=5)
+    r_cal = [d.circuit.r2_ohm for d in cal.devices["steady_high_k"]]
+    r_raw = [d.circuit.r2_ohm for d in raw.devices["steady_high_k"]]
+    assert len(set(r_cal)) == 3 and all(r != CircuitParams().r2_ohm for r in r_cal)
+    assert r_raw == [CircuitParams().r2_ohm] * 3
+    assert [d.fsr for d in cal.devices["steady_high_k"]] == [d.fsr for d in raw.devices["steady_high_k"]]
