@@ -428,8 +428,9 @@ FSRS: dict[str, FSRParams] = {
 class CircuitParams(_Checked):
     """Voltage divider (FSR to the supply, R2 to ground) and ADC; paper eq. 1."""
     supply_v: float = _pos(5.0, "V", "[R] Arduino Uno 5 V rail (Carambat 2016)")
-    r2_ohm: float = _pos(1150.0, "ohm", "[D] calibrated so the paper's Wiener estimator reads the "
-                         "nominal FSR (docs/model.md, 'Calibration'); paper: adjustable 1-20 kOhm")
+    r2_ohm: float = _pos(1140.0, "ohm", "[D] the bench calibration of the nominal FSR unit for the paper's "
+                         "Wiener estimator (calibration.bench_calibrate_device: presses to 0.5-2 N held 5-60 s, "
+                         "set to 10 ohm; docs/model.md, 'Calibration'); paper: adjustable 1-20 kOhm")
     adc_bits: int = _pos(10, "bit", "[R] ATmega328 10-bit ADC")
     adc_ref_v: float = _pos(5.0, "V", "[R] ATmega328 AVcc reference")
 
