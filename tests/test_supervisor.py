@@ -312,11 +312,11 @@ def test_stuck_estimate_while_the_board_travels_latches():
     run(sup, 1.0, n=20)
     c = sup.config
     v = 2e-3                                      # the board moves at 2 mm/s, the estimate does not change
-    # twice the design's largest backlash (0.2 mm) and one estimator period at the speed limit
-    assert c.stuck_travel_m == pytest.approx(0.4e-3 + 0.01 * 0.04137, rel=1e-3)   # 0.81 mm
-    for _ in range(350):
+    # the design's largest backlash (0.2 mm) and one estimator period at the speed limit
+    assert c.stuck_travel_m == pytest.approx(0.2e-3 + 0.01 * 0.04137, rel=1e-3)   # 0.61 mm
+    for _ in range(250):
         sup.update(1.0, 1.0, 1e-3, (sup.u_prev - c.back_emf_v_s_per_m * v) / c.motor_resistance_ohm)
-    assert sup.fault is None                      # 0.7 mm: within the backlash and one estimator period
+    assert sup.fault is None                      # 0.5 mm: within the backlash and one estimator period
     for _ in range(100):
         sup.update(1.0, 1.0, 1e-3, (sup.u_prev - c.back_emf_v_s_per_m * v) / c.motor_resistance_ohm)
     assert sup.fault == "fsr_stuck"

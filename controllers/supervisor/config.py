@@ -160,7 +160,7 @@ def firmware_limits(sheet: DeviceParams, cal: DriveCalibration) -> dict:
         "reader_b_n_per_m": rb,
         "reader_m_per_m": rm,
         "speed_hold_s": 0.5 * math.pi * math.sqrt(impact_mass / k_contact),
-        "stuck_travel_m": 2.0 * BACKLASH_MAX_M + ESTIMATOR_PERIOD_S * _speed_limit(drive, rb, rm),
+        "stuck_travel_m": BACKLASH_MAX_M + ESTIMATOR_PERIOD_S * _speed_limit(drive, rb, rm),
         "first_contact_travel_m": DESIGN_GAP_M + compression_at_force_m(
             SAFE_FORCE_N, soft.stiffness_b_n_per_m, soft.exponent_m_per_m),
         "sense_gain_error_max": cs.gain_error_max + cs.shunt_tolerance,
@@ -280,7 +280,8 @@ class SupervisorConfig:
     """How long the highest recent speed sets the current limit: a quarter period of the impact
     mass on the design reader's stiffness at the contact threshold [D]."""
     stuck_travel_m: float = None  # type: ignore[assignment]
-    """Net travel with an unchanged estimate that makes it stuck: twice the backlash plus the
+    """Net travel with an unchanged estimate that makes it stuck: one traverse of the design's
+    largest backlash (:data:`BACKLASH_MAX_M`; the firmware does not know the unit's) plus the
     travel at the impact speed limit within one estimator period [D]."""
     first_contact_travel_m: float = None  # type: ignore[assignment]
     """Travel from the start within which the first contact must show: the design gap plus the
