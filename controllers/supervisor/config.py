@@ -274,7 +274,7 @@ class SupervisorConfig:
     """Break-away friction of the guide rods, N (the plausibility band's lower edge): the design
     range's largest [E]."""
     reader_b_n_per_m: float = None  # type: ignore[assignment]
-    """Pulp b of the reader the impact bound assumes (the stiffer of the device's and the stiff preset)."""
+    """Pulp b of the reader the impact bound assumes (the stiff preset: the firmware does not know its reader)."""
     reader_m_per_m: float = None  # type: ignore[assignment]
     speed_hold_s: float = None  # type: ignore[assignment]
     """How long the highest recent speed sets the current limit: a quarter period of the impact
