@@ -28,8 +28,8 @@ divider calibration load    uniform +/- 2 %              [E] the 1 N load as the
 ==========================  ==========================  =========================================
 
 With ``calibrate=True`` (default) each drawn device's divider is re-calibrated for its own
-FSR unit at assembly (:func:`calibrate_device`, one press to 1 N held 20 s); the spread of
-hysteresis and creep remains an uncalibrated error.
+FSR unit at assembly (:func:`calibrate_device`, one press to 1 N held 20 s, the load off by
+its drawn error); the spread of hysteresis and creep remains an uncalibrated error.
 
 Examples
 --------
