@@ -118,17 +118,17 @@ def _mean_code_at_rest(v0, noise_rms_v, seed, n, lsb_v, max_code):
     return total / n
 
 
-def mean_reading_a(cs, current_a: float, seed: float, n: int) -> float:
+def mean_reading_a(cs, current_a: float, seed: float, n: int, zero: float | None = None) -> float:
     """The firmware's mean of ``n`` readings of a steady ``current_a`` (the RC sections settled),
-    against a zero it measured at rest just before (:func:`zero_code` with ``seed``), A: what a
-    calibration routine that holds a current and averages its conversions reads.  The unit's
-    shunt error, gain error and offset are in it; the conversions' noise comes from the
-    device's noise sequence of ``seed + 1`` (:func:`_mean_code_at_rest`)."""
+    against the zero code ``zero`` it measured at rest before (None: :func:`zero_code` with
+    ``seed``), A: what a calibration routine that holds a current and averages its conversions
+    reads.  The unit's shunt error, gain error and offset are in it; the conversions' noise
+    comes from the device's noise sequence of ``seed + 1`` (:func:`_mean_code_at_rest`)."""
     lsb, top = cs.adc_lsb_v, cs.adc_max_code
     v = amplifier_v(current_a, cs.shunt_ohm * (1.0 + cs.shunt_error), cs.gain_v_per_v, cs.gain_error, cs.offset_v,
                     cs.reference_v)
     code = _mean_code_at_rest(v, cs.adc_noise_lsb * lsb, float(seed) + 1.0, int(n), lsb, top)
-    return firmware_current_a(code, zero_code(cs, seed, lsb, top), lsb, cs.nominal_v_per_a)
+    return firmware_current_a(code, zero_code(cs, seed, lsb, top) if zero is None else zero, lsb, cs.nominal_v_per_a)
 
 
 MEAN_QUANTISATION_LSB = 0.01
