@@ -238,7 +238,7 @@ def test_derived_limits_of_the_default_device():
     # the calibrated push per ampere with its margins: above the unit's 63.28 N/A, by at most 4 %
     assert 1.0 < c.push_force_per_a_n / (0.6 * 4.12e-3 * 64 / 2.5e-3) < 1.04
     assert c.envelope_force_n == pytest.approx(3.5 - (540 + 1448 * 3.5) * 45e-6, rel=1e-12)  # 3.25 N
-    assert c.current_limit_a == pytest.approx(0.0561, abs=2e-4)           # 58.6 mA with the unit's truth
+    assert c.current_limit_a == pytest.approx(0.0566, abs=2e-4)           # 58.6 mA with the unit's truth
     assert c.speed_limit_m_per_s == pytest.approx(0.0395, abs=5e-4)       # 40.2 mm/s with the unit's truth
     assert c.current_limit_a < c.rated_current_a < c.stall_current_a
     assert c.drive_force_limit_n(0.0) == pytest.approx(c.envelope_force_n)
