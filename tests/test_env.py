@@ -371,10 +371,15 @@ def test_safety_layer_is_on_by_default_and_holds_a_full_push_below_the_safe_limi
             t_past = info["time_s"]
     assert "supervisor_mode" not in info
     assert t_past is not None and t_past < 0.1                # past 3.5 N within 0.1 s of the push
-    from controllers.supervisor import SupervisorConfig
-    c = SupervisorConfig.for_device(opts["device"])
-    i_stall = c.stall_current_a
-    f_lo = c.push_force_n(i_stall, c.friction_breakaway_ratio, -c.weight_n) - c.guide_static_n
-    assert f_lo - 0.05 < peak_off < c.push_force_n(i_stall)    # 17.07 N, five times the safe limit
+    # the unit's own stall push (its true constants, not the firmware's bounds)
+    from ebraille_sim.physics import limits
+    dev = opts["device"]
+    b = limits.drive_bounds(dev)
+    i_stall = dev.driver_supply_v / dev.motor.resistance_ohm
+    tf = b["friction_current_a"] * b["push_force_per_a_n"]
+    f_lo = limits.push_force_bound_n(i_stall, b["push_force_per_a_n"], 1.0, 1.0, dev.motor.breakaway_ratio * tf,
+                                     -b["weight_n"]) - dev.drivetrain.guide_coulomb_n * dev.drivetrain.guide_breakaway_ratio
+    f_hi = limits.push_force_bound_n(i_stall, b["push_force_per_a_n"], 1.0, 1.0, tf, b["weight_n"])
+    assert f_lo - 0.05 < peak_off < f_hi                       # 17.07 N, five times the safe limit
 
 

@@ -99,6 +99,8 @@ def _override_bounds(cls, key):
         return (0.0, None, True, False, False)
     if m.get("nonneg"):
         return (0.0, None, False, False, False)
+    if "lo" in m or "hi" in m:
+        return (m.get("lo"), m.get("hi"), False, False, False)
     return (None, None, False, False, False)
 
 
@@ -118,7 +120,7 @@ def bounds(path: tuple):
         return (lo, hi, False, False, False)
     if head == "supervisor" and len(path) == 2:
         hi = supervisor.FORCE_CAP_LIMIT_N if path[1] == "force_cap_n" else None
-        return (0.0, hi, True, False, False)
+        return (0.0, hi, path[1] not in supervisor.config._MAY_BE_ZERO, False, False)
     if head == "device" and len(path) == 3 and path[1].endswith("_overrides"):
         return _override_bounds(spec._OVERRIDE_TARGET[path[1]], path[2])
     table, key = ("", head) if len(path) == 1 else (head, path[1])

@@ -168,18 +168,21 @@ def test_motor_limits_follow_the_device():
     from ebraille_sim.physics.params import MOTORS, TACTILE_FORCE_MAX_N, DeviceParams
     nominal = SupervisorConfig()
     assert nominal == SupervisorConfig.for_device(DeviceParams())
-    assert (nominal.motor_resistance_ohm, nominal.stall_current_a, nominal.rated_current_a) == (21.2, 6.0 / 21.2, 0.19)
+    # the resistance is the one the at-rest calibration measured through the current chain
+    assert nominal.motor_resistance_ohm == pytest.approx(21.2, rel=0.015)
+    assert nominal.stall_current_a == 6.0 / nominal.motor_resistance_ohm and nominal.rated_current_a == 0.19
     assert nominal.force_cap_n == TACTILE_FORCE_MAX_N
     for name, motor in MOTORS.items():
         dev = DeviceParams(motor=motor, driver_supply_v=motor.nominal_voltage_v)
         c = SupervisorConfig.for_device(dev)
-        assert c.motor_resistance_ohm == motor.resistance_ohm
-        assert c.stall_current_a == pytest.approx(motor.nominal_voltage_v / motor.resistance_ohm)
+        assert c.motor_resistance_ohm == pytest.approx(motor.resistance_ohm, rel=0.015)
+        assert c.stall_current_a == pytest.approx(motor.nominal_voltage_v / motor.resistance_ohm, rel=0.015)
         assert 0 < c.rated_current_a < c.stall_current_a
     maxon = DeviceParams(motor=MOTORS["maxon_dcx6m_3v"], driver_supply_v=3.0)
-    assert SupervisorConfig.for_device(maxon).motor_resistance_ohm == 8.9
+    r_maxon = SupervisorConfig.for_device(maxon).motor_resistance_ohm
+    assert r_maxon == pytest.approx(8.9, rel=0.015)
     sup = wrap_controller({"force_cap_n": 2.0, "cap_margin_n": 0.2}, Const(1.0), 1e-3, device=maxon)
-    assert sup.config.motor_resistance_ohm == 8.9 and sup.config.force_cap_n == 2.0
+    assert sup.config.motor_resistance_ohm == r_maxon and sup.config.force_cap_n == 2.0
     assert SupervisorConfig.for_device(maxon, motor_resistance_ohm=9.5).motor_resistance_ohm == 9.5
 
 
@@ -232,20 +235,23 @@ def test_pulp_energy_is_the_integral_of_the_elastic_law():
 
 def test_derived_limits_of_the_default_device():
     c = SupervisorConfig()
-    assert c.push_force_per_a_n == pytest.approx(0.6 * 4.12e-3 * 64 / 2.5e-3, rel=1e-12)   # 63.28 N/A
+    # the calibrated push per ampere with its margins: above the unit's 63.28 N/A, by at most 4 %
+    assert 1.0 < c.push_force_per_a_n / (0.6 * 4.12e-3 * 64 / 2.5e-3) < 1.04
     assert c.envelope_force_n == pytest.approx(3.5 - (540 + 1448 * 3.5) * 45e-6, rel=1e-12)  # 3.25 N
-    assert c.current_limit_a == pytest.approx(0.0586, abs=2e-4)
-    assert c.speed_limit_m_per_s == pytest.approx(0.0402, abs=5e-4)
+    assert c.current_limit_a == pytest.approx(0.0566, abs=2e-4)           # 58.6 mA with the unit's truth
+    assert c.speed_limit_m_per_s == pytest.approx(0.0395, abs=5e-4)       # 40.2 mm/s with the unit's truth
     assert c.current_limit_a < c.rated_current_a < c.stall_current_a
     assert c.drive_force_limit_n(0.0) == pytest.approx(c.envelope_force_n)
     assert 1.8 < c.drive_force_limit_n(0.014) < 2.0                        # the 14 mm/s approach
     from ebraille_sim.physics.params import DRIVETRAINS, MOTORS, DeviceParams
     pololu = SupervisorConfig.for_device(DeviceParams(motor=MOTORS["pololu_lp_6v"],
                                                       drivetrain=DRIVETRAINS["pololu_100"]))
-    assert pololu.push_force_per_a_n == pytest.approx(0.51 * 4.15e-3 * 100.37 / 2.5e-3, rel=1e-12)
-    assert pololu.friction_current_a == pytest.approx(0.02, rel=1e-12)           # T_f/kM = its no-load current
+    assert 1.0 < pololu.push_force_per_a_n / (0.51 * 4.15e-3 * 100.37 / 2.5e-3) < 1.04
+    # the friction the line measured (T_f/kM = its 20 mA no-load current, and the guide rods), less
+    # what may be lost in service
+    assert 0.7 * 0.02 < pololu.friction_current_a < 0.02
     assert pololu.current_limit_a == pytest.approx(
-        (pololu.envelope_force_n - pololu.weight_n) / pololu.push_force_per_a_n + 0.02, rel=1e-12)
+        (pololu.envelope_force_n - pololu.weight_n) / pololu.push_force_per_a_n + pololu.friction_current_a, rel=1e-12)
     with pytest.raises(ValueError, match="safe_force_n = 4.5 N is above the 4 N"):
         SupervisorConfig(safe_force_n=4.5)
 
@@ -306,10 +312,11 @@ def test_stuck_estimate_while_the_board_travels_latches():
     run(sup, 1.0, n=20)
     c = sup.config
     v = 2e-3                                      # the board moves at 2 mm/s, the estimate does not change
-    assert c.stuck_travel_m == pytest.approx(0.2e-3 + 0.01 * 0.04207, rel=1e-3)   # 0.62 mm
+    # the design's largest backlash (0.2 mm) and one estimator period at the speed limit
+    assert c.stuck_travel_m == pytest.approx(0.2e-3 + 0.01 * 0.04137, rel=1e-3)   # 0.61 mm
     for _ in range(250):
         sup.update(1.0, 1.0, 1e-3, (sup.u_prev - c.back_emf_v_s_per_m * v) / c.motor_resistance_ohm)
-    assert sup.fault is None                      # 0.5 mm: backlash plus one estimator period of travel
+    assert sup.fault is None                      # 0.5 mm: within the backlash and one estimator period
     for _ in range(100):
         sup.update(1.0, 1.0, 1e-3, (sup.u_prev - c.back_emf_v_s_per_m * v) / c.motor_resistance_ohm)
     assert sup.fault == "fsr_stuck"
@@ -326,13 +333,13 @@ def test_motor_pushing_without_motion_or_contact_is_stopped():
 
 def test_at_the_current_limit_a_push_the_estimate_accounts_for_is_a_hold_not_a_stall():
     """A board at rest at the current limit: a jam when the push at the lower edge of the friction
-    band (2.63 N at the limit as the board reads it, 54.8 mA) exceeds the estimate by more than
+    band (2.39 N at the limit as the board reads it, 52.8 mA) exceeds the estimate by more than
     ``implausible_n``, a hold of a high force (creeping forward against the break-away friction)
     when the estimate shows it."""
     c = SupervisorConfig()
     i_read = c.sensed_limit_a(c.current_limit_a)
     f_rest = c.push_force_n(i_read, c.friction_breakaway_ratio, -c.weight_n) - c.guide_static_n
-    assert f_rest == pytest.approx(2.63, abs=0.01)
+    assert f_rest == pytest.approx(2.39, abs=0.01)
     for f, fault in [(f_rest - c.implausible_n + 0.05, None), (1.0, "motor_stalled")]:
         sup = Supervisor(Const(6.0))
         sup.reset(force_est_n=f, setpoint_n=c.force_cap_n)
@@ -369,7 +376,7 @@ def test_travel_follows_a_force_loop_that_hunts_back_and_forth():
     c = sup.config
     v, leg = 2e-3, 40                                   # 2 mm/s for 40 ms: 0.08 mm a leg
     legs = ((v, 0.024), (-v, -0.004))                   # forward at 24 mA, back at -4 mA
-    assert c.powered_current_a < 0.004 < 0.5 * c.friction_current_a
+    assert c.powered_current_a < 0.004 < c.friction_current_a
     k = 0
     start = None
     for cycle in range(60):                             # 4.8 s of hunting

@@ -3,7 +3,7 @@
 Each case drives :class:`controllers.supervisor.Supervisor` around an inner controller that
 returns a chosen command, with hand-made estimates, setpoints and currents, and checks the
 command, mode, fault and events against numbers worked out by hand from the rule (in the
-module docstring) and the nominal configuration's values.
+module docstring) and the nominal unit's own drive constants (:func:`unit_constants`).
 
 Most cases run at a control period of ``DT = 1/1024 s``: a binary fraction, so the
 supervisor's clock ``k DT`` is exact and a rule's time limit falls between two known periods
@@ -16,8 +16,31 @@ import pytest
 from controllers.supervisor import EVENT_CAPACITY, Supervisor, SupervisorConfig
 
 DT = 2.0 ** -10
-C = SupervisorConfig()
-R, K_E = C.motor_resistance_ohm, C.back_emf_v_s_per_m          # 21.2 ohm, 105.37 V s/m
+
+
+def unit_constants() -> dict:
+    """The drive constants of the nominal unit itself, as an exact calibration with no margins
+    would store them (the firmware's own are :func:`controllers.supervisor.config.device_limits`):
+    the cases are worked out by hand with these round numbers."""
+    from controllers.supervisor.config import ESTIMATOR_PERIOD_S, _design_reader, _speed_limit
+    from ebraille_sim.physics import limits
+    from ebraille_sim.physics.fingertip import tangent_stiffness_n_per_m
+    from ebraille_sim.physics.params import DeviceParams
+    dev = DeviceParams()
+    b = limits.drive_bounds(dev)
+    rb, rm = _design_reader()
+    keys = ("push_force_per_a_n", "friction_current_a", "weight_n", "back_emf_v_s_per_m", "pinion_mass_kg",
+            "board_mass_kg", "gear_efficiency")
+    return {**{k: b[k] for k in keys}, "motor_resistance_ohm": dev.motor.resistance_ohm,
+            "stall_current_a": dev.driver_supply_v / dev.motor.resistance_ohm,
+            "guide_static_n": dev.drivetrain.guide_coulomb_n * dev.drivetrain.guide_breakaway_ratio,
+            "speed_hold_s": 0.5 * math.pi * math.sqrt(b["impact_mass_kg"] / tangent_stiffness_n_per_m(0.2, rb, rm)),
+            "stuck_travel_m": 2.0 * dev.drivetrain.backlash_m + ESTIMATOR_PERIOD_S * _speed_limit(b, rb, rm)}
+
+
+UNIT = unit_constants()
+C = SupervisorConfig(**UNIT)
+R, K_E = C.motor_resistance_ohm, C.back_emf_v_s_per_m          # 21.2 ohm, 105.47 V s/m
 
 
 class Fixed:
@@ -38,7 +61,7 @@ class Fixed:
 
 
 def make(u, *, f0=1.0, command_v=0.0, **config):
-    sup = Supervisor(Fixed(u), SupervisorConfig(**config))
+    sup = Supervisor(Fixed(u), SupervisorConfig(**{**UNIT, **config}))
     sup.reset(force_est_n=f0, setpoint_n=1.0, command_v=command_v)
     return sup
 

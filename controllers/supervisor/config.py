@@ -1,5 +1,7 @@
 """The supervisor's configuration: its policy (thresholds and times) and the drive constants
-it derives its limits from (:class:`SupervisorConfig`, :func:`device_limits`)."""
+it derives its limits from (:class:`SupervisorConfig`, :func:`device_limits`): what the firmware
+knows, the part's datasheet with the designer's margins and the unit's end-of-line calibration,
+never the unit's own constants."""
 from __future__ import annotations
 
 import dataclasses
@@ -16,9 +18,12 @@ from controllers.supervisor.layout import _pack
 from controllers.supervisor.motion import design_slip_cap_n
 from ebraille_sim.base.validation import check_bool, check_keys, check_number, replace_fields
 from ebraille_sim.physics import limits
-from ebraille_sim.physics.current_sense import worst_case_error_a
+from ebraille_sim.estimation.calibration import (CALIBRATION_CONVERSIONS, FORCE_GAUGE_TOLERANCE, FREE_RUN_V,
+                                                 RESISTANCE_TEST_V, SPEED_REFERENCE_TOLERANCE, DriveCalibration,
+                                                 calibrate_drive)
+from ebraille_sim.physics.current_sense import averaged_error_a, mean_error_a, worst_case_error_a
 from ebraille_sim.physics.fingertip import compression_at_force_m, tangent_stiffness_n_per_m
-from ebraille_sim.physics.params import DeviceParams, FINGERS, TACTILE_FORCE_MAX_N
+from ebraille_sim.physics.params import DRIVETRAINS, FINGERS, MOTORS, TACTILE_FORCE_MAX_N, DeviceParams
 
 _NOMINAL = DeviceParams()
 
@@ -48,10 +53,11 @@ DESIGN_GAP_M = 2e-3
 """Largest board-to-pulp gap at the start of a session, m [E] (the shipped scenarios use 1-2 mm)."""
 
 
-def _design_reader(device: DeviceParams):
-    """Pulp constants the impact bound assumes: the stiffer of the device's reader and the stiff preset [E]."""
-    f, s = device.finger, FINGERS["stiff"]
-    return max(f.stiffness_b_n_per_m, s.stiffness_b_n_per_m), max(f.exponent_m_per_m, s.exponent_m_per_m)
+def _design_reader():
+    """Pulp constants the impact bound assumes: the stiff preset [E] (the firmware does not know its
+    reader; the population's stiffest draws, b x 2 and m x 1.15 of the nominal reader, stay below it)."""
+    s = FINGERS["stiff"]
+    return s.stiffness_b_n_per_m, s.exponent_m_per_m
 
 
 ESTIMATOR_PERIOD_S = 0.01
@@ -65,39 +71,128 @@ def _speed_limit(b: dict, rb: float, rm: float) -> float:
     return limits.speed_for_energy_m_per_s(e, b["pinion_mass_kg"], b["board_mass_kg"], b["gear_efficiency"])
 
 
-def device_limits(device: DeviceParams) -> dict:
-    """The drive and reader constants of ``device`` that :class:`SupervisorConfig` carries (see docs/safety.md)."""
-    b = limits.drive_bounds(device)
-    rb, rm = _design_reader(device)
+FRICTION_FALL = 0.20
+"""Fraction by which the drive's friction (brushes, gearhead, guide rods) may fall in service
+below what the line measured [E]: run-in of brushes and rods, warmer grease.  Friction always
+opposes a push that raises the force, so the bound keeps the rest of it; for the nominal unit
+what it keeps (0.48 N) is less than the motor's own friction alone (0.52 N at the rack)."""
+
+GUIDE_COULOMB_MAX_N = 0.30
+"""Largest Coulomb friction of the board's guide rods, N [E]: the top of the 0.05-0.3 N design
+range (docs/model.md, parameters table 3); the plausibility rules' lower edge of the friction
+band assumes it."""
+
+BACKLASH_MAX_M = 0.2e-3
+"""Largest backlash at the board, m [E]: the top of the 0.03-0.2 mm design range (parameters
+table 3)."""
+
+UNIT_FIELDS = {"motor": ("resistance_ohm", "torque_constant_nm_per_a", "back_emf_v_s_per_rad"),
+               "drivetrain": ("gear_efficiency", "guide_coulomb_n", "backlash_m")}
+"""The constants that differ from unit to unit of one part (the population draws them): the
+firmware knows their datasheet values only (:func:`datasheet_device`)."""
+
+
+def datasheet_device(device: DeviceParams) -> DeviceParams:
+    """The device as its designer knows it: the motor and drive train of ``device`` with the
+    :data:`UNIT_FIELDS` of their part's datasheet (the preset of the same name; a part with no
+    preset is its own datasheet), the current chain without the unit's errors.  The reader and
+    the FSR unit are not part of it (the firmware assumes design readers; the divider is
+    calibrated)."""
+    parts = {}
+    for part, presets in (("motor", MOTORS), ("drivetrain", DRIVETRAINS)):
+        unit = getattr(device, part)
+        sheet = presets.get(unit.name, unit)
+        parts[part] = replace_fields(unit, **{f: getattr(sheet, f) for f in UNIT_FIELDS[part]})
+    cs = replace_fields(device.current_sense, shunt_error=0.0, gain_error=0.0, offset_v=0.0)
+    return replace_fields(device, current_sense=cs, **parts)
+
+
+def firmware_limits(sheet: DeviceParams, cal: DriveCalibration) -> dict:
+    """The constants :class:`SupervisorConfig` carries, from what the firmware knows: the datasheet
+    device ``sheet`` (:func:`datasheet_device`), the designer's margins and the unit's end-of-line
+    calibration ``cal`` (:func:`~ebraille_sim.estimation.calibration.calibrate_drive`); see
+    docs/safety.md.
+
+    The push per ampere is the calibrated slope raised by the chain's gain bound, the gauge's
+    tolerance and the slope's reading error; the friction current is the calibrated friction
+    force (motor, gearhead and guide rods, as the push test met it moving forward) lowered by
+    the gauge's tolerance and the reading error, of which :data:`FRICTION_FALL` may be lost in
+    service; the back-EMF
+    constant is the free run's, lowered by the speed reference's tolerance and the error of
+    ``R i`` (the speed read high); the gear efficiency of the impact is the largest the
+    calibrated push allows with that constant (``kM = kE`` in SI units).  Every constant is on
+    the side that lowers the current and speed limits."""
+    b = limits.drive_bounds(sheet)
+    rb, rm = _design_reader()
     soft = FINGERS["soft"]
+    dt, cs = sheet.drivetrain, sheet.current_sense
+    e_avg = averaged_error_a(cs, CALIBRATION_CONVERSIONS)
+    i1, i2 = cal.test_currents_a
+    slope_tol = 2.0 * mean_error_a(cs, CALIBRATION_CONVERSIONS) / (i2 - i1) if i2 > i1 else math.inf   # zero cancels
+    if not slope_tol < MAX_SLOPE_ERROR:
+        raise ValueError(f"CurrentSenseParams: a reading of the chain (shunt_ohm {cs.shunt_ohm:g} ohm, gain_v_per_v "
+                         f"{cs.gain_v_per_v:g}, adc_bits {cs.adc_bits}, adc_noise_lsb {cs.adc_noise_lsb:g}) is too "
+                         f"coarse for the drive's calibration: the push per ampere would be known to "
+                         f"{100 * slope_tol:.3g} % only (at most {100 * MAX_SLOPE_ERROR:g} %)")
+    push_per_a = cal.push_force_per_a_n * (1.0 + cs.gain_error_max + cs.shunt_tolerance) / (
+        (1.0 - FORCE_GAUGE_TOLERANCE) * (1.0 - slope_tol))
+    friction_n = ((-cal.push_offset_n / (1.0 + FORCE_GAUGE_TOLERANCE) - push_per_a * (e_avg + slope_tol * abs(i1)))
+                  * (1.0 - FRICTION_FALL))
+    # the free run's speed from the line's reference and the armature's law: kE low by the
+    # reference's tolerance and by the error of R i_read (the zero's and the means' errors)
+    e_ri = cal.resistance_ohm * e_avg * (1.0 + abs(cal.free_run_current_a) * cal.resistance_ohm / RESISTANCE_TEST_V)
+    v_free = (FREE_RUN_V - cal.resistance_ohm * cal.free_run_current_a) / cal.back_emf_v_s_per_m
+    back_emf = cal.back_emf_v_s_per_m * (1.0 - SPEED_REFERENCE_TOLERANCE) - e_ri / v_free
+    eta = min(1.0, push_per_a / back_emf)           # kM = kE in SI units: the largest efficiency the push allows
+    drive = {"push_force_per_a_n": push_per_a, "friction_current_a": max(friction_n, 0.0) / push_per_a,
+             "weight_n": b["weight_n"], "back_emf_v_s_per_m": back_emf,
+             "pinion_mass_kg": b["pinion_mass_kg"], "board_mass_kg": b["board_mass_kg"], "gear_efficiency": eta}
     k_contact = tangent_stiffness_n_per_m(CONTACT_ON_N, rb, rm)
-    dt = device.drivetrain
+    impact_mass = eta * b["pinion_mass_kg"] + b["board_mass_kg"]
     return {
-        "motor_resistance_ohm": device.motor.resistance_ohm,
-        "stall_current_a": device.driver_supply_v / device.motor.resistance_ohm,
-        "rated_current_a": rated_current_a(device),
-        "driver_supply_v": device.driver_supply_v,
-        "push_force_per_a_n": b["push_force_per_a_n"],
-        "friction_current_a": b["friction_current_a"],
-        "weight_n": b["weight_n"],
-        "back_emf_v_s_per_m": b["back_emf_v_s_per_m"],
-        "pinion_mass_kg": b["pinion_mass_kg"],
-        "board_mass_kg": b["board_mass_kg"],
-        "gear_efficiency": b["gear_efficiency"],
-        "friction_breakaway_ratio": device.motor.breakaway_ratio,
-        "guide_static_n": dt.guide_coulomb_n * dt.guide_breakaway_ratio,
+        "motor_resistance_ohm": cal.resistance_ohm,
+        "stall_current_a": sheet.driver_supply_v / cal.resistance_ohm,
+        "rated_current_a": rated_current_a(sheet),
+        "driver_supply_v": sheet.driver_supply_v,
+        **drive,
+        "friction_breakaway_ratio": sheet.motor.breakaway_ratio,
+        "guide_static_n": GUIDE_COULOMB_MAX_N * dt.guide_breakaway_ratio,
         "soft_b_n_per_m": soft.stiffness_b_n_per_m,
         "soft_m_per_m": soft.exponent_m_per_m,
         "reader_b_n_per_m": rb,
         "reader_m_per_m": rm,
-        "speed_hold_s": 0.5 * math.pi * math.sqrt(b["impact_mass_kg"] / k_contact),
-        "stuck_travel_m": 2.0 * dt.backlash_m + ESTIMATOR_PERIOD_S * _speed_limit(b, rb, rm),
+        "speed_hold_s": 0.5 * math.pi * math.sqrt(impact_mass / k_contact),
+        "stuck_travel_m": BACKLASH_MAX_M + ESTIMATOR_PERIOD_S * _speed_limit(drive, rb, rm),
         "first_contact_travel_m": DESIGN_GAP_M + compression_at_force_m(
             SAFE_FORCE_N, soft.stiffness_b_n_per_m, soft.exponent_m_per_m),
-        "sense_gain_error_max": device.current_sense.gain_error_max + device.current_sense.shunt_tolerance,
-        "sense_error_a": worst_case_error_a(device.current_sense, 0.0),
-        "powered_current_a": worst_case_error_a(device.current_sense, 0.0) + 0.5e-3,
+        "sense_gain_error_max": cs.gain_error_max + cs.shunt_tolerance,
+        "sense_error_a": worst_case_error_a(cs, 0.0),
+        "powered_current_a": worst_case_error_a(cs, 0.0) + 0.5e-3,
     }
+
+
+MAX_SLOPE_ERROR = 0.05
+"""Largest relative error of the calibrated push per ampere that the chain's reading may leave
+[E]; a coarser chain is refused (the envelope would be a guess)."""
+
+
+def device_limits(device: DeviceParams) -> dict:
+    """:func:`firmware_limits` of ``device``: its datasheet (:func:`datasheet_device`) and its
+    drive's calibration (:func:`~ebraille_sim.estimation.calibration.calibrate_drive`, the only
+    step that meets the unit's own constants).
+
+    Raises ValueError (one line, naming the current chain's keys) when the chain cannot read the
+    drive: a range below the datasheet's stall current (the shunt is sized for it) or a reading
+    too coarse for the calibration (:class:`SupervisorConfig` refuses a worst-case error that
+    leaves no current limit)."""
+    sheet = datasheet_device(device)
+    cs = sheet.current_sense
+    stall_a = sheet.driver_supply_v / sheet.motor.resistance_ohm
+    if not cs.range_a >= stall_a:
+        raise ValueError(f"CurrentSenseParams: the chain reads at most {cs.range_a:.4g} A (reference_v "
+                         f"{cs.reference_v:g} V over gain_v_per_v {cs.gain_v_per_v:g} x shunt_ohm {cs.shunt_ohm:g} "
+                         f"ohm), below the drive's stall current {stall_a:.4g} A")
+    return firmware_limits(sheet, calibrate_drive(device))
 
 
 def rated_current_a(device: DeviceParams) -> float:
@@ -112,6 +207,9 @@ _NOMINAL_LIMITS: dict = {}
 _NUMERIC_FIELD_NAMES: list = []
 _numeric_values = None
 _FLOAT_ONLY = {float}
+_MAY_BE_ZERO = {"friction_current_a"}
+"""Numeric fields that may be 0: a friction current the calibration cannot tell from the guide
+rods' largest friction is bounded by none."""
 
 
 def _numeric_field_names() -> tuple:
@@ -127,9 +225,10 @@ def _numeric_field_names() -> tuple:
 class SupervisorConfig:
     """Limits and detector settings of :class:`Supervisor` (SI units in the names).
 
-    The motor, drive and reader constants default to the nominal device's
-    (:class:`DeviceParams`, :func:`device_limits`); :meth:`for_device` derives them from
-    another device.  Every numeric field must be a positive finite number.
+    The motor, drive and reader constants default to what the firmware of the nominal device
+    knows (:class:`DeviceParams`, :func:`device_limits`: datasheet, margins, calibration);
+    :meth:`for_device` derives them for another device.  Every numeric field must be a positive finite number (``friction_current_a``
+    may be 0).
     """
     force_cap_n: float = TACTILE_FORCE_MAX_N
     """Cap on the estimated force (upper end of the tactile range, [R] seed paper)."""
@@ -144,21 +243,23 @@ class SupervisorConfig:
     rated_current_a: float = None  # type: ignore[assignment]
     """Continuous motor current (:func:`rated_current_a`)."""
     stall_current_a: float = None  # type: ignore[assignment]
-    """Stall current at the driver supply, [D] U / R."""
+    """Stall current at the driver supply, [D] U / R with the calibrated R."""
     overload_time_s: float = 0.5
     """Time allowed at the stall current before the I^2 t trip [E]."""
     motor_resistance_ohm: float = None  # type: ignore[assignment]
-    """Armature resistance R of the device's motor (back-EMF ``u - R i`` and motion detection)."""
+    """Armature resistance R as the at-rest calibration read it (back-EMF ``u - R i`` and motion detection)."""
     driver_supply_v: float = None  # type: ignore[assignment]
     """H-bridge supply: the terminal voltage is the command clipped to it."""
     push_force_per_a_n: float = None  # type: ignore[assignment]
-    """eta kM N/r, N/A: rack force per ampere through the gearhead in the pushing direction [D]."""
+    """eta kM N/r, N/A: rack force per ampere through the gearhead in the pushing direction, the
+    calibrated slope raised by its margins [D]."""
     friction_current_a: float = None  # type: ignore[assignment]
-    """T_f / kM, A: current that the motor's own friction torque takes [D]."""
+    """A: the current the drive's friction (motor, gearhead, guide rods, moving forward) takes, the
+    calibrated one lowered by its margins [D]; 0 allowed."""
     weight_n: float = None  # type: ignore[assignment]
     """m_b g, N: weight of the board, counted as pushing (hand upside down) [D]."""
     back_emf_v_s_per_m: float = None  # type: ignore[assignment]
-    """kE N/r, V s/m: back-EMF per rack speed [D]."""
+    """kE N/r, V s/m: back-EMF per rack speed, the free run's lowered by its margins (speed read high) [D]."""
     sense_gain_error_max: float = _NOMINAL.current_sense.gain_error_max + _NOMINAL.current_sense.shunt_tolerance
     """Largest relative gain error of the board's current reading: the amplifier's gain error and
     the shunt's tolerance at their bounds (:class:`~ebraille_sim.physics.params.CurrentSenseParams`)."""
@@ -169,17 +270,20 @@ class SupervisorConfig:
     """J (N/r)^2, kg: rotor inertia at the rack line [D]."""
     board_mass_kg: float = None  # type: ignore[assignment]
     gear_efficiency: float = None  # type: ignore[assignment]
+    """Gear efficiency of the impact's mass: the largest the calibrated push and back-EMF allow [D]."""
     friction_breakaway_ratio: float = None  # type: ignore[assignment]
     guide_static_n: float = None  # type: ignore[assignment]
-    """Break-away friction of the guide rods, N (the plausibility band's lower edge)."""
+    """Break-away friction of the guide rods, N (the plausibility band's lower edge): the design
+    range's largest [E]."""
     reader_b_n_per_m: float = None  # type: ignore[assignment]
-    """Pulp b of the reader the impact bound assumes (the stiffer of the device's and the stiff preset)."""
+    """Pulp b of the reader the impact bound assumes (the stiff preset: the firmware does not know its reader)."""
     reader_m_per_m: float = None  # type: ignore[assignment]
     speed_hold_s: float = None  # type: ignore[assignment]
     """How long the highest recent speed sets the current limit: a quarter period of the impact
     mass on the design reader's stiffness at the contact threshold [D]."""
     stuck_travel_m: float = None  # type: ignore[assignment]
-    """Net travel with an unchanged estimate that makes it stuck: twice the backlash plus the
+    """Net travel with an unchanged estimate that makes it stuck: one traverse of the design's
+    largest backlash (:data:`BACKLASH_MAX_M`; the firmware does not know the unit's) plus the
     travel at the impact speed limit within one estimator period [D]."""
     first_contact_travel_m: float = None  # type: ignore[assignment]
     """Travel from the start within which the first contact must show: the design gap plus the
@@ -279,7 +383,7 @@ class SupervisorConfig:
                     v = _NOMINAL_LIMITS[name]
                 elif type(v) is float and 0.0 < v < math.inf:
                     continue                        # what check_number returns unchanged
-                object.__setattr__(self, name, check_number(name, v, lo=0.0, lo_open=True))
+                object.__setattr__(self, name, check_number(name, v, lo=0.0, lo_open=name not in _MAY_BE_ZERO))
         if self.force_cap_n > FORCE_CAP_LIMIT_N:
             raise ValueError(f"force_cap_n = {self.force_cap_n:g} N is above the {FORCE_CAP_LIMIT_N:g} N safe limit "
                              f"(the {TACTILE_FORCE_MAX_N:g} N top of the tactile range, [R] seed paper, plus "
@@ -311,6 +415,12 @@ class SupervisorConfig:
             raise ValueError(f"slip_headroom_m = {self.slip_headroom_m:g} m over slip_time_s = {self.slip_time_s:g} s "
                              f"leaves a setpoint of {self.slip_setpoint_cap_n:.3g} N, not above contact_on_n "
                              f"({self.contact_on_n:g} N): no force is left for reading")
+        if not self.sensed_limit_a(self.current_limit_a) > 2.0 * self.powered_current_a:
+            raise ValueError(f"sense_error_a = {1e3 * self.sense_error_a:.3g} mA (the current chain's worst-case "
+                             f"reading error: CurrentSenseParams adc_bits, adc_noise_lsb, zero_samples, shunt_ohm, "
+                             f"gain_v_per_v) leaves no current limit: the {1e3 * self.current_limit_a:.3g} mA limit "
+                             f"at rest reads as {1e3 * self.sensed_limit_a(self.current_limit_a):.3g} mA, not above "
+                             f"twice powered_current_a ({1e3 * self.powered_current_a:.3g} mA)")
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], device: DeviceParams | None = None) -> SupervisorConfig:
@@ -320,11 +430,13 @@ class SupervisorConfig:
 
     @classmethod
     def for_device(cls, device: DeviceParams, **overrides: Any) -> SupervisorConfig:
-        """The defaults with the motor, drive and reader constants of ``device``, then ``overrides``.
+        """The defaults with the drive and reader constants the firmware of ``device`` knows,
+        then ``overrides``.
 
-        ``motor_resistance_ohm`` is the motor's R, ``stall_current_a`` the driver supply
-        over R, ``rated_current_a`` from :func:`rated_current_a`; the drive and reader
-        constants from :func:`device_limits`.
+        The constants come from :func:`device_limits`: the part's datasheet with the
+        designer's margins and the unit's calibration (``motor_resistance_ohm`` the R it
+        measured, ``stall_current_a`` the driver supply over it, ``rated_current_a`` from
+        :func:`rated_current_a` of the datasheet).
 
         Examples
         --------

@@ -26,8 +26,8 @@ ENVELOPE_MEMO_NODES = 1 << 14
 @functools.lru_cache(maxsize=8)
 def _envelope_memo(envelope_force_n: float, reader_b_n_per_m: float, reader_m_per_m: float) -> np.ndarray:
     """The bisection memo of the envelopes with this force and design reader, the most recently
-    used eight kept: the design reader is the stiffer of the device's and the stiff preset, so
-    most devices of a population share one (and their envelopes one tree of midpoints)."""
+    used eight kept: the design reader is the stiff preset, so every device shares one (and
+    their envelopes one tree of midpoints)."""
     return limits.new_bisection_memo(ENVELOPE_MEMO_NODES)
 
 

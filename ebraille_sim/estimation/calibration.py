@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ebraille_sim.base.compiled import njit
-from ebraille_sim.base.validation import replace_fields
+from ebraille_sim.base.validation import check_number, replace_fields
 from ebraille_sim.estimation.registry import cached_model
 from ebraille_sim.physics.fsr import adc_code, adc_voltage, divider_voltage, play_widths, static_conductance
 
@@ -292,15 +292,16 @@ def _r2_root(lo, hi, g_zero, g_load, supply, lsb, max_code, force_n, table):
 
 
 @functools.lru_cache(maxsize=4096)
-def _calibrated_r2(spec: str, fsr, circuit, force_n: float, hold_s: float) -> float | None:
+def _calibrated_r2(spec: str, fsr, circuit, force_n: float, hold_s: float, load_n: float) -> float | None:
     """R2 (ohm) of :func:`calibrate_device` for one estimator, FSR unit and divider; None when
-    no R2 in [500, 50 000] ohm reads ``force_n`` exactly.  Cached: the parameters are frozen.
+    no R2 in [500, 50 000] ohm reads ``force_n`` exactly while the film carries ``load_n``.
+    Cached: the parameters are frozen.
     The protocol's error and Brent's method run in one compiled call (:func:`_r2_root`)."""
     table = _steady_map_of(spec)
     if table is None:
         cached_model(spec).steady_state(0.0)      # raises as the model does
     # the calibration protocol's voltages with every R2-independent factor computed once
-    g_load = static_conductance(force_n * loading_branch_factor(fsr), fsr, load_time_s=hold_s)
+    g_load = static_conductance(load_n * loading_branch_factor(fsr), fsr, load_time_s=hold_s)
     g_zero = static_conductance(0.0, fsr)
     lo, hi = math.log(500.0), math.log(50000.0)
     x, status = _r2_root(lo, hi, g_zero, g_load, circuit.supply_v, circuit.adc_lsb_v, circuit.adc_max_code,
@@ -314,21 +315,28 @@ def _calibrated_r2(spec: str, fsr, circuit, force_n: float, hold_s: float) -> fl
     return math.exp(x)
 
 
-def calibrate_device(device: DeviceParams, force_n: float = 1.0, hold_s: float = 20.0) -> DeviceParams:
-    """Set R2 so that the device's estimator reads ``force_n`` exactly after a press and hold.
+def calibrate_device(device: DeviceParams, force_n: float = 1.0, hold_s: float = 20.0,
+                     load_error: float = 0.0) -> DeviceParams:
+    """Set R2 so that the device's estimator reads ``force_n`` after a press and hold of the
+    known load.
 
     One-point assembly calibration (the estimator is fixed; the potentiometer is turned):
-    solved by Brent's method on ln R2 in [ln 500, ln 50 000] ohm.  The result depends only on
-    the estimator, the FSR unit and the divider and is cached per combination, so drawing the
-    same unit again costs a dictionary look-up.
+    solved by Brent's method on ln R2 in [ln 500, ln 50 000] ohm.  The load is known to its
+    tolerance only: the film carries ``force_n (1 + load_error)`` while the technician sets the
+    reading to ``force_n``, so a unit's estimate is off by that error from then on.  The result
+    depends only on the estimator, the FSR unit, the divider and the load and is cached per
+    combination, so drawing the same unit again costs a dictionary look-up.
     """
-    r2 = _calibrated_r2(device.estimator.model, device.fsr, device.circuit, float(force_n), float(hold_s))
+    load_error = check_number("calibration load_error", load_error, lo=-0.5, hi=0.5)
+    r2 = _calibrated_r2(device.estimator.model, device.fsr, device.circuit, float(force_n), float(hold_s),
+                        float(force_n) * (1.0 + load_error))
     if r2 is None:
         return device
     return replace_fields(device, circuit=replace_fields(device.circuit, r2_ohm=r2))
 
 
-def calibrate_device_reference(device: DeviceParams, force_n: float = 1.0, hold_s: float = 20.0) -> DeviceParams:
+def calibrate_device_reference(device: DeviceParams, force_n: float = 1.0, hold_s: float = 20.0,
+                               load_error: float = 0.0) -> DeviceParams:
     """:func:`calibrate_device` through :func:`steady_estimate` at every iterate, uncached
     (the protocol as written; the cached path must give the same R2 to the last bit)."""
     import scipy.optimize
@@ -337,7 +345,7 @@ def calibrate_device_reference(device: DeviceParams, force_n: float = 1.0, hold_
 
     def err(log_r2):
         c = dataclasses.replace(circuit, r2_ohm=math.exp(log_r2))
-        return steady_estimate(model, force_n, fsr, c, hold_s) - force_n
+        return steady_estimate(model, force_n * (1.0 + load_error), fsr, c, hold_s) - force_n
 
     lo, hi = math.log(500.0), math.log(50000.0)
     if err(lo) * err(hi) > 0:
@@ -350,8 +358,8 @@ BENCH_R2_RANGE_OHM = (500.0, 50000.0)
 """R2 range of :func:`bench_calibrate_device`, ohm (that of :func:`calibrate_device`)."""
 
 BENCH_R2_STEP_OHM = 10.0
-"""Resolution a technician sets R2 to on the bench, ohm (the shipped 1 150 ohm is the
-nominal unit's 1 153 ohm at this step)."""
+"""Resolution a technician sets R2 to on the bench, ohm (the shipped 1 140 ohm is the
+nominal unit's 1 143 ohm at this step)."""
 
 
 @functools.lru_cache(maxsize=256)
@@ -377,3 +385,117 @@ def bench_calibrate_device(device: DeviceParams) -> tuple[DeviceParams, bool]:
     inside = all(abs(math.log(best / end)) > 0.05 for end in BENCH_R2_RANGE_OHM)
     r2 = BENCH_R2_STEP_OHM * round(best / BENCH_R2_STEP_OHM)
     return replace_fields(device, circuit=replace_fields(device.circuit, r2_ohm=r2)), inside
+
+
+# ---- the drive's end-of-line calibration ----------------------------------------------------------
+
+CALIBRATION_CONVERSIONS = 256
+"""Conversions of the motor current averaged at each point of the drive's calibration [E]
+(a quarter second at the 1 kHz control rate)."""
+
+RESISTANCE_TEST_V = 1.0
+"""Voltage the at-rest resistance test applies backward, V [E]: the board is held at its retracted
+end stop, so the motor cannot turn and no back-EMF opposes it; on the Faulhaber 0816 006 SR it
+draws 47 mA, 48 steps of the chain's ADC."""
+
+PUSH_TEST_CURRENTS_A = (0.010, 0.050)
+"""The two motor currents at which the line pushes the board slowly into its force gauge, A [E]:
+on the nominal drive 0.1 N and 2.6 N, the reading range and above."""
+
+FORCE_GAUGE_TOLERANCE = 0.01
+"""Relative error of the line's force gauge at the test forces [E] (a 10 N bench gauge of 0.1 %
+of full scale read at about 1 N)."""
+
+FREE_RUN_V = 3.0
+"""Voltage of the free-run test, V [E]: the board runs forward with nothing in its way (about
+28 mm/s on the nominal drive) while the line measures its speed."""
+
+SPEED_REFERENCE_TOLERANCE = 0.005
+"""Relative error of the line's speed reference at the free-run speed [E] (an optical encoder or
+a laser triangulation sensor on the board, timed over a few millimetres)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class DriveCalibration:
+    """What the end-of-line calibration stored for one drive (:func:`calibrate_drive`), in the
+    firmware's own units: amperes as its current chain reads them."""
+    resistance_ohm: float
+    """Armature resistance, ohm: the test voltage over the averaged reading at rest."""
+    push_force_per_a_n: float
+    """Slope of the gauge's force against the read current, N/A."""
+    push_offset_n: float
+    """The gauge's force at zero read current on that line, N (negative: the drive's friction)."""
+    back_emf_v_s_per_m: float
+    """Back-EMF per rack speed, V s/m: the free run's voltage less ``R i_read`` over the line's speed."""
+    free_run_current_a: float
+    """The current of the free run as the firmware read it, A."""
+    test_currents_a: tuple
+    """The two currents of the push test as the firmware read them, A."""
+
+
+def _unit_seed(device) -> int:
+    """The noise of a unit's calibration: a fixed function of the unit's drive and current chain
+    (the calibration ran once, at the line; its noise is the unit's, not the session's)."""
+    import zlib
+    key = repr((device.motor, device.drivetrain, device.current_sense, device.driver_supply_v))
+    return zlib.crc32(key.encode()) % (1 << 31)
+
+
+@functools.lru_cache(maxsize=1024)
+def calibrate_drive(device: DeviceParams) -> DriveCalibration:
+    """The end-of-line calibration of ``device``'s drive, through the board's own current chain.
+
+    1. *Resistance at rest*: the board held at its retracted end stop, the driver applies
+       :data:`RESISTANCE_TEST_V` backward; the firmware averages :data:`CALIBRATION_CONVERSIONS`
+       readings (:func:`ebraille_sim.physics.current_sense.mean_reading_a`) and stores
+       ``R = U / i_read``.
+    2. *Push per ampere*: the board advances slowly into the line's force gauge at the two
+       currents of :data:`PUSH_TEST_CURRENTS_A`, horizontal (no weight along the push); at each
+       the gauge reads the steady push of the drive (eq. (1) of docs/safety.md with the guide
+       rods' Coulomb friction against it), high or low by the gauge's error; the line through
+       the two points (force against the read current) is stored.
+    3. *Back-EMF constant*: the board runs free at :data:`FREE_RUN_V` (no gauge, horizontal);
+       the line's speed reference (:data:`SPEED_REFERENCE_TOLERANCE`) times the run, and the
+       firmware stores ``(U - R i_read) / v``.  The run is steady: the current is the one the
+       Coulomb friction of the motor and of the guide rods takes, and the speed the armature's
+       law gives at that current (:func:`~ebraille_sim.physics.limits.rack_speed_from_emf_m_per_s`;
+       viscous friction, a few per cent of the current, is left out: the pair still obeys the
+       armature's law, which is all the measurement uses).
+
+    The measurement uses the unit's true constants, as the line's hardware meets them, and
+    nothing else reaches the firmware: it keeps the three numbers of :class:`DriveCalibration`.
+    The gauge's error and the conversions' noise are the unit's own (:func:`_unit_seed`).
+
+    Examples
+    --------
+    >>> from ebraille_sim.physics.params import DeviceParams
+    >>> cal = calibrate_drive(DeviceParams())
+    >>> round(cal.resistance_ohm, 1), round(cal.push_force_per_a_n, 1), round(cal.push_offset_n, 2)
+    (21.2, 63.1, -0.62)
+    """
+    from ebraille_sim.physics.current_sense import mean_reading_a, zero_code
+    from ebraille_sim.physics.limits import push_force_bound_n, rack_speed_from_emf_m_per_s, shaft_to_rack_per_m
+    cs, n = device.current_sense, CALIBRATION_CONVERSIONS
+    seed = _unit_seed(device)
+    zero = zero_code(cs, seed, cs.adc_lsb_v, cs.adc_max_code)     # one zeroing at rest before the tests
+    m, dt = device.motor, device.drivetrain                        # plant truth: what the line's hardware meets
+    i_rest = -RESISTANCE_TEST_V / m.resistance_ohm                 # plant truth
+    r_ohm = -RESISTANCE_TEST_V / mean_reading_a(cs, i_rest, seed, n, zero)
+    rng = np.random.default_rng(seed)
+    gauge = 1.0 + FORCE_GAUGE_TOLERANCE * (2.0 * rng.random() - 1.0)
+    g = shaft_to_rack_per_m(dt.gear_ratio, dt.pinion_radius_m)
+    forces, reads = [], []
+    for k, i in enumerate(PUSH_TEST_CURRENTS_A):
+        push = push_force_bound_n(i, m.torque_constant_nm_per_a, g, dt.gear_efficiency,  # plant truth
+                                  m.friction_torque_nm, 0.0) - dt.guide_coulomb_n      # plant truth
+        forces.append(gauge * push)
+        reads.append(mean_reading_a(cs, i, seed + 2.0 * (k + 1), n, zero))
+    slope = (forces[1] - forces[0]) / (reads[1] - reads[0])
+    i_free = (dt.guide_coulomb_n / (dt.gear_efficiency * g) + m.friction_torque_nm) / m.torque_constant_nm_per_a  # plant truth
+    v_free = rack_speed_from_emf_m_per_s(FREE_RUN_V, i_free, m.resistance_ohm, m.back_emf_v_s_per_rad, g)  # plant truth
+    v_ref = v_free * (1.0 + SPEED_REFERENCE_TOLERANCE * (2.0 * rng.random() - 1.0))
+    i_read = mean_reading_a(cs, i_free, seed + 7.0, n, zero)
+    return DriveCalibration(resistance_ohm=float(r_ohm), push_force_per_a_n=float(slope),
+                            push_offset_n=float(forces[0] - slope * reads[0]), test_currents_a=tuple(reads),
+                            back_emf_v_s_per_m=float((FREE_RUN_V - r_ohm * i_read) / v_ref),
+                            free_run_current_a=float(i_read))

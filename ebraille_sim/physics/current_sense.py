@@ -118,6 +118,38 @@ def _mean_code_at_rest(v0, noise_rms_v, seed, n, lsb_v, max_code):
     return total / n
 
 
+def mean_reading_a(cs, current_a: float, seed: float, n: int, zero: float | None = None) -> float:
+    """The firmware's mean of ``n`` readings of a steady ``current_a`` (the RC sections settled),
+    against the zero code ``zero`` it measured at rest before (None: :func:`zero_code` with
+    ``seed``), A: what a calibration routine that holds a current and averages its conversions
+    reads.  The unit's shunt error, gain error and offset are in it; the conversions' noise
+    comes from the device's noise sequence of ``seed + 1`` (:func:`_mean_code_at_rest`)."""
+    lsb, top = cs.adc_lsb_v, cs.adc_max_code
+    v = amplifier_v(current_a, cs.shunt_ohm * (1.0 + cs.shunt_error), cs.gain_v_per_v, cs.gain_error, cs.offset_v,
+                    cs.reference_v)
+    code = _mean_code_at_rest(v, cs.adc_noise_lsb * lsb, float(seed) + 1.0, int(n), lsb, top)
+    return firmware_current_a(code, zero_code(cs, seed, lsb, top) if zero is None else zero, lsb, cs.nominal_v_per_a)
+
+
+MEAN_QUANTISATION_LSB = 0.01
+"""Bound on the bias of a mean of round-down conversions that the chain's own noise dithers
+(0.5 LSB RMS), LSB [D]: the bias of a dithered quantiser falls as ``exp(-2 pi^2 sigma^2)``,
+0.007 at 0.5 LSB; the round-down's half step is common to the reading and the zero and cancels
+(tests/test_calibration.py measures it)."""
+
+
+def mean_error_a(cs, n: int) -> float:
+    """Largest error of a mean of ``n`` conversions of a steady input, A: three standard errors
+    of the averaged noise and the dithered quantiser's bias (:data:`MEAN_QUANTISATION_LSB`)."""
+    return cs.lsb_a * (3.0 * cs.adc_noise_lsb / math.sqrt(n) + MEAN_QUANTISATION_LSB)
+
+
+def averaged_error_a(cs, n: int) -> float:
+    """Largest error of :func:`mean_reading_a` beyond the unit's gain error, A: the mean's error
+    (:func:`mean_error_a`) and that of the zero it is read against (``zero_samples`` conversions)."""
+    return mean_error_a(cs, n) + mean_error_a(cs, cs.zero_samples)
+
+
 def worst_case_error_a(cs, current_a: float) -> float:
     """Largest error of the firmware's reading at ``current_a`` over the chain's tolerances, A.
 

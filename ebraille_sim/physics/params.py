@@ -472,12 +472,13 @@ class CurrentSenseParams(_Checked):
     firmware knows only the nominal ``gain_v_per_v`` and ``shunt_ohm``."""
     shunt_ohm: float = _pos(0.05, "ohm", "[D] +/-0.5 A into the amplifier's +/-2.5 V half range at 100 V/V "
                             "(stall current 0.28 A of the Faulhaber drive)")
-    shunt_tolerance: float = _nn(0.01, "-", "[R] 1 % current-sense resistor (e.g. Vishay WSL2512 series)")
+    shunt_tolerance: float = sourced(0.01, "-", "[R] 1 % current-sense resistor (e.g. Vishay WSL2512 series)",
+                                     lo=0.0, hi=0.05)
     shunt_error: float = sourced(0.0, "-", "[E] this unit's shunt deviation; nominal board 0", lo=-0.05, hi=0.05)
     gain_v_per_v: float = _pos(100.0, "V/V", INA240 + ": INA240A3 gain")
-    gain_error_max: float = _nn(0.002, "-", INA240 + ": gain error +/-0.20 % max")
+    gain_error_max: float = sourced(0.002, "-", INA240 + ": gain error +/-0.20 % max", lo=0.0, hi=0.05)
     gain_error: float = sourced(0.0, "-", "[E] this unit's gain error; nominal board 0", lo=-0.05, hi=0.05)
-    offset_max_v: float = _nn(25e-6, "V", INA240 + ": input offset +/-25 uV max")
+    offset_max_v: float = sourced(25e-6, "V", INA240 + ": input offset +/-25 uV max", lo=0.0, hi=1e-3)
     offset_v: float = sourced(0.0, "V", "[E] this unit's input offset; nominal board 0", lo=-1e-3, hi=1e-3)
     reference_v: float = _pos(2.5, "V", INA240 + ": output midpoint from REF1/REF2 at mid-supply of 5 V")
     filter_tau_s: float = _pos(159e-6, "s", "[D] each RC anti-alias section 1.6 kOhm x 100 nF (corner 1.0 kHz)")
@@ -485,7 +486,8 @@ class CurrentSenseParams(_Checked):
                               "(ebraille_sim.physics.current_sense)")
     adc_bits: int = _pos(10, "bit", "[R] ATmega328 10-bit ADC (the FSR's converter)")
     adc_ref_v: float = _pos(5.0, "V", "[R] ATmega328 AVcc reference")
-    adc_noise_lsb: float = _nn(0.5, "LSB", "[E] within the ATmega328's +/-2 LSB absolute accuracy [R]")
+    adc_noise_lsb: float = sourced(0.5, "LSB", "[E] within the ATmega328's +/-2 LSB absolute accuracy [R]",
+                                   lo=0.0, hi=4.0)
     zero_samples: int = _pos(64, "-", "[E] conversions averaged by the start-up zeroing at rest")
     pwm_hz: float = _pos(20000.0, "Hz", "[E] H-bridge PWM frequency above hearing")
 
@@ -494,7 +496,8 @@ class CurrentSenseParams(_Checked):
         for name, lo, hi in (("adc_bits", 1, ADC_BITS_MAX), ("zero_samples", 1, 1_000_000), ("filter_stages", 1, 2)):
             v = check_number(f"CurrentSenseParams.{name}", getattr(self, name), lo=lo, hi=hi, integer=True)
             object.__setattr__(self, name, v)
-        for name in ("shunt_error", "gain_error", "offset_v"):
+        for name in ("shunt_tolerance", "gain_error_max", "offset_max_v", "adc_noise_lsb", "shunt_error",
+                     "gain_error", "offset_v"):
             f = next(f for f in dataclasses.fields(self) if f.name == name)
             check_number(f"CurrentSenseParams.{name}", getattr(self, name), lo=f.metadata["lo"], hi=f.metadata["hi"])
         if abs(self.gain_error) > self.gain_error_max or abs(self.shunt_error) > self.shunt_tolerance \

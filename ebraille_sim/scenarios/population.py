@@ -21,11 +21,15 @@ motor R, kM                 normal, 5 % / 3 % (1 sigma)  [E] winding and magnet 
 gear efficiency             uniform [0.5, 0.7]           [R] 0.53 (3 stages) - 0.7 (Faulhaber)
 guide Coulomb friction      log-uniform [0.05, 0.3] N    [E] parameters table 3
 backlash                    uniform [0.03, 0.2] mm       [E] parameters table 3
+current-sense shunt error   uniform +/- shunt_tolerance  [R] 1 % resistor; uniform [E]
+current-sense gain error    uniform +/- gain_error_max   [R] INA240 +/-0.20 % max; uniform [E]
+current-sense offset        uniform +/- offset_max_v     [R] INA240 +/-25 uV max; uniform [E]
+divider calibration load    uniform +/- 2 %              [E] the 1 N load as the fixture applies it
 ==========================  ==========================  =========================================
 
 With ``calibrate=True`` (default) each drawn device's divider is re-calibrated for its own
-FSR unit at assembly (:func:`calibrate_device`, one press to 1 N held 20 s); the spread of
-hysteresis and creep remains an uncalibrated error.
+FSR unit at assembly (:func:`calibrate_device`, one press to 1 N held 20 s, the load off by
+its drawn error); the spread of hysteresis and creep remains an uncalibrated error.
 
 Examples
 --------
@@ -106,20 +110,31 @@ DEVICE_UNIFORMS = ("finger_b_scale", "finger_m_scale", "relax_c0", "fsr_exponent
 (``finger_b_scale`` and ``guide_coulomb_n`` log-uniform, the others uniform)."""
 DEVICE_NORMALS = ("fsr_k_sigma_ln", "motor_r_sigma", "motor_k_sigma")
 """The :class:`PopulationSpec` spreads of a device's standard normal variates, in their order."""
+BOARD_UNIFORMS = ("shunt_error", "gain_error", "offset_v", "calibration_load_error")
+"""The board's uniform variates, after :data:`DEVICE_UNIFORMS`: the current chain's unit errors
+within their datasheet bounds (``shunt_tolerance``, ``gain_error_max``, ``offset_max_v`` of
+the base device's :class:`~ebraille_sim.physics.params.CurrentSenseParams`) and the error of
+the divider calibration's known load within :data:`CALIBRATION_LOAD_TOLERANCE`."""
+CALIBRATION_LOAD_TOLERANCE = 0.02
+"""Relative error of the 1 N load the divider calibration applies through the board [E]: a
+102 g weight is exact to far better, its alignment on the fixture is not."""
 
 
 def device_variates(seed_sequence) -> tuple[list, list]:
     """The random numbers of one device: the uniforms on [0, 1) of :data:`DEVICE_UNIFORMS` and
-    the standard normals of :data:`DEVICE_NORMALS`, in their orders.  Each component draws
-    from its own child of ``seed_sequence`` (reader, FSR unit, motor, drive train:
-    ``seed_sequence.spawn(4)``), so that a component's draws do not depend on another's."""
-    r_f, r_s, r_m, r_d = (np.random.default_rng(c) for c in seed_sequence.spawn(4))
+    the standard normals of :data:`DEVICE_NORMALS`, in their orders, the uniforms followed by
+    the board's :data:`BOARD_UNIFORMS`.  Each component draws from its own child of
+    ``seed_sequence`` (reader, FSR unit, motor, drive train, board: ``seed_sequence.spawn(5)``,
+    the first four the children ``spawn(4)`` gives), so that a component's draws do not depend
+    on another's."""
+    r_f, r_s, r_m, r_d, r_b = (np.random.default_rng(c) for c in seed_sequence.spawn(5))
     u_f = r_f.random(3).tolist()                        # pulp b, m, c0
     z_k = float(r_s.standard_normal())                  # FSR: k, then exponent, hysteresis, creep
     u_s = r_s.random(3).tolist()
     z_m = r_m.standard_normal(2).tolist()               # motor R, kM
     u_d = r_d.random(3).tolist()                        # gear efficiency, guide friction, backlash
-    return u_f + u_s + u_d, [z_k] + z_m
+    u_b = r_b.random(len(BOARD_UNIFORMS)).tolist()      # current chain, divider calibration load
+    return u_f + u_s + u_d + u_b, [z_k] + z_m
 
 
 def device_from_variates(u, z, spec: PopulationSpec = PopulationSpec(),
@@ -152,8 +167,12 @@ def device_from_variates(u, z, spec: PopulationSpec = PopulationSpec(),
                             torque_constant_nm_per_a=m.torque_constant_nm_per_a * kscale,
                             back_emf_v_s_per_rad=m.back_emf_v_s_per_rad * kscale)
     drivetrain = replace_checked(d, name=d.name, gear_efficiency=gear_eff, guide_coulomb_n=guide_n, backlash_m=backlash)
-    dev = replace_fields(base, finger=finger, fsr=fsr, motor=motor, drivetrain=drivetrain)
-    return calibrate_device(dev) if spec.calibrate else dev
+    cs = base.current_sense
+    e_shunt, e_gain, e_offset, e_load = (2.0 * v - 1.0 for v in u[len(DEVICE_UNIFORMS):])
+    board = replace_checked(cs, shunt_error=cs.shunt_tolerance * e_shunt, gain_error=cs.gain_error_max * e_gain,
+                            offset_v=cs.offset_max_v * e_offset)
+    dev = replace_fields(base, finger=finger, fsr=fsr, motor=motor, drivetrain=drivetrain, current_sense=board)
+    return calibrate_device(dev, load_error=CALIBRATION_LOAD_TOLERANCE * e_load) if spec.calibrate else dev
 
 
 def sample_device(rng_or_seed, spec: PopulationSpec = PopulationSpec(), base: DeviceParams = DeviceParams()

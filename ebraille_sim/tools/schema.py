@@ -249,9 +249,9 @@ def _override_keys(cls) -> tuple[Key, ...]:
         v = getattr(defaults, f.name)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             continue
-        lo = 0.0 if (m.get("positive") or m.get("nonneg")) else None
-        keys.append(Key(f.name, "number", m.get("unit", "-"), v, lo=lo, lo_open=bool(m.get("positive")),
-                        source=m.get("source", "")))
+        lo = 0.0 if (m.get("positive") or m.get("nonneg")) else m.get("lo")
+        keys.append(Key(f.name, "number", m.get("unit", "-"), v, lo=lo, hi=m.get("hi"),
+                        lo_open=bool(m.get("positive")), source=m.get("source", "")))
     return tuple(keys)
 
 
@@ -329,6 +329,7 @@ def _fault_sections() -> list[Section]:
 
 def _supervisor_section() -> Section:
     from controllers.supervisor import FORCE_CAP_LIMIT_N, SupervisorConfig
+    from controllers.supervisor.config import _MAY_BE_ZERO
     docs = _field_docs(SupervisorConfig)
     defaults = SupervisorConfig()
     keys = []
@@ -341,7 +342,7 @@ def _supervisor_section() -> Section:
         note = docs.get(f.name, "")
         if f.name in ("rated_current_a", "stall_current_a", "motor_resistance_ohm"):
             note = (note + " Default: from the scenario's motor and supply (value shown: the default device).")
-        keys.append(Key(f.name, "number", unit_from_name(f.name), v, lo=0.0, hi=hi, lo_open=True,
+        keys.append(Key(f.name, "number", unit_from_name(f.name), v, lo=0.0, hi=hi, lo_open=f.name not in _MAY_BE_ZERO,
                         source="", note=note.strip()))
     return Section("supervisor", "[supervisor]", "The fields of `controllers.supervisor.SupervisorConfig`: " +
                    _first_paragraph(SupervisorConfig.__doc__)[0].lower() + _first_paragraph(SupervisorConfig.__doc__)[1:] +
