@@ -63,7 +63,7 @@ def test_motor_stall_is_stopped_at_the_current_limit_and_retracts_after_the_jam(
     t = tr["t_s"]
     assert tr["force_true_n"].max() <= MAX_SAFE_N
     jam = (t >= 4.0) & (t < 6.0)
-    assert np.ptp(tr["board_pos_m"][jam]) < 1e-6           # the jam holds the board
+    assert np.ptp(tr["board_pos_m"][jam]) < 2e-6           # the jam holds the board (bar the mesh's give)
     i_lim = SupervisorConfig().current_limit_a              # the controller saturates into the current limit
     assert 0.95 * i_lim < tr["motor_current_a"][jam].max() < 1.05 * i_lim
     assert _retracted(tr)
@@ -90,7 +90,7 @@ def test_finger_withdrawn_and_put_back_recovers():
     assert tr["force_true_n"].max() <= MAX_SAFE_N
     away = (tr["t_s"] > 4.1) & (tr["t_s"] < 4.4)
     assert tr["force_true_n"][away].max() == 0.0
-    assert _recovered(tr, 5.5) >= 0.95
+    assert _recovered(tr, 6.0) >= 0.95                       # in band again within about a second
 
 
 def test_fault_runs_are_deterministic():

@@ -161,5 +161,10 @@ def test_press_over_the_board_edge_reads_low_and_the_loop_overloads_the_finger()
     assert f_eq < 0.97 * sum(fc)
     static_ratio = sum(fc) / f_eq
     assert static_ratio > 1.03
-    # same estimate, more force on the finger (measured 1.020), never more than the static law
-    assert 1.015 * true_n[0.0] < true_n[9e-3] < static_ratio * true_n[0.0]
+    # same estimate, more force on the finger (measured 1.020), never more than the static law;
+    # the turn-on region lowers a lightly loaded point's conductance by its factor T(f) < 1, which
+    # the power-law bound widens by T^(-1/n) at the lightest loaded point
+    from ebraille_sim.physics.fsr import turn_on_factor
+    fsr = DeviceParams().fsr
+    t_min = min(turn_on_factor(f, fsr.actuation_force_n, fsr.turn_on_steepness) for f in fc if f > 0)
+    assert 1.015 * true_n[0.0] < true_n[9e-3] < static_ratio * t_min ** (-1.0 / n) * true_n[0.0]

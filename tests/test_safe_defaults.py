@@ -28,11 +28,11 @@ def test_opt_out_is_explicit_and_recorded():
     assert "supervisor" not in spec.sections
     r = run_scenario(spec, duration_s=1.0)
     assert r.supervisor["enabled"] and r.supervisor["source"].startswith("on: default")
-    assert r.supervisor["fault"] is None and r.controller_name == "pid"
+    assert r.supervisor["fault"] is None and r.controller_name == "pid_dob"
     off = dataclasses.replace(spec, sections={**spec.sections, "supervisor": {"enabled": False}})
     r_off = run_scenario(off, duration_s=1.0)
     assert not r_off.supervisor["enabled"] and "enabled = false" in r_off.supervisor["source"]
-    assert r_off.controller_name == "pid"
+    assert r_off.controller_name == "pid_dob"
     r_arg = run_scenario(spec, duration_s=1.0, supervised=False)
     assert not r_arg.supervisor["enabled"] and "--no-supervisor" in r_arg.supervisor["source"]
     with pytest.raises(TypeError, match="supervised"):

@@ -76,7 +76,8 @@ def test_episode_rows_match_a_direct_run():
     row = S.run_episode(plan, ep)
     spec = plan.specs[ep.scenario]
     spec = dataclasses.replace(spec, reading=dataclasses.replace(spec.reading, wpm=ep.wpm))
-    res = run_scenario(spec, seed=ep.seed, duration_s=DURATION_S, device=plan.devices[ep.scenario][ep.reader])
+    res = run_scenario(spec, controller=ep.controller, seed=ep.seed, duration_s=DURATION_S,
+                       device=plan.devices[ep.scenario][ep.reader])
     for k, v in res.metrics.items():
         if k != "real_time_factor":
             assert row[k] == v, k

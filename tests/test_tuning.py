@@ -151,9 +151,9 @@ def test_tune_report_gives_margins_only_for_a_stable_loop(tmp_path):
     fixed = dataclasses.replace(DEFAULT_PID, schedule_above_n=None)
     a1, a2 = analyse_loop(DEFAULT_PID, force_n=1.0), analyse_loop(fixed, force_n=2.0)
     # the loop of test_margins.test_default_pid_margins_at_1n_and_0_6n
-    assert _loop_cells(a1.summary()) == ["stable", "33.4 deg at 6.48 Hz", "1.45 at 9.34 Hz", "3.60"]
+    assert _loop_cells(a1.summary()) == ["stable", "33.9 deg at 6.43 Hz", "1.46 at 9.34 Hz", "3.54"]
     assert _loop_cells(a2.summary()) == ["unstable", "-", "-", "unstable"]
-    assert a1.margin_label() == "PM 33.4 deg at 6.48 Hz, GM 1.45"
+    assert a1.margin_label() == "PM 33.9 deg at 6.43 Hz, GM 1.46"
     plot_bode([a1, a2], tmp_path / "bode.png")
     assert (tmp_path / "bode.png").stat().st_size > 10_000
 

@@ -12,7 +12,7 @@ Examples
 >>> from controllers.pid import DEFAULT_PID
 >>> a = analyse_loop(DEFAULT_PID, force_n=0.6)
 >>> a.stable, round(a.ms, 2)
-(True, 1.71)
+(True, 1.7)
 """
 from __future__ import annotations
 

@@ -24,8 +24,8 @@ def add_arguments(p):
     p.add_argument("--readers", type=whole(0, MAX_READERS), default=10, metavar="N",
                    help="readers/FSR units drawn from the population per scenario (0: the scenario's device; "
                         f"default 10, at most {MAX_READERS})")
-    p.add_argument("--controllers", nargs="+", default=["pid"], metavar="CTRL",
-                   help="controller names or gains files (default: pid)")
+    p.add_argument("--controllers", nargs="+", default=["pid_dob"], metavar="CTRL",
+                   help="controller names, designs or gains files (default: pid_dob, the scenarios' default)")
     p.add_argument("--replicates", type=whole(1, MAX_READERS), default=1, metavar="R",
                    help="seeds per combination (default 1)")
     p.add_argument("--seed", type=seed, default=0, help="master seed, in [0, 2**63) (default 0)")

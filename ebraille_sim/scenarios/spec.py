@@ -162,7 +162,7 @@ class SetpointSpec:
 @dataclass(frozen=True)
 class ControllerSpec:
     """``[controller]``: a registered name (or gains file) and its keyword gains."""
-    name: str = _key("pid", "-", "str")
+    name: str = _key("pid_dob", "-", "str")
     gains: dict = field(default_factory=dict, metadata={"unit": "-", "source": _SETTING, "kind": "free"})
 
 
@@ -570,7 +570,7 @@ def parse_scenario(data: dict, source: str = "<scenario>", base_dir: str = ".") 
         name=top["name"], description=top.get("description", ""), seed=top.get("seed", 0),
         duration_s=top.get("duration_s"), reading=reading, setpoint=sp, device=dev,
         finger=finger,
-        controller=ControllerSpec(name=ctl.get("name", "pid"), gains=ctl.get("gains", {})),
+        controller=ControllerSpec(name=ctl.get("name", ControllerSpec().name), gains=ctl.get("gains", {})),
         criteria=top.get("criteria", {}), sections={k: top[k] for k in DELEGATES if k in top},
         source=source, base_dir=base_dir, calibrated=top.get("device", {}).get("calibrate", DeviceSpec().calibrate))
 

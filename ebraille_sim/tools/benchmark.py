@@ -82,7 +82,8 @@ BOUNDS = ("actuator_bound", "hysteresis_bound", "sensor_bound")
 """Leaderboard entries that are bounds, not controllers one could ship."""
 
 FRACTIONS = ("in_band_fraction", "char_in_band_fraction")
-KEPT = FRACTIONS + ("peak_force_n", "energy_j", "legible_char_fraction", "force_rmse_n", "estimate_rmse_n")
+KEPT = FRACTIONS + ("peak_force_n", "energy_j", "legible_char_fraction", "force_rmse_n", "estimate_rmse_n",
+                    "onset_overshoot_fraction")
 
 
 @dataclass(frozen=True)
