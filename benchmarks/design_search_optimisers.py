@@ -32,7 +32,7 @@ import numpy as np
 
 def _search(args, seed):
     from ebraille_sim.tools.design_search import DesignSearch, default_space
-    space = default_space([args.firmware])
+    space = default_space(None if args.firmware == "all" else [args.firmware])
     space = dataclasses.replace(space, arms=tuple(dataclasses.replace(a, starts=()) for a in space.arms))
     return DesignSearch(space, suite=args.suite, readers=args.readers, seed=seed, evaluations=args.evaluations,
                         jobs=args.jobs)
@@ -88,7 +88,7 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--evaluations", type=int, default=40)
     p.add_argument("--seeds", type=int, default=3)
-    p.add_argument("--firmware", default="fast_1khz")
+    p.add_argument("--firmware", default="fast_1khz", help="a firmware preset, or 'all' (the default space)")
     p.add_argument("--suite", default="quick")
     p.add_argument("--readers", type=int, default=1)
     p.add_argument("-j", "--jobs", type=int, default=1)
