@@ -19,9 +19,9 @@ def _space(start):
 BAD = {"kp_v_per_n": 0.05, "ki_v_per_ns": 0.05}
 
 
-def _search(journal=None, evaluations=10, jobs=1, start=BAD, seed=3):
+def _search(journal=None, evaluations=10, jobs=1, start=BAD, seed=3, optimiser="de"):
     return DesignSearch(_space(start), suite="quick", readers=1, seed=seed, evaluations=evaluations, jobs=jobs,
-                        journal=journal)
+                        journal=journal, optimiser=optimiser)
 
 
 def test_the_search_beats_a_deliberately_bad_start():
@@ -39,6 +39,15 @@ def test_same_seed_same_design_and_jobs_do_not_matter(tmp_path):
     assert a.best == b.best and a.history == b.history
     c = _search(evaluations=10, seed=4).run()
     assert c.history != a.history
+
+
+def test_the_optuna_optimiser_starts_from_the_start_points_and_repeats_itself():
+    pytest.importorskip("optuna")
+    a = _search(evaluations=6, optimiser="optuna").run()
+    assert a.history[0]["gains"]["kp_v_per_n"] == 0.05 and a.evaluations == 6
+    assert a.train_value > a.history[0]["value"]
+    b = _search(evaluations=6, optimiser="optuna", jobs=2).run()
+    assert a.history == b.history
 
 
 def test_a_rerun_continues_from_the_journal(tmp_path):
@@ -113,6 +122,7 @@ def test_tune_search_writes_a_design_that_run_and_benchmark_take(tmp_path, capsy
     (["--evaluations", "0"], "--evaluations"),
     (["--statistic", "mean"], "mean"),
     (["--suite", "huge"], "huge"),
+    (["--optimiser", "annealing"], "annealing"),
     (["--seed", str(bm.POPULATION_SEED)], "--seed"),
     (["--firmware", "no_such_preset"], "no_such_preset"),
     (["--family", "pid"], "--family"),

@@ -40,7 +40,7 @@ MAX_EVALUATIONS = 10_000
 """Most cost evaluations of ``--evaluations``."""
 
 ROBUST_DEFAULTS = {"population": 8, "family": "pid_scheduled", "scenarios": "standard", "ms_max": 1.6, "ms_gain": 1.0}
-SEARCH_DEFAULTS = {"suite": "standard", "statistic": "score", "readers": 4, "jobs": 1}
+SEARCH_DEFAULTS = {"suite": "standard", "statistic": "score", "readers": 4, "jobs": 1, "optimiser": "de"}
 
 TUNE_OWNED = ("gains.toml", "gains_tuned.toml", "gains_hand.toml", "report.md", "report.json", "bode.png",
               "nyquist.png", "population.png")
@@ -89,6 +89,9 @@ def add_arguments(p):
                         "cvar10_char_in_band, median_in_band, median_char_in_band")
     g.add_argument("--readers", type=whole(1, MAX_POPULATION), default=None, metavar="N",
                    help=f"training readers per scenario, drawn from --seed (default 4, at most {MAX_POPULATION})")
+    g.add_argument("--optimiser", default=None, metavar="NAME",
+                   help="de (default: SciPy's differential evolution) or optuna (Optuna's TPE sampler, the optional "
+                        "extra 'search')")
     g.add_argument("--firmware", action="append", default=None, metavar="PRESET",
                    help="search the default space on this firmware preset only (repeatable)")
     g.add_argument("--no-starts", action="store_true",
@@ -410,11 +413,13 @@ def _search_main(args) -> int:
 
     con = console(args)
     evaluations = 60 if args.evaluations is None else args.evaluations
-    try:
-        suite = bm.get_suite(args.suite)
-        ds.check_statistic(args.statistic)
-    except ValueError as exc:
-        raise UserError(f"--{'suite' if 'suite' in str(exc) else 'statistic'}: {exc}") from None
+    for opt, check in (("--suite", bm.get_suite), ("--statistic", ds.check_statistic),
+                       ("--optimiser", ds.check_optimiser)):
+        try:
+            check(getattr(args, opt[2:]))
+        except ValueError as exc:
+            raise UserError(f"{opt}: {exc}") from None
+    suite = bm.get_suite(args.suite)
     if args.seed == bm.POPULATION_SEED:
         raise UserError(f"--seed {args.seed} is the benchmark's reader seed: the held-out readers would be "
                         "trained on; give another seed")
@@ -440,7 +445,8 @@ def _search_main(args) -> int:
                         owned=ds.SEARCH_FILES)
     journal = out / ds.JOURNAL
     search = ds.DesignSearch(space, suite=suite.name, statistic=args.statistic, readers=args.readers,
-                             seed=args.seed, evaluations=evaluations, jobs=args.jobs, journal=journal)
+                             seed=args.seed, evaluations=evaluations, jobs=args.jobs, journal=journal,
+                             optimiser=args.optimiser)
     if journal.exists():
         try:
             search.check_journal()
@@ -486,7 +492,8 @@ def _search_main(args) -> int:
                                                                "readers": val.readers, "command": rel}))
             rep = {"name": name, "design": {"controller": best.controller, "firmware": best.firmware,
                                             "gains": best.gains},
-                   "suite": suite.name, "statistic": args.statistic, "training_readers": args.readers,
+                   "suite": suite.name, "statistic": args.statistic, "optimiser": args.optimiser,
+                   "training_readers": args.readers,
                    "seed": args.seed, "evaluations": res.evaluations, "from_journal": res.cached,
                    "training_statistic": res.train_value, "training_score": res.train_score,
                    "held_out_score": held, "held_out_readers": val.readers,
@@ -501,7 +508,7 @@ def _search_main(args) -> int:
             (tmp / "report.md").write_text(ds.report_markdown(rep, bm.format_markdown(val, summary)))
             (tmp / ds.JOURNAL).write_bytes(journal.read_bytes())
     get_design(out / "design.toml")
-    con.result({k: rep[k] for k in ("name", "design", "suite", "statistic", "training_readers", "seed",
+    con.result({k: rep[k] for k in ("name", "design", "suite", "statistic", "optimiser", "training_readers", "seed",
                                     "evaluations", "from_journal", "training_statistic", "training_score",
                                     "held_out_score", "held_out_readers", "reference", "ratio_to_reference",
                                     "wall_s")} | {"out": str(out), "files": [str(out / f) for f in ds.SEARCH_FILES]})

@@ -26,10 +26,13 @@ The optimiser sees one coordinate per searched gain of every arm, plus one that 
 when there are several; gains are rounded to :data:`DIGITS` significant digits before a
 run, so the design file holds the numbers that were measured.
 
-Optimiser.  SciPy's differential evolution (``rand1bin``, deferred updating: every
-generation is evaluated as one batch, so the result does not depend on ``jobs``) from an
-initial population that holds the start points, the rest a Latin hypercube of the seed.
-The search's budget is a number of evaluations; SciPy's own polish is off.
+Optimiser (:data:`OPTIMISERS`).  ``de`` (the default): SciPy's differential evolution
+(``rand1bin``, deferred updating: every generation is evaluated as one batch, so the result
+does not depend on ``jobs``) from an initial population that holds the start points, the
+rest a Latin hypercube of the seed; SciPy's own polish is off.  ``optuna``: Optuna's TPE
+sampler (the optional extra ``search``), the start points enqueued as its first trials, one
+trial at a time.  The budget is a number of evaluations; the episodes of an evaluation run
+over the ``jobs`` processes.
 
 Journal.  Each evaluation is appended to ``journal.jsonl`` as soon as its episodes are done
 (the candidate, its training statistic and score).  A rerun with the same settings replays
@@ -56,10 +59,14 @@ from dataclasses import dataclass, field
 
 __all__ = ["Param", "Arm", "SearchSpace", "STATISTICS", "DIGITS", "check_statistic", "default_space",
            "load_space", "check_space", "training_devices", "Candidate", "DesignSearch", "SearchResult",
-           "design_text", "toml_value", "report_markdown", "JOURNAL", "SEARCH_FILES"]
+           "design_text", "toml_value", "report_markdown", "JOURNAL", "SEARCH_FILES", "OPTIMISERS",
+           "check_optimiser"]
 
 DIGITS = 4
 """Significant digits of a searched gain."""
+
+OPTIMISERS = {"de": "SciPy's differential evolution", "optuna": "Optuna's TPE sampler (pip install 'ebraille-sim[search]')"}
+"""The optimisers of the search by name."""
 
 JOURNAL = "journal.jsonl"
 """The journal's file name in the output folder."""
@@ -84,6 +91,18 @@ def check_statistic(name: str) -> str:
     """``name`` if it is one of :data:`STATISTICS` (one-line ``ValueError`` naming them otherwise)."""
     if name not in STATISTICS:
         raise ValueError(f"unknown statistic {name!r}; statistics: {', '.join(STATISTICS)}")
+    return name
+
+
+def check_optimiser(name: str) -> str:
+    """``name`` if it is one of :data:`OPTIMISERS` and importable (one-line ``ValueError``)."""
+    if name not in OPTIMISERS:
+        raise ValueError(f"unknown optimiser {name!r}; optimisers: {', '.join(OPTIMISERS)}")
+    if name == "optuna":
+        try:
+            import optuna  # noqa: F401
+        except ImportError:
+            raise ValueError("optimiser 'optuna' needs Optuna: pip install 'ebraille-sim[search]'") from None
     return name
 
 
@@ -355,14 +374,18 @@ class DesignSearch:
         Budget: candidates evaluated (the starts included).
     jobs : int
         Local worker processes; the result does not depend on it.
+    optimiser : str
+        One of :data:`OPTIMISERS`.
     journal : path, optional
         The journal file (module docstring); None keeps no journal.
     """
 
     def __init__(self, space: SearchSpace, suite: str = "standard", statistic: str = "score", readers: int = 4,
-                 seed: int = 0, evaluations: int = 60, jobs: int = 1, journal=None, progress=None):
+                 seed: int = 0, evaluations: int = 60, jobs: int = 1, journal=None, progress=None,
+                 optimiser: str = "de"):
         from ebraille_sim.tools.benchmark import get_suite
         check_statistic(statistic)
+        self.optimiser = check_optimiser(optimiser)
         if isinstance(evaluations, bool) or not isinstance(evaluations, int) or evaluations < 1:
             raise ValueError(f"the budget must be at least 1 evaluation, got {evaluations!r}")
         if isinstance(readers, bool) or not isinstance(readers, int) or readers < 1:
@@ -383,6 +406,7 @@ class DesignSearch:
         from ebraille_sim.tools.benchmark import SUITE_VERSION
         return {"journal": "ebraille-sim design search", "suite": self.suite.name, "suite_version": SUITE_VERSION,
                 "statistic": self.statistic, "readers": self.readers, "seed": self.seed,
+                "optimiser": self.optimiser,
                 "space": self.space.describe()}
 
     def check_journal(self) -> list:
@@ -500,7 +524,9 @@ class DesignSearch:
         d = self.space.dimensions
         size = max(5, min(16, d + 4, self.evaluations))
         pop, n_starts = self._population(size)
-        if self.evaluations < 5 or self.evaluations <= size:
+        if self.optimiser == "optuna":
+            self._run_optuna(pop[:n_starts])
+        elif self.evaluations < 5 or self.evaluations <= size:
             self._evaluate([self.space.decode(x) for x in pop[:self.evaluations]])
         else:
             generations = self.evaluations // size - 1
@@ -519,6 +545,18 @@ class DesignSearch:
                 xs = [np.clip(self.space.encode(*best) + rng.normal(0.0, 0.05, d), 0.0, 1.0) for _ in range(rest)]
                 self._evaluate([self.space.decode(x) for x in xs])
         return self._result(n_starts)
+
+    def _run_optuna(self, starts) -> None:
+        import optuna
+        optuna.logging.set_verbosity(optuna.logging.WARNING)
+        study = optuna.create_study(direction="maximize", sampler=optuna.samplers.TPESampler(seed=self.seed))
+        names = [f"x{i}" for i in range(self.space.dimensions)]
+        for x in starts:
+            study.enqueue_trial(dict(zip(names, (float(v) for v in x))))
+        for _ in range(self.evaluations):
+            trial = study.ask()
+            x = [trial.suggest_float(n, 0.0, 1.0) for n in names]
+            study.tell(trial, self._evaluate([self.space.decode(x)])[0])
 
     def _best_point(self):
         h = max(self.history, key=lambda e: e["value"])
