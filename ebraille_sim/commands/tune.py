@@ -518,5 +518,9 @@ def _search_main(args) -> int:
             f"readers per scenario drawn from seed {args.seed}")
     con.say(f"  held-out score {held:.2f} on the benchmark's {val.readers} readers ({suite.name} suite)" +
             (f"; {ref} {ref_score:.2f}, ratio {held / ref_score:.3f}" if ref_score else ""))
+    same = [h["start"] for h in res.starts if (h["controller"], h["firmware"], h["gains"]) ==
+            (best.controller, best.firmware, best.gains)]
+    if same:
+        con.say(f"  no candidate beat the start point {same[0]} on the training readers: the design is that start")
     con.say(f"wrote {out / 'design.toml'}, report.md, report.json, {ds.JOURNAL}")
     return 0

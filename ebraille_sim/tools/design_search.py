@@ -503,8 +503,10 @@ class DesignSearch:
 
         from controllers.designs import get_design
         starts = []
+        self.start_labels = []
         for k, arm in enumerate(self.space.arms):
             for s in arm.starts:
+                self.start_labels.append(s if isinstance(s, str) else f"{arm.controller} at the given gains")
                 gains = dict(_defaults(arm), **(get_design(s).gains if isinstance(s, str) else dict(s)))
                 if "refresh_hold_damping_v_per_v" in {p.name for p in arm.params} and \
                         "refresh_hold_damping_v_per_v" not in gains:
@@ -566,9 +568,9 @@ class DesignSearch:
     def _result(self, n_starts: int) -> SearchResult:
         i = max(range(len(self.history)), key=lambda j: (self.history[j]["value"], -j))
         h = self.history[i]
+        starts = [dict(e, start=label) for e, label in zip(self.history[:n_starts], self.start_labels)]
         return SearchResult(Candidate(h["controller"], h["firmware"], h["gains"]), h["value"], h["score"],
-                            len(self.history), len(self.history) - self.ran, list(self.history),
-                            self.history[:n_starts])
+                            len(self.history), len(self.history) - self.ran, list(self.history), starts)
 
 
 def _defaults(arm: Arm) -> dict:
@@ -631,12 +633,19 @@ def report_markdown(rep: dict, held_out_tables: str) -> str:
                 f"({ref['source']}); the found design reaches {100 * rep['ratio_to_reference']:.1f} % of it."]
     out += ["", f"## Design: `{d['controller']}` on `{d['firmware']}`", "", "| gain | value |", "|---|---:|"]
     out += [f"| {k} | {v:g} |" for k, v in d["gains"].items() if isinstance(v, (int, float))]
-    out += ["", "## Start points (training)", "", "| controller | firmware | training score |", "|---|---|---:|"]
-    out += [f"| {h['controller']} | {h['firmware']} | {h['score']:.2f} |" for h in rep["starts"]]
+    same = [h["start"] for h in rep["starts"] if (h["controller"], h["firmware"], h["gains"]) ==
+            (d["controller"], d["firmware"], d["gains"])]
+    if same:
+        out += ["", f"No candidate beat the start point `{same[0]}` on the training readers: the design is that start."]
+    out += ["", "## Start points (training)", "", "| start | controller | firmware | training score |",
+            "|---|---|---|---:|"]
+    out += [f"| {h['start']} | {h['controller']} | {h['firmware']} | {h['score']:.2f} |" for h in rep["starts"]]
     top = sorted(rep["history"], key=lambda h: -h["value"])[:10]
-    out += ["", "## Best candidates (training)", "", f"| controller | firmware | {rep['statistic']} | score |",
-            "|---|---|---:|---:|"]
-    out += [f"| {h['controller']} | {h['firmware']} | {h['value']:.2f} | {h['score']:.2f} |" for h in top]
+    head = "score" if rep["statistic"] == "score" else f"{rep['statistic']} | score"
+    out += ["", "## Best candidates (training)", "", f"| controller | firmware | {head} |",
+            "|---|---|---:|" + ("" if rep["statistic"] == "score" else "---:|")]
+    out += [f"| {h['controller']} | {h['firmware']} | " + (f"{h['score']:.2f} |" if rep["statistic"] == "score" else
+                                                            f"{h['value']:.2f} | {h['score']:.2f} |") for h in top]
     out += ["", "## Held-out benchmark", "", held_out_tables]
     return "\n".join(out) + "\n"
 
