@@ -278,14 +278,16 @@ def main(args) -> int:
         (["duration"] if search and args.duration is not None else [])
     if given:
         opt = "-j" if given[0] == "jobs" else "--" + given[0].replace("_", "-")
-        raise UserError(f"{opt} is an option of the {'robust tuning (give a SCENARIO)' if search else 'design search (--search)'}, "
-                        f"not of the {'design search' if search else 'robust tuning'}")
+        mode = "robust tuning (give a SCENARIO)" if search else "design search (--search)"
+        this = "design search" if search else "robust tuning"
+        raise UserError(f"{opt} is an option of the {mode}, not of the {this}")
     for k, v in own.items():
         if getattr(args, k) is None:
             setattr(args, k, v)
     if search:
         if args.scenario is not None:
-            raise UserError(f"--search takes no scenario (the suite's scenarios are the objective), got {args.scenario!r}")
+            raise UserError(f"--search takes no scenario (the suite's scenarios are the objective), "
+                            f"got {args.scenario!r}")
         return _search_main(args)
     if args.scenario is None:
         raise UserError("give a scenario (or --search for the design search)")

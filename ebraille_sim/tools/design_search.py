@@ -65,7 +65,8 @@ __all__ = ["Param", "Arm", "SearchSpace", "STATISTICS", "DIGITS", "check_statist
 DIGITS = 4
 """Significant digits of a searched gain."""
 
-OPTIMISERS = {"de": "SciPy's differential evolution", "optuna": "Optuna's TPE sampler (pip install 'ebraille-sim[search]')"}
+OPTIMISERS = {"de": "SciPy's differential evolution",
+              "optuna": "Optuna's TPE sampler (pip install 'ebraille-sim[search]')"}
 """The optimisers of the search by name."""
 
 JOURNAL = "journal.jsonl"
@@ -418,8 +419,8 @@ class DesignSearch:
             raise ValueError(f"{self.journal} is not a regular file")
         lines = self.journal.read_text(encoding="utf-8").splitlines()
         if not lines or lines[0] != json.dumps(self.header(), sort_keys=True):
-            raise ValueError(f"{self.journal} is the journal of another search (suite, statistic, readers, seed "
-                             "or space differ); give another --out or remove it")
+            raise ValueError(f"{self.journal} is the journal of another search (suite, statistic, readers, seed, "
+                             "optimiser or space differ); give another --out or remove it")
         out = []
         for line in lines[1:]:
             try:
@@ -562,7 +563,8 @@ class DesignSearch:
 
     def _best_point(self):
         h = max(self.history, key=lambda e: e["value"])
-        k = next(i for i, a in enumerate(self.space.arms) if (a.controller, a.firmware) == (h["controller"], h["firmware"]))
+        k = next(i for i, a in enumerate(self.space.arms)
+                 if (a.controller, a.firmware) == (h["controller"], h["firmware"]))
         return k, h["gains"]
 
     def _result(self, n_starts: int) -> SearchResult:
