@@ -106,6 +106,7 @@ def test_tune_search_writes_a_design_that_run_and_benchmark_take(tmp_path, capsy
     d = get_design(out / "design.toml")
     assert (d.name, d.controller, d.firmware, d.benchmark["suite"]) == ("mine", "pid_dob", "fast_1khz", "quick")
     assert d.benchmark["score"] == doc["held_out_score"]
+    assert "| mine |" in (out / "report.md").read_text()           # the leaderboard names the design
     # the held-out score is the benchmark's own number for the file
     again = bm.summarise(bm.run_benchmark([str(out / "design.toml")], "quick", bounds=False))
     assert again[str(out / "design.toml")]["score"] == d.benchmark["score"]
@@ -127,6 +128,7 @@ def test_tune_search_writes_a_design_that_run_and_benchmark_take(tmp_path, capsy
     (["--firmware", "no_such_preset"], "no_such_preset"),
     (["--family", "pid"], "--family"),
     (["steady_90wpm"], "steady_90wpm"),
+    (["--name", "dob_100hz"], "dob_100hz"),
 ])
 def test_bad_search_input_is_one_line_and_writes_nothing(tmp_path, capsys, extra, named):
     out = tmp_path / "o"

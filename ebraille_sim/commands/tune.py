@@ -403,6 +403,7 @@ def _robust_main(args) -> int:
 
 
 def _search_main(args) -> int:
+    import dataclasses
     import json
     import pathlib
     import time
@@ -435,7 +436,6 @@ def _search_main(args) -> int:
     except (ValueError, FileNotFoundError) as exc:
         raise UserError(f"--search: {exc}" if args.firmware is None else f"--firmware: {exc}") from None
     if args.no_starts:
-        import dataclasses
         space = dataclasses.replace(space, arms=tuple(dataclasses.replace(a, starts=()) for a in space.arms))
     firmwares = sorted({a.firmware or "" for a in space.arms})
     name = args.name if args.name is not None else "search_" + "_".join(f or "scenario" for f in firmwares)
@@ -443,6 +443,9 @@ def _search_main(args) -> int:
         check_name("--name", name)
     except ValueError as exc:
         raise UserError(str(exc)) from None
+    from controllers.designs import designs
+    if name in designs():
+        raise UserError(f"--name {name!r} is a shipped design's name; give another")
     out = check_out_dir(args.out if args.out is not None else pathlib.Path("runs") / "tune-search",
                         owned=ds.SEARCH_FILES)
     journal = out / ds.JOURNAL
@@ -480,8 +483,12 @@ def _search_main(args) -> int:
             finally:
                 bar.close()
             t_val = time.perf_counter() - t1
+            shown = {str(draft): name}                  # the leaderboard names the design, not the staged file
+            val = dataclasses.replace(val, controllers=[shown.get(c, c) for c in val.controllers],
+                                      rows=[dict(r, controller=shown.get(r["controller"], r["controller"]))
+                                            for r in val.rows])
             summary = bm.summarise(val)
-            held = summary[str(draft)]["score"]
+            held = summary[name]["score"]
             ref_score = (fw.score if recorded else summary[ref]["score"]) if ref is not None else None
             rel = f"ebraille-sim benchmark {out / 'design.toml'}" + ("" if suite.name == "standard" else
                                                                      f" --suite {suite.name}")
