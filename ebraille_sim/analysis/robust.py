@@ -84,7 +84,7 @@ from controllers.pid import DEFAULT_PID, PID, PIDConfig
 __all__ = ["FAMILIES", "TuneScenario", "tuning_population", "standard_scenarios", "unramped",
            "linearisation_points", "population_ms", "evaluate", "evaluate_scenarios", "tracking_cost",
            "scenario_cost", "multi_cost", "summarise", "cvar", "robust_tune", "TuneResult", "scenario_setpoints",
-           "family_config", "family_controller", "family_ms_controller", "gains_document", "gains_toml",
+           "family_config", "family_controller", "family_ms_controller", "gains_document", "gains_toml", "toml_value",
            "friction_band_v", "shipped_config", "KD_OFFSET"]
 
 KD_OFFSET = 1e-3
@@ -363,7 +363,12 @@ def gains_document(cfg, family: str) -> dict:
     return {"controller": family, "gains": g}
 
 
-def _toml_value(v) -> str:
+def toml_value(v) -> str:
+    """A TOML literal of a bool, string, whole number or float (infinities as ``inf``).
+
+    >>> toml_value(True), toml_value("a\"b"), toml_value(3), toml_value(float("inf")), toml_value(0.5)
+    ('true', '"a\\"b"', '3', 'inf', '0.5')
+    """
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, str):
@@ -392,7 +397,7 @@ def gains_toml(doc: dict, comment: str = "") -> str:
     """
     lines = [f"# {line}" for line in comment.splitlines()]
     lines += [f'controller = "{doc["controller"]}"', "", "[gains]"]
-    lines += [f"{k} = {_toml_value(v)}" for k, v in doc["gains"].items()]
+    lines += [f"{k} = {toml_value(v)}" for k, v in doc["gains"].items()]
     return "\n".join(lines) + "\n"
 
 

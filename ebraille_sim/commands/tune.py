@@ -15,14 +15,22 @@ Writes into ``--out`` (default ``runs/tune-SCENARIO``):
   and gain margins and Ms of the tuned loop on the nominal reader at each setpoint;
 * ``bode.png``, ``nyquist.png`` (tuned loop on the nominal reader at each setpoint) and
   ``population.png`` (worst-case in-band fraction per scenario for each controller).
+
+``ebraille-sim tune --search [SPACE]``: the design search of
+:mod:`ebraille_sim.tools.design_search` (controller family, gains and firmware preset scored
+by the benchmark on training readers, then benchmarked on the held-out readers).  Writes into
+``--out`` (default ``runs/tune-search``): ``design.toml`` (a design file that ``run
+--controller`` and ``benchmark`` take, with the held-out score and the command that
+reproduces it), ``report.md``, ``report.json`` and ``journal.jsonl`` (every evaluation: a
+rerun into the same folder continues the search).
 """
 from __future__ import annotations
 
 import math
 
 NAME = "tune"
-HELP = ("tune PID gains over a population of readers and FSR units and several scenarios "
-        "(Ms <= 1.6 by default); keep the shipped controller if it does better; write gains, report, figures")
+HELP = ("tune PID gains over a population of readers and several scenarios (Ms <= 1.6 by default), or "
+        "with --search find a design (family, gains, firmware) on the benchmark's score; write gains or a design")
 
 
 MAX_POPULATION = 1000
@@ -31,37 +39,66 @@ MAX_POPULATION = 1000
 MAX_EVALUATIONS = 10_000
 """Most cost evaluations of ``--evaluations``."""
 
+ROBUST_DEFAULTS = {"population": 8, "family": "pid_scheduled", "scenarios": "standard", "ms_max": 1.6, "ms_gain": 1.0}
+SEARCH_DEFAULTS = {"suite": "standard", "statistic": "score", "readers": 4, "jobs": 1, "optimiser": "de"}
+
 TUNE_OWNED = ("gains.toml", "gains_tuned.toml", "gains_hand.toml", "report.md", "report.json", "bode.png",
               "nyquist.png", "population.png")
 """What ``tune`` writes into its folder."""
 
 
 def add_arguments(p):
-    from ebraille_sim.commands import number, seed, whole
-    p.add_argument("scenario", help="scenario file or the name of a shipped scenario (see 'list')")
-    p.add_argument("--population", type=whole(0, MAX_POPULATION), default=8, metavar="N",
+    from ebraille_sim.commands import MAX_JOBS, number, seed, whole
+    p.add_argument("scenario", nargs="?", default=None,
+                   help="scenario file or the name of a shipped scenario (see 'list'); not with --search")
+    p.add_argument("--population", type=whole(0, MAX_POPULATION), default=None, metavar="N",
                    help=f"random devices drawn besides the 5 presets (default 8, at most {MAX_POPULATION})")
-    p.add_argument("--out", default=None, metavar="DIR", help="output folder (default runs/tune-SCENARIO)")
-    p.add_argument("--seed", type=seed, default=0, help="population seed, in [0, 2**63) (default 0)")
-    p.add_argument("--family", default="pid_scheduled", choices=["pid", "pid_scheduled", "pid_feedforward"],
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="output folder (default runs/tune-SCENARIO, with --search runs/tune-search)")
+    p.add_argument("--seed", type=seed, default=0,
+                   help="population seed, in [0, 2**63) (default 0); with --search also the optimiser's and the "
+                        "training readers' seed (not the benchmark's 2026)")
+    p.add_argument("--family", default=None, choices=["pid", "pid_scheduled", "pid_feedforward"],
                    help="fixed PID gains, gains scheduled on force with the reference map (default), "
                         "or that plus the friction-band feedforward")
-    p.add_argument("--scenarios", default="standard", metavar="LIST",
+    p.add_argument("--scenarios", default=None, metavar="LIST",
                    help="'standard' (default: SCENARIO plus steady_90wpm shortened, contact_onset, "
                         "setpoint_steps, setpoint_steps without its ramp and strap_slip shortened), "
                         "'single' (SCENARIO alone), "
                         "or a comma-separated list of scenarios added to SCENARIO "
                         "(NAME_unramped takes NAME's steps at once); every scenario runs with "
                         "SCENARIO's [estimator] settings")
-    p.add_argument("--evaluations", type=whole(4, MAX_EVALUATIONS), default=30, metavar="N",
-                   help=f"cost evaluations, in [4, {MAX_EVALUATIONS}] (default 30)")
+    p.add_argument("--evaluations", type=whole(1, MAX_EVALUATIONS), default=None, metavar="N",
+                   help=f"cost evaluations, in [4, {MAX_EVALUATIONS}] (default 30); with --search candidates "
+                        f"evaluated, start points included, in [1, {MAX_EVALUATIONS}] (default 60)")
     p.add_argument("--duration", type=number(0, None, lo_open=True), default=None, metavar="S",
                    help="override the duration of SCENARIO, s (steady scenarios default to 12 s in 'standard')")
-    p.add_argument("--ms-max", type=number(1, None, lo_open=True, allow_inf=True), default=1.6,
+    p.add_argument("--ms-max", type=number(1, None, lo_open=True, allow_inf=True), default=None,
                    help="bound on the sensitivity peak at every device and setpoint (default 1.6; 'inf' for none)")
-    p.add_argument("--ms-gain", type=number(0, 100, lo_open=True), default=1.0,
+    p.add_argument("--ms-gain", type=number(0, 100, lo_open=True), default=None,
                    help="describing-function factor in (0, 100] applied to the loop in the Ms check (default 1: the "
                         "sliding linearisation; e.g. 0.5 for the friction-band relaxation of docs/tuning.md)")
+    g = p.add_argument_group("design search (--search)")
+    g.add_argument("--search", nargs="?", const="default", default=None, metavar="SPACE",
+                   help="search designs instead: over the default space (every firmware preset, pid_dob from the "
+                        "shipped designs and pid_scheduled) or the arms of the search-space file SPACE")
+    g.add_argument("--suite", default=None, metavar="NAME",
+                   help="benchmark suite of the objective and of the held-out check: quick, standard (default)")
+    g.add_argument("--statistic", default=None, metavar="NAME",
+                   help="objective over the training readers: score (default, the benchmark's), cvar10_in_band, "
+                        "cvar10_char_in_band, median_in_band, median_char_in_band")
+    g.add_argument("--readers", type=whole(1, MAX_POPULATION), default=None, metavar="N",
+                   help=f"training readers per scenario, drawn from --seed (default 4, at most {MAX_POPULATION})")
+    g.add_argument("--optimiser", default=None, metavar="NAME",
+                   help="de (default: SciPy's differential evolution) or optuna (Optuna's TPE sampler, the optional "
+                        "extra 'search')")
+    g.add_argument("--firmware", action="append", default=None, metavar="PRESET",
+                   help="search the default space on this firmware preset only (repeatable)")
+    g.add_argument("--no-starts", action="store_true",
+                   help="start from a Latin hypercube alone, not from the shipped designs")
+    g.add_argument("--name", default=None, metavar="NAME", help="the design's name (default search_FIRMWARE)")
+    g.add_argument("-j", "--jobs", type=whole(1, MAX_JOBS), default=None, metavar="N",
+                   help=f"local worker processes, at most {MAX_JOBS} (default 1); the design does not depend on it")
 
 
 def _fmt_ms(x: float) -> str:
@@ -212,6 +249,34 @@ def _scenario_list(arg: str, spec, duration):
 
 
 def main(args) -> int:
+    from ebraille_sim.commands import UserError
+    search = args.search is not None
+    other, own = (ROBUST_DEFAULTS, SEARCH_DEFAULTS) if search else (SEARCH_DEFAULTS, ROBUST_DEFAULTS)
+    given = [k for k in other if getattr(args, k) is not None] + \
+        [k for k in ("firmware", "name") if not search and getattr(args, k) is not None] + \
+        (["no_starts"] if not search and args.no_starts else []) + \
+        (["duration"] if search and args.duration is not None else [])
+    if given:
+        opt = "-j" if given[0] == "jobs" else "--" + given[0].replace("_", "-")
+        mode = "robust tuning (give a SCENARIO)" if search else "design search (--search)"
+        this = "design search" if search else "robust tuning"
+        raise UserError(f"{opt} is an option of the {mode}, not of the {this}")
+    for k, v in own.items():
+        if getattr(args, k) is None:
+            setattr(args, k, v)
+    if search:
+        if args.scenario is not None:
+            raise UserError(f"--search takes no scenario (the suite's scenarios are the objective), "
+                            f"got {args.scenario!r}")
+        return _search_main(args)
+    if args.scenario is None:
+        raise UserError("give a scenario (or --search for the design search)")
+    if args.evaluations is None:
+        args.evaluations = 30
+    return _robust_main(args)
+
+
+def _robust_main(args) -> int:
     import json
     import pathlib
 
@@ -316,3 +381,136 @@ def main(args) -> int:
                   f"{_fmt_ms(rep['hand']['ms_max'])}: written as gains_hand.toml (see report.md)")
         con.say(f"wrote {out / 'gains.toml'}, " + ", ".join(files[1:]))
         return 0
+
+
+def _search_main(args) -> int:
+    import dataclasses
+    import json
+    import pathlib
+    import time
+
+    from controllers.designs import get_design
+    from ebraille_sim.commands import FrameProgress, UserError, check_out_dir, claim_out_dir, console
+    from ebraille_sim.estimation.presets import check_name, get_firmware
+    from ebraille_sim.tools import benchmark as bm
+    from ebraille_sim.tools import design_search as ds
+
+    con = console(args)
+    evaluations = 60 if args.evaluations is None else args.evaluations
+    for opt, check in (("--suite", bm.get_suite), ("--statistic", ds.check_statistic),
+                       ("--optimiser", ds.check_optimiser)):
+        try:
+            check(getattr(args, opt[2:]))
+        except ValueError as exc:
+            raise UserError(f"{opt}: {exc}") from None
+    suite = bm.get_suite(args.suite)
+    if args.seed == bm.POPULATION_SEED:
+        raise UserError(f"--seed {args.seed} is the benchmark's reader seed: the held-out readers would be "
+                        "trained on; give another seed")
+    try:
+        if args.search == "default":
+            space = ds.default_space(args.firmware)
+        else:
+            if args.firmware is not None:
+                raise UserError("--firmware chooses among the default space's presets; a SPACE file names its own")
+            space = ds.load_space(args.search)
+    except (ValueError, FileNotFoundError) as exc:
+        raise UserError(f"--search: {exc}" if args.firmware is None else f"--firmware: {exc}") from None
+    if args.no_starts:
+        space = dataclasses.replace(space, arms=tuple(dataclasses.replace(a, starts=()) for a in space.arms))
+    firmwares = sorted({a.firmware or "" for a in space.arms})
+    name = args.name if args.name is not None else "search_" + "_".join(f or "scenario" for f in firmwares)
+    try:
+        check_name("--name", name)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    from controllers.designs import designs
+    if name in designs():
+        raise UserError(f"--name {name!r} is a shipped design's name; give another")
+    out = check_out_dir(args.out if args.out is not None else pathlib.Path("runs") / "tune-search",
+                        owned=ds.SEARCH_FILES)
+    journal = out / ds.JOURNAL
+    search = ds.DesignSearch(space, suite=suite.name, statistic=args.statistic, readers=args.readers,
+                             seed=args.seed, evaluations=evaluations, jobs=args.jobs, journal=journal,
+                             optimiser=args.optimiser)
+    if journal.exists():
+        try:
+            search.check_journal()
+        except ValueError as exc:
+            raise UserError(str(exc)) from None
+    out.mkdir(parents=True, exist_ok=True)          # the journal outlives an interrupted run
+    with claim_out_dir(out, ds.SEARCH_FILES) as target:
+        bar = FrameProgress("tune --search: evaluations", enabled=con.progress and not con.json)
+        search.progress = bar
+        t0 = time.perf_counter()
+        try:
+            res = search.run()
+        finally:
+            bar.close()
+        t_search = time.perf_counter() - t0
+        best = res.best
+        fw = get_firmware(best.firmware) if best.firmware is not None else None
+        ref = fw.benchmark.get("design") if fw is not None else None
+        recorded = (fw is not None and fw.benchmark.get("suite") == suite.name
+                    and fw.benchmark.get("readers") == suite.readers and fw.score is not None)
+        with target.staged() as tmp:
+            draft = tmp / "design.toml"
+            draft.write_text(ds.design_text(name, "", best, {}))
+            bar = FrameProgress("tune --search: held-out episodes", enabled=con.progress and not con.json)
+            t1 = time.perf_counter()
+            try:
+                names = [str(draft)] + ([ref] if ref is not None and not recorded else [])
+                val = bm.run_benchmark(names, suite, jobs=args.jobs, bounds=False, progress=bar)
+            finally:
+                bar.close()
+            t_val = time.perf_counter() - t1
+            shown = {str(draft): name}                  # the leaderboard names the design, not the staged file
+            val = dataclasses.replace(val, controllers=[shown.get(c, c) for c in val.controllers],
+                                      rows=[dict(r, controller=shown.get(r["controller"], r["controller"]))
+                                            for r in val.rows])
+            summary = bm.summarise(val)
+            held = summary[name]["score"]
+            ref_score = (fw.score if recorded else summary[ref]["score"]) if ref is not None else None
+            rel = f"ebraille-sim benchmark {out / 'design.toml'}" + ("" if suite.name == "standard" else
+                                                                     f" --suite {suite.name}")
+            desc = (f"{best.controller} on {best.firmware or 'the scenario firmware'} found by tune --search "
+                    f"(seed {args.seed}, {res.evaluations} evaluations, {args.readers} training readers per "
+                    f"scenario, statistic {args.statistic}): training score {res.train_score:.2f}, held-out "
+                    f"score {held:.2f}" + (f" ({100 * held / ref_score:.1f} % of {ref}, {ref_score:.2f})"
+                                           if ref_score else "") + ".")
+            draft.write_text(ds.design_text(name, desc, best, {"score": held, "suite": suite.name,
+                                                               "readers": val.readers, "command": rel}))
+            rep = {"name": name, "design": {"controller": best.controller, "firmware": best.firmware,
+                                            "gains": best.gains},
+                   "suite": suite.name, "statistic": args.statistic, "optimiser": args.optimiser,
+                   "training_readers": args.readers,
+                   "seed": args.seed, "evaluations": res.evaluations, "from_journal": res.cached,
+                   "training_statistic": res.train_value, "training_score": res.train_score,
+                   "held_out_score": held, "held_out_readers": val.readers,
+                   "reference": {"design": ref, "score": ref_score,
+                                 "source": "recorded in the firmware preset" if recorded else "run with the check"}
+                   if ref is not None else None,
+                   "ratio_to_reference": held / ref_score if ref_score else None,
+                   "wall_s": {"search": round(t_search, 1), "held_out": round(t_val, 1)},
+                   "space": space.describe(), "starts": res.starts, "history": res.history,
+                   "held_out": {k: v for k, v in bm.results_document(val, summary).items() if k != "rows"}}
+            (tmp / "report.json").write_text(json.dumps(rep, indent=2, default=float) + "\n")
+            (tmp / "report.md").write_text(ds.report_markdown(rep, bm.format_markdown(val, summary)))
+            (tmp / ds.JOURNAL).write_bytes(journal.read_bytes())
+    get_design(out / "design.toml")
+    con.result({k: rep[k] for k in ("name", "design", "suite", "statistic", "optimiser", "training_readers", "seed",
+                                    "evaluations", "from_journal", "training_statistic", "training_score",
+                                    "held_out_score", "held_out_readers", "reference", "ratio_to_reference",
+                                    "wall_s")} | {"out": str(out), "files": [str(out / f) for f in ds.SEARCH_FILES]})
+    con.say(f"searched {res.evaluations} designs ({res.cached} from the journal) in {t_search:.0f} s: "
+            f"{best.controller} on {best.firmware}")
+    con.say(f"  training {args.statistic} {res.train_value:.2f} (score {res.train_score:.2f}) on {args.readers} "
+            f"readers per scenario drawn from seed {args.seed}")
+    con.say(f"  held-out score {held:.2f} on the benchmark's {val.readers} readers ({suite.name} suite)" +
+            (f"; {ref} {ref_score:.2f}, ratio {held / ref_score:.3f}" if ref_score else ""))
+    same = [h["start"] for h in res.starts if (h["controller"], h["firmware"], h["gains"]) ==
+            (best.controller, best.firmware, best.gains)]
+    if same:
+        con.say(f"  no candidate beat the start point {same[0]} on the training readers: the design is that start")
+    con.say(f"wrote {out / 'design.toml'}, report.md, report.json, {ds.JOURNAL}")
+    return 0
