@@ -366,8 +366,8 @@ def gains_document(cfg, family: str) -> dict:
 def toml_value(v) -> str:
     """A TOML literal of a bool, string, whole number or float (infinities as ``inf``).
 
-    >>> toml_value(True), toml_value("a\"b"), toml_value(3), toml_value(float("inf")), toml_value(0.5)
-    ('true', '"a\\"b"', '3', 'inf', '0.5')
+    >>> toml_value(True), toml_value("pid"), toml_value(3), toml_value(float("inf")), toml_value(0.5)
+    ('true', '"pid"', '3', 'inf', '0.5')
     """
     if isinstance(v, bool):
         return "true" if v else "false"
