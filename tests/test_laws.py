@@ -173,6 +173,45 @@ def test_pulp_elastic_force_at_the_paper_derived_compressions():
     assert compression_m(2.0e-3, 0.6e-3) == pytest.approx(1.4e-3, rel=1e-12)
 
 
+def test_ramp_compression_follows_the_qlv_law_between_its_relaxed_and_instant_limits():
+    from ebraille_sim.physics.fingertip import ramp_compression_at_force_m
+    f = NOMINAL
+    # a ramp far slower than the 1.4 s term meets the relaxed law, a near-instant one the elastic law
+    assert ramp_compression_at_force_m(f, 1.0, 1e-8, 2e-6) == pytest.approx(f.compression_at_m(1.0, relaxed=True),
+                                                                           rel=1e-4)
+    assert ramp_compression_at_force_m(f, 1.0, 100.0, 2e-6) == pytest.approx(f.compression_at_m(1.0), rel=1e-3)
+    # between them, the shipped nominal reader on flat-plate ramps: 1 N at 2.61 mm at 1 mm/s,
+    # at 2.15 mm at 32 mm/s; 4 N at 3.38 mm at 16 mm/s
+    assert ramp_compression_at_force_m(f, 1.0, 1e-3, 2e-6) * 1e3 == pytest.approx(2.606, rel=0.005)
+    assert ramp_compression_at_force_m(f, 1.0, 32e-3, 2e-6) * 1e3 == pytest.approx(2.148, rel=0.005)
+    assert ramp_compression_at_force_m(f, 4.0, 16e-3, 2e-6) * 1e3 == pytest.approx(3.380, rel=0.005)
+    # an elastic pulp reaches the force at the instantaneous law's compression at any speed
+    import dataclasses
+    elastic = dataclasses.replace(f, relax_weight_inf=1.0, relax_weight_1=0.0, relax_weight_2=0.0, relax_weight_3=0.0)
+    for v in (1e-3, 0.1):
+        assert ramp_compression_at_force_m(elastic, 1.0, v, 1e-7) == pytest.approx(f.compression_at_m(1.0), rel=1e-4)
+    with pytest.raises(ValueError, match="needs force_n"):
+        ramp_compression_at_force_m(f, 1.0, 0.0)
+
+
+def test_dynamic_stiffness_is_the_tangent_stiffness_times_the_relaxation_modulus():
+    from ebraille_sim.physics.fingertip import complex_relaxation, dynamic_stiffness_n_per_m
+    f = NOMINAL
+    k_inst = f.stiffness_b_n_per_m + f.exponent_m_per_m * 1.0 / f.relax_weight_inf
+    assert dynamic_stiffness_n_per_m(f, 1.0, 0.0) == pytest.approx(f.relax_weight_inf * k_inst, rel=1e-12)
+    assert dynamic_stiffness_n_per_m(f, 1.0, 1e9) == pytest.approx(k_inst, rel=1e-6)
+    w = 2 * math.pi * 6.5
+    g = f.relax_weight_inf + sum(c * 1j * w * t / (1 + 1j * w * t) for c, t in (
+        (f.relax_weight_1, 0.004), (f.relax_weight_2, 0.070), (f.relax_weight_3, 1.4)))
+    assert complex_relaxation(f, 6.5) == pytest.approx(g, rel=1e-12)
+    assert complex_relaxation(f, 0.0) == pytest.approx(f.relax_weight_inf, rel=1e-12)
+    assert complex_relaxation(f, 1e9) == pytest.approx(1.0, rel=1e-6)
+    # the shipped nominal reader at 1 N: 2.55 N/mm at the default loop's 6.5 Hz crossover, a
+    # third of the instantaneous 8.57 N/mm, twice the relaxed 1.29 N/mm
+    assert dynamic_stiffness_n_per_m(f, 1.0, 6.5) == pytest.approx(abs(g) * k_inst, rel=1e-12)
+    assert dynamic_stiffness_n_per_m(f, 1.0, 6.5) == pytest.approx(2545.0, rel=2e-3)
+
+
 def test_qlv_step_response_relaxes_to_c0_fe_with_the_three_time_constants():
     f = NOMINAL
     taus = (f.relax_tau_1_s, f.relax_tau_2_s, f.relax_tau_3_s)

@@ -11,6 +11,13 @@ function ``G(t) = c0 + sum_i c_i exp(-t/tau_i)`` (tau = 4 ms, 70 ms, 1.4 s)::
     F(t) = c0 Fe(t) + sum_i h_i(t),     dh_i/dt = -h_i/tau_i + c_i dFe/dt
 
 (:func:`prony_rate_n_per_s`, the form the loop analysis linearises).
+
+Small-signal stiffness about a relaxed contact force ``F`` (Fe = F/c0, all h_i = 0)::
+
+    K(jw) = (b + m F/c0) G*(jw),   G*(jw) = c0 + sum_i c_i jw tau_i / (1 + jw tau_i)
+
+(:func:`dynamic_stiffness_n_per_m`): ``c0 (b + m F/c0)`` slowly, ``b + m F/c0`` for an
+instant change; a loop sees ``|K|`` at its crossover.
 Each Prony state is advanced exactly for ``Fe`` varying linearly over a step ``h``::
 
     h_i <- a_i h_i + c_i beta_i (Fe_new - Fe_old),  a_i = exp(-h/tau_i),
@@ -143,3 +150,60 @@ def tap_dissipated_fraction(finger, duration_s: float = 0.1, peak_force_n: float
             w_out -= work
         fe_old, d_old, f_old = fe, d, f
     return 1.0 - w_out / w_in
+
+
+def complex_relaxation(finger, frequency_hz: float) -> complex:
+    """``G*(jw) = c0 + sum_i c_i jw tau_i / (1 + jw tau_i)`` at ``frequency_hz`` (-).
+
+    The Fourier form of the reduced relaxation function (:func:`relaxation_function`): the
+    force answer to a small sinusoidal change of the elastic force about a relaxed state.
+    ``G*(0) = c0``; ``G*(inf) = 1``.
+    """
+    jw = 2j * math.pi * float(frequency_hz)
+    g = complex(finger.relax_weight_inf)
+    for c, tau in ((finger.relax_weight_1, finger.relax_tau_1_s), (finger.relax_weight_2, finger.relax_tau_2_s),
+                   (finger.relax_weight_3, finger.relax_tau_3_s)):
+        g += c * jw * tau / (1.0 + jw * tau)
+    return g
+
+
+def dynamic_stiffness_n_per_m(finger, force_n: float, frequency_hz: float) -> float:
+    """Magnitude of the pulp's small-signal stiffness at a relaxed contact force, N/m.
+
+    ``|K(jw)| = (b + m F/c0) |G*(jw)|`` (module docstring): the stiffness a loop sees at
+    ``frequency_hz`` about a contact force ``force_n`` held long enough to relax (the elastic
+    force sits at ``F/c0``).  0 Hz gives the relaxed stiffness ``c0 (b + m F/c0)``; a high
+    frequency the instantaneous tangent stiffness ``b + m F/c0``.
+    """
+    k_inst = tangent_stiffness_n_per_m(relaxed_elastic_force_n(float(force_n), finger.relax_weight_inf),
+                                       finger.stiffness_b_n_per_m, finger.exponent_m_per_m)
+    return k_inst * abs(complex_relaxation(finger, frequency_hz))
+
+
+def ramp_compression_at_force_m(finger, force_n: float, speed_m_per_s: float, step_m: float = 1e-6) -> float:
+    """Compression (m) at which a constant-speed ramp from first contact reaches ``force_n``.
+
+    The board advances into an unloaded pulp at ``speed_m_per_s`` (a ramp-and-hold
+    indentation's ramp); the pulp is advanced with the loop's own laws
+    (:func:`elastic_force`, :func:`prony_step`, :func:`contact_force`) in steps of
+    ``step_m`` of compression, and the crossing is interpolated linearly between steps.
+    """
+    if not (force_n > 0.0 and speed_m_per_s > 0.0 and step_m > 0.0):
+        raise ValueError(f"ramp_compression_at_force_m needs force_n, speed_m_per_s and step_m > 0, "
+                         f"got {force_n}, {speed_m_per_s}, {step_m}")
+    b, m = finger.stiffness_b_n_per_m, finger.exponent_m_per_m
+    taus = (finger.relax_tau_1_s, finger.relax_tau_2_s, finger.relax_tau_3_s)
+    cs = (finger.relax_weight_1, finger.relax_weight_2, finger.relax_weight_3)
+    a, beta = prony_coefficients(step_m / speed_m_per_s, taus)
+    h = [0.0, 0.0, 0.0]
+    fe_old, f_old, d = 0.0, 0.0, 0.0
+    d_max = compression_at_force_m(relaxed_elastic_force_n(float(force_n), finger.relax_weight_inf), b, m)
+    while d <= d_max + step_m:
+        d += step_m
+        fe = elastic_force(d, b, m)
+        h = [prony_step(h[i], a[i], cs[i], beta[i], fe - fe_old) for i in range(3)]
+        f = contact_force(d, fe, finger.relax_weight_inf, h[0], h[1], h[2])
+        if f >= force_n:
+            return d - step_m * (f - force_n) / (f - f_old)
+        fe_old, f_old = fe, f
+    raise ValueError(f"a ramp at {speed_m_per_s} m/s does not reach {force_n} N")  # pragma: no cover
