@@ -29,9 +29,10 @@ def cvar_low(x, alpha=0.1):
     return float(np.mean(x[:k]))
 
 
-def shares(scenario: str, readers: int, seed: int, duration_s: float, controller=None) -> dict:
+def shares(scenario: str, readers: int, seed: int, duration_s: float, controller=None, base=None) -> dict:
+    """One row: readers drawn around ``base`` (default the scenario's device)."""
     spec = load_scenario(scenario)
-    devs = sample_devices(seed, readers, base=spec.device)
+    devs = sample_devices(seed, readers, base=spec.device if base is None else base)
     runs = [{"scenario": spec, "seed": spec.seed + 7 * i, "duration_s": duration_s, "device": d,
              **({} if controller is None else {"controller": controller})} for i, d in enumerate(devs)]
     res = run_batch(runs, keep_traces=False)
