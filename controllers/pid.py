@@ -84,13 +84,14 @@ from typing import Any
 import numpy as np
 
 from ebraille_sim.base.validation import check_finite, check_keys, check_number
-from ebraille_sim.physics.fingertip import tangent_stiffness_n_per_m
+from ebraille_sim.physics.fingertip import dynamic_stiffness_n_per_m, tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N, DeviceParams
 
 from controllers.base import check_update_args
 from controllers.compiled import KIND_PID, PS, core_reset, core_step, pid_params, pid_reset, pid_state, pid_step
 
-__all__ = ["DEFAULT_PID", "PID", "PIDConfig", "PIDCore", "pid_from_dict", "tracking_time_s"]
+__all__ = ["DEFAULT_PID", "PID", "PIDConfig", "PIDCore", "pid_from_dict", "tracking_time_s", "pulp_stiffness_n_per_m",
+           "LOOP_CROSSOVER_HZ"]
 
 _INF = math.inf
 
@@ -132,14 +133,33 @@ def tracking_gain_per_s(tt_s: float) -> float:
     return 0.0 if tt_s == _INF else (_INF if tt_s == 0.0 else 1.0 / tt_s)
 
 
-def pulp_stiffness_n_per_m(force_n: float, device: DeviceParams = DeviceParams()) -> float:
-    """Relaxed tangent stiffness of the pulp at contact force ``force_n``, N/m.
+LOOP_CROSSOVER_HZ = 6.5
+"""Gain crossover of the default PID on the nominal reader at 1 N, Hz ([D]
+:func:`ebraille_sim.analysis.margins.analyse_loop`: 40.7 rad/s): the time scale of the loop,
+at which :func:`pulp_stiffness_n_per_m` reads the pulp when asked for it."""
 
-    ``K(F) = b + m F / c0``: the tangent stiffness of the elastic law
+
+def pulp_stiffness_n_per_m(force_n: float, device: DeviceParams = DeviceParams(),
+                           frequency_hz: float | None = None) -> float:
+    """Stiffness of the pulp about a relaxed contact force ``force_n``, N/m.
+
+    Without ``frequency_hz``: ``K(F) = b + m F / c0``, the tangent stiffness of the elastic law
     (:func:`ebraille_sim.physics.fingertip.tangent_stiffness_n_per_m`) at the elastic force
-    ``F / c0`` on which a relaxed contact force ``F`` sits.
+    ``F / c0`` on which a relaxed contact force ``F`` sits: the stiffness of an instant change,
+    which the gain rules, the feedforward and the DOB's nominal model use.  With
+    ``frequency_hz``: ``|K(jw)| = K(F) |G*(jw)|``
+    (:func:`ebraille_sim.physics.fingertip.dynamic_stiffness_n_per_m`), e.g. at
+    :data:`LOOP_CROSSOVER_HZ` 2.5 kN/m at 1 N against the instantaneous 8.6 kN/m.  The ratio
+    of two forces' stiffnesses is the same at every frequency.
+
+    Examples
+    --------
+    >>> round(pulp_stiffness_n_per_m(1.0)), round(pulp_stiffness_n_per_m(1.0, frequency_hz=LOOP_CROSSOVER_HZ))
+    (8571, 2545)
     """
     f = device.finger
+    if frequency_hz is not None:
+        return dynamic_stiffness_n_per_m(f, force_n, frequency_hz)
     return tangent_stiffness_n_per_m(force_n / f.relax_weight_inf, f.stiffness_b_n_per_m, f.exponent_m_per_m)
 
 

@@ -202,6 +202,8 @@ def test_default_pid_margins_at_1n_and_0_6n():
     a1 = analyse_loop(DEFAULT_PID, force_n=1.0)
     assert a1.stable and a1.phase_margin_deg == pytest.approx(33.89, abs=0.05)
     assert a1.gain_crossover_hz == pytest.approx(6.431, abs=0.005)
+    from controllers.pid import LOOP_CROSSOVER_HZ       # the loop's time scale for the pulp
+    assert a1.gain_crossover_hz == pytest.approx(LOOP_CROSSOVER_HZ, abs=0.1)
     assert a1.gain_margin == pytest.approx(1.4601, rel=1e-3)
     a06 = analyse_loop(DEFAULT_PID, force_n=0.6)
     assert a06.stable and a06.gain_margin == pytest.approx(2.6867, rel=1e-3)
