@@ -133,9 +133,9 @@ def tracking_gain_per_s(tt_s: float) -> float:
     return 0.0 if tt_s == _INF else (_INF if tt_s == 0.0 else 1.0 / tt_s)
 
 
-LOOP_CROSSOVER_HZ = 6.5
+LOOP_CROSSOVER_HZ = 6.4
 """Gain crossover of the default PID on the nominal reader at 1 N, Hz ([D]
-:func:`ebraille_sim.analysis.margins.analyse_loop`: 40.7 rad/s): the time scale of the loop,
+:func:`ebraille_sim.analysis.margins.analyse_loop`: 6.43 Hz, 40.4 rad/s): the time scale of the loop,
 at which :func:`pulp_stiffness_n_per_m` reads the pulp when asked for it."""
 
 
@@ -155,7 +155,7 @@ def pulp_stiffness_n_per_m(force_n: float, device: DeviceParams = DeviceParams()
     Examples
     --------
     >>> round(pulp_stiffness_n_per_m(1.0)), round(pulp_stiffness_n_per_m(1.0, frequency_hz=LOOP_CROSSOVER_HZ))
-    (8571, 2545)
+    (8571, 2533)
     """
     f = device.finger
     if frequency_hz is not None:
