@@ -4,10 +4,10 @@ For each scenario, readers are drawn (``sample_devices``) around the scenario's 
 once as shipped and once with the candidate of ``fit.json`` in place of its reader's pulp (the
 fitted weights and, for the scenario's preset, the fitted b and m; the draw then spreads b, m
 and c0 as it does for every pulp).  Controllers, supervisor and firmware are the shipped
-ones.  The rows are those of ``studies/population/shares.py`` (share at >= 0.9 in band,
+ones (or ``--controller``).  The rows are those of ``studies/population/shares.py`` (share at >= 0.9 in band,
 median, CVaR10, the largest peak, the latched faults), printed and written to ``--out``.
 
-    python studies/pulp_fit/population.py --readers 200 --seed 777001 --duration 12 \\
+    python studies/pulp_fit/population.py --readers 200 --seed 777001 --duration 12 --controller pid \\
         --out studies/pulp_fit/population.json
 """
 from __future__ import annotations
@@ -51,6 +51,7 @@ def main(argv=None) -> int:
     ap.add_argument("--readers", type=int, default=200)
     ap.add_argument("--seed", type=int, default=777001)
     ap.add_argument("--duration", type=float, default=12.0)
+    ap.add_argument("--controller", default=None, help="controller or design (default: the scenario's)")
     ap.add_argument("--out", default=None, help="write both sets of rows as JSON here")
     a = ap.parse_args(argv)
     shares = _shares_module().shares
@@ -59,7 +60,7 @@ def main(argv=None) -> int:
     for sc in SCENARIOS:
         dev = load_scenario(sc).device
         for pulp, base in (("shipped", dev), ("candidate", candidate_device(dev, fit))):
-            r = shares(sc, a.readers, a.seed, a.duration, base=base)
+            r = shares(sc, a.readers, a.seed, a.duration, a.controller, base=base)
             out[pulp].append(r)
             print(f"{sc:20s} {pulp:9s} share>=0.9 {r['share_in_band_0.9']:.3f}  median {r['median_in_band']:.3f}"
                   f"  CVaR10 {r['cvar10_in_band']:.3f}  peak max {r['peak_max_n']:.2f} N  latched {r['latched']}",
