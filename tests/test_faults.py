@@ -130,3 +130,22 @@ def test_build_inputs_windows_and_withdraw_profile():
 def test_validate_section_errors(value, msg):
     with pytest.raises(ScenarioError, match=msg):
         validate_section("x.toml", value)
+
+
+def test_a_finger_beyond_the_boards_reach_is_not_a_stalled_motor():
+    """A soft, relaxing reader whose pulp at 1.5 N lies beyond the rack's 6 mm travel from a 2 mm gap
+    (reader 174 of ``sample_devices(4711, 200)`` around contact_onset): the board reaches its far end
+    stop and pushes there at the current limit.  That is the device's reach, not a jam: no latch, the
+    contact is kept and the force stays bounded; a jam short of the end stop still latches
+    (``fault_motor_stall``, above)."""
+    from controllers.supervisor import SupervisorConfig
+    from ebraille_sim.scenarios.population import sample_devices
+    spec = load_scenario("contact_onset")
+    dev = sample_devices(4711, 200, base=spec.device)[174]
+    res = run_scenario(spec, seed=spec.seed + 7 * 174, duration_s=12.0, device=dev)
+    tr = res.trace
+    at_stop = tr["board_pos_m"] >= dev.drivetrain.travel_max_m - 1e-9
+    assert at_stop.sum() > 1000                                   # more than a second on the stop
+    assert res.supervisor["fault"] is None
+    assert tr["force_true_n"][at_stop].min() > 1.0 and tr["force_true_n"].max() <= MAX_SAFE_N
+    assert SupervisorConfig().end_stop_travel_m < dev.drivetrain.travel_max_m

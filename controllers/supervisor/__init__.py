@@ -59,7 +59,8 @@ fsr_implausible    moving forward, the force the current implies (lower edge of 
 fsr_no_contact     no contact within ``first_contact_travel_m`` of travel from the start
 motor_stalled      pushing without moving for ``stall_time_s``, with no contact shown, or at
                    ``stall_fraction`` of the current limit while the push at the lower edge
-                   of the friction band exceeds the recent estimate by ``implausible_n``
+                   of the friction band exceeds the recent estimate by ``implausible_n``,
+                   short of ``end_stop_travel_m`` (beyond it: the board's far end stop)
 ================== =====================================================================
 
 A fall of the setpoint within ``release_window_s`` (refresh release, a step down) widens the

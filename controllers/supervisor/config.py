@@ -165,6 +165,7 @@ def firmware_limits(sheet: DeviceParams, cal: DriveCalibration) -> dict:
         "stuck_travel_m": BACKLASH_MAX_M + ESTIMATOR_PERIOD_S * _speed_limit(drive, rb, rm),
         "first_contact_travel_m": DESIGN_GAP_M + compression_at_force_m(
             SAFE_FORCE_N, soft.stiffness_b_n_per_m, soft.exponent_m_per_m),
+        "end_stop_travel_m": (dt.travel_max_m - dt.travel_min_m) * (1.0 - MAX_SLOPE_ERROR) - BACKLASH_MAX_M,
         "sense_gain_error_max": cs.gain_error_max + cs.shunt_tolerance,
         "sense_error_a": worst_case_error_a(cs, 0.0),
         "powered_current_a": worst_case_error_a(cs, 0.0) + 0.5e-3,
@@ -288,6 +289,13 @@ class SupervisorConfig:
     first_contact_travel_m: float = None  # type: ignore[assignment]
     """Travel from the start within which the first contact must show: the design gap plus the
     soft reader's compression at the safe force [D]."""
+    end_stop_travel_m: float = None  # type: ignore[assignment]
+    """Travel from the start beyond which a motor pushing at its limit without moving sits on the
+    rack's far end stop, not on a jam [D]: the design travel less the travel integral's largest
+    error (the back-EMF slope's calibration error, :data:`MAX_SLOPE_ERROR`, over the whole travel)
+    and the design's largest backlash.  A finger beyond the board's reach is not a stalled motor:
+    the stall rule's push-without-force branch does not count there (the current envelope still
+    bounds the push, the i2t rule the heat)."""
     soft_b_n_per_m: float = None  # type: ignore[assignment]
     """Pulp b of the softest reader preset: the most travel a force change can take."""
     soft_m_per_m: float = None  # type: ignore[assignment]

@@ -186,11 +186,13 @@ def _detect(sv, cfg, f, cur, dt):
     if not in_contact and sv[SV.travel_m] > cfg[CF.first_contact_travel_m]:
         return FAULT.fsr_no_contact
     # pushing and not moving: with no contact seen, or at the current limit with a push that does
-    # not reach the finger (the lower edge of the friction band at rest above the estimate): a
+    # not reach the finger (the lower edge of the friction band at rest above the estimate) short of
+    # the far end stop (there the finger lies beyond the board's reach, not behind a jam): a
     # motor creeping a held force forward against the full break-away friction also sits at the
     # limit, and its estimate accounts for the push
     if not moving and ((f < cfg[CF.contact_on_n] and cur > cfg[CF.contact_current_a])
                        or (cur > cfg[CF.stall_fraction] * cfg[CF.current_limit_a]
+                           and sv[SV.travel_m] < cfg[CF.end_stop_travel_m]
                            and _rest_push_lower_edge_n(cfg, cur) - _win_hi(sv, cfg, SV.est_win_t0, CF.est_win_span)
                            > cfg[CF.implausible_n])):
         sv[SV.stall_s] += dt
