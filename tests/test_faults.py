@@ -63,7 +63,9 @@ def test_motor_stall_is_stopped_at_the_current_limit_and_retracts_after_the_jam(
     t = tr["t_s"]
     assert tr["force_true_n"].max() <= MAX_SAFE_N
     jam = (t >= 4.0) & (t < 6.0)
-    assert np.ptp(tr["board_pos_m"][jam]) < 2e-6           # the jam holds the board (bar the mesh's give)
+    # the jam holds the board: what moves is the gear mesh's give (1.2 um measured with pid_dob's
+    # current changes against the 30 N/mm mesh), far below a step of the free board
+    assert np.ptp(tr["board_pos_m"][jam]) < 2e-6
     i_lim = SupervisorConfig().current_limit_a              # the controller saturates into the current limit
     assert 0.95 * i_lim < tr["motor_current_a"][jam].max() < 1.05 * i_lim
     assert _retracted(tr)

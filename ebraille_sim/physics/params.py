@@ -60,6 +60,16 @@ ADC_BITS_MAX = 24
 converters are the finest sold, e.g. TI ADS1256, Analog Devices AD7190)."""
 
 
+def _adc_step_v(ref_v: float, bits: int) -> float:
+    """Voltage of one step of a ``bits``-bit ADC on the reference ``ref_v``: V_ref / 2^bits (V)."""
+    return ref_v / (2 ** bits)
+
+
+def _adc_top_code(bits: int) -> float:
+    """Largest code of a ``bits``-bit ADC, 2^bits - 1."""
+    return float(2 ** bits - 1)
+
+
 def _p(default: Any, unit: str, source: str):
     return sourced(default, unit, source)
 
@@ -450,12 +460,12 @@ class CircuitParams(_Checked):
     @property
     def adc_lsb_v(self) -> float:
         """Voltage of one ADC step, V_ref / 2^bits (V)."""
-        return self.adc_ref_v / (2 ** self.adc_bits)
+        return _adc_step_v(self.adc_ref_v, self.adc_bits)
 
     @property
     def adc_max_code(self) -> float:
         """Largest ADC code, 2^bits - 1."""
-        return float(2 ** self.adc_bits - 1)
+        return _adc_top_code(self.adc_bits)
 
 
 INA240 = "[R] TI INA240 datasheet (SBOS662), electrical characteristics"
@@ -517,11 +527,13 @@ class CurrentSenseParams(_Checked):
 
     @property
     def adc_lsb_v(self) -> float:
-        return self.adc_ref_v / (2 ** self.adc_bits)
+        """Voltage of one step of the chain's ADC (V)."""
+        return _adc_step_v(self.adc_ref_v, self.adc_bits)
 
     @property
     def adc_max_code(self) -> float:
-        return float(2 ** self.adc_bits - 1)
+        """Largest code of the chain's ADC."""
+        return _adc_top_code(self.adc_bits)
 
     @property
     def lsb_a(self) -> float:

@@ -629,8 +629,9 @@ def _with_controller_copy(kw: dict, made: dict) -> dict:
     name = kw.get("controller")
     if not isinstance(name, str):
         return kw
-    if kw.get("firmware") is None and design_firmware(name) is not None:
-        kw = {**kw, "firmware": design_firmware(name)}      # the design's firmware, kept with its copy
+    firmware = design_firmware(name) if kw.get("firmware") is None else None
+    if firmware is not None:
+        kw = {**kw, "firmware": firmware}                    # the design's firmware, kept with its copy
     if name not in made:
         try:
             proto = make_controller(None, name)
