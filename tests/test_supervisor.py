@@ -183,7 +183,31 @@ def test_motor_limits_follow_the_device():
     assert r_maxon == pytest.approx(8.9, rel=0.015)
     sup = wrap_controller({"force_cap_n": 2.0, "cap_margin_n": 0.2}, Const(1.0), 1e-3, device=maxon)
     assert sup.config.motor_resistance_ohm == r_maxon and sup.config.force_cap_n == 2.0
-    assert SupervisorConfig.for_device(maxon, motor_resistance_ohm=9.5).motor_resistance_ohm == 9.5
+    assert SupervisorConfig.for_device(maxon, envelope_overrides={"motor_resistance_ohm": 9.5}).motor_resistance_ohm == 9.5
+
+
+def test_the_policy_is_settable_and_the_drive_envelope_comes_from_the_device():
+    import dataclasses
+
+    from controllers.supervisor import ENVELOPE_KEYS, POLICY_KEYS, device_limits
+    from ebraille_sim.physics.params import DRIVETRAINS, DeviceParams
+    names = [f.name for f in dataclasses.fields(SupervisorConfig)]
+    assert sorted(POLICY_KEYS + ENVELOPE_KEYS) == sorted(names) and not set(POLICY_KEYS) & set(ENVELOPE_KEYS)
+    assert set(device_limits(DeviceParams())) == set(ENVELOPE_KEYS)
+    assert {"board_mass_kg", "reader_b_n_per_m", "push_force_per_a_n", "mesh_stiffness_n_per_m"} <= set(ENVELOPE_KEYS)
+    for key in ("board_mass_kg", "motor_resistance_ohm"):
+        with pytest.raises(ValueError, match=f"^{key} is not a supervisor setting: it is derived from \\[device\\]"):
+            SupervisorConfig.for_device(DeviceParams(), **{key: 1.0})
+        with pytest.raises(ScenarioError, match=f"^x.toml: \\[supervisor\\] {key} is not a setting: the supervisor "
+                                                f"derives it from \\[device\\]"):
+            validate_section("x.toml", {key: 1.0})
+    # the mesh stiffness the slip cap assumes is the device's drive train's, as the firmware's datasheet has it
+    stiff = dataclasses.replace(DRIVETRAINS["planetary_64"], mesh_stiffness_n_per_m=6e4)
+    c = SupervisorConfig.for_device(DeviceParams(drivetrain=stiff))
+    assert c.mesh_stiffness_n_per_m == 6e4 and SupervisorConfig().mesh_stiffness_n_per_m == 3e4
+    assert c.slip_setpoint_cap_n < SupervisorConfig().slip_setpoint_cap_n       # a stiffer mesh leaves less room
+    with pytest.raises(ValueError, match="unknown key 'force_cap_n' in the drive envelope"):
+        SupervisorConfig.for_device(DeviceParams(), envelope_overrides={"force_cap_n": 2.0})
 
 
 def test_force_cap_limit_is_the_tactile_maximum_plus_one_newton():

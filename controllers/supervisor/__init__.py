@@ -73,8 +73,10 @@ is a loss only while the setpoint asks for contact.
 0 V (hold).  A jammed motor keeps retracting at ``retract_v / R`` (below the rated current)
 until it frees itself.  Without a current measurement the retract lasts ``retract_s``.
 
-Scenario section ``[supervisor]`` (:func:`validate_section`, :func:`wrap_controller`):
-every :class:`SupervisorConfig` field may be given; ``enabled = false`` disables it.
+Scenario section ``[supervisor]`` (:mod:`ebraille_sim.scenarios.supervision`): every
+:class:`SupervisorPolicy` field may be given; ``enabled = false`` disables it.  The
+:class:`DriveEnvelope` (motor, drive and reader constants) follows from ``[device]``: a
+scenario cannot set it.
 
 Compiled period
 ---------------
@@ -118,8 +120,9 @@ Examples
 from __future__ import annotations
 
 from controllers.supervisor.config import (CONTACT_ON_N, DESIGN_GAP_M, ESTIMATOR_PERIOD_S, FORCE_CAP_LIMIT_N,
-                                           RATED_CURRENT_A, RATED_TO_STALL, SAFE_FORCE_N, SupervisorConfig,
-                                           _default_config, _packed_config, device_limits, rated_current_a)
+                                           ENVELOPE_KEYS, POLICY_KEYS, RATED_CURRENT_A, RATED_TO_STALL,
+                                           SAFE_FORCE_N, DriveEnvelope, SupervisorConfig, SupervisorPolicy,
+                                           check_policy, _default_config, _packed_config, device_limits, rated_current_a)
 from controllers.supervisor.envelope import ENVELOPE_POINTS, _envelope_memo, _envelope_table
 from controllers.supervisor.layout import (CF, EVENT, EVENT_CAPACITY, FAULT, FAULTS, MAX_WINDOW_SAMPLES,
                                            MIN_CONTROL_PERIOD_S, MODE, MODES, SV, _initial_state, _pack,
@@ -128,7 +131,8 @@ from controllers.supervisor.detectors import _interp_envelope
 from controllers.supervisor.period import supervise_begin, supervise_end
 from controllers.supervisor.wrapper import Supervisor
 
-__all__ = ["SupervisorConfig", "Supervisor", "RATED_CURRENT_A", "RATED_TO_STALL", "rated_current_a",
+__all__ = ["SupervisorConfig", "SupervisorPolicy", "DriveEnvelope", "POLICY_KEYS", "ENVELOPE_KEYS",
+           "check_policy", "Supervisor", "RATED_CURRENT_A", "RATED_TO_STALL", "rated_current_a",
            "FORCE_CAP_LIMIT_N", "SAFE_FORCE_N", "device_limits", "supervise_begin", "supervise_end",
            "MIN_CONTROL_PERIOD_S", "MAX_WINDOW_SAMPLES", "EVENT_CAPACITY", "MODES", "FAULTS", "SV", "CF",
            "MODE", "FAULT", "EVENT", "CONTACT_ON_N", "DESIGN_GAP_M", "ESTIMATOR_PERIOD_S", "ENVELOPE_POINTS"]

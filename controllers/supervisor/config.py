@@ -1,7 +1,8 @@
-"""The supervisor's configuration: its policy (thresholds and times) and the drive constants
-it derives its limits from (:class:`SupervisorConfig`, :func:`device_limits`): what the firmware
-knows, the part's datasheet with the designer's margins and the unit's end-of-line calibration,
-never the unit's own constants."""
+"""The supervisor's configuration: its policy, the thresholds and times a scenario may set
+(:class:`SupervisorPolicy`), and the drive envelope it derives its limits from
+(:class:`DriveEnvelope`, :func:`device_limits`): what the firmware knows, the part's datasheet
+with the designer's margins and the unit's end-of-line calibration, never the unit's own
+constants.  :class:`SupervisorConfig` holds both."""
 from __future__ import annotations
 
 import dataclasses
@@ -16,6 +17,7 @@ import numpy as np
 
 from controllers.supervisor.layout import _pack
 from controllers.supervisor.motion import design_slip_cap_n
+from ebraille_sim.base.fields import sourced
 from ebraille_sim.base.validation import check_bool, check_keys, check_number, replace_fields
 from ebraille_sim.physics import limits
 from ebraille_sim.estimation.calibration import (CALIBRATION_CONVERSIONS, FORCE_GAUGE_TOLERANCE, FREE_RUN_V,
@@ -169,6 +171,7 @@ def firmware_limits(sheet: DeviceParams, cal: DriveCalibration) -> dict:
         "sense_gain_error_max": cs.gain_error_max + cs.shunt_tolerance,
         "sense_error_a": worst_case_error_a(cs, 0.0),
         "powered_current_a": worst_case_error_a(cs, 0.0) + 0.5e-3,
+        "mesh_stiffness_n_per_m": dt.mesh_stiffness_n_per_m,
     }
 
 
@@ -222,128 +225,85 @@ def _numeric_field_names() -> tuple:
     return _NUMERIC_FIELD_NAMES, _numeric_values
 
 
-@dataclass(frozen=True)
-class SupervisorConfig:
-    """Limits and detector settings of :class:`Supervisor` (SI units in the names).
+_DEVICE = "[D] device_limits: datasheet, margins and calibration"
 
-    The motor, drive and reader constants default to what the firmware of the nominal device
-    knows (:class:`DeviceParams`, :func:`device_limits`: datasheet, margins, calibration);
-    :meth:`for_device` derives them for another device.  Every numeric field must be a positive finite number (``friction_current_a``
-    may be 0).
+
+def _derived(unit: str, doc: str, source: str = _DEVICE) -> Any:
+    """A field of :class:`DriveEnvelope`: no default of its own (:func:`device_limits` fills it)."""
+    return sourced(None, unit, source, doc=doc, envelope=True)
+
+
+@dataclass(frozen=True)
+class DriveEnvelope:
+    """The drive and reader constants the supervisor derives its limits from: what the firmware
+    of the device knows (:func:`device_limits`: the part's datasheet, the designer's margins and
+    the unit's end-of-line calibration, never the unit's own constants).
+
+    They follow from the scenario's ``[device]`` and are not settable in ``[supervisor]``: a
+    scenario that gives one is refused, naming the key.  A None field takes the nominal
+    device's value.
     """
-    force_cap_n: float = TACTILE_FORCE_MAX_N
-    """Cap on the estimated force (upper end of the tactile range, [R] seed paper)."""
-    cap_margin_n: float = 0.3
-    safe_force_n: float = SAFE_FORCE_N
-    """Bound on the true force that the current and speed envelope keeps whatever the sensor reads."""
-    finger_motion_m: float = 45e-6
-    """Motion of the pulp toward a held board that the drive cannot prevent, m: three times the
-    15 um RMS of physiological tremor [E] (the tremor scenarios' amplitude)."""
-    slew_v_per_s: float = 600.0
-    """Full scale (6 V) in 10 ms, one estimator period."""
-    rated_current_a: float = None  # type: ignore[assignment]
-    """Continuous motor current (:func:`rated_current_a`)."""
-    stall_current_a: float = None  # type: ignore[assignment]
-    """Stall current at the driver supply, [D] U / R with the calibrated R."""
-    overload_time_s: float = 0.5
-    """Time allowed at the stall current before the I^2 t trip [E]."""
-    motor_resistance_ohm: float = None  # type: ignore[assignment]
-    """Armature resistance R as the at-rest calibration read it (back-EMF ``u - R i`` and motion detection)."""
-    driver_supply_v: float = None  # type: ignore[assignment]
-    """H-bridge supply: the terminal voltage is the command clipped to it."""
-    push_force_per_a_n: float = None  # type: ignore[assignment]
-    """eta kM N/r, N/A: rack force per ampere through the gearhead in the pushing direction, the
-    calibrated slope raised by its margins [D]."""
-    friction_current_a: float = None  # type: ignore[assignment]
-    """A: the current the drive's friction (motor, gearhead, guide rods, moving forward) takes, the
-    calibrated one lowered by its margins [D]; 0 allowed."""
-    weight_n: float = None  # type: ignore[assignment]
-    """m_b g, N: weight of the board, counted as pushing (hand upside down) [D]."""
-    back_emf_v_s_per_m: float = None  # type: ignore[assignment]
-    """kE N/r, V s/m: back-EMF per rack speed, the free run's lowered by its margins (speed read high) [D]."""
-    sense_gain_error_max: float = _NOMINAL.current_sense.gain_error_max + _NOMINAL.current_sense.shunt_tolerance
-    """Largest relative gain error of the board's current reading: the amplifier's gain error and
-    the shunt's tolerance at their bounds (:class:`~ebraille_sim.physics.params.CurrentSenseParams`)."""
-    sense_error_a: float = worst_case_error_a(_NOMINAL.current_sense, 0.0)
-    """Largest absolute error of one current reading beyond the gain error, A: zeroing residual,
-    round-down and noise (:func:`ebraille_sim.physics.current_sense.worst_case_error_a` at 0 A)."""
-    pinion_mass_kg: float = None  # type: ignore[assignment]
-    """J (N/r)^2, kg: rotor inertia at the rack line [D]."""
-    board_mass_kg: float = None  # type: ignore[assignment]
-    gear_efficiency: float = None  # type: ignore[assignment]
-    """Gear efficiency of the impact's mass: the largest the calibrated push and back-EMF allow [D]."""
-    friction_breakaway_ratio: float = None  # type: ignore[assignment]
-    guide_static_n: float = None  # type: ignore[assignment]
-    """Break-away friction of the guide rods, N (the plausibility band's lower edge): the design
-    range's largest [E]."""
-    reader_b_n_per_m: float = None  # type: ignore[assignment]
-    """Pulp b of the reader the impact bound assumes (the stiff preset: the firmware does not know its reader)."""
-    reader_m_per_m: float = None  # type: ignore[assignment]
-    speed_hold_s: float = None  # type: ignore[assignment]
+    motor_resistance_ohm: float = _derived("ohm", "Armature resistance R as the at-rest calibration measured it.")
+    stall_current_a: float = _derived("A", "Stall current: the driver supply over the calibrated R.")
+    rated_current_a: float = _derived("A", "Continuous motor current (RATED_CURRENT_A of the motor, else its "
+                                           "rated-to-stall ratio).", "[R] Faulhaber 0816 006 SR datasheet")
+    driver_supply_v: float = _derived("V", "H-bridge supply: the terminal voltage is the command clipped to it.",
+                                      "[D] the device's driver_supply_v")
+    push_force_per_a_n: float = _derived("N/A", "Rack force per ampere through the gearhead when pushing: the "
+                                                "calibrated slope raised by its margins.")
+    friction_current_a: float = _derived("A", "Current the drive's friction takes moving forward: the calibrated "
+                                              "friction lowered by its margins (0 allowed).")
+    weight_n: float = _derived("N", "Weight of the board, counted as pushing (hand upside down).")
+    back_emf_v_s_per_m: float = _derived("V s/m", "Back-EMF per rack speed: the free run's, lowered by its "
+                                                  "margins (speed read high).")
+    pinion_mass_kg: float = _derived("kg", "Rotor inertia at the rack line, J (N/r)^2.")
+    board_mass_kg: float = _derived("kg", "Moving mass of the board and rack.", "[D] the datasheet drive train")
+    gear_efficiency: float = _derived("-", "Gear efficiency of the impact's mass: the largest the calibrated push "
+                                           "and back-EMF allow.")
+    friction_breakaway_ratio: float = _derived("-", "Break-away over running friction of the motor.",
+                                               "[D] the datasheet motor's breakaway_ratio")
+    guide_static_n: float = _derived("N", "Break-away friction of the guide rods (lower edge of the plausibility "
+                                          "band): the design range's largest.", "[E] design range 0.05-0.3 N")
+    soft_b_n_per_m: float = _derived("N/m", "Pulp b of the softest reader preset: the most travel a force change "
+                                            "can take.", "[D] FINGERS['soft']")
+    soft_m_per_m: float = _derived("1/m", "Pulp exponent m of the softest reader preset.", "[D] FINGERS['soft']")
+    reader_b_n_per_m: float = _derived("N/m", "Pulp b of the reader the impact bound assumes (the stiff preset: "
+                                              "the firmware does not know its reader).", "[D] FINGERS['stiff']")
+    reader_m_per_m: float = _derived("1/m", "Pulp exponent m of the reader the impact bound assumes (the stiff "
+                                            "preset).", "[D] FINGERS['stiff']")
+    speed_hold_s: float = _derived("s", "How long the highest recent speed sets the current limit: a quarter "
+                                        "period of the impact mass on the design reader at contact.")
     """How long the highest recent speed sets the current limit: a quarter period of the impact
     mass on the design reader's stiffness at the contact threshold [D]."""
-    stuck_travel_m: float = None  # type: ignore[assignment]
+    stuck_travel_m: float = _derived("m", "Net travel with an unchanged estimate that makes it stuck: the design's "
+                                          "largest backlash plus one estimator period at the speed limit.")
     """Net travel with an unchanged estimate that makes it stuck: one traverse of the design's
     largest backlash (:data:`BACKLASH_MAX_M`; the firmware does not know the unit's) plus the
     travel at the impact speed limit within one estimator period [D]."""
-    first_contact_travel_m: float = None  # type: ignore[assignment]
-    """Travel from the start within which the first contact must show: the design gap plus the
-    soft reader's compression at the safe force [D]."""
-    end_stop_travel_m: float = None  # type: ignore[assignment]
+    first_contact_travel_m: float = _derived("m", "Travel from the start within which the first contact must "
+                                                  "show: the design gap plus the soft reader's compression at the "
+                                                  "safe force.")
+    end_stop_travel_m: float = _derived("m", "Travel from the start beyond which a motor pushing without moving "
+                                             "sits on the far end stop, not on a jam.")
     """Travel from the start beyond which a motor pushing at its limit without moving sits on the
     rack's far end stop, not on a jam [D]: the design travel less the travel integral's largest
     error (the back-EMF slope's calibration error, :data:`MAX_SLOPE_ERROR`, over the whole travel)
     and the design's largest backlash.  A finger beyond the board's reach is not a stalled motor:
     the stall rule's push-without-force branch does not count there (the current envelope still
     bounds the push, the i2t rule the heat)."""
-    soft_b_n_per_m: float = None  # type: ignore[assignment]
-    """Pulp b of the softest reader preset: the most travel a force change can take."""
-    soft_m_per_m: float = None  # type: ignore[assignment]
-    retract_v: float = 2.0
-    retract_s: float = 0.6
-    retract_moving_s: float = 0.05
-    max_retract_s: float = 10.0
-    out_of_range_n: float = 4.0
-    stuck_window_s: float = 0.1
-    stuck_response_s: float = 0.05
-    travel_follow_s: float = 5.0
-    """Time constant with which the travel check's reference follows the finger's slow motion
-    (drift, pressing, strap slips) [E]: a board running into the finger faster than this while
-    the reading stays low is caught."""
-    """Time the estimate needs to show a command's effect [E]: the 10 ms estimator period, its
-    two-sample mean and the 20 Hz anti-alias filter (about 40 ms), rounded up."""
-    stuck_tolerance_n: float = 2e-3
-    stuck_command_v: float = 0.25
-    stuck_emf_v: float = 0.05
-    contact_on_n: float = CONTACT_ON_N
-    contact_lost_n: float = 0.1
-    """Above the 0.063 N that the paper's estimator reads with no load (and with an open FSR)."""
-    drop_n: float = 0.3
-    drop_window_s: float = 0.03
-    drop_keep_fraction: float = 0.5
-    """A fall by ``drop_n`` within ``drop_window_s`` is a loss of contact only if the estimate ends
-    below this fraction of its value at the start of the window [E]: a lost contact takes the
-    estimate to its no-load value, a partial unloading keeps most of it (a 0.2 mm strap slip
-    on the pulp drops 1.0 N to 0.63-0.70 N within 30 ms and the finger stays in contact)."""
-    release_window_s: float = 0.15
-    """A fall of the setpoint within this time is an intended release, not a loss of contact [E]
-    (estimator delay plus the controller's settling)."""
-    backoff_s: float = 0.05
-    contact_loss_timeout_s: float = 0.6
-    watchdog_timeout_s: float = 0.5
-    moving_speed_m_per_s: float = 0.5e-3
-    """Rack speed above which the motor is taken to move (back-EMF 0.05 V for the nominal drive) [E]."""
-    stall_time_s: float = 0.5
-    """A motor pushing with current but not moving while no contact shows is stopped after this [E]."""
-    stall_fraction: float = 0.95
-    """Fraction of the current limit at rest above which a motor that does not move, and whose push
-    at the lower edge of the friction band exceeds the estimate by ``implausible_n``, is stalled [E]
-    (creeping a 2.8 N hold forward against the break-away friction takes about 97 % of the limit,
-    so the current alone does not tell a jam from a hold at the top of the range)."""
-    implausible_n: float = 0.5
-    """Margin by which the force the current implies may exceed the estimate [E]."""
-    implausible_s: float = 0.2
-    powered_current_a: float = worst_case_error_a(_NOMINAL.current_sense, 0.0) + 0.5e-3
+    sense_gain_error_max: float = _derived("-", "Largest relative gain error of the current reading (amplifier "
+                                                "gain error plus shunt tolerance).",
+                                           "[D] the device's CurrentSenseParams")
+    """Largest relative gain error of the board's current reading: the amplifier's gain error and
+    the shunt's tolerance at their bounds (:class:`~ebraille_sim.physics.params.CurrentSenseParams`)."""
+    sense_error_a: float = _derived("A", "Largest absolute error of one current reading beyond the gain error "
+                                         "(zeroing residual, round-down, noise).",
+                                    "[D] physics.current_sense.worst_case_error_a at 0 A")
+    """Largest absolute error of one current reading beyond the gain error, A: zeroing residual,
+    round-down and noise (:func:`ebraille_sim.physics.current_sense.worst_case_error_a` at 0 A)."""
+    powered_current_a: float = _derived("A", "Smallest current reading that shows the driver powers the motor: "
+                                             "0.5 mA above the worst reading at 0 A.",
+                                        "[D] worst_case_error_a at 0 A + 0.5 mA [E]")
     """Smallest reading of the motor current that shows the driver powers the motor [D]: 0.5 mA
     above the largest reading of a motor at rest (the sensing chain's worst case at 0 A,
     :func:`~ebraille_sim.physics.current_sense.worst_case_error_a`, 3.1 mA), so that the chain's
@@ -351,19 +311,135 @@ class SupervisorConfig:
     that moves while drawing less than its friction current (the finger pushing the board back
     as the drive retracts) is counted, so the travel integral follows a force loop that
     hunts back and forth."""
-    enabled: bool = True
-    # ---- body motion (docs/safety.md, "Body motion"): the room the setpoint leaves for a strap slip ----
-    slip_headroom_m: float = 0.1e-3
+    mesh_stiffness_n_per_m: float = _derived("N/m", "Stiffness of the gear mesh that holds the board while a slip "
+                                                    "loads the pulp.", "[D] the device's drive train")
+    """Stiffness of the gear mesh that holds the board, N/m: the board gives way on it as a slip
+    loads the pulp (the drive train's nominal constant, [E] plastic mesh contact 1e4-1e5 N/m)."""
+
+
+_SETTING = "[E] supervisor policy"
+
+
+@dataclass(frozen=True)
+class SupervisorPolicy:
+    """The supervisor's policy: the thresholds and times a scenario's ``[supervisor]`` table
+    may set (every other constant of :class:`SupervisorConfig` is the device's
+    :class:`DriveEnvelope`)."""
+    enabled: bool = sourced(True, "-", "scenario setting", doc="false: no supervisor (the controller's command "
+                                                               "goes to the drive unshaped).")
+    force_cap_n: float = sourced(TACTILE_FORCE_MAX_N, "N", "[R] seed paper: top of the tactile range",
+                                 doc="Cap on the estimated force.", hi=FORCE_CAP_LIMIT_N)
+    cap_margin_n: float = sourced(0.3, "N", _SETTING, doc="Width of the soft zone below the cap in which a pushing "
+                                                          "command is scaled down; the setpoint is clipped below it.")
+    safe_force_n: float = sourced(SAFE_FORCE_N, "N", "[E] 0.5 N above the 3 N top of the tactile range",
+                                  doc="Bound on the true force that the current and speed envelope keeps whatever "
+                                      "the sensor reads.", hi=FORCE_CAP_LIMIT_N)
+    finger_motion_m: float = sourced(45e-6, "m", "[E] three times the 15 um RMS of physiological tremor",
+                                     doc="Motion of the pulp toward a held board that the drive cannot prevent.")
+    slew_v_per_s: float = sourced(600.0, "V/s", "[E] full scale (6 V) in one 10 ms estimator period",
+                                  doc="Fastest change of the command.")
+    overload_time_s: float = sourced(0.5, "s", "[E] motor thermal margin",
+                                     doc="Time allowed at the stall current before the I^2 t trip.")
+    retract_v: float = sourced(2.0, "V", _SETTING, doc="Voltage of the safe retract and of the back-off after a loss "
+                                                       "of contact (applied as -retract_v).")
+    retract_s: float = sourced(0.6, "s", _SETTING, doc="Length of the safe retract without a current measurement.")
+    retract_moving_s: float = sourced(0.05, "s", _SETTING, doc="Time the board must have moved back before a stall "
+                                                               "on the end stop ends the retract.")
+    max_retract_s: float = sourced(10.0, "s", _SETTING, doc="Longest safe retract.")
+    out_of_range_n: float = sourced(4.0, "N", "[E] above the cap, below the ~15 N of a shorted FSR",
+                                    doc="Estimate above which the FSR is out of range (fault fsr_out_of_range).")
+    stuck_window_s: float = sourced(0.1, "s", _SETTING, doc="Window of the stuck rule without a current "
+                                                            "measurement.")
+    stuck_response_s: float = sourced(0.05, "s", "[E] the 10 ms estimator period, its two-sample mean and the "
+                                                 "20 Hz anti-alias filter (about 40 ms), rounded up",
+                                      doc="Time the estimate needs to show a command's effect.")
+    travel_follow_s: float = sourced(5.0, "s", _SETTING, doc="Time constant with which the travel check's reference "
+                                                             "follows the finger's slow motion (drift, pressing, "
+                                                             "strap slips).")
+    """Time constant with which the travel check's reference follows the finger's slow motion
+    (drift, pressing, strap slips) [E]: a board running into the finger faster than this while
+    the reading stays low is caught."""
+    stuck_tolerance_n: float = sourced(2e-3, "N", _SETTING, doc="Change of the estimate below which it counts as "
+                                                                "unchanged (stuck rules).")
+    stuck_command_v: float = sourced(0.25, "V", _SETTING, doc="Change of the delayed command above which a stuck "
+                                                              "estimate is a fault (stuck rule without a current).")
+    stuck_emf_v: float = sourced(0.05, "V", _SETTING, doc="Back-EMF above which the stuck rule without a current "
+                                                          "counts the motor as moving.")
+    contact_on_n: float = sourced(CONTACT_ON_N, "N", "[R] seed paper: bottom of the tactile range",
+                                  doc="Estimate above which the board is taken to touch the finger.")
+    contact_lost_n: float = sourced(0.1, "N", "[E] above the 0.063 N the paper's estimator reads with no load",
+                                    doc="Estimate below which contact is lost (while the setpoint asks for contact).")
+    drop_n: float = sourced(0.3, "N", _SETTING, doc="Fall of the estimate within drop_window_s that counts as a loss "
+                                                    "of contact.")
+    drop_window_s: float = sourced(0.03, "s", _SETTING, doc="Window of the drop rule.")
+    drop_keep_fraction: float = sourced(0.5, "-", "[E] a 0.2 mm strap slip keeps 0.63-0.70 of 1.0 N",
+                                        doc="A drop is a loss of contact only if the estimate ends below this "
+                                            "fraction of its value at the start of the window.", hi=1.0)
+    """A fall by ``drop_n`` within ``drop_window_s`` is a loss of contact only if the estimate ends
+    below this fraction of its value at the start of the window [E]: a lost contact takes the
+    estimate to its no-load value, a partial unloading keeps most of it (a 0.2 mm strap slip
+    on the pulp drops 1.0 N to 0.63-0.70 N within 30 ms and the finger stays in contact)."""
+    release_window_s: float = sourced(0.15, "s", "[E] estimator delay plus the controller's settling",
+                                      doc="A fall of the setpoint within this time is an intended release, not a "
+                                          "loss of contact.")
+    backoff_s: float = sourced(0.05, "s", _SETTING, doc="Back-off at -retract_v after a loss of contact, before "
+                                                        "holding 0 V.")
+    contact_loss_timeout_s: float = sourced(0.6, "s", _SETTING, doc="A contact not regained within this time is a "
+                                                                    "latched contact_lost fault.")
+    watchdog_timeout_s: float = sourced(0.5, "s", _SETTING, doc="Non-finite commands for longer than this are a "
+                                                                "latched controller_nonfinite fault.")
+    moving_speed_m_per_s: float = sourced(0.5e-3, "m/s", "[E] back-EMF 0.05 V for the nominal drive",
+                                          doc="Rack speed above which the motor is taken to move.")
+    stall_time_s: float = sourced(0.5, "s", _SETTING, doc="A motor pushing with current but not moving while no "
+                                                          "contact shows is stopped after this.")
+    stall_fraction: float = sourced(0.95, "-", "[E] creeping a 2.8 N hold forward takes about 97 % of the limit",
+                                    doc="Fraction of the current limit at rest above which a motor that does not move "
+                                        "and whose push exceeds the estimate by implausible_n is stalled.")
+    """Fraction of the current limit at rest above which a motor that does not move, and whose push
+    at the lower edge of the friction band exceeds the estimate by ``implausible_n``, is stalled [E]
+    (creeping a 2.8 N hold forward against the break-away friction takes about 97 % of the limit,
+    so the current alone does not tell a jam from a hold at the top of the range)."""
+    implausible_n: float = sourced(0.5, "N", _SETTING, doc="Margin by which the force the current implies may exceed "
+                                                           "the estimate.")
+    implausible_s: float = sourced(0.2, "s", _SETTING, doc="How long the implied force may exceed the estimate by "
+                                                           "implausible_n before fsr_implausible.")
+    slip_headroom_m: float = sourced(0.1e-3, "m", "[E] the largest strap slip of the wearer's own motion "
+                                                  "(scenarios.disturbances.body_motion_budget)",
+                                     doc="Strap slip toward the board that the setpoint leaves room for.")
     """Strap slip toward the board that the setpoint leaves room for, m: the largest the wearer's
     own motion produces ([E] 0.1 mm, :func:`ebraille_sim.scenarios.disturbances.body_motion_budget`).
     A slip ends before the estimate shows it and the held board draws no current for it, so the
     standing force must leave the room (:attr:`slip_setpoint_cap_n`)."""
-    slip_time_s: float = 0.02
-    """Duration of the slip the setpoint leaves room for, s: the fastest strap slip ([E] 20 ms);
-    a slower one relaxes more on the way and peaks lower."""
-    mesh_stiffness_n_per_m: float = _NOMINAL.drivetrain.mesh_stiffness_n_per_m
-    """Stiffness of the gear mesh that holds the board, N/m: the board gives way on it as a slip
-    loads the pulp (the drive train's nominal constant, [E] plastic mesh contact 1e4-1e5 N/m)."""
+    slip_time_s: float = sourced(0.02, "s", "[E] the fastest strap slip",
+                                 doc="Duration of the slip the setpoint leaves room for.")
+
+
+POLICY_KEYS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(SupervisorPolicy))
+"""The keys a scenario's ``[supervisor]`` table may set."""
+ENVELOPE_KEYS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(DriveEnvelope))
+"""The constants derived from the device (:func:`device_limits`), not settable in a scenario."""
+
+
+def check_policy(where: str, d: Mapping[str, Any]) -> None:
+    """Refuse a key of ``d`` that is no :data:`POLICY_KEYS` entry, in one line: an envelope
+    constant is named as such (it comes from ``[device]`` and its calibration)."""
+    for k in d:
+        if k in ENVELOPE_KEYS:
+            raise ValueError(f"{k} is not a supervisor setting: it is derived from [device] (datasheet and "
+                             f"calibration); set the device instead")
+    check_keys(where, d, POLICY_KEYS)
+
+
+@dataclass(frozen=True)
+class SupervisorConfig(DriveEnvelope, SupervisorPolicy):
+    """Limits and detector settings of :class:`Supervisor` (SI units in the names): the
+    :class:`SupervisorPolicy` a scenario sets and the :class:`DriveEnvelope` the device gives.
+
+    The envelope defaults to what the firmware of the nominal device knows
+    (:class:`DeviceParams`, :func:`device_limits`: datasheet, margins, calibration);
+    :meth:`for_device` derives it for another device.  Every numeric field must be a positive
+    finite number (``friction_current_a`` may be 0).
+    """
 
     @functools.cached_property
     def slip_setpoint_cap_n(self) -> float:
@@ -432,29 +508,40 @@ class SupervisorConfig:
 
     @classmethod
     def from_dict(cls, d: Mapping[str, Any], device: DeviceParams | None = None) -> SupervisorConfig:
-        """:meth:`for_device` with the fields of a mapping; an unknown key is a one-line error."""
-        check_keys("SupervisorConfig", d, _FIELD_NAMES)
+        """:meth:`for_device` with the policy of a mapping; a key that is no :data:`POLICY_KEYS`
+        entry (unknown, or a :data:`ENVELOPE_KEYS` constant) is a one-line error."""
         return cls.for_device(_NOMINAL if device is None else device, **d)
 
     @classmethod
-    def for_device(cls, device: DeviceParams, **overrides: Any) -> SupervisorConfig:
-        """The defaults with the drive and reader constants the firmware of ``device`` knows,
-        then ``overrides``.
+    def for_device(cls, device: DeviceParams, *, envelope_overrides: Mapping[str, Any] | None = None,
+                   **policy: Any) -> SupervisorConfig:
+        """The :class:`DriveEnvelope` the firmware of ``device`` knows with the defaults' policy,
+        then ``policy`` (:data:`POLICY_KEYS` only).
 
-        The constants come from :func:`device_limits`: the part's datasheet with the
-        designer's margins and the unit's calibration (``motor_resistance_ohm`` the R it
-        measured, ``stall_current_a`` the driver supply over it, ``rated_current_a`` from
-        :func:`rated_current_a` of the datasheet).
+        The envelope comes from :func:`device_limits`: the part's datasheet with the designer's
+        margins and the unit's calibration (``motor_resistance_ohm`` the R it measured,
+        ``stall_current_a`` the driver supply over it, ``rated_current_a`` from
+        :func:`rated_current_a` of the datasheet).  ``envelope_overrides`` replaces envelope
+        constants (:data:`ENVELOPE_KEYS`) for tests and studies of the envelope itself; a
+        scenario cannot set them.
 
         Examples
         --------
         >>> SupervisorConfig.for_device(DeviceParams()) == SupervisorConfig()
         True
+        >>> SupervisorConfig.for_device(DeviceParams(), board_mass_kg=1.0)
+        Traceback (most recent call last):
+        ...
+        ValueError: board_mass_kg is not a supervisor setting: it is derived from [device] (datasheet and calibration); set the device instead
         """
-        check_keys("SupervisorConfig", overrides, _FIELD_NAMES)
+        check_policy("SupervisorConfig", policy)
+        limits_ = device_limits(device)
+        if envelope_overrides:
+            check_keys("the drive envelope", envelope_overrides, ENVELOPE_KEYS)
+            limits_.update(envelope_overrides)
         if cls is SupervisorConfig:                 # the defaults' fields replaced, then checked
-            return replace_fields(_default_config(), **{**device_limits(device), **overrides})
-        return cls(**{**device_limits(device), **overrides})
+            return replace_fields(_default_config(), **{**limits_, **policy})
+        return cls(**{**limits_, **policy})
 
     @property
     def i2t_limit_a2s(self) -> float:
@@ -534,8 +621,9 @@ def _packed_config(c: SupervisorConfig) -> np.ndarray:
     return packed
 
 
-_FIELD_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(SupervisorConfig))
 _NOMINAL_LIMITS.update(device_limits(_NOMINAL))
+if set(_NOMINAL_LIMITS) != set(ENVELOPE_KEYS):
+    raise ImportError(f"device_limits and DriveEnvelope disagree: {sorted(set(_NOMINAL_LIMITS) ^ set(ENVELOPE_KEYS))}")
 
 
 @functools.lru_cache(maxsize=1)
