@@ -113,7 +113,9 @@ from ebraille_sim.physics.drivetrain import shaft_to_rack_per_m
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N, DeviceParams
 
 from controllers.base import check_reset_args, check_update_args
-from controllers.pid import DEFAULT_PID, PIDConfig, PIDCore, pulp_stiffness_n_per_m, tracking_gain_per_s
+from ebraille_sim.base.fields import sourced
+from controllers.pid import (DEFAULT_PID, GAIN_SOURCE, PIDConfig, PIDCore, pid_field, pulp_stiffness_n_per_m,
+                             tracking_gain_per_s)
 from controllers.refresh import RefreshLearner, RefreshLearning
 
 __all__ = ["DOBConfig", "DOBPID", "DEFAULT_DOB", "NominalPlant", "make_dob"]
@@ -152,6 +154,9 @@ class NominalPlant:
     def force_rate_n_per_s(self, command_v: float, disturbance_v: float) -> float:
         """``dF/dt = b (u - d)`` of the model, N/s."""
         return self.b_n_per_vs * (command_v - disturbance_v)
+
+
+_STUDY = "[E] refresh-learning study (studies/benchmark)"
 
 
 @dataclass(frozen=True)
@@ -194,24 +199,41 @@ class DOBConfig(PIDConfig):
     ValueError
         One line naming the offending field (also every :class:`~controllers.pid.PIDConfig` check).
     """
-    kp_v_per_n: float = 1.75
-    ki_v_per_ns: float = 2.5
-    kd_vs_per_n: float = DEFAULT_PID.kd_vs_per_n
-    derivative_filter_s: float = DEFAULT_PID.derivative_filter_s
-    schedule_above_n: float | None = DEFAULT_PID.schedule_above_n
-    q_time_constant_s: float = 0.003
-    compensation_fraction: float = 0.66
-    max_compensation_v: float = 3.0
-    hold_damping_v_per_v: float = 0.0
-    hold_speed_filter_s: float = 0.001
-    hold_after_step_s: float = 0.032
-    hold_band_fraction: float = 0.2
-    refresh_learning_gain: float = 0.0
-    refresh_learning_lead_s: float = RefreshLearning.lead_s
-    refresh_learning_smoothing_s: float = RefreshLearning.smoothing_s
-    refresh_learning_after_s: float = RefreshLearning.after_s
-    refresh_learning_limit_fraction: float = RefreshLearning.limit_fraction
-    refresh_hold_damping_v_per_v: float | None = None
+    kp_v_per_n: float = pid_field("kp_v_per_n", 1.75)
+    ki_v_per_ns: float = pid_field("ki_v_per_ns", 2.5)
+    kd_vs_per_n: float = pid_field("kd_vs_per_n", DEFAULT_PID.kd_vs_per_n)
+    derivative_filter_s: float = pid_field("derivative_filter_s", DEFAULT_PID.derivative_filter_s)
+    schedule_above_n: float | None = pid_field("schedule_above_n", DEFAULT_PID.schedule_above_n)
+    q_time_constant_s: float = sourced(0.003, "s", GAIN_SOURCE, doc="Time constant tau of the observer's filter "
+                                                                    "Q(s) = 1/(tau s + 1).")
+    compensation_fraction: float = sourced(0.66, "-", GAIN_SOURCE, doc="Share f of the estimated disturbance "
+                                                                       "added to the command.")
+    max_compensation_v: float = sourced(3.0, "V", GAIN_SOURCE, doc="Clamp on the compensation |f d_hat|.")
+    hold_damping_v_per_v: float = sourced(0.0, "V/V", GAIN_SOURCE, doc="Hold damping kv on the back-EMF while the "
+                                                                       "force holds (0: off).")
+    hold_speed_filter_s: float = sourced(0.001, "s", GAIN_SOURCE, doc="Time constant of the back-EMF's filter for "
+                                                                      "the hold damping.")
+    hold_after_step_s: float = sourced(0.032, "s", GAIN_SOURCE, doc="Time without a setpoint change before the "
+                                                                    "hold damping applies.")
+    hold_band_fraction: float = sourced(0.2, "-", GAIN_SOURCE, doc="The hold damping applies while the error is "
+                                                                   "below this fraction of the setpoint.")
+    refresh_learning_gain: float = sourced(0.0, "-", _STUDY, experimental=True,
+                                           doc="Gain gamma of the refresh learning (0: off).")
+    refresh_learning_lead_s: float = sourced(RefreshLearning.lead_s, "s", _STUDY, experimental=True,
+                                             doc="Refresh learning: the error seen this long after a sample "
+                                                 "corrects that sample.")
+    refresh_learning_smoothing_s: float = sourced(RefreshLearning.smoothing_s, "s", _STUDY, experimental=True,
+                                                  doc="Refresh learning: half-width of the moving average over the "
+                                                      "correction.")
+    refresh_learning_after_s: float = sourced(RefreshLearning.after_s, "s", _STUDY, experimental=True,
+                                              doc="Refresh learning: it learns from this long after each rise of "
+                                                  "the setpoint on.")
+    refresh_learning_limit_fraction: float = sourced(RefreshLearning.limit_fraction, "-", _STUDY, experimental=True,
+                                                     doc="Refresh learning: bound on its correction, a fraction of "
+                                                         "the high setpoint.")
+    refresh_hold_damping_v_per_v: float | None = sourced(None, "V/V", _STUDY, experimental=True,
+                                                         doc="Hold damping while the refresh pattern is recognised "
+                                                             "(None: hold_damping_v_per_v).")
 
     def __post_init__(self) -> None:
         super().__post_init__()

@@ -58,10 +58,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from ebraille_sim.base.fields import sourced
 from ebraille_sim.base.validation import check_keys, check_number, replace_checked
 from ebraille_sim.physics.params import DeviceParams
 
 from controllers.compiled import feedforward_v as compiled_feedforward_v
+from controllers.pid import GAIN_SOURCE, pid_field
 from controllers.schedule import ScheduleConfig, ScheduledPID
 
 __all__ = ["FrictionConfig", "FrictionPID", "FRICTION_GAINS", "DEFAULT_FRICTION", "make_friction"]
@@ -90,12 +92,16 @@ class FrictionConfig(ScheduleConfig):
         One line naming the offending field (also every :class:`ScheduleConfig` check), or
         when ``feedforward`` is off (the friction term is part of the feedforward).
     """
-    kp_v_per_n: float = FRICTION_GAINS["kp_v_per_n"]
-    ki_v_per_ns: float = FRICTION_GAINS["ki_v_per_ns"]
-    kd_vs_per_n: float = FRICTION_GAINS["kd_vs_per_n"]
-    feedforward: bool = True
-    friction_fraction: float = 0.7
-    hysteresis_fraction: float = 0.02
+    kp_v_per_n: float = pid_field("kp_v_per_n", FRICTION_GAINS["kp_v_per_n"])
+    ki_v_per_ns: float = pid_field("ki_v_per_ns", FRICTION_GAINS["ki_v_per_ns"])
+    kd_vs_per_n: float = pid_field("kd_vs_per_n", FRICTION_GAINS["kd_vs_per_n"])
+    feedforward: bool = sourced(True, "-", GAIN_SOURCE, doc="Add the model feedforward (needed: the friction term "
+                                                            "is part of it).")
+    friction_fraction: float = sourced(0.7, "-", GAIN_SOURCE, doc="Fraction of the modelled Coulomb friction "
+                                                                  "compensated.")
+    hysteresis_fraction: float = sourced(0.02, "-", GAIN_SOURCE, doc="Error, a fraction of max(r, 0.2 N), beyond "
+                                                                     "which the friction direction follows the "
+                                                                     "error's sign.")
 
     def __post_init__(self):
         super().__post_init__()

@@ -43,10 +43,12 @@ from dataclasses import dataclass
 import control
 import numpy as np
 
+from ebraille_sim.base.fields import sourced
 from ebraille_sim.base.validation import check_number, replace_checked
 
 from controllers.base import check_reset_args, check_update_args
 from controllers.compiled import KIND_LQG, lqg_params, lqg_reset, lqg_state, lqg_step
+from controllers.pid import GAIN_SOURCE, pid_field
 
 __all__ = ["LQGConfig", "LQG", "design", "config_from"]
 
@@ -54,15 +56,19 @@ __all__ = ["LQGConfig", "LQG", "design", "config_from"]
 @dataclass(frozen=True)
 class LQGConfig:
     """Weights and design point of :class:`LQG`."""
-    design_force_n: float = 1.0
-    q_force: float = 1.0
-    q_integral: float = 60.0
-    r_command: float = 0.08
-    w_command_v: float = 0.3
-    v_force_n: float = 0.01
-    sample_s: float = 0.01
-    u_min_v: float = -6.0
-    u_max_v: float = 6.0
+    design_force_n: float = sourced(1.0, "N", GAIN_SOURCE, doc="Force at which the plant is linearised for the "
+                                                               "design.")
+    q_force: float = sourced(1.0, "1/N^2", GAIN_SOURCE, doc="LQR weight on the squared force error.")
+    q_integral: float = sourced(60.0, "1/(N^2 s^2)", GAIN_SOURCE, doc="LQR weight on the squared integral of the "
+                                                                      "force error.")
+    r_command: float = sourced(0.08, "1/V^2", GAIN_SOURCE, doc="LQR weight on the squared command.")
+    w_command_v: float = sourced(0.3, "V", GAIN_SOURCE, doc="Kalman filter: process noise on the command "
+                                                            "(friction and stiction act there).")
+    v_force_n: float = sourced(0.01, "N", GAIN_SOURCE, doc="Kalman filter: measurement noise of the estimate.")
+    sample_s: float = sourced(0.01, "s", "[R] seed paper: the 100 Hz estimator period",
+                              doc="Sampling period of the controller (the estimator's).")
+    u_min_v: float = pid_field("u_min_v", -6.0, "[R] the drive's -6 V supply")
+    u_max_v: float = pid_field("u_max_v", 6.0, "[R] the drive's 6 V supply")
 
     def __post_init__(self):
         for f in dataclasses.fields(self):

@@ -83,6 +83,7 @@ from typing import Any
 
 import numpy as np
 
+from ebraille_sim.base.fields import sourced
 from ebraille_sim.base.validation import check_finite, check_keys, check_number
 from ebraille_sim.physics.fingertip import dynamic_stiffness_n_per_m, tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N, DeviceParams
@@ -260,6 +261,33 @@ class PIDCore:
         return core_step(self.s, y, r, h, kp, ki, kd, tf, b, c, inv_tt, ff, umin, umax)
 
 
+PID_FIELDS: dict[str, tuple[str, str]] = {
+    "kp_v_per_n": ("V/N", "Proportional gain kp."),
+    "ki_v_per_ns": ("V/(N s)", "Integral gain ki = kp/Ti."),
+    "kd_vs_per_n": ("V s/N", "Derivative gain kd = kp Td."),
+    "derivative_filter_s": ("s", "Time constant Tf of the derivative's first-order filter (0: unfiltered)."),
+    "setpoint_weight_p": ("-", "Setpoint weight b of the proportional term, kp (b r - y)."),
+    "setpoint_weight_d": ("-", "Setpoint weight c of the derivative of c r - y (0: derivative on measurement)."),
+    "u_min_v": ("V", "Lower output limit."),
+    "u_max_v": ("V", "Upper output limit."),
+    "tracking_time_s": ("s", "Back-calculation time constant Tt of the anti-windup (None: from the gains; inf: "
+                             "off)."),
+    "feedforward_v": ("V", "Constant command added before the saturation."),
+    "schedule_above_n": ("N", "Force above which the gains scale down with the pulp's stiffness (None: fixed "
+                              "gains)."),
+}
+"""Unit and one-line description of the PID fields, shared by every config that carries them."""
+
+GAIN_SOURCE = "[E] design setting (docs/tuning.md)"
+"""Source tag of a controller's gains: chosen by design and tuning, not measured."""
+
+
+def pid_field(name: str, default: Any = dataclasses.MISSING, source: str = GAIN_SOURCE) -> Any:
+    """A PID field (:data:`PID_FIELDS`) declared with :func:`~ebraille_sim.base.fields.sourced`."""
+    unit, doc = PID_FIELDS[name]
+    return sourced(default, unit, source, doc=doc)
+
+
 @dataclasses.dataclass(frozen=True)
 class PIDConfig:
     """Gains and limits of the discrete PID controller.
@@ -317,17 +345,17 @@ class PIDConfig:
     ValueError: kp_v_per_n must be >= 0, got -1.0
     """
 
-    kp_v_per_n: float
-    ki_v_per_ns: float = 0.0
-    kd_vs_per_n: float = 0.0
-    derivative_filter_s: float = 0.0
-    setpoint_weight_p: float = 1.0
-    setpoint_weight_d: float = 0.0
-    u_min_v: float = -6.0
-    u_max_v: float = 6.0
-    tracking_time_s: float | None = None
-    feedforward_v: float = 0.0
-    schedule_above_n: float | None = None
+    kp_v_per_n: float = pid_field("kp_v_per_n")
+    ki_v_per_ns: float = pid_field("ki_v_per_ns", 0.0)
+    kd_vs_per_n: float = pid_field("kd_vs_per_n", 0.0)
+    derivative_filter_s: float = pid_field("derivative_filter_s", 0.0)
+    setpoint_weight_p: float = pid_field("setpoint_weight_p", 1.0)
+    setpoint_weight_d: float = pid_field("setpoint_weight_d", 0.0)
+    u_min_v: float = pid_field("u_min_v", -6.0, "[R] the drive's -6 V supply")
+    u_max_v: float = pid_field("u_max_v", 6.0, "[R] the drive's 6 V supply")
+    tracking_time_s: float | None = pid_field("tracking_time_s", None)
+    feedforward_v: float = pid_field("feedforward_v", 0.0)
+    schedule_above_n: float | None = pid_field("schedule_above_n", None)
 
     def __post_init__(self) -> None:
         nonneg = (

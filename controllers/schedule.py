@@ -70,7 +70,8 @@ from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N
 from controllers.base import check_reset_args, check_update_args
 from controllers.compiled import (KIND_PID, MAP_POINTS, PP, PS, map_reference, model_feedforward_v, pid_params,
                                   pid_reset, pid_step, scheduled_gains)
-from controllers.pid import PIDConfig, PIDCore
+from ebraille_sim.base.fields import sourced
+from controllers.pid import GAIN_SOURCE, PIDConfig, PIDCore, pid_field
 
 __all__ = ["ScheduleConfig", "ScheduledPID", "make_scheduled", "make_feedforward", "RECOMMENDED", "MS_1_6", "HAND"]
 
@@ -79,6 +80,9 @@ F_MIN_N, F_MAX_N = TACTILE_FORCE_MIN_N, TACTILE_FORCE_MAX_N
 _NONNEG = ("kp_v_per_n", "ki_v_per_ns", "kd_vs_per_n", "derivative_filter_s", "setpoint_weight_p",
            "setpoint_weight_d", "rate_deadband_n_per_s")
 _SWITCHES = ("schedule", "feedforward", "reference_map")
+
+
+_TUNED = "[E] tuned: ebraille-sim tune setpoint_steps (docs/tuning.md)"
 
 
 @dataclass(frozen=True)
@@ -105,21 +109,26 @@ class ScheduleConfig:
     ValueError
         One line naming the offending field, its value and the admissible range.
     """
-    kp_v_per_n: float = 0.859
-    ki_v_per_ns: float = 1.72
-    kd_vs_per_n: float = 0.00348
-    derivative_filter_s: float = 0.005
-    setpoint_weight_p: float = 1.0
-    reference_force_n: float = 1.0
-    schedule: bool = True
-    schedule_on: str = "setpoint"
-    feedforward: bool = False
-    reference_map: bool = True
-    rate_deadband_n_per_s: float = 0.05
-    u_min_v: float = -6.0
-    u_max_v: float = 6.0
-    setpoint_weight_d: float = 0.0
-    tracking_time_s: float | None = None
+    kp_v_per_n: float = pid_field("kp_v_per_n", 0.859, _TUNED)
+    ki_v_per_ns: float = pid_field("ki_v_per_ns", 1.72, _TUNED)
+    kd_vs_per_n: float = pid_field("kd_vs_per_n", 0.00348, _TUNED)
+    derivative_filter_s: float = pid_field("derivative_filter_s", 0.005)
+    setpoint_weight_p: float = pid_field("setpoint_weight_p", 1.0)
+    reference_force_n: float = sourced(1.0, "N", GAIN_SOURCE, doc="Force F_ref at which the gains are given (the "
+                                                                  "schedule scales them from there).")
+    schedule: bool = sourced(True, "-", GAIN_SOURCE, doc="Scale the gains with the pulp's stiffness at the "
+                                                         "scheduling force.")
+    schedule_on: str = sourced("setpoint", "-", GAIN_SOURCE, doc="Scheduling force: the setpoint or the estimate.")
+    feedforward: bool = sourced(False, "-", GAIN_SOURCE, doc="Add the model feedforward from the setpoint "
+                                                             "trajectory.")
+    reference_map: bool = sourced(True, "-", GAIN_SOURCE, doc="Replace the setpoint by the estimate the nominal "
+                                                              "sensor chain shows at that true force.")
+    rate_deadband_n_per_s: float = sourced(0.05, "N/s", GAIN_SOURCE, doc="Setpoint rate below which the "
+                                                                         "feedforward keeps its last direction.")
+    u_min_v: float = pid_field("u_min_v", -6.0, "[R] the drive's -6 V supply")
+    u_max_v: float = pid_field("u_max_v", 6.0, "[R] the drive's 6 V supply")
+    setpoint_weight_d: float = pid_field("setpoint_weight_d", 0.0)
+    tracking_time_s: float | None = pid_field("tracking_time_s", None)
 
     def __post_init__(self):
         check_choice("schedule_on", self.schedule_on, ("estimate", "setpoint"))

@@ -13,7 +13,7 @@ from controllers.designs import DESIGN_KEYS, designs, get_design
 from ebraille_sim.estimation.presets import firmware_presets, get_firmware
 from ebraille_sim.physics.params import EstimatorParams
 from ebraille_sim.scenarios.runner import design_firmware, run_scenario
-from ebraille_sim.scenarios.spec import ScenarioError, load_scenario, parse_scenario, with_firmware
+from ebraille_sim.scenarios.spec import SCHEMA, ScenarioError, load_scenario, parse_scenario, with_firmware
 
 
 def test_every_shipped_design_names_a_controller_a_firmware_and_a_measured_score():
@@ -54,10 +54,13 @@ def test_a_firmware_preset_sets_the_estimator_as_its_keys_do():
     for k, v in want.items():
         assert getattr(fast.device.estimator, k) == v
     named = parse_scenario({"name": "x", "estimator": {"firmware": "fast_1khz"}})
-    keys = parse_scenario({"name": "x", "estimator": want})
+    trial = {k: want.pop(k) for k in list(want) if k in SCHEMA["estimator.experimental"]}
+    assert trial == {"hysteresis_turn_lsb": 1.75}        # the preset's study knob: [estimator.experimental]
+    keys = parse_scenario({"name": "x", "estimator": {**want, "experimental": trial}})
     assert named.device.estimator == keys.device.estimator
     # a key of the section replaces the preset's
-    own = parse_scenario({"name": "x", "estimator": {"firmware": "fast_1khz", "hysteresis_turn_lsb": 3.0}})
+    own = parse_scenario({"name": "x", "estimator": {"firmware": "fast_1khz",
+                                                     "experimental": {"hysteresis_turn_lsb": 3.0}}})
     assert own.device.estimator.hysteresis_turn_lsb == 3.0
     assert own.device.estimator.model == want["model"]
 
@@ -134,3 +137,4 @@ def test_run_with_a_design_name_from_any_folder(tmp_path):
     assert doc["firmware"] == "fast_1khz"
     assert doc["metrics"]["char_in_band_fraction"] == pytest.approx(
         get_design("dob_learn_1khz").check["char_in_band_fraction"], abs=0.006)
+

@@ -47,7 +47,7 @@ SEED = 20261123
 N_CLI = 20
 UNKNOWN = "zz_not_a_key"
 INJECT_INTO = ("steady_90wpm", "soft_reader_120wpm", "fault_fsr_open")
-"""Files that also get every override field and supervisor key they do not set (the injected
+"""Files that also get every override field and supervisor policy key they do not set (the injected
 keys do not interact with the rest of a file, so three files cover them)."""
 
 # --------------------------------------------------------------------------------------
@@ -156,6 +156,9 @@ WRONG_FOR_BOOL = {"number": 1, "string": "true", "array": [True]}
 WRONG_FOR_LIST = {"string": "1.0", "number": 1.0, "table": {"v": 1.0}}
 WRONG_FOR_TABLE = {"number": 1.0, "string": "x", "array": [1.0]}
 FREE_TABLES = {("controller", "gains")}
+EXPERIMENTAL = "experimental"
+"""Name of the sections' tables of study knobs (``[estimator.experimental]``, ...): the table
+makes no stability promise, so no case is generated inside it."""
 
 
 @dataclasses.dataclass
@@ -181,6 +184,8 @@ def _walk(node, path=()):
     """(path, value) of every table, array and leaf below ``node``."""
     if isinstance(node, dict):
         for k, v in node.items():
+            if k == EXPERIMENTAL and path:
+                continue
             yield path + (k,), v
             if path + (k,) not in FREE_TABLES:
                 yield from _walk(v, path + (k,))
@@ -211,8 +216,8 @@ def _injected(doc):
                 continue
             out.append((("device", table, f.name), getattr(cls(), f.name)))
     if "supervisor" in doc and not doc["supervisor"]:
-        for f in dataclasses.fields(supervisor.SupervisorConfig):
-            out.append((("supervisor", f.name), getattr(supervisor.SupervisorConfig(), f.name)))
+        for name in supervisor.POLICY_KEYS:         # the drive envelope is no scenario key
+            out.append((("supervisor", name), getattr(supervisor.SupervisorConfig(), name)))
     return out
 
 
@@ -471,3 +476,13 @@ def test_cli_rejects_a_sample_with_exit_2_one_error_line_and_nothing_written(tmp
         assert written == [], (case.name, written)
         if case.match is not None:
             assert case.match in lines[0], (case.name, lines[0])
+
+
+def test_the_table_promises_neither_the_drive_envelope_nor_the_experimental_knobs():
+    names = [c.name for c in CASES]
+    assert any(":supervisor.stall_time_s:" in n for n in names)
+    assert not [n for n in names for k in supervisor.ENVELOPE_KEYS if f":supervisor.{k}:" in n]
+    doc = {"name": "x", "estimator": {"model": "paper:wiener:5", "experimental": {"hysteresis_turn_lsb": 1.0}},
+           "controller": {"name": "pid_dob", "experimental": {"refresh_learning_gain": 0.25}}}
+    made = [c.name for c in structural_cases("x", doc)]
+    assert any("estimator.model" in n for n in made) and not any("experimental" in n for n in made)

@@ -120,7 +120,11 @@ def _scenario_with_unknown_key():
     cases = {"top level": {"name": "x", KEY: 1}}
     for table in spec.SCHEMA:
         if table:
-            cases[f"[{table}]"] = {"name": "x", table: {KEY: 1}}
+            doc = {KEY: 1}
+            for part in reversed(table.split(".")):         # [estimator.experimental] nests in [estimator]
+                doc = {part: doc}
+            cases[f"[{table}]"] = {"name": "x", **doc}
+    cases["[controller.experimental]"] = {"name": "x", "controller": {"experimental": {KEY: 1.0}}}
     for key, rule in spec.SCHEMA["device"].items():
         if rule == "overrides":
             cases[f"[device.{key}]"] = {"name": "x", "device": {key: {KEY: 1.0}}}

@@ -151,16 +151,18 @@ def test_schema_uses_only_the_keywords_the_validator_implements(js):
 def test_every_table_and_key_of_the_loader_is_documented(rendered, js):
     from ebraille_sim.scenarios import disturbances, faults, mechanism_section
     from ebraille_sim.scenarios.spec import DELEGATES, SCHEMA
-    from controllers.supervisor import SupervisorConfig
+    from controllers.supervisor import ENVELOPE_KEYS, POLICY_KEYS, SupervisorConfig
     import dataclasses
     md = rendered[gen.REFERENCE_PATH]
     props = js["properties"]
     assert set(props) == set(SCHEMA[""]) and set(DELEGATES) <= set(props)
     for table, rules in SCHEMA.items():
-        where = props[table]["properties"] if table else props
+        where = props
+        for part in table.split(".") if table else ():
+            where = where[part]["properties"]
         assert set(where) == set(rules), table
         if table:
-            assert f"## [{table}]" in md
+            assert f"# [{table}]" in md
         for key in rules:
             assert f"| `{key}`" in md
     for kind, cls in disturbances.KINDS.items():
@@ -169,7 +171,8 @@ def test_every_table_and_key_of_the_loader_is_documented(rendered, js):
     for kind in faults.KINDS:
         assert f'### [[faults]] kind = "{kind}"' in md
     assert props["faults"]["items"]["properties"]["kind"]["enum"] == list(faults.KINDS)
-    assert set(props["supervisor"]["properties"]) == {f.name for f in dataclasses.fields(SupervisorConfig)}
+    assert set(props["supervisor"]["properties"]) == set(POLICY_KEYS)
+    assert set(POLICY_KEYS) | set(ENVELOPE_KEYS) == {f.name for f in dataclasses.fields(SupervisorConfig)}
     assert set(props["mechanism"]["properties"]) == set(mechanism_section._SECTION_KEYS)
 
 
@@ -199,13 +202,86 @@ def test_gains_file_format_and_every_registered_controller_is_documented(rendere
 def test_reference_states_units_ranges_defaults_and_sources(rendered):
     md = rendered[gen.REFERENCE_PATH]
     assert "| `wpm` | number | 1/min | (0, 1000] | `90` |" in md
-    assert "| `force_n` | number | N | (0, 3] | `1` | [R] seed paper: tactile forces" in md
+    assert ("| `force_n` | number | N | (0, 3] | `1` | Force setpoint (the first one when steps are given). "
+            "| [R] seed paper: tactile forces") in md
     assert "| `seed` | integer | - | [0, 4503599627370496] | `0` |" in md
-    assert "| `rms_m` | number | m | [0, 0.0002] | `1.5e-05` | [R]/[E] Growdon 2000" in md
-    assert "| `resistance_ohm` | number | ohm | > 0 | `21.2` | [R] Faulhaber 0816" in md
+    assert "| `rms_m` | number | m | [0, 0.0002] | `1.5e-05` | RMS of the pulp's tremor motion. | [R]/[E] Growdon 2000" in md
+    assert "| `resistance_ohm` | number | ohm | > 0 | `21.2` | Armature resistance R. | [R] Faulhaber 0816" in md
     assert "| `force_cap_n` | number | N | (0, 4] | `3` |" in md
     assert "| `value_v` (required) | number | V | [-1, 10] | - |" in md
     assert "| `finger_tilt_deg` | number | deg | [-30, 30] | `0` |" in md
+
+
+def test_the_generator_refuses_a_field_without_unit_or_description():
+    # a synthetic parameter dataclass: the generator reads the declaration, guesses nothing
+    # from the name (a "_n" suffix is no unit) and names the field that lacks either
+    import dataclasses
+
+    from ebraille_sim.base.fields import sourced
+
+    @dataclasses.dataclass(frozen=True)
+    class Declared:
+        force_n: float = sourced(1.0, "N", "[E] test", positive=True, doc="A force.")
+
+    @dataclasses.dataclass(frozen=True)
+    class NoDoc:
+        force_n: float = sourced(1.0, "N", "[E] test", positive=True)
+
+    @dataclasses.dataclass(frozen=True)
+    class NoUnit:
+        ok_s: float = sourced(1.0, "s", "[E] test", doc="A time.")
+        force_n: float = dataclasses.field(default=1.0, metadata={"source": "[E] test", "doc": "A force."})
+
+    (k,) = gen._override_keys(Declared)
+    assert (k.unit, k.doc) == ("N", "A force.")
+    with pytest.raises(ValueError, match=r"^NoDoc force_n has no description at its declaration"):
+        gen._override_keys(NoDoc)
+    with pytest.raises(ValueError, match=r"^NoUnit force_n has no unit at its declaration"):
+        gen._override_keys(NoUnit)
+    assert not hasattr(gen, "unit_from_name") and not hasattr(gen, "_field_docs")
+
+
+def test_every_generated_key_has_a_unit_and_a_description():
+    sections, configs = gen.reference(), gen.controller_configs()
+    keys = [(s.path, k) for s in sections for k in s.keys]
+    keys += [(name, k) for name, (_, ks) in configs.items() for k in ks]
+    assert len(keys) > 300
+    undeclared = [(where, k.name) for where, k in keys if not k.unit.strip() or not k.doc.strip()]
+    assert undeclared == []
+
+
+def test_units_are_the_declared_ones_not_guessed_from_names(rendered):
+    secs = {s.path: s for s in gen.reference()}
+    envelope = {k.name: k for k in secs["supervisor.envelope"].keys}
+    assert not secs["supervisor.envelope"].settable
+    assert envelope["reader_b_n_per_m"].unit == "N/m" and envelope["reader_m_per_m"].unit == "1/m"
+    assert envelope["push_force_per_a_n"].unit == "N/A" and envelope["board_mass_kg"].unit == "kg"
+    sup = {k.name: k for k in secs["supervisor"].keys}
+    assert sup["stuck_response_s"].doc == "Time the estimate needs to show a command's effect."
+    assert sup["slew_v_per_s"].unit == "V/s" and sup["moving_speed_m_per_s"].unit == "m/s"
+    assert not set(sup) & set(envelope)
+    gains = {k.name: k for k in gen.controller_configs()["lqg"][1]}
+    assert gains["q_force"].unit == "1/N^2" and gains["r_command"].unit == "1/V^2"
+    md = rendered[gen.REFERENCE_PATH]
+    assert "### Drive envelope (derived from [device]; not settable)" in md
+
+
+def test_experimental_tables_are_marked_and_hold_the_study_knobs(rendered, js):
+    secs = {s.path: s for s in gen.reference()}
+    experimental = {s.path for s in secs.values() if s.experimental}
+    assert experimental == {"estimator.experimental", "controller.experimental"}
+    assert {k.name for k in secs["estimator.experimental"].keys} == {
+        "hysteresis_turn_lsb", "hysteresis_follow_lsb", "hysteresis_turn_time_s"}
+    assert {k.name for k in secs["controller.experimental"].keys} == {
+        "refresh_learning_gain", "refresh_learning_lead_s", "refresh_learning_smoothing_s",
+        "refresh_learning_after_s", "refresh_learning_limit_fraction", "refresh_hold_damping_v_per_v"}
+    assert "hysteresis_turn_lsb" not in {k.name for k in secs["estimator"].keys}
+    md = rendered[gen.REFERENCE_PATH]
+    for path in experimental:
+        block = md.split(f"### [{path}]", 1)[1]
+        assert block.lstrip().startswith("**Experimental**: study knobs with no stability promise")
+    est = js["properties"]["estimator"]["properties"]["experimental"]
+    assert est["description"].startswith("Experimental (no stability promise).")
 
 
 # --------------------------------------------------------------------------------------
@@ -248,6 +324,9 @@ BAD = {
                                  "maximum"),
     "supervisor cap above the limit": ({"name": "x", "supervisor": {"force_cap_n": 4.5}}, "maximum"),
     "supervisor unknown key": ({"name": "x", "supervisor": {"cap_n": 2.0}}, "unknown key 'cap_n'"),
+    "supervisor envelope key": ({"name": "x", "supervisor": {"board_mass_kg": 0.01}}, "unknown key 'board_mass_kg'"),
+    "study knob outside its table": ({"name": "x", "estimator": {"hysteresis_turn_lsb": 1.75}},
+                                     "unknown key 'hysteresis_turn_lsb'"),
     "mechanism tilt too far": ({"name": "x", "mechanism": {"finger_tilt_deg": 31.0}}, "maximum"),
     "mechanism pose row too short": ({"name": "x", "mechanism": {"pose_steps": [[1.0, 0.0]]}}, "fewer than 3"),
 }
@@ -259,6 +338,31 @@ def test_schema_and_loader_reject_a_bad_scenario(case, js):
     errs = errors(data, js)
     assert errs and any(why in e for e in errs), errs
     assert loader_rejects(data), f"the loader accepts {data}"
+
+
+def test_the_loader_names_an_envelope_key_and_routes_the_experimental_tables():
+    from ebraille_sim.scenarios import spec
+
+    def parse(data):
+        return spec.parse_scenario(data, source="x.toml")
+
+    with pytest.raises(spec.ScenarioError, match=r"^x.toml: \[supervisor\] board_mass_kg is not a setting: the "
+                                                 r"supervisor derives it from \[device\]"):
+        parse({"name": "x", "supervisor": {"board_mass_kg": 0.01}})
+    with pytest.raises(spec.ScenarioError, match=r"^x.toml: \[controller\] gains refresh_learning_gain is "
+                                                 r"experimental: give it in \[controller.experimental\]$"):
+        parse({"name": "x", "controller": {"name": "pid_dob", "gains": {"refresh_learning_gain": 0.25}}})
+    with pytest.raises(spec.ScenarioError, match=r"unknown key 'kp_v_per_n' in \[controller.experimental\]"):
+        parse({"name": "x", "controller": {"experimental": {"kp_v_per_n": 1.0}}})
+    with pytest.raises(spec.ScenarioError, match=r"\[estimator.experimental\] hysteresis_turn_lsb = -1 is out of range"):
+        parse({"name": "x", "estimator": {"experimental": {"hysteresis_turn_lsb": -1.0}}})
+    s = parse({"name": "x", "estimator": {"firmware": "paper_100hz", "experimental": {"hysteresis_turn_lsb": 1.5}},
+               "controller": {"name": "pid_dob", "gains": {"kp_v_per_n": 2.0},
+                              "experimental": {"refresh_learning_gain": 0.25}}})
+    assert s.device.estimator.hysteresis_turn_lsb == 1.5
+    assert s.controller.gains == {"kp_v_per_n": 2.0, "refresh_learning_gain": 0.25}
+    fw = parse({"name": "x", "estimator": {"firmware": "fast_1khz"}})
+    assert fw.device.estimator.hysteresis_turn_lsb == 1.75            # a preset still carries its knob
 
 
 def test_gains_are_checked_against_the_named_controller(js):

@@ -70,8 +70,8 @@ def _adc_top_code(bits: int) -> float:
     return float(2 ** bits - 1)
 
 
-def _p(default: Any, unit: str, source: str):
-    return sourced(default, unit, source)
+def _p(default: Any, unit: str, source: str, doc: str = ""):
+    return sourced(default, unit, source, **({"doc": doc} if doc else {}))
 
 
 FAULHABER = "[R] Faulhaber 0816 K 006 SR datasheet table"
@@ -111,12 +111,12 @@ def _finite_plan(cls) -> tuple:
                  for f in dataclasses.fields(cls))
 
 
-def _pos(default, unit, source):
-    return sourced(default, unit, source, positive=True)
+def _pos(default, unit, source, doc: str = ""):
+    return sourced(default, unit, source, positive=True, **({"doc": doc} if doc else {}))
 
 
-def _nn(default, unit, source):
-    return sourced(default, unit, source, nonneg=True)
+def _nn(default, unit, source, doc: str = ""):
+    return sourced(default, unit, source, nonneg=True, **({"doc": doc} if doc else {}))
 
 
 class _Checked:
@@ -135,23 +135,29 @@ class MotorParams(_Checked):
     name: str = "faulhaber_0816_006sr"
     sources: tuple = ()
     """Per-preset (field, source) pairs overriding the class-level source of those fields."""
-    nominal_voltage_v: float = _pos(6.0, "V", FAULHABER)
-    resistance_ohm: float = _pos(21.2, "ohm", FAULHABER)
-    inductance_h: float = _pos(217e-6, "H", FAULHABER)
-    torque_constant_nm_per_a: float = _pos(4.12e-3, "N m/A", FAULHABER)
+    nominal_voltage_v: float = _pos(6.0, "V", FAULHABER,
+                                    doc="Rated terminal voltage of the motor (the default driver supply).")
+    resistance_ohm: float = _pos(21.2, "ohm", FAULHABER, doc="Armature resistance R.")
+    inductance_h: float = _pos(217e-6, "H", FAULHABER, doc="Armature inductance L.")
+    torque_constant_nm_per_a: float = _pos(4.12e-3, "N m/A", FAULHABER, doc="Torque constant kM.")
     back_emf_v_s_per_rad: float = _pos(
-        4.116e-3, "V s/rad", "[R] Faulhaber 0816 006 SR: kE = 0.431 mV/rpm = 0.431e-3*60/(2 pi)")
-    rotor_inertia_kg_m2: float = _pos(0.052e-7, "kg m^2", FAULHABER + " (0.052 g cm^2)")
-    friction_torque_nm: float = _nn(0.034e-3, "N m", FAULHABER)
+        4.116e-3, "V s/rad", "[R] Faulhaber 0816 006 SR: kE = 0.431 mV/rpm = 0.431e-3*60/(2 pi)",
+        doc="Back-EMF constant kE.")
+    rotor_inertia_kg_m2: float = _pos(0.052e-7, "kg m^2", FAULHABER + " (0.052 g cm^2)", doc="Rotor inertia J.")
+    friction_torque_nm: float = _nn(0.034e-3, "N m", FAULHABER,
+                                    doc="Brush and bearing friction torque (the no-load current's torque).")
     breakaway_ratio: float = _pos(
         1.25, "-", "[E] static/kinetic friction ratio 1.2-1.5 for sliding polymer/metal pairs "
-        "(POM on steel mu_s/mu_k = 0.25/0.2, [R] Stagnoli)")
+        "(POM on steel mu_s/mu_k = 0.25/0.2, [R] Stagnoli)", doc="Static over kinetic friction of the motor.")
     viscous_friction_nm_s_per_rad: float = _nn(
-        0.0, "N m s/rad", "[E] datasheet friction is given as a constant torque; no viscous term")
+        0.0, "N m s/rad", "[E] datasheet friction is given as a constant torque; no viscous term",
+        doc="Viscous friction of the rotor.")
     # datasheet performance values used only for cross-checks
-    no_load_speed_rpm: float = _pos(13500.0, "rpm", FAULHABER)
-    no_load_current_a: float = _nn(8.3e-3, "A", FAULHABER)
-    stall_torque_nm: float = _pos(1.13e-3, "N m", FAULHABER)
+    no_load_speed_rpm: float = _pos(13500.0, "rpm", FAULHABER,
+                                    doc="Datasheet no-load speed at the rated voltage (cross-checks only).")
+    no_load_current_a: float = _nn(8.3e-3, "A", FAULHABER, doc="Datasheet no-load current (cross-checks only).")
+    stall_torque_nm: float = _pos(1.13e-3, "N m", FAULHABER,
+                                  doc="Datasheet stall torque at the rated voltage (cross-checks only).")
 
     @property
     def electrical_time_constant_s(self) -> float:
@@ -245,20 +251,30 @@ class DriveTrainParams(_Checked):
     sources: tuple = ()
     """Per-preset (field, source) pairs overriding the class-level source of those fields."""
     gear_ratio: float = _pos(64.0, "-", "[E] three-stage planetary head (4:1 per stage) for the "
-                             "0816 series; catalogue ratios 4:1-1024:1 [R] Faulhaber")
+                             "0816 series; catalogue ratios 4:1-1024:1 [R] Faulhaber", doc="Gearhead reduction N.")
     gear_efficiency: float = _pos(0.6, "-", "[R] 81 % per planetary stage (Citizen) gives 0.53 for "
-                                  "3 stages [D]; 0.7 at 43:1 [R] Faulhaber 16/7; 0.6 chosen [E]")
-    pinion_radius_m: float = _pos(2.5e-3, "m", "[E] module 0.3 mm, 16 teeth -> 2.4 mm")
-    moving_mass_kg: float = _pos(6e-3, "kg", "[E] two plastic racks, board and 3x2 display")
-    backlash_m: float = _nn(0.1e-3, "m", "[E] rack mesh 0.01-0.03 mm plus 1-3 deg gearhead play x r")
-    mesh_stiffness_n_per_m: float = _pos(3e4, "N/m", "[E] plastic mesh contact 1e4-1e5 N/m")
-    mesh_damping_ratio: float = _nn(0.3, "-", "[E] polymer mesh loss")
-    guide_coulomb_n: float = _nn(0.10, "N", "[E] guide rods 0.05-0.3 N")
-    guide_viscous_n_s_per_m: float = _nn(1.0, "N s/m", "[E] guide rods 0.5-5 N s/m")
-    guide_breakaway_ratio: float = _pos(1.25, "-", "[R] POM on steel mu_s/mu_k = 0.25/0.2 (Stagnoli)")
-    stribeck_velocity_m_per_s: float = _pos(0.5e-3, "m/s", "[E] 0.1-1 mm/s")
-    travel_min_m: float = _p(0.0, "m", "[E] board fully retracted")
-    travel_max_m: float = _p(6e-3, "m", "[E] rack travel of a finger-worn frame")
+                                  "3 stages [D]; 0.7 at 43:1 [R] Faulhaber 16/7; 0.6 chosen [E]",
+                                  doc="Gearhead efficiency eta (a fraction).")
+    pinion_radius_m: float = _pos(2.5e-3, "m", "[E] module 0.3 mm, 16 teeth -> 2.4 mm",
+                                  doc="Pitch radius r of the pinion on the rack.")
+    moving_mass_kg: float = _pos(6e-3, "kg", "[E] two plastic racks, board and 3x2 display",
+                                 doc="Mass of the racks, board and display that move.")
+    backlash_m: float = _nn(0.1e-3, "m", "[E] rack mesh 0.01-0.03 mm plus 1-3 deg gearhead play x r",
+                            doc="Backlash at the board.")
+    mesh_stiffness_n_per_m: float = _pos(3e4, "N/m", "[E] plastic mesh contact 1e4-1e5 N/m",
+                                         doc="Stiffness of the gear mesh at the rack.")
+    mesh_damping_ratio: float = _nn(0.3, "-", "[E] polymer mesh loss", doc="Damping ratio of the gear mesh.")
+    guide_coulomb_n: float = _nn(0.10, "N", "[E] guide rods 0.05-0.3 N", doc="Coulomb friction of the guide rods.")
+    guide_viscous_n_s_per_m: float = _nn(1.0, "N s/m", "[E] guide rods 0.5-5 N s/m",
+                                         doc="Viscous friction of the guide rods.")
+    guide_breakaway_ratio: float = _pos(1.25, "-", "[R] POM on steel mu_s/mu_k = 0.25/0.2 (Stagnoli)",
+                                        doc="Static over kinetic friction of the guide rods.")
+    stribeck_velocity_m_per_s: float = _pos(0.5e-3, "m/s", "[E] 0.1-1 mm/s",
+                                            doc="Stribeck velocity of the friction's fall from break-away.")
+    travel_min_m: float = _p(0.0, "m", "[E] board fully retracted",
+                             doc="Board position at the near end stop (fully retracted).")
+    travel_max_m: float = _p(6e-3, "m", "[E] rack travel of a finger-worn frame",
+                             doc="Board position at the far end stop.")
 
     def __post_init__(self):
         super().__post_init__()
@@ -311,18 +327,22 @@ class FingerParams(_Checked):
     sources: tuple = ()
     """Per-preset (field, source) pairs overriding the class-level source of those fields."""
     stiffness_b_n_per_m: float = _pos(264.0, "N/m", "[E] solved through 1.4 mm at 1 N and 2.4 mm at "
-                                      "4 N, checked against Hertz E = 0.1 MPa (parameters table 1.2)")
-    exponent_m_per_m: float = _pos(1246.0, "1/m", "[E] as stiffness_b_n_per_m")
+                                      "4 N, checked against Hertz E = 0.1 MPa (parameters table 1.2)",
+                                      doc="Pulp stiffness b of the elastic law F = (b/m)(exp(m d) - 1).")
+    exponent_m_per_m: float = _pos(1246.0, "1/m", "[E] as stiffness_b_n_per_m",
+                                   doc="Pulp exponent m of the elastic law.")
     relax_weight_inf: float = _pos(0.15, "-", "[D] c0 of the Prony series: with c1-c3, a 100 ms half-sine tap "
                                    "to 2 N dissipates 81 % of its work ([R] Jindrich et al. 2003, J Biomech "
                                    "36:497: 81 % in voluntary tapping) at the [R] relaxation times; not unique: "
-                                   "81 % needs c0 <= 0.2 with most weight at 4 ms")
-    relax_weight_1: float = _nn(0.75, "-", "[D] c1, as relax_weight_inf")
-    relax_weight_2: float = _nn(0.05, "-", "[D] c2, as relax_weight_inf")
-    relax_weight_3: float = _nn(0.05, "-", "[D] c3, as relax_weight_inf")
-    relax_tau_1_s: float = _pos(0.004, "s", "[R] Pawluk & Howe 1999, J Biomech Eng 121:178")
-    relax_tau_2_s: float = _pos(0.070, "s", "[R] Pawluk & Howe 1999")
-    relax_tau_3_s: float = _pos(1.4, "s", "[R] Pawluk & Howe 1999")
+                                   "81 % needs c0 <= 0.2 with most weight at 4 ms",
+                                   doc="Prony weight c0: the part of the force that never relaxes.")
+    relax_weight_1: float = _nn(0.75, "-", "[D] c1, as relax_weight_inf", doc="Prony weight c1 (fast relaxation).")
+    relax_weight_2: float = _nn(0.05, "-", "[D] c2, as relax_weight_inf", doc="Prony weight c2 (middle relaxation).")
+    relax_weight_3: float = _nn(0.05, "-", "[D] c3, as relax_weight_inf", doc="Prony weight c3 (slow relaxation).")
+    relax_tau_1_s: float = _pos(0.004, "s", "[R] Pawluk & Howe 1999, J Biomech Eng 121:178",
+                                doc="Time constant of the fast relaxation.")
+    relax_tau_2_s: float = _pos(0.070, "s", "[R] Pawluk & Howe 1999", doc="Time constant of the middle relaxation.")
+    relax_tau_3_s: float = _pos(1.4, "s", "[R] Pawluk & Howe 1999", doc="Time constant of the slow relaxation.")
 
     def __post_init__(self):
         super().__post_init__()
@@ -365,40 +385,52 @@ class FSRParams(_Checked):
     sources: tuple = ()
     """Per-preset (field, source) pairs overriding the class-level source of those fields."""
     resistance_at_1n_ohm: float = _pos(10e3, "ohm", "[D] power-law fit through Interlink/Adafruit "
-                                       "points 0.2 N-30 k, 1 N-6 k, 10 N-1 k; spread 6-27 k")
-    exponent: float = _pos(0.9, "-", "[D] same fit; 0.75-1.0")
-    standoff_resistance_ohm: float = _pos(10e6, "ohm", "[R] FSR 402 datasheet: > 10 MOhm unloaded")
+                                       "points 0.2 N-30 k, 1 N-6 k, 10 N-1 k; spread 6-27 k",
+                                       doc="Film resistance at 1 N (the scale of the power law in force).")
+    exponent: float = _pos(0.9, "-", "[D] same fit; 0.75-1.0", doc="Exponent of the resistance's power law in force.")
+    standoff_resistance_ohm: float = _pos(10e6, "ohm", "[R] FSR 402 datasheet: > 10 MOhm unloaded",
+                                          doc="Resistance with no load.")
     hysteresis_fraction: float = _nn(0.10, "-", "[R] FSR 402 datasheet: +10 % average (R_F+ - R_F-)/R_F+, "
                                      "taken at 1000 g, creep included; the play operators carry the part the "
-                                     "creep does not (physics.fsr.play_loop_fraction)")
+                                     "creep does not (physics.fsr.play_loop_fraction)",
+                                     doc="Width of the loading/unloading loop, a fraction of the loading resistance.")
     creep_per_decade: float = _nn(
         0.0275, "-", "[D] hereditary creep of the crept force per decade of load time, such that a held force's "
         "conductance rises 12 % from 1 s to 48 h (Sensitronics, standard FSR ink at 2 psi [R]: "
         "drift_log log10(t), t in s); 2.4 %/decade in conductance at 0.1-1 s, 2.1 % at 1000 s, inside the FSR 402 datasheet's "
-        "< 5 % per log10(time) [R]")
+        "< 5 % per log10(time) [R]", doc="Creep of the force reading per decade of load time.")
     creep_tau_min_s: float = _pos(0.01, "s", "[E] fastest creep term: the film settles in tens of ms "
-                                  "after its 1-2 ms mechanical rise [R] Interlink guide")
+                                  "after its 1-2 ms mechanical rise [R] Interlink guide",
+                                  doc="Fastest time constant of the creep law.")
     creep_tau_max_s: float = _pos(1e6, "s", "[D] slowest creep term, 11.6 days: the log-time law holds over "
                                   "the datasheet's drift test (1 kg for 35 days [R]) and Sensitronics' 48 h [R]; "
-                                  "one term per decade from creep_tau_min_s")
+                                  "one term per decade from creep_tau_min_s",
+                                  doc="Slowest time constant of the creep law.")
     load_threshold_n: float = _pos(0.02, "N", "[E] film in contact with the electrodes: below the "
-                                   "0.1 N actuation force [R]; the creep acts and a press starts above it")
+                                   "0.1 N actuation force [R]; the creep acts and a press starts above it",
+                                   doc="Force at which the film meets the electrodes.")
     actuation_force_n: float = _pos(0.1, "N", "[R] FSR 402 datasheet (2010): actuation force 0.1 N (400-series "
-                                    "sheet: ~0.2 N min); the power-law path conducts half its law there")
+                                    "sheet: ~0.2 N min); the power-law path conducts half its law there",
+                                    doc="Force F_a at which the film turns on.")
     turn_on_steepness: float = _pos(4.0, "-", "[E] exponent m of the turn-on 1/(1 + (F_a/F)^m): the resistance at "
                                     "the actuation force is 160 kOhm, above the guide's > 100 kOhm before turn-on "
                                     "[R], and the power law is met within 6 % from 2 F_a (0.2 N: 45 kOhm; "
-                                    "Adafruit/Interlink table 30 kOhm [R], inside the k spread)")
+                                    "Adafruit/Interlink table 30 kOhm [R], inside the k spread)",
+                                    doc="Exponent m of the turn-on 1/(1 + (F_a/F)^m).")
     press_repeatability: float = _nn(0.02, "-", "[R] FSR 402 datasheet: single-part force repeatability +/-2 %, "
                                      "one standard deviation/mean at 1000 g; drawn per press as a resistance "
-                                     "factor exp(sigma z)")
-    mechanical_lag_s: float = _pos(1.5e-3, "s", "[R] Interlink integration guide: 1-2 ms mechanical rise")
-    noise_v_rms: float = _nn(2e-3, "V", "[E] divider + ADC input noise, about 0.4 LSB of a 10-bit 5 V ADC")
+                                     "factor exp(sigma z)",
+                                     doc="Part-to-part scatter of a press's reading, a fraction.")
+    mechanical_lag_s: float = _pos(1.5e-3, "s", "[R] Interlink integration guide: 1-2 ms mechanical rise",
+                                   doc="Mechanical rise time of the film.")
+    noise_v_rms: float = _nn(2e-3, "V", "[E] divider + ADC input noise, about 0.4 LSB of a 10-bit 5 V ADC",
+                             doc="RMS noise at the divider's output.")
     temperature_coeff_per_k: float = _p(
-        -0.15 / 60.0, "1/K", "[D] warm side: datasheet -15 % resistance at +85 C after 1 h [R], linear from 25 C")
+        -0.15 / 60.0, "1/K", "[D] warm side: datasheet -15 % resistance at +85 C after 1 h [R], linear from 25 C",
+        doc="Relative change of resistance per kelvin on the warm side.")
     temperature_coeff_cold_per_k: float = _p(
         0.05 / 65.0, "1/K", "[D] cold side: datasheet -5 % resistance at -40 C after 1 h [R], linear from 25 C "
-        "(the resistance falls on both sides)")
+        "(the resistance falls on both sides)", doc="Relative change of resistance per kelvin on the cold side.")
 
     def __post_init__(self):
         super().__post_init__()
@@ -437,12 +469,14 @@ FSRS: dict[str, FSRParams] = {
 @dataclass(frozen=True)
 class CircuitParams(_Checked):
     """Voltage divider (FSR to the supply, R2 to ground) and ADC; paper eq. 1."""
-    supply_v: float = _pos(5.0, "V", "[R] Arduino Uno 5 V rail (Carambat 2016)")
+    supply_v: float = _pos(5.0, "V", "[R] Arduino Uno 5 V rail (Carambat 2016)",
+                           doc="Supply of the FSR's voltage divider.")
     r2_ohm: float = _pos(1140.0, "ohm", "[D] the bench calibration of the nominal FSR unit for the paper's "
                          "Wiener estimator (calibration.bench_calibrate_device: presses to 0.5-2 N held 5-60 s, "
-                         "set to 10 ohm; docs/model.md, 'Calibration'); paper: adjustable 1-20 kOhm")
-    adc_bits: int = _pos(10, "bit", "[R] ATmega328 10-bit ADC")
-    adc_ref_v: float = _pos(5.0, "V", "[R] ATmega328 AVcc reference")
+                         "set to 10 ohm; docs/model.md, 'Calibration'); paper: adjustable 1-20 kOhm",
+                         doc="Fixed resistor R2 of the divider (the bench calibration sets it).")
+    adc_bits: int = _pos(10, "bit", "[R] ATmega328 10-bit ADC", doc="Resolution of the FSR's ADC.")
+    adc_ref_v: float = _pos(5.0, "V", "[R] ATmega328 AVcc reference", doc="Reference voltage of the FSR's ADC.")
 
     def __post_init__(self):
         super().__post_init__()
@@ -481,25 +515,35 @@ class CurrentSenseParams(_Checked):
     board; a population draws them within the ``*_max`` and ``shunt_tolerance`` bounds); the
     firmware knows only the nominal ``gain_v_per_v`` and ``shunt_ohm``."""
     shunt_ohm: float = _pos(0.05, "ohm", "[D] +/-0.5 A into the amplifier's +/-2.5 V half range at 100 V/V "
-                            "(stall current 0.28 A of the Faulhaber drive)")
+                            "(stall current 0.28 A of the Faulhaber drive)", doc="Motor current shunt resistance.")
     shunt_tolerance: float = sourced(0.01, "-", "[R] 1 % current-sense resistor (e.g. Vishay WSL2512 series)",
-                                     lo=0.0, hi=0.05)
-    shunt_error: float = sourced(0.0, "-", "[E] this unit's shunt deviation; nominal board 0", lo=-0.05, hi=0.05)
-    gain_v_per_v: float = _pos(100.0, "V/V", INA240 + ": INA240A3 gain")
-    gain_error_max: float = sourced(0.002, "-", INA240 + ": gain error +/-0.20 % max", lo=0.0, hi=0.05)
-    gain_error: float = sourced(0.0, "-", "[E] this unit's gain error; nominal board 0", lo=-0.05, hi=0.05)
-    offset_max_v: float = sourced(25e-6, "V", INA240 + ": input offset +/-25 uV max", lo=0.0, hi=1e-3)
-    offset_v: float = sourced(0.0, "V", "[E] this unit's input offset; nominal board 0", lo=-1e-3, hi=1e-3)
-    reference_v: float = _pos(2.5, "V", INA240 + ": output midpoint from REF1/REF2 at mid-supply of 5 V")
-    filter_tau_s: float = _pos(159e-6, "s", "[D] each RC anti-alias section 1.6 kOhm x 100 nF (corner 1.0 kHz)")
+                                     lo=0.0, hi=0.05, doc="Tolerance of the shunt, a fraction (the firmware's bound).")
+    shunt_error: float = sourced(0.0, "-", "[E] this unit's shunt deviation; nominal board 0", lo=-0.05, hi=0.05,
+                                 doc="This unit's shunt deviation, a fraction.")
+    gain_v_per_v: float = _pos(100.0, "V/V", INA240 + ": INA240A3 gain", doc="Gain of the current-sense amplifier.")
+    gain_error_max: float = sourced(0.002, "-", INA240 + ": gain error +/-0.20 % max", lo=0.0, hi=0.05,
+                                    doc="Largest gain error of the amplifier, a fraction (the firmware's bound).")
+    gain_error: float = sourced(0.0, "-", "[E] this unit's gain error; nominal board 0", lo=-0.05, hi=0.05,
+                                doc="This unit's gain error, a fraction.")
+    offset_max_v: float = sourced(25e-6, "V", INA240 + ": input offset +/-25 uV max", lo=0.0, hi=1e-3,
+                                  doc="Largest input offset of the amplifier.")
+    offset_v: float = sourced(0.0, "V", "[E] this unit's input offset; nominal board 0", lo=-1e-3, hi=1e-3,
+                              doc="This unit's input offset.")
+    reference_v: float = _pos(2.5, "V", INA240 + ": output midpoint from REF1/REF2 at mid-supply of 5 V",
+                              doc="Output reference of the amplifier (the zero-current level).")
+    filter_tau_s: float = _pos(159e-6, "s", "[D] each RC anti-alias section 1.6 kOhm x 100 nF (corner 1.0 kHz)",
+                               doc="Time constant of each RC anti-alias section.")
     filter_stages: int = _pos(2, "-", "[D] two buffered RC sections: the 20 kHz PWM ripple under one LSB "
-                              "(ebraille_sim.physics.current_sense)")
-    adc_bits: int = _pos(10, "bit", "[R] ATmega328 10-bit ADC (the FSR's converter)")
-    adc_ref_v: float = _pos(5.0, "V", "[R] ATmega328 AVcc reference")
+                              "(ebraille_sim.physics.current_sense)", doc="Number of RC anti-alias sections.")
+    adc_bits: int = _pos(10, "bit", "[R] ATmega328 10-bit ADC (the FSR's converter)",
+                         doc="Resolution of the current's ADC.")
+    adc_ref_v: float = _pos(5.0, "V", "[R] ATmega328 AVcc reference", doc="Reference voltage of the current's ADC.")
     adc_noise_lsb: float = sourced(0.5, "LSB", "[E] within the ATmega328's +/-2 LSB absolute accuracy [R]",
-                                   lo=0.0, hi=4.0)
-    zero_samples: int = _pos(64, "-", "[E] conversions averaged by the start-up zeroing at rest")
-    pwm_hz: float = _pos(20000.0, "Hz", "[E] H-bridge PWM frequency above hearing")
+                                   lo=0.0, hi=4.0, doc="RMS noise of one conversion, in codes.")
+    zero_samples: int = _pos(64, "-", "[E] conversions averaged by the start-up zeroing at rest",
+                             doc="Conversions averaged by the start-up zeroing at rest.")
+    pwm_hz: float = _pos(20000.0, "Hz", "[E] H-bridge PWM frequency above hearing",
+                         doc="PWM frequency of the H-bridge.")
 
     def __post_init__(self):
         super().__post_init__()

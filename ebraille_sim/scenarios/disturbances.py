@@ -349,11 +349,12 @@ class Tremor:
     """
     rms_m: float = sourced(15e-6, "m", "[R]/[E] Growdon 2000 ~30 um mean; Carignan 2009 band share; at most "
                            "200 um (4-5 fold with the arm extended, more under stress)",
-                           lo=0.0, hi=FINGER_TREMOR_RMS_MAX_M, kind="float")
+                           lo=0.0, hi=FINGER_TREMOR_RMS_MAX_M, kind="float", doc="RMS of the pulp's tremor motion.")
     band_hz: tuple = sourced((8.0, 12.0), "Hz", "[R] Sutton & Sykes 1967; Lakie 2015",
-                             lo=0.0, hi=100.0, kind="band")
+                             lo=0.0, hi=100.0, kind="band", doc="Frequency band of the tremor.")
     transmission: float = sourced(1.0, "-", "[E] 1 = frame does not follow the finger; "
-                             "strap_transmission() for a strapped frame", lo=0.0, hi=1.0, kind="float")
+                             "strap_transmission() for a strapped frame", lo=0.0, hi=1.0, kind="float",
+                                  doc="Share of the pulp's motion relative to the frame (1: the frame does not follow).")
 
     drives = ("finger_pos_m",)
     """The plant inputs :meth:`inputs` returns."""
@@ -376,8 +377,10 @@ class Pressing:
     of a few seconds to word-scale adjustments, gives the band 0.1-1 Hz [E].
     """
     rms_m: float = sourced(0.1e-3, "m", "[D] 0.15 N RMS [E] / 1.5 N/mm [E]; at most a third of the soft "
-                           "reader's 2.1 mm between 0.2 and 3 N [D]", lo=0.0, hi=PRESSING_RMS_MAX_M, kind="float")
-    band_hz: tuple = sourced((0.1, 1.0), "Hz", "[E] line- to word-scale adjustments", lo=0.0, hi=20.0, kind="band")
+                           "reader's 2.1 mm between 0.2 and 3 N [D]", lo=0.0, hi=PRESSING_RMS_MAX_M, kind="float",
+                           doc="RMS of the pulp's slow pressing excursions.")
+    band_hz: tuple = sourced((0.1, 1.0), "Hz", "[E] line- to word-scale adjustments", lo=0.0, hi=20.0, kind="band",
+                             doc="Frequency band of the pressing.")
 
     drives = ("finger_pos_m",)
     """The plant inputs :meth:`inputs` returns."""
@@ -403,15 +406,18 @@ class StrapSlip:
     (``max_offset_m``), well inside the 6 mm rack travel; an hour of slips at 2 per minute
     therefore moves the pulp 1 mm, not 12.
     """
-    at_s: tuple = sourced((), "s", "[E] scenario-chosen slip times", lo=0.0, hi=3600.0, kind="times")
+    at_s: tuple = sourced((), "s", "[E] scenario-chosen slip times", lo=0.0, hi=3600.0, kind="times",
+                          doc="Times of the slips (empty: drawn at rate_per_min).")
     rate_per_min: float = sourced(0.0, "1/min", "[E] Poisson slip rate when at_s is empty",
-                                  lo=0.0, hi=60.0, kind="float")
+                                  lo=0.0, hi=60.0, kind="float", doc="Rate of randomly timed slips when at_s is empty.")
     displacement_m: float = sourced(0.2e-3, "m", "[E] 0.1-0.5 mm resettling of the strap",
-                                    lo=-2e-3, hi=2e-3, kind="float")
+                                    lo=-2e-3, hi=2e-3, kind="float",
+                                    doc="Pulp motion relative to the frame in one slip (> 0: away from the board).")
     duration_s: float = sourced(0.03, "s", "[E] skin shear under the strap, tens of ms (at least 10 ms)",
-                                lo=0.01, hi=5.0, kind="float")
+                                lo=0.01, hi=5.0, kind="float", doc="Time one slip takes.")
     max_offset_m: float = sourced(1e-3, "m", "[E] the strap seats after ~1 mm of slips (tapering finger, "
-                                  "stretched skin)", lo=0.0, hi=3e-3, kind="float")
+                                  "stretched skin)", lo=0.0, hi=3e-3, kind="float",
+                                  doc="Largest total offset the slips add up to (the strap seats).")
 
     drives = ("finger_pos_m",)
     """The plant inputs :meth:`inputs` returns."""
@@ -453,11 +459,15 @@ class Orientation:
     60-90 deg takes about 0.4-1 s [E] (0.6 s default).
     """
     from_deg: float = sourced(None, "deg", "[E] default: the device's hand_orientation_deg",
-                              lo=-180.0, hi=180.0, kind="optional")
-    to_deg: float = sourced(90.0, "deg", "[E] palm turned sideways", lo=-180.0, hi=180.0, kind="float")
-    at_s: float = sourced(5.0, "s", "[E] scenario-chosen", lo=0.0, hi=3600.0, kind="float")
-    duration_s: float = sourced(0.6, "s", "[E] forearm rotation 0.4-1 s", lo=0.01, hi=60.0, kind="float")
-    return_at_s: float = sourced(None, "s", "[E] optional return to from_deg", lo=0.0, hi=3600.0, kind="optional")
+                              lo=-180.0, hi=180.0, kind="optional",
+                              doc="Hand orientation before the change (None: the device's hand_orientation_deg).")
+    to_deg: float = sourced(90.0, "deg", "[E] palm turned sideways", lo=-180.0, hi=180.0, kind="float",
+                            doc="Hand orientation after the change.")
+    at_s: float = sourced(5.0, "s", "[E] scenario-chosen", lo=0.0, hi=3600.0, kind="float", doc="Start of the change.")
+    duration_s: float = sourced(0.6, "s", "[E] forearm rotation 0.4-1 s", lo=0.01, hi=60.0, kind="float",
+                                doc="Time the change takes.")
+    return_at_s: float = sourced(None, "s", "[E] optional return to from_deg", lo=0.0, hi=3600.0, kind="optional",
+                                 doc="Time of the return to from_deg (None: none).")
 
     drives = ("gravity_along_m_per_s2",)
     """The plant inputs :meth:`inputs` returns."""
@@ -486,11 +496,16 @@ class FSRTemperature:
     board's lateral heat capacity and loss to air stretch it to about a minute (60 s [E]).
     ``reference_c`` is the temperature at which the device was calibrated (25 C [E]).
     """
-    start_c: float = sourced(25.0, "degC", "[E] device at room temperature", lo=-20.0, hi=60.0, kind="float")
-    skin_c: float = sourced(31.0, "degC", "[R] Shilco 2019: fingers 27-31 C", lo=20.0, hi=40.0, kind="float")
-    reference_c: float = sourced(25.0, "degC", "[E] calibration temperature", lo=-20.0, hi=60.0, kind="float")
-    tau_s: float = sourced(60.0, "s", "[E] board/film conduction with losses", lo=1.0, hi=3600.0, kind="float")
-    at_s: float = sourced(0.0, "s", "[E] device put on at t = at_s", lo=0.0, hi=3600.0, kind="float")
+    start_c: float = sourced(25.0, "degC", "[E] device at room temperature", lo=-20.0, hi=60.0, kind="float",
+                             doc="FSR temperature at the start.")
+    skin_c: float = sourced(31.0, "degC", "[R] Shilco 2019: fingers 27-31 C", lo=20.0, hi=40.0, kind="float",
+                            doc="Skin temperature it approaches.")
+    reference_c: float = sourced(25.0, "degC", "[E] calibration temperature", lo=-20.0, hi=60.0, kind="float",
+                                 doc="Temperature the FSR was calibrated at.")
+    tau_s: float = sourced(60.0, "s", "[E] board/film conduction with losses", lo=1.0, hi=3600.0, kind="float",
+                           doc="Time constant of the warming.")
+    at_s: float = sourced(0.0, "s", "[E] device put on at t = at_s", lo=0.0, hi=3600.0, kind="float",
+                          doc="Time the device is put on.")
 
     def offset_k(self, t_s):
         rise = np.where(t_s >= self.at_s, -np.expm1(-(t_s - self.at_s) / self.tau_s), 0.0)
@@ -514,7 +529,8 @@ class FSRDrift:
     """
     session_offset_s: float = sourced(1800.0, "s", "[E] 30 min into a session; creep law of "
                                  "the FSR model (hereditary creep, conductance rising under load)",
-                                     lo=0.0, hi=7 * 24 * 3600.0, kind="float")
+                                     lo=0.0, hi=7 * 24 * 3600.0, kind="float",
+                                      doc="Load time before the run starts (the session so far).")
 
     def factor(self, t_s, fsr):
         t = np.maximum(t_s, 0.0)
@@ -541,14 +557,22 @@ class Battery:
     (ATmega328 at 16 MHz ~15 mA [M], stimulator 2 mA x 150 V x 4 ms/s x 6 electrodes
     through a 70 % boost ~3 mA [D], motor mean ~10 mA from the closed-loop energy).
     """
-    cells_series: int = sourced(1, "-", "[E] one cell in a finger-worn device", lo=1, hi=4, kind="int")
-    capacity_mah: float = sourced(105.0, "mAh", "[R] GMB 371042 data sheet", lo=1.0, hi=10000.0, kind="float")
-    soc_start: float = sourced(0.10, "-", "[E] a nearly empty cell", lo=0.0, hi=1.0, kind="float")
-    load_current_a: float = sourced(0.03, "A", "[E] mean device draw", lo=0.0, hi=2.0, kind="float")
-    r0_ohm: float = sourced(0.38, "ohm", "[R] GMB 371042: <= 380 mOhm", lo=0.0, hi=10.0, kind="float")
-    r1_ohm: float = sourced(0.15, "ohm", "[E] polarisation resistance", lo=0.0, hi=10.0, kind="float")
-    tau1_s: float = sourced(30.0, "s", "[E] polarisation time constant", lo=0.1, hi=3600.0, kind="float")
-    cutoff_v: float = sourced(3.0, "V", "[R] discharge cut-off voltage", lo=2.5, hi=3.6, kind="float")
+    cells_series: int = sourced(1, "-", "[E] one cell in a finger-worn device", lo=1, hi=4, kind="int",
+                                doc="Li-ion polymer cells in series.")
+    capacity_mah: float = sourced(105.0, "mAh", "[R] GMB 371042 data sheet", lo=1.0, hi=10000.0, kind="float",
+                                  doc="Capacity of a cell.")
+    soc_start: float = sourced(0.10, "-", "[E] a nearly empty cell", lo=0.0, hi=1.0, kind="float",
+                               doc="State of charge at the start.")
+    load_current_a: float = sourced(0.03, "A", "[E] mean device draw", lo=0.0, hi=2.0, kind="float",
+                                    doc="Mean current the device draws.")
+    r0_ohm: float = sourced(0.38, "ohm", "[R] GMB 371042: <= 380 mOhm", lo=0.0, hi=10.0, kind="float",
+                            doc="Series resistance of a cell.")
+    r1_ohm: float = sourced(0.15, "ohm", "[E] polarisation resistance", lo=0.0, hi=10.0, kind="float",
+                            doc="Polarisation resistance of a cell.")
+    tau1_s: float = sourced(30.0, "s", "[E] polarisation time constant", lo=0.1, hi=3600.0, kind="float",
+                            doc="Polarisation time constant.")
+    cutoff_v: float = sourced(3.0, "V", "[R] discharge cut-off voltage", lo=2.5, hi=3.6, kind="float",
+                              doc="Cut-off voltage of a cell.")
 
     def supply_v(self, t_s):
         i = self.load_current_a

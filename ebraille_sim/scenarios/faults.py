@@ -59,6 +59,13 @@ _EXTRA = {"fsr_value": {"value_v"}, "finger_withdrawn": {"distance_m", "move_s"}
 _RANGES = {"start_s": (0.0, 3600.0, False), "duration_s": (0.0, 3600.0, True), "value_v": (-1.0, 10.0, False),
            "distance_m": (0.0, 0.02, True), "move_s": (0.0, 10.0, True)}
 """``(lo, hi, lo_open)`` of every numeric key."""
+KEY_DOCS = {"kind": ("-", "The fault (one of KINDS)."),
+            "start_s": ("s", "Time the fault starts."),
+            "duration_s": ("s", "How long the fault lasts."),
+            "value_v": ("V", "Voltage the divider reads during an fsr_value fault."),
+            "distance_m": ("m", "How far the pulp moves away."),
+            "move_s": ("s", "Time of the pulp's move away and back.")}
+"""``(unit, one-line description)`` of every key (the scenario reference reads them)."""
 
 
 def validate_section(source: str, value) -> list[dict]:

@@ -22,6 +22,12 @@ _SECTION_KEYS = {
     "pose_steps": None,
     "pose_ramp_s": (0.0, 10.0),
 }
+KEY_DOCS = {"press_offset_m": ("m", "Lateral offset of the press centre on the board."),
+            "finger_tilt_deg": ("deg", "Tilt of the pulp surface relative to the board."),
+            "hand_roll_deg": ("deg", "Roll of the hand about the finger axis (lateral gravity g sin(roll))."),
+            "pose_steps": ("s, m, deg", "Pose changes as [time_s, press_offset_m, finger_tilt_deg] rows."),
+            "pose_ramp_s": ("s", "Ramp time of each pose change (0: a step).")}
+"""``(unit, one-line description)`` of every key (the scenario reference reads them)."""
 
 
 def validate_section(source: str, value) -> dict:

@@ -33,6 +33,7 @@ ebraille_sim.scenarios.spec.ScenarioError: inline: unknown key 'wmp' in [reading
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import os
 import pathlib
@@ -84,22 +85,27 @@ def check_section_table(source: str, section: str, value, allowed) -> None:
 _SETTING = "scenario setting"
 
 
-def _key(default: Any, unit: str, kind: str, source: str = _SETTING, **rule) -> Any:
+def _key(default: Any, unit: str, kind: str, source: str = _SETTING, *, doc: str, **rule) -> Any:
     """A scenario key: a :func:`~ebraille_sim.base.fields.sourced` field whose metadata is its rule.
 
     ``kind`` is ``"float"``, ``"int"``, ``"str"``, ``"bool"``, ``"choice"`` (``choices=``),
     ``"steps"``, ``"table"`` (``table=`` the dataclass of the sub-table), ``"overrides"``
-    (``target=`` the parameter dataclass) or ``"free"`` (any table).  Numbers take ``lo``,
-    ``hi``, ``lo_open``, ``hi_open``.
+    (``target=`` the parameter dataclass), ``"free"`` (any table) or ``"experimental"``
+    (the section's study knobs: ``table=`` their dataclass, or ``gains=True`` for the
+    controllers' experimental gains).  Numbers take ``lo``, ``hi``, ``lo_open``, ``hi_open``;
+    ``doc`` is the key's one-line description.
     """
-    return sourced(default, unit, source, kind=kind, **rule)
+    return sourced(default, unit, source, kind=kind, doc=doc, **rule)
 
 
 def _table(cls) -> Any:
-    return field(default=None, metadata={"unit": "-", "source": _SETTING, "kind": "table", "table": cls})
+    return field(default=None, metadata={"unit": "-", "source": _SETTING, "kind": "table", "table": cls,
+                                         "doc": cls.__doc__.split(":", 1)[1].strip().split("\n")[0]})
 
 
 _TACTILE = "[R] seed paper: tactile forces 0.2-3 N (physics.params.TACTILE_FORCE_MAX_N)"
+_EXPERIMENTAL = ("Study knobs: no stability promise (a knob may change meaning, range or name, or go, "
+                 "between versions); not part of the generated malformed-scenario table.")
 
 DELEGATES: dict[str, str] = {
     "disturbances": "ebraille_sim.scenarios.disturbances",
@@ -123,24 +129,33 @@ inside the safety supervisor (``supervisor``)."""
 @dataclass(frozen=True)
 class ReadingSpec:
     """``[reading]``: the passage and the reading schedule."""
-    passage: str = _key("default", "-", "str")
-    text: str | None = _key(None, "-", "str")
-    file: str | None = _key(None, "-", "str")
-    wpm: float = _key(90.0, "1/min", "float", lo=0, hi=1000, lo_open=True)
-    start_s: float = _key(1.5, "s", "float", lo=0, hi=600)
-    jitter_fraction: float = _key(0.0, "-", "float", lo=0, hi=0.5)
-    word_pause_s: float = _key(0.0, "s", "float", lo=0, hi=5)
-    line_pause_s: float = _key(0.0, "s", "float", lo=0, hi=10)
-    max_characters: int | None = _key(None, "-", "int", lo=1, hi=10**6)
+    passage: str = _key("default", "-", "str", doc="A shipped passage by name (`ebraille-sim list`).")
+    text: str | None = _key(None, "-", "str", doc="The text to read, given inline (instead of passage).")
+    file: str | None = _key(None, "-", "str", doc="A UTF-8 text file to read, relative to the scenario file "
+                                                  "(instead of passage).")
+    wpm: float = _key(90.0, "1/min", "float", lo=0, hi=1000, lo_open=True, doc="Reading rate in words per minute.")
+    start_s: float = _key(1.5, "s", "float", lo=0, hi=600, doc="Time of the first character.")
+    jitter_fraction: float = _key(0.0, "-", "float", lo=0, hi=0.5,
+                                  doc="Random spread of each character's dwell, a fraction of the dwell.")
+    word_pause_s: float = _key(0.0, "s", "float", lo=0, hi=5, doc="Extra pause after each word.")
+    line_pause_s: float = _key(0.0, "s", "float", lo=0, hi=10, doc="Extra pause after each line.")
+    max_characters: int | None = _key(None, "-", "int", lo=1, hi=10**6,
+                                      doc="Read at most this many cells (None: the whole text).")
     # per-character refresh: each dwell is lift | press | hold | release, as fractions of
     # the dwell; the setpoint is refresh_lift_force_n while lifted or released and the
     # force setpoint from the press on; only the hold part counts as the character's window
     # (see ebraille_sim.scenarios.inputs.refresh_phases)
-    mode: str = _key("continuous", "-", "choice", choices=("continuous", "refresh"))
-    refresh_lift_fraction: float = _key(0.10, "-", "float", lo=0, hi=1)
-    refresh_press_fraction: float = _key(0.30, "-", "float", lo=0, hi=1)
-    refresh_release_fraction: float = _key(0.15, "-", "float", lo=0, hi=1)
-    refresh_lift_force_n: float = _key(0.1, "N", "float", _TACTILE, lo=0, hi=_params.TACTILE_FORCE_MAX_N)
+    mode: str = _key("continuous", "-", "choice", choices=("continuous", "refresh"),
+                     doc="continuous: the finger slides over a held force; refresh: the board lifts, presses, "
+                         "holds and releases for every character.")
+    refresh_lift_fraction: float = _key(0.10, "-", "float", lo=0, hi=1,
+                                        doc="Refresh mode: part of each dwell with the board lifted.")
+    refresh_press_fraction: float = _key(0.30, "-", "float", lo=0, hi=1,
+                                         doc="Refresh mode: part of each dwell for the press (not counted).")
+    refresh_release_fraction: float = _key(0.15, "-", "float", lo=0, hi=1,
+                                           doc="Refresh mode: part of each dwell for the release.")
+    refresh_lift_force_n: float = _key(0.1, "N", "float", _TACTILE, lo=0, hi=_params.TACTILE_FORCE_MAX_N,
+                                       doc="Refresh mode: setpoint while lifted or released.")
 
     def __post_init__(self):
         if self.mode == "refresh":
@@ -153,51 +168,91 @@ class ReadingSpec:
 @dataclass(frozen=True)
 class SetpointSpec:
     """``[setpoint]``: the force setpoint profile."""
-    force_n: float = _key(1.0, "N", "float", _TACTILE, lo=0, hi=_params.TACTILE_FORCE_MAX_N, lo_open=True)
-    band_fraction: float = _key(0.10, "-", "float", lo=0, hi=1, lo_open=True)
-    steps: tuple[tuple[float, float], ...] = _key((), "s, N", "steps")
-    ramp_s: float = _key(0.0, "s", "float", lo=0, hi=10)
+    force_n: float = _key(1.0, "N", "float", _TACTILE, lo=0, hi=_params.TACTILE_FORCE_MAX_N, lo_open=True,
+                          doc="Force setpoint (the first one when steps are given).")
+    band_fraction: float = _key(0.10, "-", "float", lo=0, hi=1, lo_open=True,
+                                doc="Half-width of the in-band window around the setpoint, a fraction of it.")
+    steps: tuple[tuple[float, float], ...] = _key((), "s, N", "steps",
+                                                  doc="Setpoint changes as [time_s, force_n] pairs.")
+    ramp_s: float = _key(0.0, "s", "float", lo=0, hi=10, doc="Ramp time of each setpoint change (0: a step).")
 
 
 @dataclass(frozen=True)
 class ControllerSpec:
-    """``[controller]``: a registered name (or gains file) and its keyword gains."""
-    name: str = _key("pid_dob", "-", "str")
-    gains: dict = field(default_factory=dict, metadata={"unit": "-", "source": _SETTING, "kind": "free"})
+    """``[controller]``: a registered name (or design, or gains file) and its keyword gains."""
+    name: str = _key("pid_dob", "-", "str", doc="A registered controller, a shipped design, a design or gains "
+                                                "file, or policy:PATH.")
+    gains: dict = field(default_factory=dict, metadata={"unit": "-", "source": _SETTING, "kind": "free",
+                                                        "doc": "Keyword gains of the controller (see the gains "
+                                                               "tables below)."})
+    experimental: dict = field(default_factory=dict, metadata={
+        "unit": "-", "source": _SETTING, "kind": "experimental", "gains": True,
+        "doc": "Experimental gains of the controller (study knobs, no stability promise)."})
 
 
 @dataclass(frozen=True)
 class FingerSpec:
     """``[finger]``: where the reader's pulp rests."""
-    gap_m: float = _key(1.0e-3, "m", "float", lo=-0.01, hi=0.01)
+    gap_m: float = _key(1.0e-3, "m", "float", lo=-0.01, hi=0.01,
+                        doc="Gap between the board and the resting pulp at the start (< 0: pressed in).")
 
 
 @dataclass(frozen=True)
 class DeviceSpec:
     """``[device]``: presets and field overrides (None: the preset's or the motor's value)."""
-    motor: str = _key("faulhaber_0816_006sr", "-", "choice", choices=tuple(sorted(_params.MOTORS)))
-    drivetrain: str = _key("planetary_64", "-", "choice", choices=tuple(sorted(_params.DRIVETRAINS)))
-    finger: str = _key("nominal", "-", "choice", choices=tuple(sorted(_params.FINGERS)))
-    fsr: str = _key("nominal", "-", "choice", choices=tuple(sorted(_params.FSRS)))
-    driver_supply_v: float | None = _key(None, "V", "float", lo=0, hi=48, lo_open=True)
-    hand_orientation_deg: float = _key(0.0, "deg", "float", lo=-180, hi=180)
-    motor_overrides: dict | None = _key(None, "-", "overrides", target=_params.MotorParams)
-    drivetrain_overrides: dict | None = _key(None, "-", "overrides", target=_params.DriveTrainParams)
-    finger_overrides: dict | None = _key(None, "-", "overrides", target=_params.FingerParams)
-    fsr_overrides: dict | None = _key(None, "-", "overrides", target=_params.FSRParams)
-    circuit_overrides: dict | None = _key(None, "-", "overrides", target=_params.CircuitParams)
-    current_sense_overrides: dict | None = _key(None, "-", "overrides", target=_params.CurrentSenseParams)
+    motor: str = _key("faulhaber_0816_006sr", "-", "choice", choices=tuple(sorted(_params.MOTORS)),
+                      doc="Motor preset.")
+    drivetrain: str = _key("planetary_64", "-", "choice", choices=tuple(sorted(_params.DRIVETRAINS)),
+                           doc="Drive train preset (gearhead, pinion, rack, board).")
+    finger: str = _key("nominal", "-", "choice", choices=tuple(sorted(_params.FINGERS)),
+                       doc="Reader (fingertip pulp) preset.")
+    fsr: str = _key("nominal", "-", "choice", choices=tuple(sorted(_params.FSRS)), doc="Force sensor preset.")
+    driver_supply_v: float | None = _key(None, "V", "float", lo=0, hi=48, lo_open=True,
+                                         doc="H-bridge supply (None: the motor's nominal voltage).")
+    hand_orientation_deg: float = _key(0.0, "deg", "float", lo=-180, hi=180,
+                                       doc="Hand orientation: the board's weight acts with g cos(angle).")
+    motor_overrides: dict | None = _key(None, "-", "overrides", target=_params.MotorParams,
+                                        doc="Field overrides of the motor preset.")
+    drivetrain_overrides: dict | None = _key(None, "-", "overrides", target=_params.DriveTrainParams,
+                                             doc="Field overrides of the drive train preset.")
+    finger_overrides: dict | None = _key(None, "-", "overrides", target=_params.FingerParams,
+                                         doc="Field overrides of the reader preset.")
+    fsr_overrides: dict | None = _key(None, "-", "overrides", target=_params.FSRParams,
+                                      doc="Field overrides of the force sensor preset.")
+    circuit_overrides: dict | None = _key(None, "-", "overrides", target=_params.CircuitParams,
+                                          doc="Field overrides of the FSR's divider and ADC.")
+    current_sense_overrides: dict | None = _key(None, "-", "overrides", target=_params.CurrentSenseParams,
+                                                doc="Field overrides of the motor current chain.")
     calibrate: bool = _key(True, "-", "bool", "true: R2 set on the bench for this FSR unit and estimator (presses "
                            "to 0.5-2 N held 5-60 s, least squares; drawn units are trimmed at 1 N held 20 s); "
-                           "false: a miscalibrated unit on purpose, with the circuit's R2")
+                           "false: a miscalibrated unit on purpose, with the circuit's R2",
+                           doc="Calibrate the divider's R2 for this FSR unit and estimator.")
 
 
 @dataclass(frozen=True)
 class RatesSpec:
     """``[rates]``: control, sensor and physics rates."""
-    control_hz: float = _key(1000.0, "Hz", "float", lo=0, hi=1e6, lo_open=True)
-    sensor_hz: float = _key(1000.0, "Hz", "float", lo=0, hi=1e6, lo_open=True)
-    physics_hz: float = _key(10000.0, "Hz", "float", lo=0, hi=1e7, lo_open=True)
+    control_hz: float = _key(1000.0, "Hz", "float", lo=0, hi=1e6, lo_open=True, doc="Controller rate.")
+    sensor_hz: float = _key(1000.0, "Hz", "float", lo=0, hi=1e6, lo_open=True, doc="FSR sampling rate.")
+    physics_hz: float = _key(10000.0, "Hz", "float", lo=0, hi=1e7, lo_open=True,
+                             doc="Plant integration rate (a whole multiple of the control rate).")
+
+
+_PARAM = "see EstimatorParams"
+
+
+@dataclass(frozen=True)
+class EstimatorExperimentalSpec:
+    """``[estimator.experimental]``: the hysteresis compensation's turn test (study knobs, no stability promise)."""
+    hysteresis_turn_lsb: float | None = _key(None, "LSB", "float", _PARAM, lo=0, hi=1e3, experimental=True,
+                                             doc="Turn test of the hysteresis compensation: reversal threshold "
+                                                 "in ADC codes (0: off).")
+    hysteresis_follow_lsb: float | None = _key(None, "LSB", "float", _PARAM, lo=0, hi=1e3, experimental=True,
+                                               doc="With the turn test: the deadband a move on in the followed "
+                                                   "direction passes.")
+    hysteresis_turn_time_s: float | None = _key(None, "s", "float", _PARAM, lo=0, hi=10, lo_open=True,
+                                                experimental=True,
+                                                doc="Time constant of the turn test's exponential average.")
 
 
 @dataclass(frozen=True)
@@ -206,37 +261,47 @@ class EstimatorSpec:
 
     ``firmware`` names a firmware preset (:mod:`ebraille_sim.estimation.presets`): its settings
     come first, and the section's other keys replace them."""
-    firmware: str | None = _key(None, "-", "choice", choices=tuple(sorted(_firmware_presets())))
-    model: str | None = _key(None, "-", "str")
-    antialias_cutoff_hz: float | None = _key(None, "Hz", "float", lo=0, hi=1e5, lo_open=True)
-    tare_at_start: bool | None = _key(None, "-", "bool")
-    clamp_nonnegative: bool | None = _key(None, "-", "bool")
-    nyquist_average: bool | None = _key(None, "-", "bool")
-    creep_compensation: bool | None = _key(None, "-", "bool")
-    creep_reference_hold_s: float | None = _key(None, "s", "float", lo=0, hi=1e5, lo_open=True)
-    hysteresis_compensation: bool | None = _key(None, "-", "bool")
-    hysteresis_fraction: float | None = _key(None, "-", "float", lo=0, hi=1, hi_open=True)
-    hysteresis_deadband_lsb: float | None = _key(None, "LSB", "float", lo=0, hi=1e3)
-    hysteresis_turn_lsb: float | None = _key(None, "LSB", "float", lo=0, hi=1e3)
-    hysteresis_follow_lsb: float | None = _key(None, "LSB", "float", lo=0, hi=1e3)
-    hysteresis_turn_time_s: float | None = _key(None, "s", "float", lo=0, hi=10, lo_open=True)
+    firmware: str | None = _key(None, "-", "choice", choices=tuple(sorted(_firmware_presets())),
+                                doc="A firmware preset (`ebraille-sim list`): its settings come first.")
+    model: str | None = _key(None, "-", "str", _PARAM,
+                             doc="Estimator model: paper:NAME[@RATE] or a model file relative to the scenario.")
+    antialias_cutoff_hz: float | None = _key(None, "Hz", "float", _PARAM, lo=0, hi=1e5, lo_open=True,
+                                             doc="Cutoff of the anti-alias filter before the estimator.")
+    tare_at_start: bool | None = _key(None, "-", "bool", _PARAM, doc="Zero the estimate at the start of the run.")
+    clamp_nonnegative: bool | None = _key(None, "-", "bool", _PARAM, doc="Clamp the estimate at 0 N.")
+    nyquist_average: bool | None = _key(None, "-", "bool", _PARAM,
+                                        doc="Average the samples of each estimator period.")
+    creep_compensation: bool | None = _key(None, "-", "bool", _PARAM,
+                                           doc="Divide the nominal FSR's predicted creep out of the estimate.")
+    creep_reference_hold_s: float | None = _key(None, "s", "float", _PARAM, lo=0, hi=1e5, lo_open=True,
+                                                doc="Hold of the calibration the creep compensation refers to.")
+    hysteresis_compensation: bool | None = _key(None, "-", "bool", _PARAM,
+                                                doc="Invert the nominal FSR's hysteresis.")
+    hysteresis_fraction: float | None = _key(None, "-", "float", _PARAM, lo=0, hi=1, hi_open=True,
+                                             doc="Loop width the hysteresis compensation inverts.")
+    hysteresis_deadband_lsb: float | None = _key(None, "LSB", "float", _PARAM, lo=0, hi=1e3,
+                                                 doc="Deadband of the hysteresis compensation, in ADC codes.")
+    experimental: dict | None = _key(None, "-", "experimental", table=EstimatorExperimentalSpec,
+                                     doc="Experimental estimator settings (study knobs, no stability promise).")
 
 
 @dataclass(frozen=True)
 class CriteriaSpec:
     """``[criteria]``: pass/fail limits checked by the regression suite (None: not checked)."""
-    onset_overshoot_max: float | None = _key(None, "-", "float", lo=0, hi=10)
-    in_band_min: float | None = _key(None, "-", "float", lo=0, hi=1)
-    peak_force_max_n: float | None = _key(None, "N", "float", lo=0, hi=100)
+    onset_overshoot_max: float | None = _key(None, "-", "float", lo=0, hi=10,
+                                             doc="Largest onset overshoot, a fraction of the setpoint.")
+    in_band_min: float | None = _key(None, "-", "float", lo=0, hi=1, doc="Smallest share of time in band.")
+    peak_force_max_n: float | None = _key(None, "N", "float", lo=0, hi=100, doc="Largest true peak force.")
 
 
 @dataclass(frozen=True)
 class ScenarioFile:
     """The top level of a scenario file (the sections of :data:`DELEGATES` come on top)."""
-    name: str | None = _key(None, "-", "str")
-    description: str = _key("", "-", "str")
-    seed: int = _key(0, "-", "int", lo=0, hi=2**52)
-    duration_s: float | None = _key(None, "s", "float", lo=0, hi=3600, lo_open=True)
+    name: str | None = _key(None, "-", "str", doc="The scenario's name (letters, digits, '_', '-').")
+    description: str = _key("", "-", "str", doc="One line on what the scenario tests.")
+    seed: int = _key(0, "-", "int", lo=0, hi=2**52, doc="Seed of every random draw of the run.")
+    duration_s: float | None = _key(None, "s", "float", lo=0, hi=3600, lo_open=True,
+                                    doc="Length of the run (None: until the passage is read).")
     reading: ReadingSpec | None = _table(ReadingSpec)
     setpoint: SetpointSpec | None = _table(SetpointSpec)
     device: DeviceSpec | None = _table(DeviceSpec)
@@ -258,6 +323,8 @@ def _rule(f: dataclasses.Field) -> Any:
         return {"type": "choice", "choices": list(m["choices"])}
     if kind in ("str", "bool", "steps"):
         return {"type": kind}
+    if kind == "experimental":
+        return "gains" if m.get("gains") else "table"
     return kind                                            # table, overrides, free
 
 
@@ -268,6 +335,9 @@ def _derive_schema() -> dict[str, dict[str, Any]]:
     for f in dataclasses.fields(ScenarioFile):
         if f.metadata["kind"] == "table":
             schema[f.name] = {g.name: _rule(g) for g in dataclasses.fields(f.metadata["table"])}
+            for g in dataclasses.fields(f.metadata["table"]):
+                if g.metadata["kind"] == "experimental" and "table" in g.metadata:
+                    schema[f"{f.name}.{g.name}"] = {h.name: _rule(h) for h in dataclasses.fields(g.metadata["table"])}
     return schema
 
 
@@ -339,7 +409,9 @@ def _check_table(src, name, data):
     for key, value in data.items():
         rule = allowed[key]
         if rule == "table":
-            out[key] = _check_table(src, key, value)
+            out[key] = _check_table(src, f"{name}.{key}" if name else key, value)
+        elif rule == "gains":
+            out[key] = _check_experimental_gains(src, f"{name}.{key}", value)
         elif rule == "overrides":
             out[key] = _check_overrides(src, f"{name}.{key}", value, _OVERRIDE_TARGET[key])
         elif rule == "delegate":
@@ -356,6 +428,35 @@ def _check_table(src, name, data):
         else:
             out[key] = _check_value(src, name, key, value, rule)
     return out
+
+
+@functools.lru_cache(maxsize=1)
+def experimental_gains() -> dict[str, dataclasses.Field]:
+    """The controllers' experimental gains by name: the fields of every registered controller's
+    config declared with ``experimental=True`` (:func:`~ebraille_sim.base.fields.sourced`).
+
+    A scenario gives them in ``[controller.experimental]``, not in ``[controller] gains``.
+    """
+    import controllers
+    out: dict[str, dataclasses.Field] = {}
+    for name in controllers.available():
+        for f in dataclasses.fields(type(controllers.make(name).config)):
+            if f.metadata.get("experimental"):
+                out.setdefault(f.name, f)
+    return out
+
+
+def _check_experimental_gains(src, where, data):
+    if not isinstance(data, dict):
+        raise ScenarioError(f"{src}: [{where}] must be a table")
+    try:
+        check_keys(f"[{where}]", data, sorted(experimental_gains()))
+        for key, value in data.items():
+            if value is not None:
+                check_number(f"[{where}] {key}", value)
+    except ValueError as exc:
+        raise ScenarioError(f"{src}: {exc}") from None
+    return dict(data)
 
 
 def _check_overrides(src, where, data, cls):
@@ -389,6 +490,8 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
             control_rate_hz=rates.get("control_hz", r0.control_hz),
             sensor_rate_hz=rates.get("sensor_hz", r0.sensor_hz),
             physics_rate_hz=rates.get("physics_hz", r0.physics_hz))
+        if "experimental" in est:               # the study knobs are EstimatorParams fields like the rest
+            est = {**{k: v for k, v in est.items() if k != "experimental"}, **est["experimental"]}
         if "firmware" in est:
             est = {**_firmware_presets()[est["firmware"]].estimator,
                    **{k: v for k, v in est.items() if k != "firmware"}}
@@ -566,11 +669,18 @@ def parse_scenario(data: dict, source: str = "<scenario>", base_dir: str = ".") 
     finger = FingerSpec(**top.get("finger", {}))
     _check_gap(source, finger, dev)
     ctl = top.get("controller", {})
+    gains, trial = ctl.get("gains", {}), ctl.get("experimental", {})
+    if gains:
+        late = sorted(set(gains) & set(experimental_gains()))
+        if late:
+            raise ScenarioError(f"{source}: [controller] gains {late[0]} is experimental: give it in "
+                                f"[controller.experimental]")
     return ScenarioSpec(
         name=top["name"], description=top.get("description", ""), seed=top.get("seed", 0),
         duration_s=top.get("duration_s"), reading=reading, setpoint=sp, device=dev,
         finger=finger,
-        controller=ControllerSpec(name=ctl.get("name", ControllerSpec().name), gains=ctl.get("gains", {})),
+        controller=ControllerSpec(name=ctl.get("name", ControllerSpec().name), gains={**gains, **trial},
+                                  experimental=dict(trial)),
         criteria=top.get("criteria", {}), sections={k: top[k] for k in DELEGATES if k in top},
         source=source, base_dir=base_dir, calibrated=top.get("device", {}).get("calibrate", DeviceSpec().calibrate))
 

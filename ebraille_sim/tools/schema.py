@@ -38,7 +38,6 @@ Examples
 from __future__ import annotations
 
 import argparse
-import ast
 import dataclasses
 import inspect
 import json
@@ -46,7 +45,6 @@ import math
 import pathlib
 import re
 import sys
-import textwrap
 from dataclasses import dataclass
 from typing import Any
 
@@ -63,22 +61,24 @@ JSON_SCHEMA_PATH = "scenarios/scenario.schema.json"
 
 _SETTING = "scenario setting"
 
-_UNIT_SUFFIXES = (("_v_per_ns", "V/(N s)"), ("_vs_per_n", "V s/N"), ("_v_per_n", "V/N"),
-                  ("_n_per_s", "N/s"), ("_v_per_s", "V/s"), ("_v_per_v", "V/V"), ("_ohm", "ohm"), ("_deg", "deg"),
-                  ("_hz", "Hz"), ("_s", "s"), ("_n", "N"), ("_v", "V"), ("_a", "A"), ("_m", "m"))
-"""Unit of a key without unit metadata, from the suffix of its name (the project's naming rule)."""
+def declared(where: str, name: str, metadata) -> tuple[str, str]:
+    """The ``unit`` and ``doc`` (one-line description) a field carries at its declaration
+    (:func:`ebraille_sim.base.fields.sourced`); a ``ValueError`` naming the field when either is
+    missing: the reference guesses nothing from a name.
 
-
-def unit_from_name(name: str) -> str:
-    """The SI unit a key's name ends in (``"-"`` for none).
-
-    >>> unit_from_name("ki_v_per_ns"), unit_from_name("finger_tilt_deg"), unit_from_name("q_force")
-    ('V/(N s)', 'deg', '-')
+    >>> declared("[x]", "k_n", {"unit": "N", "doc": "A force."})
+    ('N', 'A force.')
+    >>> declared("[x]", "k_n", {"unit": "N"})
+    Traceback (most recent call last):
+    ...
+    ValueError: [x] k_n has no description at its declaration (sourced(..., doc=...))
     """
-    for suffix, unit in _UNIT_SUFFIXES:
-        if name.endswith(suffix):
-            return unit
-    return "-"
+    unit, doc = metadata.get("unit"), metadata.get("doc")
+    missing = [w for w, v in (("unit", unit), ("description", doc)) if not (isinstance(v, str) and v.strip())]
+    if missing:
+        raise ValueError(f"{where} {name} has no {' and no '.join(missing)} at its declaration "
+                         f"(sourced(..., doc=...))")
+    return unit, doc
 
 
 @dataclass(frozen=True)
@@ -89,7 +89,8 @@ class Key:
     (``choices``), ``"band"`` (a ``[low, high]`` pair), ``"times"`` (a list of numbers),
     ``"rows"`` (a list of fixed-length rows, ``columns`` giving each column as a
     :class:`Key`), ``"table"`` (a sub-table, described by its own :class:`Section`) or
-    ``"free"`` (any table).  ``lo``/``hi`` bound numbers (and every number of a band or
+    ``"free"`` (any table).  ``doc`` is the one-line description of the key's declaration.
+    ``lo``/``hi`` bound numbers (and every number of a band or
     of times), ``lo_open``/``hi_open`` exclude the bound itself.  ``default`` is
     :data:`None` when the key has no fixed default (``note`` says what applies).
     """
@@ -106,6 +107,7 @@ class Key:
     source: str = _SETTING
     note: str = ""
     required: bool = False
+    doc: str = ""
 
     def range_text(self) -> str:
         """The admissible values in words: ``(0, 1000]``, ``> 0``, ``one of: a, b``, ``-``."""
@@ -130,7 +132,9 @@ class Section:
     """A table of a scenario file: its path (``"reading"``, ``"disturbances.tremor"``, ...), keys and words.
 
     ``array`` marks an array of tables (each kind of ``[[faults]]`` entry is one section);
-    ``required`` lists the keys a table must have.
+    ``required`` lists the keys a table must have; ``experimental`` marks a table of study
+    knobs (no stability promise); ``settable = False`` a table the reference shows but a
+    scenario cannot set (the supervisor's drive envelope).
     """
     path: str
     title: str
@@ -138,6 +142,8 @@ class Section:
     keys: tuple[Key, ...]
     array: bool = False
     required: tuple[str, ...] = ()
+    experimental: bool = False
+    settable: bool = True
 
 
 def _num(x) -> str:
@@ -164,39 +170,6 @@ def _first_sentence(text: str) -> str:
     return m.group(1) if m else text
 
 
-def _field_docs(cls) -> dict[str, str]:
-    """The first sentence-paragraph documenting each field of a dataclass.
-
-    Attribute docstrings (a string right after the field) and the numpydoc
-    ``Parameters`` section of the class docstring (``name : type`` then indented text).
-    """
-    out: dict[str, str] = {}
-    doc = inspect.cleandoc(cls.__doc__ or "")
-    lines = doc.splitlines()
-    if "Parameters" in lines:
-        i = lines.index("Parameters") + 2
-        current: list[str] = []
-        while i < len(lines) and not (i + 1 < len(lines) and set(lines[i + 1].strip()) == {"-"}):
-            line = lines[i]
-            if line and not line.startswith(" "):
-                current = [n.strip() for n in line.split(":")[0].split(",")]
-            elif line.strip():
-                for n in current:
-                    out[n] = (out.get(n, "") + " " + line.strip()).strip()
-            i += 1
-        out = {n: _md(_first_sentence(t)) for n, t in out.items()}
-    try:
-        tree = ast.parse(textwrap.dedent(inspect.getsource(cls)))
-    except (OSError, TypeError):
-        return out
-    body = tree.body[0].body
-    for a, b in zip(body, body[1:]):
-        if (isinstance(a, ast.AnnAssign) and isinstance(a.target, ast.Name) and isinstance(b, ast.Expr)
-                and isinstance(b.value, ast.Constant) and isinstance(b.value.value, str)):
-            out[a.target.id] = _first_sentence(_first_paragraph(b.value.value))
-    return out
-
-
 def _plain(value):
     """A default as JSON data: tuples become lists, infinities and None become None."""
     if isinstance(value, tuple):
@@ -215,11 +188,12 @@ _STEPS_COLUMNS = (Key("time_s", "number", "s", lo=0.0, hi=3600.0),
 """Columns of ``[setpoint] steps``, as :func:`ebraille_sim.scenarios.spec._check_value` checks them."""
 
 
-def _spec_key(f: dataclasses.Field) -> Key:
+def _spec_key(f: dataclasses.Field, where: str) -> Key:
     m = f.metadata
     kind = m["kind"]
+    unit, doc = declared(where, f.name, m)
     default = f.default if f.default is not dataclasses.MISSING else None
-    common = dict(unit=m["unit"], default=_plain(default), source=m["source"])
+    common = dict(unit=unit, default=_plain(default), source=m["source"], doc=doc)
     if kind in ("float", "int"):
         return Key(f.name, "number" if kind == "float" else "integer", lo=m.get("lo"), hi=m.get("hi"),
                    lo_open=m.get("lo_open", False), hi_open=m.get("hi_open", False), **common)
@@ -231,7 +205,7 @@ def _spec_key(f: dataclasses.Field) -> Key:
         return Key(f.name, "boolean", **common)
     if kind == "steps":
         return Key(f.name, "rows", columns=_STEPS_COLUMNS, **common)
-    if kind in ("table", "overrides"):
+    if kind in ("table", "overrides", "experimental"):
         return Key(f.name, "table", **common)
     if kind == "free":
         return Key(f.name, "free", **common)
@@ -249,33 +223,65 @@ def _override_keys(cls) -> tuple[Key, ...]:
         v = getattr(defaults, f.name)
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             continue
+        unit, doc = declared(cls.__name__, f.name, m)
         lo = 0.0 if (m.get("positive") or m.get("nonneg")) else m.get("lo")
-        keys.append(Key(f.name, "number", m.get("unit", "-"), v, lo=lo, hi=m.get("hi"),
-                        lo_open=bool(m.get("positive")), source=m.get("source", "")))
+        keys.append(Key(f.name, "number", unit, v, lo=lo, hi=m.get("hi"),
+                        lo_open=bool(m.get("positive")), source=m.get("source", ""), doc=doc))
     return tuple(keys)
 
 
+_EXPERIMENTAL_NOTE = ("**Experimental**: study knobs with no stability promise: a key may change its meaning, "
+                      "range or name, or go, from one version to the next; the generated malformed-scenario "
+                      "table does not cover it.")
+
+
+def _gain_key(f: dataclasses.Field, where: str, default) -> Key:
+    """A controller gain from its config field's declaration."""
+    unit, doc = declared(where, f.name, f.metadata)
+    t = str(f.type)
+    kind = "boolean" if t == "bool" else "string" if t == "str" else "number"
+    note = "Omitted: derived from the other gains." if default is None else ""
+    return Key(f.name, kind, unit, _plain(default), source=f.metadata["source"], doc=doc, note=note)
+
+
 def _core_sections() -> list[Section]:
+    import importlib
     secs = []
-    top = [dataclasses.replace(_spec_key(f), required=(f.name == "name"))
+    top = [dataclasses.replace(_spec_key(f, "the top level"), required=(f.name == "name"))
            for f in dataclasses.fields(_spec.ScenarioFile)]
-    top += [Key(name, "table", note=f"validated by `{mod}`") for name, mod in _spec.DELEGATES.items()]
+    top += [Key(name, "table", note=f"validated by `{mod}`",
+                doc=_first_sentence(_first_paragraph(importlib.import_module(mod).__doc__)))
+            for name, mod in _spec.DELEGATES.items()]
     secs.append(Section("", "Top level", _first_paragraph(_spec.ScenarioFile.__doc__), tuple(top),
                         required=("name",)))
     for f in dataclasses.fields(_spec.ScenarioFile):
         if f.metadata["kind"] != "table":
             continue
         cls = f.metadata["table"]
-        keys = tuple(_spec_key(g) for g in dataclasses.fields(cls))
+        keys = tuple(_spec_key(g, f"[{f.name}]") for g in dataclasses.fields(cls))
         secs.append(Section(f.name, f"[{f.name}]", _first_paragraph(cls.__doc__), keys))
         for g in dataclasses.fields(cls):
+            path = f"{f.name}.{g.name}"
             if g.metadata["kind"] == "overrides":
                 target = g.metadata["target"]
-                secs.append(Section(f"{f.name}.{g.name}", f"[{f.name}.{g.name}]",
+                secs.append(Section(path, f"[{path}]",
                                     f"Field overrides of `{target.__name__}`: "
                                     f"{_first_paragraph(target.__doc__)}  Defaults shown are the "
                                     f"default preset's; a preset chosen in [{f.name}] brings its own.",
                                     _override_keys(target)))
+            elif g.metadata["kind"] == "experimental" and "table" in g.metadata:
+                sub = g.metadata["table"]
+                secs.append(Section(path, f"[{path}]", _first_paragraph(sub.__doc__),
+                                    tuple(_spec_key(h, f"[{path}]") for h in dataclasses.fields(sub)),
+                                    experimental=True))
+            elif g.metadata["kind"] == "experimental":
+                gains = _spec.experimental_gains()
+                secs.append(Section(path, f"[{path}]",
+                                    "Experimental gains of the controller named in [controller] (each is a field "
+                                    "of that controller's config, below); they join its gains.",
+                                    tuple(_gain_key(h, f"[{path}]", h.default if h.default is not
+                                                    dataclasses.MISSING else None) for h in gains.values()),
+                                    experimental=True))
     return secs
 
 
@@ -286,17 +292,19 @@ def _core_sections() -> list[Section]:
 def _disturbance_sections() -> list[Section]:
     from ebraille_sim.scenarios import disturbances as dist
     secs = [Section("disturbances", "[disturbances]", _first_paragraph(dist.__doc__),
-                    tuple(Key(name, "table") for name in dist.KINDS))]
+                    tuple(Key(name, "table", doc=_first_sentence(_first_paragraph(cls.__doc__)))
+                          for name, cls in dist.KINDS.items()))]
     for name, cls in dist.KINDS.items():
         keys = []
         for f in dataclasses.fields(cls):
             m = f.metadata
+            unit, doc = declared(f"[disturbances.{name}]", f.name, m)
             kind = {"float": "number", "int": "integer", "optional": "number", "band": "band",
                     "times": "times"}[m["kind"]]
             note = {"band": f"a [low, high] pair, low < high, at least {dist.MIN_BAND_WIDTH_HZ:g} Hz apart",
                     "times": "a list of times", "optional": "may be omitted"}.get(m["kind"], "")
-            keys.append(Key(f.name, kind, m["unit"], _plain(f.default), lo=m["lo"], hi=m["hi"],
-                            source=m["source"], note=note))
+            keys.append(Key(f.name, kind, unit, _plain(f.default), lo=m["lo"], hi=m["hi"],
+                            source=m["source"], note=note, doc=doc))
         secs.append(Section(f"disturbances.{name}", f"[disturbances.{name}]", _first_paragraph(cls.__doc__),
                             tuple(keys)))
     return secs
@@ -310,14 +318,16 @@ def _fault_sections() -> list[Section]:
     from ebraille_sim.scenarios import faults
     secs = []
     for kind in faults.KINDS:
-        keys = [Key("kind", "choice", choices=(kind,), required=True)]
+        unit, doc = declared("[[faults]]", "kind", dict(zip(("unit", "doc"), faults.KEY_DOCS.get("kind", ("", "")))))
+        keys = [Key("kind", "choice", unit, choices=(kind,), required=True, doc=doc)]
         extra = faults._EXTRA.get(kind, set())
         for name in sorted(faults._COMMON - {"kind"}) + sorted(extra):
             lo, hi, lo_open = faults._RANGES[name]
+            unit, doc = declared("[[faults]]", name, dict(zip(("unit", "doc"), faults.KEY_DOCS.get(name, ("", "")))))
             default = _FAULT_DEFAULTS.get(name)
             note = default if isinstance(default, str) else ""
-            keys.append(Key(name, "number", unit_from_name(name), None if note else default, lo=lo, hi=hi,
-                            lo_open=lo_open, note=note,
+            keys.append(Key(name, "number", unit, None if note else default, lo=lo, hi=hi,
+                            lo_open=lo_open, note=note, doc=doc,
                             required=name == "start_s" or (kind == "fsr_value" and name == "value_v")))
         target = faults.KINDS[kind][0]
         secs.append(Section(f"faults.{kind}", f"[[faults]] kind = \"{kind}\"",
@@ -327,27 +337,28 @@ def _fault_sections() -> list[Section]:
     return secs
 
 
-def _supervisor_section() -> Section:
-    from controllers.supervisor import FORCE_CAP_LIMIT_N, SupervisorConfig
-    from controllers.supervisor.config import _MAY_BE_ZERO
-    docs = _field_docs(SupervisorConfig)
+def _supervisor_sections() -> list[Section]:
+    from controllers.supervisor import DriveEnvelope, SupervisorConfig, SupervisorPolicy
     defaults = SupervisorConfig()
     keys = []
-    for f in dataclasses.fields(SupervisorConfig):
+    for f in dataclasses.fields(SupervisorPolicy):
+        unit, doc = declared("[supervisor]", f.name, f.metadata)
         v = getattr(defaults, f.name)
         if isinstance(v, bool):
-            keys.append(Key(f.name, "boolean", default=v, note=docs.get(f.name, "")))
+            keys.append(Key(f.name, "boolean", unit, default=v, source=f.metadata["source"], doc=doc))
             continue
-        hi = FORCE_CAP_LIMIT_N if f.name == "force_cap_n" else None
-        note = docs.get(f.name, "")
-        if f.name in ("rated_current_a", "stall_current_a", "motor_resistance_ohm"):
-            note = (note + " Default: from the scenario's motor and supply (value shown: the default device).")
-        keys.append(Key(f.name, "number", unit_from_name(f.name), v, lo=0.0, hi=hi, lo_open=f.name not in _MAY_BE_ZERO,
-                        source="", note=note.strip()))
-    return Section("supervisor", "[supervisor]", "The fields of `controllers.supervisor.SupervisorConfig`: " +
-                   _first_paragraph(SupervisorConfig.__doc__)[0].lower() + _first_paragraph(SupervisorConfig.__doc__)[1:] +
-                   "  The section wraps the run's controller in the safety supervisor "
-                   "(`controllers.supervisor`); `enabled = false` switches it off.", tuple(keys))
+        keys.append(Key(f.name, "number", unit, v, lo=0.0, hi=f.metadata.get("hi"), lo_open=True,
+                        source=f.metadata["source"], doc=doc))
+    envelope = []
+    for f in dataclasses.fields(DriveEnvelope):
+        unit, doc = declared("the drive envelope", f.name, f.metadata)
+        envelope.append(Key(f.name, "number", unit, getattr(defaults, f.name), source=f.metadata["source"], doc=doc))
+    return [Section("supervisor", "[supervisor]",
+                    _first_paragraph(SupervisorPolicy.__doc__) + "  The section wraps the run's controller in the "
+                    "safety supervisor (`controllers.supervisor`); `enabled = false` switches it off.", tuple(keys)),
+            Section("supervisor.envelope", "Drive envelope (derived from [device]; not settable)",
+                    _first_paragraph(DriveEnvelope.__doc__) + "  Values shown: the nominal device's.",
+                    tuple(envelope), settable=False)]
 
 
 _MECHANISM_DEFAULT = 0.0
@@ -359,15 +370,16 @@ def _mechanism_section() -> Section:
     bounds = mech._SECTION_KEYS
     keys = []
     for name, b in bounds.items():
+        unit, doc = declared("[mechanism]", name, dict(zip(("unit", "doc"), mech.KEY_DOCS.get(name, ("", "")))))
         if b is None:
             cols = (Key("time_s", "number", "s", lo=0.0, hi=3600.0),
                     Key("press_offset_m", "number", "m", lo=bounds["press_offset_m"][0],
                         hi=bounds["press_offset_m"][1]),
                     Key("finger_tilt_deg", "number", "deg", lo=bounds["finger_tilt_deg"][0],
                         hi=bounds["finger_tilt_deg"][1]))
-            keys.append(Key(name, "rows", "s, m, deg", [], columns=cols, note="times increase"))
+            keys.append(Key(name, "rows", unit, [], columns=cols, note="times increase", doc=doc))
         else:
-            keys.append(Key(name, "number", unit_from_name(name), _MECHANISM_DEFAULT, lo=b[0], hi=b[1]))
+            keys.append(Key(name, "number", unit, _MECHANISM_DEFAULT, lo=b[0], hi=b[1], doc=doc))
     return Section("mechanism", "[mechanism]", _first_paragraph(mech.__doc__) +
                    "  Read by the pymunk backend only.", tuple(keys))
 
@@ -377,7 +389,7 @@ def reference() -> list[Section]:
     secs = _core_sections()
     for name in _spec.DELEGATES:
         secs += {"disturbances": _disturbance_sections, "faults": _fault_sections,
-                 "supervisor": lambda: [_supervisor_section()], "mechanism": lambda: [_mechanism_section()]}[name]()
+                 "supervisor": _supervisor_sections, "mechanism": lambda: [_mechanism_section()]}[name]()
     return secs
 
 
@@ -389,24 +401,22 @@ def controller_configs() -> dict[str, tuple[str, tuple[Key, ...]]]:
     """``{registered name: (config class path, keys)}`` of every registered controller.
 
     Each controller is built with its defaults (:func:`controllers.make`) and its
-    ``config`` dataclass is read: field names, types and the defaults that controller
-    starts from.
+    ``config`` dataclass is read: field names, types, the defaults that controller starts
+    from and each field's declared unit and description (a ``ValueError`` naming a field
+    without them).
     """
     import controllers
     out = {}
     for name in controllers.available():
         config = controllers.make(name).config
         cls = type(config)
-        docs = _field_docs(cls)
         keys = []
         for f in dataclasses.fields(cls):
-            v = getattr(config, f.name)
-            t = str(f.type)
-            kind = "boolean" if t == "bool" else "string" if t == "str" else "number"
-            note = docs.get(f.name, "")
-            if v is None:
-                note = (note + " Omitted: derived from the other gains.").strip()
-            keys.append(Key(f.name, kind, unit_from_name(f.name), _plain(v), source="", note=note))
+            k = _gain_key(f, f"{cls.__name__}", getattr(config, f.name))
+            if f.metadata.get("experimental"):
+                k = dataclasses.replace(k, note=(k.note + " Experimental: in a scenario, give it in "
+                                                 "[controller.experimental].").strip())
+            keys.append(k)
         out[name] = (f"{cls.__module__}.{cls.__name__}", tuple(keys))
     return out
 
@@ -425,7 +435,7 @@ def _bounds(k: Key) -> dict:
 
 
 def _key_schema(k: Key) -> dict:
-    desc = {"description": " ".join(x for x in (f"[{k.unit}]" if k.unit != "-" else "", k.note) if x)}
+    desc = {"description": " ".join(x for x in (f"[{k.unit}]" if k.unit != "-" else "", k.doc, k.note) if x)}
     if not desc["description"]:
         desc = {}
     if k.default is not None and k.kind not in ("table", "free"):
@@ -494,7 +504,8 @@ def json_schema(sections: list[Section] | None = None, configs=None) -> dict:
         s = by_path[path]
         subs = {k.name: table(f"{path}.{k.name}" if path else k.name)
                 for k in s.keys if k.kind == "table" and (f"{path}.{k.name}" if path else k.name) in by_path}
-        return _object(s.keys, s.required, subs, s.description)
+        return _object(s.keys, s.required, subs,
+                       ("Experimental (no stability promise). " if s.experimental else "") + s.description)
 
     top = table("")
     fault_kinds = [s for s in sections if s.array and s.path.startswith("faults.")]
@@ -545,14 +556,15 @@ def _type_text(k: Key) -> str:
 
 
 def _key_table(keys, with_range: bool = True) -> list[str]:
-    cols = ["key", "type", "unit"] + (["range"] if with_range else []) + ["default", "source / note"]
+    cols = ["key", "type", "unit"] + (["range"] if with_range else []) + ["default", "description", "source / note"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for k in keys:
         name = f"`{k.name}`" + (" (required)" if k.required else "")
         src = "; ".join(x for x in ((k.source if k.source != _SETTING else ""), k.note) if x)
         if k.kind == "table":
             src = src or "sub-table, below"
-        cells = [name, _type_text(k), k.unit] + ([k.range_text()] if with_range else []) + [_default_text(k), src]
+        cells = ([name, _type_text(k), k.unit] + ([k.range_text()] if with_range else [])
+                 + [_default_text(k), _md(k.doc), src])
         lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
     return lines
 
@@ -587,7 +599,13 @@ def markdown(sections: list[Section] | None = None, configs=None) -> str:
     for i, s in enumerate(sections):
         if s.path.startswith("faults."):
             continue
-        out += [f"## {s.title}" if "." not in s.path else f"### {s.title}", "", s.description, ""]
+        out += [f"## {s.title}" if "." not in s.path else f"### {s.title}", ""]
+        if s.experimental:
+            out += [_EXPERIMENTAL_NOTE, ""]
+        if not s.settable:
+            out += ["**Not settable**: a scenario that gives one of these keys in [supervisor] is refused, "
+                    "naming the key; change the device instead.", ""]
+        out += [s.description, ""]
         out += _key_table(s.keys)
         out.append("")
         if i == last_disturbance:
