@@ -43,12 +43,16 @@ from dataclasses import dataclass, field
 from ebraille_sim.base.validation import check_keys, read_table
 from ebraille_sim.estimation.presets import check_name, get_firmware, read_score
 
-__all__ = ["Design", "designs", "get_design", "is_design_file", "DESIGN_KEYS"]
+__all__ = ["Design", "designs", "get_design", "is_design_file", "design_files", "DESIGN_KEYS", "WORKING_FOLDER"]
 
 DESIGN_KEYS = ("name", "description", "controller", "firmware", "gains", "benchmark", "check")
 """The keys of a design file (a gains file uses ``controller`` and ``gains``)."""
 
 _SUFFIXES = (".toml", ".json")
+
+WORKING_FOLDER = "designs"
+"""Folder of the working directory whose design files ``ebraille-sim list`` shows with the
+shipped ones (as ``./scenarios`` holds your own scenarios)."""
 
 
 @dataclass(frozen=True)
@@ -148,3 +152,34 @@ def get_design(name_or_path) -> Design:
         p = os.fspath(name_or_path)
         return _from_table(p, read_table(p, "design file"), pathlib.Path(p).stem)
     raise ValueError(f"unknown design {name_or_path!r}; available: {', '.join(shipped)} (or a design file .toml/.json)")
+
+
+def design_files(paths=(), working_folder: bool = True) -> list[Design]:
+    """Your own design files: each ``.toml``/``.json`` of :data:`WORKING_FOLDER` (with
+    ``working_folder``) and of ``paths`` (files, or folders whose design files are taken), in
+    that order, sorted by file within a folder; a file given twice is read once.
+
+    Each is read as :func:`get_design` reads it.  Raises one line naming the file and its
+    problem: a ``FileNotFoundError`` for a path that does not exist, a ``ValueError``
+    otherwise (a file that is no ``.toml``/``.json``, malformed, or not a design).
+    """
+    files: list[pathlib.Path] = []
+    folder = pathlib.Path(WORKING_FOLDER)
+    roots = ([folder] if working_folder and folder.is_dir() else []) + [pathlib.Path(os.fspath(p)) for p in paths]
+    for root in roots:
+        if root.is_dir():
+            files += sorted(f for f in root.iterdir() if f.is_file() and is_design_file(f.name))
+        elif not root.exists():
+            raise FileNotFoundError(f"design file not found: {root}")
+        elif not is_design_file(root.name):
+            raise ValueError(f"{root}: a design file is .toml or .json")
+        else:
+            files.append(root)
+    out, seen = [], set()
+    for f in files:
+        key = f.resolve()
+        if key in seen:
+            continue
+        seen.add(key)
+        out.append(get_design(str(f)))
+    return out

@@ -138,3 +138,53 @@ def test_run_with_a_design_name_from_any_folder(tmp_path):
     assert doc["metrics"]["char_in_band_fraction"] == pytest.approx(
         get_design("dob_learn_1khz").check["char_in_band_fraction"], abs=0.006)
 
+
+def _list(args, cwd):
+    return subprocess.run([sys.executable, "-m", "ebraille_sim", "list", *args], capture_output=True, text=True,
+                          cwd=cwd)
+
+
+def test_list_shows_your_own_design_files_from_designs_and_from_arguments(tmp_path):
+    shipped = get_design("dob_hold_1khz").source
+    text = open(shipped, encoding="utf-8").read()
+    (tmp_path / "designs").mkdir()
+    (tmp_path / "designs" / "mine.toml").write_text(text.replace('name = "dob_hold_1khz"', 'name = "mine"'))
+    (tmp_path / "more").mkdir()
+    (tmp_path / "more" / "gains.toml").write_text('controller = "pid"\n[gains]\nkp_v_per_n = 1.5\n')
+    (tmp_path / "more" / "notes.txt").write_text("not a design\n")
+    (tmp_path / "other.json").write_text('{"controller": "pid_dob", "gains": {"kp_v_per_n": 2.0}}')
+    out = _list(["--designs", "more", "other.json", "designs/mine.toml", "--json"], tmp_path)
+    assert out.returncode == 0, out.stderr
+    rows = json.loads(out.stdout)["designs"]
+    assert [d["name"] for d in rows] == [*designs(), "mine", "gains", "other"]       # a file given twice: once
+    own = {d["name"]: d for d in rows[len(designs()):]}
+    assert own["mine"]["from"] == "working folder" and own["mine"]["score"] == get_design("dob_hold_1khz").score
+    assert own["gains"]["from"] == "argument" and own["gains"]["firmware"] is None
+    assert own["other"]["controller"] == "pid_dob" and own["other"]["gains"] == {"kp_v_per_n": 2.0}
+    assert all(d["from"] == "library" for d in rows[:len(designs())])
+    text = _list([], tmp_path).stdout
+    assert "[designs/mine.toml]" in text and "[more/gains.toml]" not in text     # only ./designs without --designs
+
+
+@pytest.mark.parametrize("content, problem", [
+    ('controller = "pid"\n[gains]\nkpp = 1.0\n', "unknown key 'kpp'"),
+    ('controller = "nosuch"\n', "controller 'nosuch' is not a registered controller"),
+    ('controller = [\n', "not valid TOML"),
+    ('controller = "pid"\nfirmware = "fast_2khz"\n', "fast_2khz"),
+])
+def test_a_bad_design_file_is_one_error_line_naming_the_file(tmp_path, content, problem):
+    (tmp_path / "bad.toml").write_text(content)
+    out = _list(["--designs", "bad.toml"], tmp_path)
+    assert out.returncode == 2 and out.stdout == ""
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "bad.toml" in lines[0] and problem in lines[0]
+    (tmp_path / "designs").mkdir()
+    (tmp_path / "bad.toml").rename(tmp_path / "designs" / "bad.toml")
+    out = _list(["--json"], tmp_path)                         # one in ./designs is refused the same way
+    assert out.returncode == 2 and "designs/bad.toml" in out.stderr and len(out.stderr.strip().splitlines()) == 1
+    (tmp_path / "designs" / "bad.toml").unlink()
+    (tmp_path / "notes.txt").write_text("x")
+    for args, why in ((["--designs", "missing.toml"], "design file not found: missing.toml"),
+                      (["--designs", "notes.txt"], "notes.txt: a design file is .toml or .json")):
+        out = _list(args, tmp_path)
+        assert out.returncode == 2 and out.stderr == f"error: {why}\n"

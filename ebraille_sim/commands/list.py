@@ -2,24 +2,33 @@
 estimator models."""
 from __future__ import annotations
 
+import pathlib
+
 NAME = "list"
 HELP = "list scenarios, controllers, firmware presets, designs, device presets and estimator models"
 
 
 def add_arguments(p):
-    """No options of its own: ``--json`` prints :func:`catalogue` (scenarios with their file and folder)."""
+    """``--designs PATH ...``: your own design files (or folders of them) to list with the
+    shipped ones; ``--json`` prints :func:`catalogue`."""
+    p.add_argument("--designs", nargs="+", default=[], metavar="PATH",
+                   help="also list these design files (.toml/.json), or the design files in these folders; "
+                        "the design files in ./designs are always listed")
 
 
-def catalogue() -> dict:
+def catalogue(design_paths=()) -> dict:
     """Everything ``list`` shows, as a JSON-ready dict.
 
     ``scenarios`` is a list of ``{"name", "description", "file", "from", "error"}`` in the
     order names are looked up: ``from`` is ``"library"`` for the shipped library and
     ``"working folder"`` for your own ``./scenarios``; ``error`` is None for a valid file,
-    else the one-line reason it cannot be loaded.
+    else the one-line reason it cannot be loaded.  ``designs`` holds the shipped designs
+    (``from`` ``"library"``), then your own design files
+    (:func:`controllers.designs.design_files`): those of ``./designs`` (``"working folder"``)
+    and of ``design_paths`` (``"argument"``); a bad design file raises one line naming it.
     """
     import controllers
-    from controllers.designs import designs
+    from controllers.designs import design_files, designs
     from ebraille_sim.estimation.paper_models import KINDS, ORDERS
     from ebraille_sim.estimation.presets import firmware_presets
     from ebraille_sim.physics import params
@@ -48,10 +57,34 @@ def catalogue() -> dict:
         "firmware": [{"name": f.name, "description": f.description, "score": f.score,
                       "settings": dict(f.estimator), "benchmark": dict(f.benchmark)}
                      for f in firmware_presets().values()],
-        "designs": [{"name": d.name, "description": d.description, "score": d.score,
-                     "controller": d.controller, "firmware": d.firmware, "gains": dict(d.gains),
-                     "benchmark": dict(d.benchmark)} for d in designs().values()],
+        "designs": [_design_entry(d, "library") for d in designs().values()]
+                   + [_design_entry(_checked(d), _origin(d)) for d in design_files(design_paths)],
     }
+
+
+def _checked(d):
+    """A user's design whose controller is registered and accepts its gains (one line naming the file)."""
+    import controllers
+    if d.controller not in controllers.available():
+        raise ValueError(f"{d.source}: controller {d.controller!r} is not a registered controller; available: "
+                         f"{', '.join(controllers.available())}")
+    try:
+        controllers.make(d.controller, **d.gains)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{d.source}: {str(exc).strip().splitlines()[0]}") from None
+    return d
+
+
+def _origin(d) -> str:
+    from controllers.designs import WORKING_FOLDER
+    here = pathlib.Path(WORKING_FOLDER).resolve()
+    return "working folder" if pathlib.Path(d.source).resolve().parent == here else "argument"
+
+
+def _design_entry(d, origin: str) -> dict:
+    return {"name": d.name, "description": d.description, "score": d.score, "controller": d.controller,
+            "firmware": d.firmware, "gains": dict(d.gains), "benchmark": dict(d.benchmark), "file": d.source,
+            "from": origin}
 
 
 def _score(v) -> str:
@@ -63,7 +96,7 @@ def main(args) -> int:
     from ebraille_sim.commands import console
 
     con = console(args)
-    cat = catalogue()
+    cat = catalogue(getattr(args, "designs", ()))
     con.result(cat)
     if con.json or con.quiet:
         return 0
@@ -82,10 +115,11 @@ def main(args) -> int:
     print("firmware presets (score: the best design on it, benchmark points):")
     for f in cat["firmware"]:
         print(f"  {f['name']:<24} {_score(f['score'])}  {f['description']}")
-    print("designs (--controller NAME runs one on its firmware):")
+    print("designs (--controller NAME runs one on its firmware; your own: --controller FILE):")
     for d in cat["designs"]:
+        mark = "" if d["from"] == "library" else f" [{d['file']}]"
         print(f"  {d['name']:<24} {_score(d['score'])}  {d['controller']} on {d['firmware'] or 'any firmware'}: "
-              f"{d['description']}")
+              f"{d['description']}{mark}")
     print("plant backends:")
     print("  " + ", ".join(cat["plant_backends"]))
     print("device presets:")
