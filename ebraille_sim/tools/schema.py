@@ -477,14 +477,17 @@ def _object(keys, required=(), tables: dict | None = None, description: str = ""
 
 
 def _gains_rules(configs) -> list[dict]:
-    """``if name is N (or omitted and N is the default) then gains are N's config keys``."""
+    """``if name is N (or omitted and N is the default) then gains are N's config keys`` (its
+    experimental gains excepted: a scenario gives them in ``[controller.experimental]``)."""
     default_name = _spec.ControllerSpec().name
+    experimental = set(_spec.experimental_gains())
     rules = []
     for name, (path, keys) in configs.items():
         cond = {"properties": {"name": {"const": name}}}
         if name != default_name:
             cond["required"] = ["name"]
-        gains = _object(keys, description=f"keyword gains of `{path}`")
+        gains = _object([k for k in keys if k.name not in experimental],      # those go to [controller.experimental]
+                        description=f"keyword gains of `{path}`")
         rules.append({"if": cond, "then": {"properties": {"gains": gains}}})
     return rules
 
