@@ -156,7 +156,7 @@ class NominalPlant:
         return self.b_n_per_vs * (command_v - disturbance_v)
 
 
-_STUDY = "[E] refresh-learning study (studies/benchmark)"
+_STUDY = "[E] tuned in the benchmark's refresh-learning study"
 
 
 @dataclass(frozen=True)

@@ -99,8 +99,11 @@ def _key(default: Any, unit: str, kind: str, source: str = _SETTING, *, doc: str
 
 
 def _table(cls) -> Any:
+    """A sub-table key: its description is the first line of its dataclass's docstring after the
+    ``[name]:`` title."""
+    doc = cls.__doc__.split(":", 1)[1].strip().split("\n")[0]
     return field(default=None, metadata={"unit": "-", "source": _SETTING, "kind": "table", "table": cls,
-                                         "doc": cls.__doc__.split(":", 1)[1].strip().split("\n")[0]})
+                                         "doc": doc[:1].upper() + doc[1:]})
 
 
 _TACTILE = "[R] seed paper: tactile forces 0.2-3 N (physics.params.TACTILE_FORCE_MAX_N)"
