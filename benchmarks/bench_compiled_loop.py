@@ -1,6 +1,6 @@
 """Speed of one scenario run: the compiled loop against the per-period loop and two compiled references.
 
-For 60 s of ``steady_90wpm`` with the built-in PID, without and with the safety supervisor
+For 60 s of ``steady_90wpm`` with the default controller (``pid_dob``, compiled), without and with the safety supervisor
 (``run_scenario(..., supervised=False)`` and the default), this reports, as the median of
 ``--repeat`` rounds in one process:
 
@@ -118,7 +118,7 @@ def main(argv=None):
            "rows": rows, "kernel_only_s": bound, "all_compiled_loop_s": loop_ref,
            "all_compiled_loop_over_total": of_loop, "own_loop_over_total": of_own, "kernel_over_total": of_kernel,
            "rounds": [{k: list(v) if isinstance(v, tuple) else v for k, v in r.items()} for r in rounds]}
-    print(f"steady_90wpm, {a.duration:g} s, default pid, medians of {a.repeat} rounds ({doc['machine']})")
+    print(f"steady_90wpm, {a.duration:g} s, default controller, medians of {a.repeat} rounds ({doc['machine']})")
     print(f"{'':>22} {'total s':>8} {'loop s':>8} {'own loop / total':>17} {'all-compiled / total':>21} "
           f"{'kernel / total':>15}")
     for label, r in rows.items():

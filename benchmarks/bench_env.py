@@ -35,7 +35,8 @@ and at 5 kHz, with the ratio an env spending nothing beyond its physics would re
 With ``--only-resets`` only the reset figures, each the median of ``--repeat`` (3) timings in
 the same process: the scalar env's reset in ms and in env steps (steps and resets
 interleaved), and the vector env's env-steps/s with autoresets against the same env
-without any (the reference), on one thread.
+without any (the reference), on one thread; then the parts of one reset in env steps
+(:func:`reset_parts`).
 
 Run:  python benchmarks/bench_env.py [--seconds 3] [--envs 1024] [--json FILE] [--only-single | --only-resets] [--repeat 3]
 """
@@ -139,6 +140,73 @@ def reset_cost_in_steps(seconds: float, seed: int = 0, **kwargs) -> tuple[float,
         n_step += 20
     r, s = t_reset / n_reset, t_step / n_step
     return r, s, r / s
+
+
+def reset_parts(n: int = 300, seed: int = 0) -> dict:
+    """The parts of a reset of the scalar env (drawn readers, disturbances), each timed on ``n``
+    fresh episodes (every drawn device used once: nothing cached from an earlier call) and
+    given in env steps, the step timed right before and after the parts (the mean of the two):
+
+    * ``episode draw``: :meth:`~ebraille_sim.scenarios.episodes.EpisodeDistribution.draw` (the
+      spec, the device draw and its R2 calibration included);
+    * ``device draw``: :func:`~ebraille_sim.scenarios.population.sample_device` alone;
+    * ``inputs``: :func:`~ebraille_sim.rl.episode.episode_from_spec` (schedule, setpoint, the
+      input table with its band-limited noises, the cell index);
+    * ``plant rows``: :func:`~ebraille_sim.plant.backends.make_plant` of the drawn device;
+    * ``supervisor envelope``: :meth:`controllers.supervisor.SupervisorConfig.for_device`, of
+      which ``drive calibration`` (:func:`~ebraille_sim.estimation.calibration.calibrate_drive`
+      uncached) is a part.
+    """
+    from controllers.supervisor import SupervisorConfig
+    from ebraille_sim.base.seeds import SeedNode
+    from ebraille_sim.estimation.calibration import calibrate_drive
+    from ebraille_sim.plant.backends import make_plant
+    from ebraille_sim.rl.env import ContactForceEnv
+    from ebraille_sim.rl.episode import episode_from_spec, estimator_model
+    from ebraille_sim.scenarios.population import sample_device
+
+    env = ContactForceEnv()
+    env.reset(seed=seed)
+    a = np.full(1, 0.1, np.float32)
+
+    def step_s(rounds=4, k=500):
+        """Mean time of one step: ``k`` steps after each of ``rounds`` resets (an episode has at
+        least 800), the resets not timed."""
+        total = 0.0
+        for _ in range(rounds):
+            env.reset()
+            t0 = time.perf_counter()
+            for _ in range(k):
+                env.step(a)
+            total += time.perf_counter() - t0
+        return total / (rounds * k)
+
+    dist = env.config.distribution()
+    seeds = [c for c in SeedNode(seed + 1).spawn(2 * n)]
+    # warm every part once (compiled code, caches of constant objects)
+    warm = dist.draw(seeds[-1])
+    episode_from_spec(warm)
+    SupervisorConfig.for_device(warm.device)
+    make_plant([warm.device], [1.0], models=[estimator_model(warm.device.estimator.model)])
+    before = step_s()
+
+    def timed(fn, items):
+        t0 = time.perf_counter()
+        for x in items:
+            fn(x)
+        return (time.perf_counter() - t0) / len(items)
+
+    specs = []
+    parts = {"episode draw": timed(lambda s: specs.append(dist.draw(s)), seeds[:n])}
+    parts["device draw"] = timed(lambda s: sample_device(s.spawn(2)[0], dist.population, dist.base_device),
+                                 seeds[n:2 * n])
+    parts["inputs"] = timed(episode_from_spec, specs)
+    parts["plant rows"] = timed(lambda s: make_plant([s.device], [float(s.seed)],
+                                                     models=[estimator_model(s.device.estimator.model)]), specs)
+    parts["drive calibration"] = timed(lambda s: calibrate_drive.__wrapped__(s.device), specs)
+    parts["supervisor envelope"] = timed(lambda s: SupervisorConfig.for_device(s.device), specs)
+    step = 0.5 * (before + step_s())
+    return {"step_s": step, "parts_s": parts, "parts_in_steps": {k: v / step for k, v in parts.items()}}
 
 
 def thread_table(sizes=(1, 4, 16, 64, 256, 1024)) -> list[dict]:
@@ -257,6 +325,12 @@ def only_resets(seconds: float, n_envs: int, repeat: int) -> dict:
     print(f"vector env {n_envs} envs, one thread: autoresets {out['vector_autoresets_env_steps_per_s']:10.0f} "
           f"env-steps/s ({out['episode_ends']:.0f} episode ends), no resets "
           f"{out['vector_no_resets_env_steps_per_s']:10.0f} env-steps/s, ratio {out['ratio_autoresets_to_no_resets']:5.2f}")
+    runs = [reset_parts(seed=j) for j in range(repeat)]
+    out["parts_in_steps"] = {k: statistics.median(r["parts_in_steps"][k] for r in runs) for k in runs[0]["parts_in_steps"]}
+    out["parts_runs"] = runs
+    print(f"parts of a reset, env steps, median of {repeat}: "
+          + ", ".join(f"{k} {v:.1f}" for k, v in out["parts_in_steps"].items())
+          + " (the device draw is part of the episode draw, the drive calibration of the supervisor envelope)")
     print(f"load average (1 min) at end {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     print(f"one reset = {ratio:.1f} env steps (target <= 20)")
     return out

@@ -1,6 +1,6 @@
 """Cost of the safety supervisor's compiled period per control period, apart from the plant.
 
-Runs ``steady_90wpm`` supervised (the default) once with its full trace and takes what the
+Runs ``steady_90wpm`` supervised (the default) with the PID once with its full trace and takes what the
 controller saw in every control period: the fed-back estimate, the setpoint and the motor
 current measured at the end of the previous period.  Those periods are then replayed in one
 compiled loop without the plant, twice from a fresh start: through the PID alone, and through
@@ -30,6 +30,10 @@ from ebraille_sim.plant.layout import S
 from ebraille_sim.scenarios import runner
 
 SCENARIO = "steady_90wpm"
+CONTROLLER = "pid"
+"""The inner controller of the replays: the PID, which reads no motor current (the trace
+records the plant's current, not the firmware's reading that a current-reading controller
+such as the default ``pid_dob`` is fed)."""
 
 
 @njit(cache=True)
@@ -41,8 +45,8 @@ def _replay(kind, cstate, cparams, supervised, sv, cfg, f_in, sp, cur_in, dt_s, 
 
 def _recorded(duration_s: float):
     """``(estimate, setpoint, current, command)`` per control period of the supervised run."""
-    tr = ebraille_sim.run_scenario(SCENARIO, duration_s=duration_s).trace
-    spec, _, run, _ = runner.prepare_run(SCENARIO, duration_s=duration_s)
+    tr = ebraille_sim.run_scenario(SCENARIO, CONTROLLER, duration_s=duration_s).trace
+    spec, _, run, _ = runner.prepare_run(SCENARIO, CONTROLLER, duration_s=duration_s)
     f0 = runner._plant_for(spec, run, "lumped").state[0][S.force_est_n]
     f_in = np.concatenate([[f0], tr["force_est_n"][:-1]])
     cur_in = np.concatenate([[0.0], tr["motor_current_a"][:-1]])
@@ -51,7 +55,7 @@ def _recorded(duration_s: float):
 
 def _fresh(duration_s: float, f0: float, sp0: float, dt_s: float):
     """The run's PID and supervisor as :func:`ebraille_sim.scenarios.runner._closed_loop` starts them."""
-    spec, _, _, ctrl = runner.prepare_run(SCENARIO, duration_s=duration_s)
+    spec, _, _, ctrl = runner.prepare_run(SCENARIO, CONTROLLER, duration_s=duration_s)
     wrapped = runner.wrap_controller(spec, ctrl, dt_s, True)
     wrapped.reset(force_est_n=f0, setpoint_n=sp0, command_v=0.0)
     kind, cstate, cparams = compiled_form(ctrl)

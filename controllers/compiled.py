@@ -2,14 +2,17 @@
 
 Every built-in controller keeps its state in one float64 vector and its parameters in
 another, with named slots (:data:`PS`, :data:`PP` for the PID family, :data:`LS`,
-:data:`LP` for the LQG), and advances through the Numba-compiled functions of this module.
-The Python classes (:class:`controllers.pid.PID`, :class:`controllers.schedule.ScheduledPID`,
-:class:`controllers.friction.FrictionPID`, :class:`controllers.lqg.LQG`) validate their
-arguments and call these functions, so a controller stepped from Python and the same
-controller stepped inside the loop engine (:mod:`ebraille_sim.plant.engine`) run
-the same code.  A controller's ``compiled()`` returns ``(kind, state, params)``: its kind
-(:data:`KIND_PID` or :data:`KIND_LQG`) and its live vectors; :func:`controller_step` and
-:func:`controller_reset` dispatch on the kind.
+:data:`LP` for the LQG, :data:`DS`, :data:`DP` for the PID with the disturbance observer), and
+advances through the Numba-compiled functions of this module.  The Python classes
+(:class:`controllers.pid.PID`, :class:`controllers.schedule.ScheduledPID`,
+:class:`controllers.friction.FrictionPID`, :class:`controllers.lqg.LQG`,
+:class:`controllers.dob.DOBPID`) validate their arguments and call these functions, so a
+controller stepped from Python and the same controller stepped inside the loop engine
+(:mod:`ebraille_sim.plant.engine`) run the same code.  A controller's ``compiled()`` returns
+``(kind, state, params)``: its kind (:data:`KIND_PID`, :data:`KIND_LQG` or :data:`KIND_DOB`)
+and its live vectors; :func:`controller_step` and :func:`controller_reset` dispatch on the
+kind.  A ``pid_dob`` with a refresh learner (:mod:`controllers.refresh`, Python) has no
+compiled form: its class calls :func:`dob_step` with the learner's reference.
 
 The arithmetic is written in the order of the recursions in :mod:`controllers.pid`,
 :mod:`controllers.schedule`, :mod:`controllers.friction` and :mod:`controllers.lqg`, with
@@ -51,11 +54,11 @@ from ebraille_sim.base.compiled import njit
 from ebraille_sim.physics.fingertip import tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N
 
-__all__ = ["KIND_NONE", "KIND_PID", "KIND_LQG", "KIND_EXTERNAL", "MAP_POINTS", "PS", "PP", "LS", "LP", "record",
-           "pid_state", "pid_params", "lqg_state", "lqg_params", "lqg_order", "py_min", "py_max",
-           "core_step", "core_reset", "pid_step", "pid_reset", "scheduled_gains", "map_reference",
-           "model_feedforward_v", "feedforward_v", "lqg_step", "lqg_reset", "controller_step",
-           "controller_reset", "compiled_form"]
+__all__ = ["KIND_NONE", "KIND_PID", "KIND_LQG", "KIND_EXTERNAL", "KIND_DOB", "MAP_POINTS", "PS", "PP", "LS", "LP",
+           "DS", "DP", "record", "pid_state", "pid_params", "lqg_state", "lqg_params", "lqg_order", "dob_state",
+           "dob_params", "py_min", "py_max", "core_step", "core_reset", "pid_step", "pid_reset", "scheduled_gains",
+           "map_reference", "model_feedforward_v", "feedforward_v", "lqg_step", "lqg_reset", "dob_step", "dob_reset",
+           "controller_step", "controller_reset", "compiled_form"]
 
 KIND_NONE = 0
 """No compiled form (a Python controller)."""
@@ -66,6 +69,8 @@ KIND_LQG = 2
 KIND_EXTERNAL = 3
 """A command handed in from outside each period: an agent's action, or the command a Python
 controller returned (:mod:`ebraille_sim.plant.engine`); resets do not reach it."""
+KIND_DOB = 4
+"""The PID with the disturbance observer on the motor current (:func:`dob_step`)."""
 
 MAP_POINTS = 57
 """Breakpoints of the static reference map of :class:`controllers.schedule.ScheduledPID`."""
@@ -116,6 +121,20 @@ LP = record("LQGParamSlots", ("order", "sample_s", "u_min_v", "u_max_v", "u0_v",
 """Parameters of the LQG: the model order ``n``, the sample period, the output limits, the
 operating point ``(u0, y0)``, ``Nu`` and ``kz``, then from slot ``matrices`` on, in this
 order: ``A`` (n x n, row-major), ``B``, ``C``, ``K``, ``L`` and ``Nx`` (n each)."""
+
+DS = record("DOBStateSlots", PS._fields + ("disturbance_v", "back_emf_v", "command_v", "setpoint_n",
+                                           "since_step_s"))
+"""State of the PID with the disturbance observer (:class:`controllers.dob.DOBPID`): the PID's
+slots (:data:`PS`, at the same indices), the observer's estimate ``d_hat``, the filtered
+back-EMF, the last command, the last setpoint and the time since it changed."""
+
+DP = record("DOBParamSlots", PP._fields + ("motor_r_ohm", "q_time_constant_s", "compensation_fraction",
+                                           "max_compensation_v", "speed_read", "hold_damping_v_per_v",
+                                           "hold_speed_filter_s", "hold_after_step_s", "hold_band_fraction"))
+"""Parameters of the PID with the disturbance observer: the fixed-gain PID's slots (:data:`PP`,
+``variant`` 0, gains scaled above ``schedule_above_n``), the nominal winding resistance, the
+observer's and the hold damping's settings of :class:`controllers.dob.DOBConfig`;
+``speed_read`` is 1.0 when the back-EMF is filtered (a hold damping in some mode)."""
 
 @njit(cache=True, inline="always")
 def py_max(a, b):
@@ -432,11 +451,77 @@ def lqg_step(s, p, force_est_n, setpoint_n, dt_s):
     return u
 
 
+def dob_state() -> np.ndarray:
+    """A cleared state vector of the PID with the disturbance observer."""
+    s = np.zeros(len(DS))
+    s[DS.direction] = 1.0
+    return s
+
+
+def dob_params(**values) -> np.ndarray:
+    """A parameter vector of the PID with the disturbance observer: the named slots of :data:`DP`
+    set, the others 0."""
+    p = np.zeros(len(DP))
+    for name, value in values.items():
+        p[DP._fields.index(name)] = value
+    return p
+
+
+@njit(cache=True, inline="always")
+def _dob_compensation_v(s, p):
+    """``f d_hat`` clamped to ``+/- max_compensation_v``, V."""
+    lim = p[DP.max_compensation_v]
+    return py_min(py_max(p[DP.compensation_fraction] * s[DS.disturbance_v], -lim), lim)
+
+
+@njit(cache=True, _nrt=False)
+def dob_reset(s, p, y, r, command_v):
+    """Bumpless reset of the PID with the disturbance observer (:meth:`controllers.dob.DOBPID.reset`)."""
+    u0 = py_min(py_max(command_v, p[PP.u_min_v]), p[PP.u_max_v])
+    s[DS.disturbance_v] = u0
+    s[DS.back_emf_v] = 0.0
+    s[DS.command_v] = u0
+    s[DS.setpoint_n] = r
+    s[DS.since_step_s] = math.inf
+    core_reset(s, y, r, u0, p[PP.kp_v_per_n] * _pid_gain_scale(p, r), p[PP.setpoint_weight_p],
+               p[PP.setpoint_weight_d], _dob_compensation_v(s, p))
+
+
+@njit(cache=True, _nrt=False)
+def dob_step(s, p, y, r, r_loop, kv, h, cur):
+    """One sample of the PID with the disturbance observer (:meth:`controllers.dob.DOBPID.update`,
+    the law of :mod:`controllers.dob`): the observer on the measured current ``cur`` (A; NaN:
+    none, the estimate held), the PID on the reference ``r_loop`` (the setpoint, or the setpoint
+    with a refresh learner's correction) with the compensation as its feedforward, then the
+    hold damping ``-kv e`` in a hold of the setpoint ``r``; returns the command, V."""
+    speed = p[DP.speed_read] != 0.0
+    if cur == cur:
+        r_ohm = p[DP.motor_r_ohm]
+        if speed:
+            s[DS.back_emf_v] += -math.expm1(-h / p[DP.hold_speed_filter_s]) * (
+                s[DS.command_v] - r_ohm * cur - s[DS.back_emf_v])
+        s[DS.disturbance_v] += -math.expm1(-h / p[DP.q_time_constant_s]) * (r_ohm * cur - s[DS.disturbance_v])
+    a = _pid_gain_scale(p, r_loop)
+    u = core_step(s, y, r_loop, h, p[PP.kp_v_per_n] * a, p[PP.ki_v_per_ns] * a, p[PP.kd_vs_per_n] * a,
+                  p[PP.derivative_filter_s], p[PP.setpoint_weight_p], p[PP.setpoint_weight_d],
+                  p[PP.tracking_gain_per_s], _dob_compensation_v(s, p), p[PP.u_min_v], p[PP.u_max_v])
+    if speed:
+        s[DS.since_step_s] = 0.0 if r != s[DS.setpoint_n] else s[DS.since_step_s] + h
+        s[DS.setpoint_n] = r
+        if s[DS.since_step_s] >= p[DP.hold_after_step_s] and abs(y - r) < p[DP.hold_band_fraction] * r:
+            u = py_min(py_max(u - kv * s[DS.back_emf_v], p[PP.u_min_v]), p[PP.u_max_v])
+        s[DS.command_v] = u
+    return u
+
+
 @njit(cache=True, inline="always")
 def controller_step(kind, s, p, force_est_n, setpoint_n, dt_s, motor_current_a):
-    """One ``update`` of a compiled controller of ``kind`` (the current is unused by these kinds)."""
+    """One ``update`` of a compiled controller of ``kind`` (``motor_current_a``, A, NaN for none,
+    is read by :data:`KIND_DOB` only)."""
     if kind == KIND_PID:
         return pid_step(s, p, force_est_n, setpoint_n, dt_s)
+    if kind == KIND_DOB:
+        return dob_step(s, p, force_est_n, setpoint_n, setpoint_n, p[DP.hold_damping_v_per_v], dt_s, motor_current_a)
     return lqg_step(s, p, force_est_n, setpoint_n, dt_s)
 
 
@@ -445,6 +530,8 @@ def controller_reset(kind, s, p, force_est_n, setpoint_n, command_v):
     """``reset`` of a compiled controller of ``kind``."""
     if kind == KIND_PID:
         pid_reset(s, p, force_est_n, setpoint_n, command_v)
+    elif kind == KIND_DOB:
+        dob_reset(s, p, force_est_n, setpoint_n, command_v)
     else:
         lqg_reset(s, p, force_est_n, setpoint_n, command_v)
 

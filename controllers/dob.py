@@ -108,14 +108,17 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from ebraille_sim.base.validation import check_finite, check_keys, check_number, replace_checked
 from ebraille_sim.physics.drivetrain import shaft_to_rack_per_m
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N, DeviceParams
 
 from controllers.base import check_reset_args, check_update_args
 from ebraille_sim.base.fields import sourced
-from controllers.pid import (DEFAULT_PID, GAIN_SOURCE, PIDConfig, PIDCore, pid_field, pulp_stiffness_n_per_m,
-                             tracking_gain_per_s)
+from controllers.compiled import DS, KIND_DOB, dob_params, dob_reset, dob_state, dob_step
+from controllers.pid import (DEFAULT_PID, GAIN_SOURCE, PIDConfig, fixed_gain_slots, pid_field,
+                             pulp_stiffness_n_per_m)
 from controllers.refresh import RefreshLearner, RefreshLearning
 
 __all__ = ["DOBConfig", "DOBPID", "DEFAULT_DOB", "NominalPlant", "make_dob"]
@@ -305,31 +308,39 @@ class DOBPID:
         if not isinstance(config, DOBConfig):
             raise TypeError(f"config must be a DOBConfig, got {type(config).__name__}")
         self._cfg = config
-        self._r_ohm = device.motor.resistance_ohm
-        self._inv_tt = tracking_gain_per_s(config.effective_tracking_time_s)
-        self._core = PIDCore()
-        self.disturbance_v = 0.0
-        self.back_emf_v = 0.0
-        self._command_v = 0.0
-        self._setpoint_n = 0.0
-        self._since_step_s = 0.0
         learning = config.refresh_learning()
         self.learner = RefreshLearner(learning) if learning is not None else None
         kv, kv_refresh = config.hold_damping_v_per_v, config.refresh_hold_damping_v_per_v
         self._kv_refresh = kv if kv_refresh is None or self.learner is None else kv_refresh
-        self._speed_read = max(kv, self._kv_refresh) > 0.0
+        self._s = dob_state()
+        self._p = dob_params(
+            **fixed_gain_slots(config), motor_r_ohm=device.motor.resistance_ohm,
+            q_time_constant_s=config.q_time_constant_s, compensation_fraction=config.compensation_fraction,
+            max_compensation_v=config.max_compensation_v,
+            speed_read=1.0 if max(kv, self._kv_refresh) > 0.0 else 0.0, hold_damping_v_per_v=kv,
+            hold_speed_filter_s=config.hold_speed_filter_s, hold_after_step_s=config.hold_after_step_s,
+            hold_band_fraction=config.hold_band_fraction)
 
     @property
     def config(self) -> DOBConfig:
         """Settings of this controller."""
         return self._cfg
 
+    @property
+    def disturbance_v(self) -> float:
+        return float(self._s[DS.disturbance_v])
+
+    @property
+    def back_emf_v(self) -> float:
+        return float(self._s[DS.back_emf_v])
+
     def __repr__(self) -> str:
         return f"DOBPID({self._cfg!r})"
 
-    def _compensation_v(self) -> float:
-        lim = self._cfg.max_compensation_v
-        return min(max(self._cfg.compensation_fraction * self.disturbance_v, -lim), lim)
+    def compiled(self) -> tuple[int, np.ndarray, np.ndarray] | None:
+        """``(kind, state, params)`` of the compiled step (:func:`controllers.compiled.dob_step`),
+        the live vectors; None with a refresh learner (stepped from Python only)."""
+        return None if self.learner is not None else (KIND_DOB, self._s, self._p)
 
     def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
         """Bumpless start from ``command_v``.
@@ -345,15 +356,9 @@ class DOBPID:
             If an argument is not finite.
         """
         y, r, u0 = check_reset_args(force_est_n, setpoint_n, command_v)
-        pid = self._cfg
-        u0 = min(max(u0, pid.u_min_v), pid.u_max_v)
-        self.disturbance_v = u0
-        self.back_emf_v = 0.0
-        self._command_v, self._setpoint_n, self._since_step_s = u0, r, math.inf
         if self.learner is not None:
             self.learner.reset(setpoint_n=r)
-        self._core.reset(y, r, u0, pid.kp_v_per_n * pid.gain_scale(r), pid.setpoint_weight_p,
-                         pid.setpoint_weight_d, self._compensation_v())
+        dob_reset(self._s, self._p, y, r, u0)
 
     def update(self, force_est_n: float, setpoint_n: float, dt_s: float,
                motor_current_a: float | None = None) -> float:
@@ -374,30 +379,14 @@ class DOBPID:
             If ``dt_s`` is not finite and > 0, or a force or the current is not finite.
         """
         y, r, h = check_update_args(force_est_n, setpoint_n, dt_s)
-        cfg = pid = self._cfg
-        kv = cfg.hold_damping_v_per_v
+        kv = self._cfg.hold_damping_v_per_v
         r_loop = r
         if self.learner is not None:
             r_loop = r + self.learner.step(y, r, h)
             if self.learner.active:
                 kv = self._kv_refresh
-        if motor_current_a is not None:
-            i_a = check_finite("motor_current_a", motor_current_a)
-            if self._speed_read:
-                self.back_emf_v += -math.expm1(-h / cfg.hold_speed_filter_s) * (
-                    self._command_v - self._r_ohm * i_a - self.back_emf_v)
-            self.disturbance_v += -math.expm1(-h / cfg.q_time_constant_s) * (self._r_ohm * i_a - self.disturbance_v)
-        s = pid.gain_scale(r_loop)
-        u = self._core.step(y, r_loop, h, pid.kp_v_per_n * s, pid.ki_v_per_ns * s, pid.kd_vs_per_n * s,
-                            pid.derivative_filter_s, pid.setpoint_weight_p, pid.setpoint_weight_d,
-                            self._inv_tt, self._compensation_v(), pid.u_min_v, pid.u_max_v)
-        if self._speed_read:
-            self._since_step_s = 0.0 if r != self._setpoint_n else self._since_step_s + h
-            self._setpoint_n = r
-            if self._since_step_s >= cfg.hold_after_step_s and abs(y - r) < cfg.hold_band_fraction * r:
-                u = min(max(u - kv * self.back_emf_v, pid.u_min_v), pid.u_max_v)
-            self._command_v = u
-        return u
+        i_a = math.nan if motor_current_a is None else check_finite("motor_current_a", motor_current_a)
+        return dob_step(self._s, self._p, y, r, r_loop, kv, h, i_a)
 
 
 def make_dob(**gains: Any) -> DOBPID:

@@ -92,7 +92,7 @@ from controllers.base import check_update_args
 from controllers.compiled import KIND_PID, PS, core_reset, core_step, pid_params, pid_reset, pid_state, pid_step
 
 __all__ = ["DEFAULT_PID", "PID", "PIDConfig", "PIDCore", "pid_from_dict", "tracking_time_s", "pulp_stiffness_n_per_m",
-           "LOOP_CROSSOVER_HZ"]
+           "fixed_gain_slots", "LOOP_CROSSOVER_HZ"]
 
 _INF = math.inf
 
@@ -169,6 +169,22 @@ def stiffness_ratio(force_n: float, reference_force_n: float, device: DevicePara
     tactile range [``TACTILE_FORCE_MIN_N``, ``TACTILE_FORCE_MAX_N``]."""
     return (pulp_stiffness_n_per_m(reference_force_n, device)
             / pulp_stiffness_n_per_m(min(max(force_n, TACTILE_FORCE_MIN_N), TACTILE_FORCE_MAX_N), device))
+
+
+def fixed_gain_slots(config: PIDConfig) -> dict:
+    """The slots of :data:`controllers.compiled.PP` of the fixed-gain PID (``variant`` 0) of
+    ``config``, by name: gains, limits, tracking gain, constant feedforward and the gain scaling
+    above ``schedule_above_n`` on the nominal pulp."""
+    finger = DeviceParams().finger
+    f_s = config.schedule_above_n
+    return dict(variant=0.0, kp_v_per_n=config.kp_v_per_n, ki_v_per_ns=config.ki_v_per_ns,
+                kd_vs_per_n=config.kd_vs_per_n, derivative_filter_s=config.derivative_filter_s,
+                setpoint_weight_p=config.setpoint_weight_p, setpoint_weight_d=config.setpoint_weight_d,
+                u_min_v=config.u_min_v, u_max_v=config.u_max_v,
+                tracking_gain_per_s=tracking_gain_per_s(config.effective_tracking_time_s),
+                feedforward_v=config.feedforward_v, schedule_above=0.0 if f_s is None else 1.0,
+                schedule_above_n=0.0 if f_s is None else f_s, finger_b_n_per_m=finger.stiffness_b_n_per_m,
+                finger_m_per_m=finger.exponent_m_per_m, relax_weight_inf=finger.relax_weight_inf)
 
 
 class PIDCore:
@@ -531,17 +547,7 @@ class PID:
         if not isinstance(config, PIDConfig):
             raise TypeError(f"config must be a PIDConfig, got {type(config).__name__}")
         self._cfg = config
-        finger = DeviceParams().finger
-        f_s = config.schedule_above_n
-        self._p = pid_params(
-            variant=0.0, kp_v_per_n=config.kp_v_per_n, ki_v_per_ns=config.ki_v_per_ns,
-            kd_vs_per_n=config.kd_vs_per_n, derivative_filter_s=config.derivative_filter_s,
-            setpoint_weight_p=config.setpoint_weight_p, setpoint_weight_d=config.setpoint_weight_d,
-            u_min_v=config.u_min_v, u_max_v=config.u_max_v,
-            tracking_gain_per_s=tracking_gain_per_s(config.effective_tracking_time_s),
-            feedforward_v=config.feedforward_v, schedule_above=0.0 if f_s is None else 1.0,
-            schedule_above_n=0.0 if f_s is None else f_s, finger_b_n_per_m=finger.stiffness_b_n_per_m,
-            finger_m_per_m=finger.exponent_m_per_m, relax_weight_inf=finger.relax_weight_inf)
+        self._p = pid_params(**fixed_gain_slots(config))
         self._core = PIDCore()
 
     def compiled(self) -> tuple[int, np.ndarray, np.ndarray]:

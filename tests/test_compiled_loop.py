@@ -9,11 +9,12 @@ import pytest
 
 import controllers
 import ebraille_sim
-from controllers.compiled import KIND_EXTERNAL, KIND_LQG, KIND_PID, MAP_POINTS, PP, PS, controller_reset, controller_step, map_reference
+from controllers.compiled import KIND_DOB, KIND_EXTERNAL, KIND_LQG, KIND_PID, MAP_POINTS, PP, PS, controller_reset, controller_step, map_reference
 from ebraille_sim.plant import engine
 from ebraille_sim.scenarios import runner
 
-CONTROLLERS = ["pid", "pid_scheduled", "pid_feedforward", "pid_friction", "lqg", "actuator_bound"]
+CONTROLLERS = ["pid", "pid_scheduled", "pid_feedforward", "pid_friction", "lqg", "actuator_bound", "pid_dob"]
+KINDS = {"lqg": KIND_LQG, "pid_dob": KIND_DOB}
 SCENARIOS = [("steady_90wpm", 2.0), ("setpoint_steps", 6.0), ("battery_sag", 3.0), ("pressing_90wpm", 3.0),
              ("refresh_120wpm", 2.0)]
 
@@ -220,9 +221,28 @@ def _random_walk(name, seed, n=400):
 @pytest.mark.parametrize("name", CONTROLLERS)
 def test_the_class_and_the_compiled_step_give_the_same_commands(name):
     ua, ub, kind = _random_walk(name, seed=len(name))
-    assert kind == (KIND_LQG if name == "lqg" else KIND_PID)
+    assert kind == KINDS.get(name, KIND_PID)
     assert np.array_equal(ua, ub)
     assert np.all(np.isfinite(ua)) and np.ptp(ua) > 0.1          # the inputs moved the command
+
+
+@pytest.mark.parametrize("scenario,duration_s", [("setpoint_steps", 6.0), ("pressing_90wpm", 3.0)])
+def test_the_hold_damping_of_pid_dob_is_the_same_in_both_loops(scenario, duration_s, loop_calls, monkeypatch):
+    """pid_dob with its hold damping on (the back-EMF read from the current, applied in a hold):
+    one compiled call gives the per-period loop's trace, and the damping changed the command."""
+    runs = []
+    for use_compiled, kv in ((True, 0.5), (False, 0.5), (True, 0.0)):
+        monkeypatch.setattr(runner, "_USE_COMPILED_LOOP", use_compiled)
+        runs.append(ebraille_sim.run_scenario(scenario, controller=controllers.make("pid_dob", hold_damping_v_per_v=kv),
+                                              duration_s=duration_s))
+    assert len(loop_calls) == 2
+    _assert_same_runs(runs[0], runs[1])
+    assert not np.array_equal(runs[0].trace["command_v"], runs[2].trace["command_v"])
+
+
+def test_pid_dob_with_a_refresh_learner_has_no_compiled_form():
+    assert controllers.make("pid_dob", refresh_learning_gain=0.25).compiled() is None
+    assert controllers.make("pid_dob").compiled()[0] == KIND_DOB
 
 
 def test_pid_state_round_trip_after_compiled_steps():

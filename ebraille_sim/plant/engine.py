@@ -20,8 +20,8 @@ Everything that closes the loop calls it:
   then computes the reward and the observation.
 
 The controller of a row is a kind of :mod:`controllers.compiled`: a built-in compiled
-controller (:data:`~controllers.compiled.KIND_PID`, :data:`~controllers.compiled.KIND_LQG`)
-stepped on its state and parameter vectors, or :data:`~controllers.compiled.KIND_EXTERNAL`, a
+controller (:data:`~controllers.compiled.KIND_PID`, :data:`~controllers.compiled.KIND_LQG`,
+:data:`~controllers.compiled.KIND_DOB`) stepped on its state and parameter vectors, or :data:`~controllers.compiled.KIND_EXTERNAL`, a
 command handed in per period.  The supervisor is optional per row (its state and
 configuration vectors, :meth:`controllers.supervisor.Supervisor.compiled`).
 

@@ -294,11 +294,18 @@ def _sample_coverage(force_n, contact, distance_m, phi):
 
 
 @njit
+def _electrode_coverage(d, r, a):
+    """Covered fraction of an electrode of radius ``r`` (m) whose centre is ``d`` (m) from the
+    centre of a contact disc of radius ``a`` (m)."""
+    return _lens_area(d, r, a) / (np.pi * r * r)
+
+
+@njit
 def _coverage_at_radius(a, contact, distance_m, phi):
     """:func:`_sample_coverage` for a contact disc of radius ``a`` (m)."""
     r = contact.electrode_radius_m
     for e in range(distance_m.size):
-        phi[e] = _lens_area(distance_m[e], r, a) / (np.pi * r * r)
+        phi[e] = _electrode_coverage(distance_m[e], r, a)
 
 
 @njit
@@ -498,20 +505,24 @@ def character_legibility(force_n, setpoint_n, char_index, cells, params: Legibil
 def _legibility_counts(force_n, setpoint_n, char_index, masks, contact, distance_m, stims, z_first):
     """One pass over the samples: per cell, the samples in which each stimulator in
     ``stims`` kept all raised dots legible, the samples shown, and whether the cell has
-    raised dots.  The coverage is computed once per sample for all stimulators, the
-    impedance once per sample for stimulators of the same impedance law (``z_first[m]``: the
-    first stimulator whose law is that of ``stims[m]``), the setpoint's nominal values once
-    per setpoint, the contact area once per sample for the coverage and the impedances (the
-    stimulators in ``stims`` share the patch law of ``contact``: :func:`_legible_fractions`
-    groups them by it)."""
+    raised dots.  An electrode's coverage is computed when a raised dot first needs it in a
+    sample and then shared by all stimulators, the impedance once per sample for stimulators
+    of the same impedance law (``z_first[m]``: the first stimulator whose law is that of
+    ``stims[m]``), the setpoint's nominal values once per setpoint, the contact area once per
+    sample for the coverage and the impedances (the stimulators in ``stims`` share the patch
+    law of ``contact``: :func:`_legible_fractions` groups them by it); a raised dot whose
+    coverage equals that of a dot already found legible in the sample with the same
+    stimulator is legible too (the same ratio), so fully covered dots are checked once."""
     n_cells = masks.size
     n_ok = np.zeros((len(stims), n_cells), np.int64)
     n_all = np.zeros(n_cells, np.int64)
     shown = np.zeros(n_cells, np.bool_)
     phi = np.empty(distance_m.size)
+    phi_at = np.full(distance_m.size, -1, np.int64)         # the sample each phi[e] was computed for
     z_sp = np.empty(len(stims))
     j_nom = np.empty(len(stims))
     z = np.empty(len(stims))
+    r = contact.electrode_radius_m
     sp_last = math.nan                                      # setpoint whose nominal values are held
     for k in range(char_index.size):
         c = char_index[k]
@@ -530,7 +541,7 @@ def _legibility_counts(force_n, setpoint_n, char_index, masks, contact, distance
         shown[c] = True
         fk = force_n[k]
         area = _contact_area_m2(fk, contact.contact_area_1n_m2, contact.contact_area_exponent)
-        _coverage_at_radius(_radius_of_area(area), contact, distance_m, phi)
+        a = _radius_of_area(area)
         for m in range(len(stims)):
             stim = stims[m]
             if z_first[m] < m:
@@ -540,12 +551,19 @@ def _legibility_counts(force_n, setpoint_n, char_index, masks, contact, distance
             else:
                 z[m] = _impedance(fk, stim)
             ok = True
+            legible_phi = math.nan                          # a coverage found legible in this sample
             for e in range(distance_m.size):                # the raised dots only, to the first dim one
                 if (dots >> e) & 1:
+                    if phi_at[e] != k:
+                        phi[e] = _electrode_coverage(distance_m[e], r, a)
+                        phi_at[e] = k
+                    if phi[e] == legible_phi:
+                        continue
                     q = _electrode_ratio(phi[e], z[m], z_sp[m], j_nom[m], stim)
                     if not (q >= stim.band_low and q <= stim.band_high):
                         ok = False
                         break
+                    legible_phi = phi[e]
             if ok:
                 n_ok[m, c] += 1
     return n_ok, n_all, shown
