@@ -49,6 +49,7 @@ __all__ = [
     "ORDERS",
     "SAMPLE_TIME_S",
     "NK",
+    "NK_READINGS",
     "UNIT_ROOT_TOL",
     "STABILITY_MARGIN",
     "INPUT_RANGE_V",
