@@ -139,6 +139,13 @@ def test_tune_command_writes_a_gains_file_that_run_accepts(tmp_path):
         assert (out / f).is_file(), f
     assert 'controller = "pid_scheduled"' in (out / "gains.toml").read_text()
     assert "reference_map = true" in (out / "gains.toml").read_text()
+    import json
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["delays"] == [0, 1] and len(rep["ms_labels"]) == 2 * len(rep["labels"])
+    assert {(r["controller"], r["nk"]) for r in rep["delay_margins"]} == \
+        {(c, k) for c in ("gains.toml", "default PID") for k in (0, 1)}
+    md = (out / "report.md").read_text()
+    assert "under both readings of the paper's input delay (nk = 0 and 1)" in md and "| nominal, nk 1 |" in md
     r = subprocess.run([sys.executable, "-m", "ebraille_sim", "run", "contact_onset", "--controller",
                         str(out / "gains.toml"), "--duration", "2", "--out", str(tmp_path / "run")],
                        capture_output=True, text=True)
@@ -281,3 +288,13 @@ def test_robust_tuning_meets_the_bound_under_both_readings_of_the_delay():
     only0 = linearisation_points(pop, forces, delays=False)
     cfg0, _ = _scaled_to_bound((2.0, 8.0, 0.0), lambda *g: family_config("pid", *g), only0, 1.6, 1.0)
     assert np.max(population_ms(cfg0, only1)) > 2.0
+
+
+def test_tune_reports_the_margins_under_both_readings_of_the_delay():
+    from ebraille_sim.commands.tune import _delay_margins
+    rows = _delay_margins({"default PID": lambda f: DEFAULT_PID}, DeviceParams(), [1.0])
+    pm = {r["nk"]: r["phase_margin_deg"] for r in rows}
+    assert set(pm) == {0, 1} and abs(pm[1] - 33.9) < 0.5 and abs(pm[0] - 57.0) < 0.5
+    fast = dataclasses.replace(DeviceParams(), estimator=dataclasses.replace(DeviceParams().estimator,
+                                                                             model="paper:wiener:5@1000"))
+    assert _delay_margins({"default PID": lambda f: DEFAULT_PID}, fast, [1.0]) == []

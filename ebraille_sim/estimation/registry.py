@@ -1,5 +1,9 @@
 """Estimator models by name: the paper's block-oriented models or a saved model file,
-optionally re-discretised at another rate (``"paper:wiener:5@1000"``)."""
+optionally re-discretised at another rate (``"paper:wiener:5@1000"``).
+
+The paper prints no input delay; a paper model's name chooses one of its two readings
+(``":nk0"``, ``":nk1"``, MATLAB's ``nk = 1`` without a suffix), and :func:`delay_of`,
+:func:`with_delay` and :func:`delay_readings` are the one place that reads and writes it."""
 from __future__ import annotations
 
 import functools
