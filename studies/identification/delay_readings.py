@@ -7,7 +7,7 @@ identified with the delay held at 0 or at 1 fits the same records
 (:func:`ebraille_sim.identification.sysid.fit_readings`, estimation on the chirp, 4 starts).
 Writes ``delay_readings.json`` next to this file and prints the fitness table (eq. 7, %).
 
-    python studies/identification/delay_readings.py     # about 3 min on 2 shared cores
+    python studies/identification/delay_readings.py     # about 1 min on 2 shared cores
 """
 from __future__ import annotations
 

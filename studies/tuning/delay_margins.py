@@ -9,7 +9,7 @@ largest Ms over the tuning population (5 presets and 8 draws, seed 0) per readin
 closed-loop metrics of the nominal reader on five scenarios with the scenarios' controller
 (pid_dob) and the default PID.  Writes ``delay_margins.json`` next to this file.
 
-    python studies/tuning/delay_margins.py            # about 3 min on 2 shared cores
+    python studies/tuning/delay_margins.py            # about 1 min on 2 shared cores
 """
 from __future__ import annotations
 
