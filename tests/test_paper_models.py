@@ -224,3 +224,18 @@ def test_a_delay_outside_the_two_readings_is_one_error_line_naming_the_key(tmp_p
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and "[estimator] model" in err[0] and suffix in err[0]
     assert not (tmp_path / "o").exists()
+
+
+def test_a_firmware_preset_carries_either_reading_and_the_shipped_one_is_matlabs():
+    from ebraille_sim.estimation.presets import get_firmware
+    from ebraille_sim.estimation.registry import delay_of, load_estimator
+    shipped = get_firmware("paper_100hz")
+    assert delay_of(shipped.estimator["model"]) == 1 and "nk = 1" in shipped.description
+    assert delay_of(get_firmware("fast_1khz").estimator["model"]) is None
+    import pathlib
+    import tempfile
+    with tempfile.TemporaryDirectory() as d:
+        p = pathlib.Path(d) / "literal.toml"
+        p.write_text('name = "literal"\n[estimator]\nmodel = "paper:wiener:5:nk0"\nantialias_cutoff_hz = 20.0\n')
+        fw = get_firmware(str(p))
+    assert load_estimator(fw.estimator["model"]).linear.nk == 0

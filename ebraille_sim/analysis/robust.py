@@ -193,8 +193,9 @@ def linearisation_points(population, forces_n, delays: bool = True) -> list[_Poi
     """Sampled plant fronts of every device at every force, under both readings of the
     paper's input delay (cached for :func:`population_ms`).
 
-    Order: device, then delay reading (:func:`ebraille_sim.analysis.margins.delay_devices`), then force.  ``delays=False``
-    linearises each device with its estimator as given (one reading).
+    Order: device, then delay reading (:func:`ebraille_sim.analysis.margins.delay_devices`),
+    then force.  ``delays=False`` linearises each device with its estimator as given (one
+    reading).
     """
     from ebraille_sim.analysis.margins import delay_devices
     from ebraille_sim.analysis.plant_model import operating_point

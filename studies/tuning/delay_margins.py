@@ -47,7 +47,8 @@ def margins() -> list[dict]:
         for f in FORCES_N:
             for nk, a in delay_analyses(c, DeviceParams(), f).items():
                 rows.append({"controller": name, "force_n": f, "nk": nk, "stable": a.stable,
-                             "phase_margin_deg": _num(a.phase_margin_deg), "gain_crossover_hz": _num(a.gain_crossover_hz),
+                             "phase_margin_deg": _num(a.phase_margin_deg),
+                             "gain_crossover_hz": _num(a.gain_crossover_hz),
                              "gain_margin": _num(a.gain_margin), "ms": _num(a.ms)})
     return rows
 
