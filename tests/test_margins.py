@@ -266,3 +266,24 @@ def test_default_gains_fixed_lose_stability_at_2n_and_scaling_keeps_the_loop():
     for f in (2.0, 3.0):
         a = analyse_loop(DEFAULT_PID, force_n=f)
         assert a.stable and a.ms < 1.5 * a1.ms
+
+
+def test_default_pid_margins_under_both_readings_of_the_papers_delay():
+    """The paper prints no nk: one 10 ms sample of estimator delay at the 6.4 Hz crossover is
+    23 deg of phase; the default PID at 1 N has PM 33.9 deg (nk = 1) against 57.0 deg (nk = 0),
+    and python-control's stability_margins on the loop's frequency response agrees on each reading
+    (on the state-space loop itself its polynomial root search returns spurious crossings)."""
+    import control
+
+    from controllers.pid import DEFAULT_PID
+    from ebraille_sim.analysis.margins import delay_analyses, freq_grid
+    a = delay_analyses(DEFAULT_PID, force_n=1.0)
+    assert set(a) == {0, 1}
+    assert abs(a[1].phase_margin_deg - 33.9) < 0.5 and abs(a[0].phase_margin_deg - 57.0) < 0.5
+    assert abs(a[1].gain_margin - 1.46) < 0.02 and abs(a[0].gain_margin - 2.25) < 0.03
+    # the difference is the one sample: the phase lost at the crossover is w_c T
+    lost = a[0].phase_margin_deg - a[1].phase_margin_deg
+    assert abs(lost - math.degrees(2 * math.pi * a[1].gain_crossover_hz * 0.01)) < 2.0
+    for nk, an in a.items():
+        gm, pm = control.stability_margins(control.frd(an.loop, freq_grid(an.loop.dt, 4000)))[:2]
+        assert abs(pm - an.phase_margin_deg) < 0.2 and abs(gm - an.gain_margin) < 0.01 * an.gain_margin, nk

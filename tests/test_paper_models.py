@@ -197,3 +197,45 @@ def test_the_two_readings_of_the_papers_delay_differ_by_one_sample():
             load_estimator(bad)
     with pytest.raises(ValueError, match="nk must be one of 0, 1"):
         paper_model("wiener", 5, nk=3)
+
+
+def test_the_delay_of_an_estimator_name_is_chosen_in_one_place():
+    from ebraille_sim.estimation.registry import delay_of, delay_readings, load_estimator, with_delay
+    assert delay_of("paper:wiener:5") == 1 and delay_of("paper:hammerstein:3:nk0") == 0
+    assert delay_of("paper:wiener:5@1000") is None and delay_of("models/wiener-5.json") is None
+    assert delay_readings("paper:wiener:5") == {0: "paper:wiener:5:nk0", 1: "paper:wiener:5:nk1"}
+    assert delay_readings("paper:wiener:5:nk0@1000") == {}
+    # re-discretised at 1 kHz the block carries no delay: both readings are one model
+    a, b = load_estimator("paper:wiener:5:nk0@1000"), load_estimator("paper:wiener:5@1000")
+    assert (a.linear.b, a.linear.f, a.linear.nk) == (b.linear.b, b.linear.f, b.linear.nk)
+    for bad in (2, -1, 0.5, True, "1"):
+        with pytest.raises(ValueError, match="nk must be 0 or 1"):
+            with_delay("paper:wiener:5", bad)
+    with pytest.raises(ValueError, match="no input delay to choose"):
+        with_delay("paper:wiener:5@1000", 0)
+
+
+@pytest.mark.parametrize("suffix", ["nk2", "nk-1", "nk1.5", "nk", "1"])
+def test_a_delay_outside_the_two_readings_is_one_error_line_naming_the_key(tmp_path, capsys, suffix):
+    from ebraille_sim.cli import main
+    f = tmp_path / "bad.toml"
+    f.write_text(f'name = "bad"\n[estimator]\nmodel = "paper:wiener:5:{suffix}"\n')
+    assert main(["run", str(f), "--duration", "0.5", "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "[estimator] model" in err[0] and suffix in err[0]
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_firmware_preset_carries_either_reading_and_the_shipped_one_is_matlabs():
+    from ebraille_sim.estimation.presets import get_firmware
+    from ebraille_sim.estimation.registry import delay_of, load_estimator
+    shipped = get_firmware("paper_100hz")
+    assert delay_of(shipped.estimator["model"]) == 1 and "nk = 1" in shipped.description
+    assert delay_of(get_firmware("fast_1khz").estimator["model"]) is None
+    import pathlib
+    import tempfile
+    with tempfile.TemporaryDirectory() as d:
+        p = pathlib.Path(d) / "literal.toml"
+        p.write_text('name = "literal"\n[estimator]\nmodel = "paper:wiener:5:nk0"\nantialias_cutoff_hz = 20.0\n')
+        fw = get_firmware(str(p))
+    assert load_estimator(fw.estimator["model"]).linear.nk == 0

@@ -434,3 +434,39 @@ def test_identify_conditions_are_selectable_and_recorded(tmp_path, csv_records, 
     rc = main(["identify", "--csv", str(csv_records[0]), "--chirp-dwell", "5", "--out", str(tmp_path / "x")])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "--chirp-dwell sets the virtual bench's chirp" in err[0]
+
+
+def test_fit_readings_tells_the_two_readings_of_the_delay_apart_on_the_same_data():
+    """The paper prints no nk: both readings are fitted on one record, and the delay the data
+    were made with fits better (a one-sample shift of a first-order block costs several points)."""
+    u = np.repeat(np.random.default_rng(0).uniform(-0.5, 0.8, 300), 4)
+    for true_nk in (0, 1):
+        true = BlockModel(LinearBF((1.0,), (-0.6,), nk=true_nk), None,
+                          PiecewiseLinear((-1.0, 0.0, 1.0, 2.0), (-0.5, 0.0, 2.0, 5.0)), dt_s=0.01)
+        y = sysid.simulate(true, u)
+        fits = sysid.fit_readings("wiener", u, y, 1, n_starts=1)
+        assert list(fits) == [0, 1] and all(fits[k].nk == k for k in fits)
+        assert fits[true_nk].fitness_pct > 99.9
+        assert fits[1 - true_nk].fitness_pct < fits[true_nk].fitness_pct - 5.0
+        assert fits[true_nk].fitness_by_nk == {true_nk: fits[true_nk].fitness_pct}
+    with pytest.raises(TypeError, match="nks"):
+        sysid.fit_readings("wiener", u, y, 1, nk=1)
+    with pytest.raises(ValueError, match="none twice"):
+        sysid.fit_readings("wiener", u, y, 1, nks=(1, 1))
+
+
+def test_identify_reports_both_readings_of_the_delay(tmp_path, csv_records, capsys):
+    import json
+
+    from ebraille_sim.cli import main
+    out = tmp_path / "r"
+    assert main(["identify", "--csv", str(csv_records[0]), "--kinds", "linear", "--orders", "2", "--quick",
+                 "--readings", "--no-plots", "--out", str(out), "--quiet"]) == 0
+    r = json.loads((out / "summary.json").read_text())["models"]["linear-2"]["readings"]
+    assert set(r) == {"0", "1"} and all(0 < r[k]["estimation_fitness"] <= 100 for k in r)
+    assert "both readings" in (out / "fitness.md").read_text()
+    capsys.readouterr()
+    assert main(["identify", "--csv", str(csv_records[0]), "--readings", "--nk", "1", "--out",
+                 str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:") and "--readings" in err[0]

@@ -139,6 +139,13 @@ def test_tune_command_writes_a_gains_file_that_run_accepts(tmp_path):
         assert (out / f).is_file(), f
     assert 'controller = "pid_scheduled"' in (out / "gains.toml").read_text()
     assert "reference_map = true" in (out / "gains.toml").read_text()
+    import json
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["delays"] == [0, 1] and len(rep["ms_labels"]) == 2 * len(rep["labels"])
+    assert {(r["controller"], r["nk"]) for r in rep["delay_margins"]} == \
+        {(c, k) for c in ("gains.toml", "default PID") for k in (0, 1)}
+    md = (out / "report.md").read_text()
+    assert "under both readings of the paper's input delay (nk = 0 and 1)" in md and "| nominal, nk 1 |" in md
     r = subprocess.run([sys.executable, "-m", "ebraille_sim", "run", "contact_onset", "--controller",
                         str(out / "gains.toml"), "--duration", "2", "--out", str(tmp_path / "run")],
                        capture_output=True, text=True)
@@ -235,3 +242,59 @@ def test_tune_scenarios_keep_the_named_scenarios_estimator():
     for sc in standard_scenarios(shipped)[2:]:
         assert sc.spec == load_scenario(sc.name), sc.name
     assert with_estimator(shipped, shipped.device.estimator) is shipped
+
+
+def _nk0(device):
+    return dataclasses.replace(device, estimator=dataclasses.replace(device.estimator, model="paper:wiener:5:nk0"))
+
+
+def test_the_ms_check_covers_both_readings_of_the_papers_delay():
+    """Every device with a paper estimator at its own rate is linearised with nk = 0 and nk = 1; on
+    a population built on the literal reading (nk = 0) the check still sees MATLAB's reading,
+    where the default PID's Ms is far higher (3.5 against 2.1 on the nominal reader at 1 N)."""
+    from ebraille_sim.analysis.robust import linearisation_points, point_labels, population_ms
+    pop = [("nominal", _nk0(DeviceParams()))]
+    pts = linearisation_points(pop, [0.6, 1.0])
+    assert [(p.nk, p.force_n) for p in pts] == [(0, 0.6), (0, 1.0), (1, 0.6), (1, 1.0)]
+    assert point_labels(pts, 2) == ["nominal, nk 0", "nominal, nk 1"]
+    ms = population_ms(DEFAULT_PID, pts)
+    alone = population_ms(DEFAULT_PID, linearisation_points(pop, [0.6, 1.0], delays=False))
+    np.testing.assert_allclose(alone, ms[:2], rtol=1e-12)
+    assert 1.9 < ms[1] < 2.2 and 3.3 < ms[3] < 3.8 and np.max(ms) > 1.5 * np.max(alone)
+    # the 1 kHz estimator is re-discretised without a delay: nothing to choose, one reading
+    fast = dataclasses.replace(DeviceParams(), estimator=dataclasses.replace(DeviceParams().estimator,
+                                                                             model="paper:wiener:5@1000"))
+    assert [p.nk for p in linearisation_points([("fast", fast)], [1.0])] == [None]
+
+
+@pytest.mark.slow
+def test_robust_tuning_meets_the_bound_under_both_readings_of_the_delay():
+    """Tuned on a device whose estimator reads the paper literally (nk = 0), the gains still meet
+    Ms <= 1.6 with MATLAB's reading (nk = 1), the one that binds; checked on nk = 0 alone
+    the same search would accept gains that exceed it there (the default gains, scaled to the
+    bound on nk = 0 alone, reach Ms > 2 with nk = 1)."""
+    from ebraille_sim.analysis.robust import (TuneScenario, _scaled_to_bound, family_config, linearisation_points,
+                                              population_ms, robust_tune)
+    from ebraille_sim.scenarios.spec import load_scenario
+    spec = load_scenario("contact_onset")
+    spec = dataclasses.replace(spec, device=_nk0(spec.device))
+    pop = [("nominal", _nk0(DeviceParams()))]
+    res = robust_tune(spec, pop, family="pid", ms_max=1.6, max_evaluations=4,
+                      scenarios=[TuneScenario(spec.name, spec, 2.5)])
+    assert res.delays == [0, 1] and res.ms_labels == ["nominal, nk 0", "nominal, nk 1"]
+    forces = res.forces_n
+    only1 = [p for p in linearisation_points(pop, forces) if p.nk == 1]
+    assert np.max(population_ms(res.tuned.config, only1)) <= 1.6 + 1e-9
+    only0 = linearisation_points(pop, forces, delays=False)
+    cfg0, _ = _scaled_to_bound((2.0, 8.0, 0.0), lambda *g: family_config("pid", *g), only0, 1.6, 1.0)
+    assert np.max(population_ms(cfg0, only1)) > 2.0
+
+
+def test_tune_reports_the_margins_under_both_readings_of_the_delay():
+    from ebraille_sim.commands.tune import _delay_margins
+    rows = _delay_margins({"default PID": lambda f: DEFAULT_PID}, DeviceParams(), [1.0])
+    pm = {r["nk"]: r["phase_margin_deg"] for r in rows}
+    assert set(pm) == {0, 1} and abs(pm[1] - 33.9) < 0.5 and abs(pm[0] - 57.0) < 0.5
+    fast = dataclasses.replace(DeviceParams(), estimator=dataclasses.replace(DeviceParams().estimator,
+                                                                             model="paper:wiener:5@1000"))
+    assert _delay_margins({"default PID": lambda f: DEFAULT_PID}, fast, [1.0]) == []

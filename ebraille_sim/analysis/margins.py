@@ -4,7 +4,8 @@
 its frequency response (crossings refined by a root finder), :func:`sensitivity_peak` the
 peak ``Ms`` of the sensitivity; :func:`analyse_loop` closes the sampled plant of
 :func:`ebraille_sim.analysis.sampled.loop_models` with a controller at an operating force
-and reports them with the bandwidth and the closed-loop step.
+and reports them with the bandwidth and the closed-loop step; :func:`delay_analyses` does so
+under both readings of the paper's input delay (``nk = 0`` and ``1``).
 
 Examples
 --------
@@ -16,6 +17,7 @@ Examples
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -26,10 +28,11 @@ import scipy.optimize
 
 from ebraille_sim.analysis.plant_model import OperatingPoint, operating_point
 from ebraille_sim.analysis.sampled import loop_models
+from ebraille_sim.estimation.registry import delay_readings
 from ebraille_sim.physics.params import DeviceParams
 
 __all__ = ["freq_grid", "freq_response", "sensitivity_peak", "LoopMargins", "loop_margins", "LoopAnalysis",
-           "analyse_loop"]
+           "analyse_loop", "delay_devices", "delay_analyses"]
 
 
 def freq_grid(dt: float, n: int = 400) -> np.ndarray:
@@ -317,3 +320,29 @@ def analyse_loop(controller, device: DeviceParams = DeviceParams(), force_n: flo
     return LoopAnalysis(force_n=float(force_n), gain_margin=gm, phase_margin_deg=pm, gain_crossover_hz=wgc,
                         phase_crossover_hz=wpc, ms=ms, bandwidth_hz=bw, step=dict(info), stable=stable, loop=loop,
                         closed=closed, op=op, margins=margins)
+
+
+def delay_devices(device: DeviceParams, delays: bool = True) -> list[tuple[int | None, DeviceParams]]:
+    """``device`` under each reading of the paper's input delay, ``[(nk, device)]``.
+
+    With ``delays`` and an estimator that is a paper model at its own rate, one device per
+    reading (``nk = 0, 1``, :func:`ebraille_sim.estimation.registry.delay_readings`); otherwise
+    ``[(None, device)]``.
+    """
+    readings = delay_readings(device.estimator.model) if delays else {}
+    if not readings:
+        return [(None, device)]
+    return [(k, dataclasses.replace(device, estimator=dataclasses.replace(device.estimator, model=m)))
+            for k, m in readings.items()]
+
+
+def delay_analyses(controller, device: DeviceParams = DeviceParams(), force_n: float = 1.0, *,
+                   friction: str = "press") -> dict:
+    """:func:`analyse_loop` under each reading of the paper's input delay, ``{nk: LoopAnalysis}``.
+
+    The device's estimator is run as ``nk = 0`` (the paper's notation read literally) and
+    ``nk = 1`` (MATLAB's convention) when it is a paper model at its own rate
+    (:func:`delay_devices`); otherwise the one analysis is keyed
+    ``None``.
+    """
+    return {nk: analyse_loop(controller, d, force_n, friction=friction) for nk, d in delay_devices(device)}

@@ -5,7 +5,15 @@ plant, :func:`ebraille_sim.scenarios.runner.run_scenario`) over a population and
 subject to a robustness constraint checked on the sampled-data small-signal loop
 (:mod:`ebraille_sim.analysis.margins`): the sensitivity peak ``Ms <= ms_max`` (1.6 by default) at
 every linearisation point, i.e. every device of the population at every setpoint of every
-scenario.
+scenario under both readings of the paper's input delay.
+
+The input delay is an uncertainty (:func:`linearisation_points`).  The paper prints no ``nk``
+for its estimators; read literally its notation gives ``nk = 0``, MATLAB's convention
+``nk = 1`` (:mod:`ebraille_sim.estimation.paper_models`), 10 ms apart at 100 Hz.  Every device
+whose estimator is a paper model at its own rate is linearised with both
+(:func:`ebraille_sim.analysis.margins.delay_devices`), so the gains meet the bound whichever
+reading the board's estimator runs; an estimator re-discretised at another rate or read from a
+file has no delay to choose and is linearised once.
 
 Population (:func:`tuning_population`): the three reader presets (soft, nominal, stiff)
 with the nominal FSR, the nominal reader with the low-k and high-k FSR presets, and
@@ -85,7 +93,7 @@ __all__ = ["FAMILIES", "TuneScenario", "tuning_population", "standard_scenarios"
            "linearisation_points", "population_ms", "evaluate", "evaluate_scenarios", "tracking_cost",
            "scenario_cost", "multi_cost", "summarise", "cvar", "robust_tune", "TuneResult", "scenario_setpoints",
            "family_config", "family_controller", "family_ms_controller", "gains_document", "gains_toml", "toml_value",
-           "friction_band_v", "shipped_config", "KD_OFFSET"]
+           "friction_band_v", "shipped_config", "KD_OFFSET", "point_labels"]
 
 KD_OFFSET = 1e-3
 """kd enters the search as ``ln(kd + KD_OFFSET)``, so that kd = 0 is a finite point."""
@@ -177,18 +185,35 @@ class _Point:
     force_n: float
     device: DeviceParams
     front: tuple
+    nk: int | None = None
+    """Input delay of the estimator at this point (samples; None: no delay to choose)."""
 
 
-def linearisation_points(population, forces_n) -> list[_Point]:
-    """Sampled plant fronts of every device at every force (cached for :func:`population_ms`)."""
+def linearisation_points(population, forces_n, delays: bool = True) -> list[_Point]:
+    """Sampled plant fronts of every device at every force, under both readings of the
+    paper's input delay (cached for :func:`population_ms`).
+
+    Order: device, then delay reading (:func:`ebraille_sim.analysis.margins.delay_devices`),
+    then force.  ``delays=False`` linearises each device with its estimator as given (one
+    reading).
+    """
+    from ebraille_sim.analysis.margins import delay_devices
     from ebraille_sim.analysis.plant_model import operating_point
     from ebraille_sim.analysis.sampled import sampled_front
     pts = []
     for label, dev in population:
-        for f in forces_n:
-            op = operating_point(dev, f)
-            pts.append(_Point(label, float(f), dev, sampled_front(dev, op)))
+        for nk, d in delay_devices(dev, delays):
+            for f in forces_n:
+                op = operating_point(d, f)
+                pts.append(_Point(label, float(f), d, sampled_front(d, op), nk))
     return pts
+
+
+def point_labels(points, n_forces: int) -> list[str]:
+    """One label per row of a points-by-force table: the device, with its delay reading
+    (``"nominal, nk 0"``) where the device was linearised under both."""
+    rows = points[::n_forces]
+    return [p.label if p.nk is None else f"{p.label}, nk {p.nk}" for p in rows]
 
 
 def population_ms(controller, points, gain: float = 1.0) -> np.ndarray:
@@ -452,9 +477,9 @@ class Candidate:
         return float(np.max(self.ms))
 
     def block(self, scenarios, labels, forces) -> dict:
-        """The report entry of this controller."""
+        """The report entry of this controller (``ms_table``: one row per device and delay reading)."""
         doc = gains_document(self.config, self.family)
-        ms = np.asarray(self.ms, float).reshape(len(labels), len(forces))
+        ms = np.asarray(self.ms, float).reshape(-1, len(forces))
         return {"controller": doc["controller"], "gains": doc["gains"], "cost": self.cost, "ms_max": self.ms_max,
                 "ms_table": np.where(np.isfinite(ms), ms, -1.0).tolist(),
                 "scenarios": {sc.name: {"metrics": summarise(self.rows[sc.name]),
@@ -492,6 +517,11 @@ class TuneResult:
     :attr:`references` of the shipped controller that beat it on the named scenario."""
     selection_reason: str = ""
     """Why the shipped controller was kept instead of the optimum (empty when it was not)."""
+    ms_labels: list = field(default_factory=list)
+    """Rows of the Ms tables: each device, with its delay reading where it has two
+    (:func:`point_labels`)."""
+    delays: list = field(default_factory=list)
+    """Readings of the paper's input delay in the Ms check (samples; empty: none to choose)."""
 
     @property
     def chosen(self) -> Candidate:
@@ -543,14 +573,14 @@ class TuneResult:
                    start_scale=self.start_scale, scenarios=[sc.name for sc in self.scenarios],
                    scenario_durations_s=[sc.duration_s for sc in self.scenarios], labels=self.labels,
                    forces_n=self.forces_n, history=self.history, selected=self.selected,
-                   selection_reason=self.selection_reason,
+                   selection_reason=self.selection_reason, ms_labels=self.ms_labels, delays=self.delays,
                    named_costs={k: self.named_cost(k) for k in ["tuned", *self.references]})
         return rep
 
 
 def robust_tune(spec, population, *, family: str = "pid", ms_max: float = 1.6, seed: int | None = None,
                 duration_s: float | None = None, max_evaluations: int = 40, progress=None,
-                base: PIDConfig = DEFAULT_PID, scenarios=None, ms_gain: float = 1.0) -> TuneResult:
+                base: PIDConfig = DEFAULT_PID, scenarios=None, ms_gain: float = 1.0, delays: bool = True) -> TuneResult:
     """Tune the gains of ``family`` over ``population`` (see the module docstring).
 
     Parameters
@@ -577,6 +607,9 @@ def robust_tune(spec, population, *, family: str = "pid", ms_max: float = 1.6, s
     ms_gain : float
         The describing-function factor ``kappa`` applied to the loop in the Ms check (1:
         the sliding model).
+    delays : bool
+        Check the bound under both readings of the paper's input delay (default;
+        :func:`linearisation_points`); False checks the population's estimator as given.
     """
     import scipy.optimize
 
@@ -592,7 +625,7 @@ def robust_tune(spec, population, *, family: str = "pid", ms_max: float = 1.6, s
         raise ValueError("scenarios must not be empty")
     forces = sorted({f for sc in scenarios for f in scenario_setpoints(sc.spec)}
                     | ({1.0} if family != "pid" else set()))
-    points = linearisation_points(population, forces)
+    points = linearisation_points(population, forces, delays)
     labels = [lab for lab, _ in population]
     history = []
     per_candidate = len(population) * len(scenarios)
@@ -694,7 +727,8 @@ def robust_tune(spec, population, *, family: str = "pid", ms_max: float = 1.6, s
     best = min(found, key=lambda c: c.cost)
     res = TuneResult(tuned=best, references=refs, scenarios=scenarios, labels=labels, forces_n=forces,
                      ms_bound=float(ms_max), ms_gain=float(ms_gain), evaluations=len(history), history=history,
-                     family=family, start_scale=start_scale)
+                     family=family, start_scale=start_scale, ms_labels=point_labels(points, len(forces)),
+                     delays=sorted({p.nk for p in points if p.nk is not None}))
     c_opt, c_ship = res.named_cost("tuned"), res.named_cost(shipped_key)
     if c_ship < c_opt:
         ship = refs[shipped_key]

@@ -13,7 +13,9 @@ when complete):
 * ``fitness.json``: kind -> order -> profile -> fitness (eq. 7, %);
 * ``fitness.md``: one table per kind (rows: profiles, columns: orders, best in bold), the
   paper's Tables 5-8 beside them for a bench run, and the winning model;
-* ``summary.json``: settings, per-model delay, poles, stability and estimation fit;
+* ``summary.json``: settings, per-model delay, poles, stability and estimation fit; with
+  ``--readings`` each model's fits with ``nk = 0`` and ``nk = 1`` (the paper prints no delay:
+  its notation read literally and MATLAB's convention), estimation and mean over the records;
 * ``models/KIND-ORDER.json``: the identified models, in the records' detrended units;
 * ``models/KIND-ORDER-device.json``: the same models re-expressed for the device, which
   tares the voltage at no load and reads the absolute force
@@ -66,7 +68,11 @@ def add_arguments(p):
     p.add_argument("--no-load-voltage", type=number(0, 100), default=None, metavar="V",
                    help="CSV: divider voltage with the FSR unloaded, for the device versions of the models")
     p.add_argument("--nk", type=whole(0, 10), default=None, metavar="K",
-                   help="input delay of every model, samples (default: searched over 0-3; the paper likely used 1)")
+                   help="input delay of every model, samples (default: searched over 0-3); the paper prints none: "
+                        "0 reads its notation literally, 1 is MATLAB's convention")
+    p.add_argument("--readings", action="store_true",
+                   help="also fit every model with nk = 0 and with nk = 1 (the paper's two readings of its delay) on "
+                        "the same estimation record and report both fits (fitness.md, summary.json); not with --nk")
     p.add_argument("--nyquist-clearance", type=number(0, 0.99), default=0.0, metavar="D",
                    help="keep every pole at least D from z = -1, in [0, 0.99] (default 0: anywhere inside "
                         "the unit circle, as MATLAB placed most of the paper's)")
@@ -99,8 +105,8 @@ def _parse_list(text: str, name: str, allowed, convert=str):
 def _fit_one(job):
     """Fit and score one ``(kind, order)`` (a worker's unit; seeded by ``fit_options``, so the
     result does not depend on which process runs it or in which order)."""
-    from ebraille_sim.identification.sysid import fit_report, fitness, simulate
-    kind, order, records, estimation, fit_options = job
+    from ebraille_sim.identification.sysid import fit_readings, fit_report, fitness, simulate
+    kind, order, records, estimation, fit_options, readings = job
     est = records[estimation]
     t0 = time.perf_counter()
     rep = fit_report(kind, est.voltage_v, est.force_n, order, dt_s=est.dt_s, **fit_options)
@@ -113,12 +119,20 @@ def _fit_one(job):
             "poles": [[float(p.real), float(p.imag)] for p in poles],
             "max_abs_pole": float(max(abs(p) for p in poles)) if len(poles) else 0.0,
             "stable": bool(m.linear.is_stable()),
-            "linear_fitness_by_nk": {str(k): v for k, v in rep.linear_fitness_by_nk.items()}}
+            "linear_fitness_by_nk": {str(k): v for k, v in rep.linear_fitness_by_nk.items()},
+            "fitness_by_nk": {str(k): v for k, v in rep.fitness_by_nk.items()}}
+    if readings:
+        by_nk = fit_readings(kind, est.voltage_v, est.force_n, order, dt_s=est.dt_s, **fit_options)
+        info["readings"] = {}
+        for k, r in by_nk.items():
+            rec_fit = {name: fitness(rec.force_n, simulate(r.model, rec.voltage_v)) for name, rec in records.items()}
+            info["readings"][str(k)] = {"estimation_fitness": r.fitness_pct, "records": rec_fit,
+                                        "mean_fitness": sum(rec_fit.values()) / len(rec_fit)}
     return m, scores, info, sims
 
 
 def identify_all(records: dict, estimation: str, kinds, orders, fit_options: dict, log=None, jobs: int = 1,
-                 sims: dict | None = None):
+                 sims: dict | None = None, readings: bool = False):
     """Identify every kind and order on ``records[estimation]`` and score it on every record.
 
     Parameters
@@ -129,6 +143,9 @@ def identify_all(records: dict, estimation: str, kinds, orders, fit_options: dic
     sims : dict, optional
         Filled with ``(kind, order) -> record name -> simulated force`` (the scoring
         simulations, reused by :func:`plot_fit`).
+    readings : bool
+        Also fit each model with ``nk = 0`` and ``nk = 1`` (:func:`~ebraille_sim.identification.sysid.fit_readings`)
+        and add their fits to ``info`` (``"readings"``).
 
     Returns
     -------
@@ -139,7 +156,7 @@ def identify_all(records: dict, estimation: str, kinds, orders, fit_options: dic
     info : dict
         ``"kind-order" -> {nk, estimation_fitness, poles, max_abs_pole, stable, seconds}``.
     """
-    jobs_list = [(kind, order, records, estimation, fit_options) for kind in kinds for order in orders]
+    jobs_list = [(kind, order, records, estimation, fit_options, readings) for kind in kinds for order in orders]
     if jobs > 1 and len(jobs_list) > 1:
         from concurrent.futures import ProcessPoolExecutor
 
@@ -157,7 +174,9 @@ def identify_all(records: dict, estimation: str, kinds, orders, fit_options: dic
             sims[(kind, order)] = sim
         if log:
             log(f"  {kind:<19} order {order}: nk={inf['nk']}  estimation fit {inf['estimation_fitness']:6.2f} %  "
-                f"({inf['seconds']:.1f} s)")
+                f"({inf['seconds']:.1f} s)" + ("".join(
+                    f"; nk = {k}: {r['estimation_fitness']:.2f} %" for k, r in inf["readings"].items())
+                    if "readings" in inf else ""))
     return models, table, info
 
 
@@ -172,8 +191,10 @@ def best_model(table: dict) -> tuple[str, int, float]:
     return best
 
 
-def fitness_markdown(table: dict, labels: dict, paper: dict | None, estimation: str, source: str) -> str:
-    """``fitness.md``: one table per kind, best value of each row in bold."""
+def fitness_markdown(table: dict, labels: dict, paper: dict | None, estimation: str, source: str,
+                     readings: dict | None = None) -> str:
+    """``fitness.md``: one table per kind, best value of each row in bold; with ``readings``
+    (``"kind-order" -> {"0": fits, "1": fits}``) the fits under both readings of the delay."""
     kind_title = {"linear": "Linear", "hammerstein": "Hammerstein", "wiener": "Wiener",
                   "hammerstein-wiener": "Hammerstein-Wiener"}
     lines = ["# Identification fitness (eq. 7, %)", "",
@@ -197,6 +218,16 @@ def fitness_markdown(table: dict, labels: dict, paper: dict | None, estimation: 
     kind, order, mean = best_model(table)
     lines += [f"Best model by mean fitness over the records: **{kind_title.get(kind, kind)}, order {order}** "
               f"({mean:.2f} %).", ""]
+    if readings:
+        lines += ["## The paper's input delay: both readings", "",
+                  "The paper prints no nk: nk = 0 reads its notation literally, nk = 1 is MATLAB's convention. "
+                  "Each model fitted with the delay held, on the same estimation record.", "",
+                  "| Model | estimation nk = 0 | estimation nk = 1 | mean over records nk = 0 | nk = 1 |",
+                  "|---|---:|---:|---:|---:|"]
+        for key, r in readings.items():
+            lines.append(f"| {key} | {r['0']['estimation_fitness']:.2f} | {r['1']['estimation_fitness']:.2f} | "
+                         f"{r['0']['mean_fitness']:.2f} | {r['1']['mean_fitness']:.2f} |")
+        lines.append("")
     if paper:
         lines += ["# The paper's Tables 5-8, for comparison", ""]
         for kind in table:
@@ -354,6 +385,8 @@ def main(args) -> int:
         raise ValueError("--chirp-dwell sets the virtual bench's chirp; a recorded CSV has its own")
     fit_options = {"seed": args.seed, "n_starts": args.starts or (1 if args.quick else 4),
                    "n_delay_candidates": 1 if args.quick else 2, "max_nfev": 100 if args.quick else 200}
+    if args.readings and args.nk is not None:
+        raise ValueError("--readings fits nk = 0 and nk = 1 itself; give it without --nk")
     if args.nk is not None:
         fit_options["nk"] = args.nk
     if args.nyquist_clearance:
@@ -423,13 +456,15 @@ def main(args) -> int:
         t0 = time.perf_counter()
         sims: dict = {}
         models, table, info = identify_all(records, estimation, kinds, orders, fit_options, log, jobs=args.jobs,
-                                           sims=sims)
+                                           sims=sims, readings=args.readings)
         total = time.perf_counter() - t0
 
         with target.staged() as tmp:
             _write_json(tmp / "fitness.json", {k: {str(o): v for o, v in by.items()} for k, by in table.items()})
             paper = None if args.csv else PAPER_FITNESS
-            (tmp / "fitness.md").write_text(fitness_markdown(table, labels, paper, estimation, source), encoding="utf-8")
+            readings = {key: inf["readings"] for key, inf in info.items() if "readings" in inf} or None
+            (tmp / "fitness.md").write_text(fitness_markdown(table, labels, paper, estimation, source, readings),
+                                            encoding="utf-8")
             kind, order, mean = best_model(table)
             summary = {"source": source, "seed": args.seed, "estimation_record": estimation, "records": list(records),
                        "fit_options": fit_options, "identification_seconds": total,

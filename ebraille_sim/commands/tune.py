@@ -11,8 +11,10 @@ Writes into ``--out`` (default ``runs/tune-SCENARIO``):
   the reference the tuned gains are compared with;
 * ``report.md`` and ``report.json``: gains, Ms at every linearisation point, median,
   CVaR25 and worst-case metrics per scenario of the tuned controller, the hand-tuned
-  default PID, the SIMC rule and the family at the default gains, per device; the phase
-  and gain margins and Ms of the tuned loop on the nominal reader at each setpoint;
+  default PID, the SIMC rule and the family at the default gains, per device and, for an
+  estimator that is a paper model at its own rate, under both readings of the paper's input
+  delay (nk = 0 and 1); the phase and gain margins and Ms of the tuned loop on the nominal
+  reader at each setpoint, and those of gains.toml and of the default PID under both readings;
 * ``bode.png``, ``nyquist.png`` (tuned loop on the nominal reader at each setpoint) and
   ``population.png`` (worst-case in-band fraction per scenario for each controller).
 
@@ -125,7 +127,9 @@ def _markdown(spec, rep: dict, n_dev: int) -> str:
     bound = rep["ms_bound"]
     rule = (f"Ms <= {bound:g}" if math.isfinite(bound) else "no Ms bound") + \
         (" on the sliding linearisation" if rep["ms_gain"] == 1.0 else
-         f" on the loop scaled by the describing-function factor {rep['ms_gain']:g}")
+         f" on the loop scaled by the describing-function factor {rep['ms_gain']:g}") + \
+        (" under both readings of the paper's input delay (nk = " + " and ".join(map(str, rep["delays"])) + ")"
+         if len(rep.get("delays", ())) > 1 else "")
     out = [f"# Robust tuning: {spec.name}", "",
            f"Population: {n_dev} devices (reader presets, FSR presets, random draws), controller family "
            f"`{rep['family']}`, {rep['evaluations']} cost evaluations, constraint: {rule}.", "",
@@ -154,7 +158,7 @@ def _markdown(spec, rep: dict, n_dev: int) -> str:
     for key in keys:
         out += [f"**{_NAMES[key]}**", "", "| device | " + " | ".join(f"{f:g} N" for f in forces) + " |",
                 "|---|" + "---|" * len(forces)]
-        for lab, row in zip(rep["labels"], rep[key]["ms_table"]):
+        for lab, row in zip(rep.get("ms_labels") or rep["labels"], rep[key]["ms_table"]):
             out.append(f"| {lab} | " + " | ".join(_fmt_ms(x) for x in row) + " |")
         out.append("")
     if "hand" in rep and rep["hand"]["cost"] < rep["tuned"]["cost"]:
@@ -177,6 +181,15 @@ def _markdown(spec, rep: dict, n_dev: int) -> str:
         for a in rep["nominal_loop"]:
             out.append(f"| {a['force_n']:g} N | " + " | ".join(_loop_cells(a)) + " |")
         out.append("")
+    if rep.get("delay_margins"):
+        out += ["## The paper's input delay: margins on the nominal reader under both readings", "",
+                "The paper prints no input delay; nk = 0 reads its notation literally, nk = 1 is MATLAB's "
+                "convention (docs/identification.md).  Sliding model, margins from `loop_margins`.", "",
+                "| controller | setpoint | nk | closed loop | phase margin | gain margin | Ms |",
+                "|---|---|---|---|---|---|---|"]
+        for a in rep["delay_margins"]:
+            out.append(f"| {a['controller']} | {a['force_n']:g} N | {a['nk']} | " + " | ".join(_loop_cells(a)) + " |")
+        out.append("")
     out += ["## Per device (in-band fraction)", ""]
     for s in rep["scenarios"]:
         out += [f"**{s}**", "", "| device | " + " | ".join(_NAMES[k] for k in keys) + " |",
@@ -187,6 +200,19 @@ def _markdown(spec, rep: dict, n_dev: int) -> str:
         out.append("")
     out += ["Figures: bode.png, nyquist.png (loop of gains.toml, nominal reader), population.png."]
     return "\n".join(out) + "\n"
+
+
+def _delay_margins(controllers: dict, device, forces_n) -> list[dict]:
+    """Margins of each ``name -> (force -> controller)`` on ``device`` at each force under both
+    readings of the paper's input delay (none where the estimator has no delay to choose)."""
+    from ebraille_sim.analysis.margins import delay_analyses
+    rows = []
+    for name, at in controllers.items():
+        for f in forces_n:
+            for nk, a in delay_analyses(at(f), device, f).items():
+                if nk is not None:
+                    rows.append({"controller": name, "nk": nk, **a.summary()})
+    return rows
 
 
 def _plot_population(rep: dict, path) -> None:
@@ -282,6 +308,7 @@ def _robust_main(args) -> int:
 
     from ebraille_sim.analysis.robust import (family_ms_controller, gains_document, gains_toml, robust_tune,
                                               tuning_population)
+    from controllers.pid import DEFAULT_PID
     from ebraille_sim.analysis.margins import analyse_loop
     from ebraille_sim.analysis.plots import plot_bode, plot_nyquist
 
@@ -330,6 +357,8 @@ def _robust_main(args) -> int:
             cfg_at = (lambda c: (lambda f: c))(cfg_at)
         analyses = [analyse_loop(cfg_at(f), nominal, f) for f in res.forces_n]
         rep["nominal_loop"] = [a.summary() for a in analyses]
+        rep["delay_margins"] = _delay_margins({"gains.toml": cfg_at, "default PID": lambda f: DEFAULT_PID},
+                                              nominal, res.forces_n)
         with target.staged() as tmp:
             reason = (f"kept the shipped {res.chosen.family}: {res.selection_reason}\n"
                       "the optimum under the bound is in gains_tuned.toml") if res.selected != "tuned" else ""

@@ -78,9 +78,9 @@ from scipy.signal import lfilter
 from ebraille_sim.base.validation import check_number
 
 from ebraille_sim.estimation.blockmodels import BlockModel, LinearBF, PiecewiseLinear, fitness
-from ebraille_sim.estimation.paper_models import KINDS, ORDERS, SAMPLE_TIME_S, paper_model
+from ebraille_sim.estimation.paper_models import KINDS, NK_READINGS, ORDERS, SAMPLE_TIME_S, paper_model
 
-__all__ = ["fit", "fit_report", "FitResult", "fitness", "paper_model", "simulate", "match_poles",
+__all__ = ["fit", "fit_report", "fit_readings", "FitResult", "fitness", "paper_model", "simulate", "match_poles",
            "shift_operating_point", "compare_with_paper", "KINDS", "ORDERS", "PAPER_FITNESS", "PAPER_PROFILE_ORDER", "DEFAULT_MARGIN"]
 
 #: Poles must stay within ``|z| < 1 - DEFAULT_MARGIN`` during the search.
@@ -742,12 +742,16 @@ class FitResult:
         Fit (%) of the linear output-error model for each delay tried.
     start_fitness_pct : tuple of float
         Estimation fit of every start, in order (the best is kept).
+    fitness_by_nk : dict
+        Estimation fit (%) of the best start for each delay carried into the nonlinear
+        refinement (the delays of ``linear_fitness_by_nk`` with the lowest error).
     """
     model: BlockModel
     fitness_pct: float
     nk: int
     linear_fitness_by_nk: dict
     start_fitness_pct: tuple
+    fitness_by_nk: dict = field(default_factory=dict)
 
 
 def _check_signal(x: Any, name: str) -> np.ndarray:
@@ -869,6 +873,7 @@ def fit_report(kind: str, u: Any, y: Any, order: int, nk: int | None = None, *, 
     rng = np.random.default_rng(np.random.SeedSequence(seed).spawn(1)[0])
     best = None
     start_fits = []
+    by_nk = {}
     for d in ranked:
         b0, f0, _, _ = linear[d]
         starts = []
@@ -891,12 +896,44 @@ def fit_report(kind: str, u: Any, y: Any, order: int, nk: int | None = None, *, 
             model = _to_model(st, th, u, dt_s, fix_b, name)
             fit_pct = fitness(y, simulate(model, u))
             start_fits.append(fit_pct)
+            by_nk[d] = max(by_nk.get(d, -math.inf), fit_pct)
             if best is None or fit_pct > best[0]:
                 best = (fit_pct, model, d)
     if best is None:
         raise ValueError(f"no admissible {kind} model of order {order} was found (every start was unstable)")
     return FitResult(model=best[1], fitness_pct=best[0], nk=best[2],
-                     linear_fitness_by_nk={d: linear[d][3] for d in nks}, start_fitness_pct=tuple(start_fits))
+                     linear_fitness_by_nk={d: linear[d][3] for d in nks}, start_fitness_pct=tuple(start_fits),
+                     fitness_by_nk=dict(sorted(by_nk.items())))
+
+
+def fit_readings(kind: str, u: Any, y: Any, order: int, nks=NK_READINGS, **options) -> dict:
+    """Identify the same model once for each input delay in ``nks`` on the same data.
+
+    The paper prints no input delay: ``nk = 0`` reads its notation literally, ``nk = 1`` is
+    MATLAB's convention (:data:`ebraille_sim.estimation.paper_models.NK_READINGS`, the
+    default ``nks``).  Each fit holds its delay fixed (:func:`fit_report` with ``nk``), so the
+    results' ``fitness_pct`` compare the readings on one record.
+
+    Parameters
+    ----------
+    kind, u, y, order
+        As in :func:`fit_report`.
+    nks : sequence of int
+        The delays, samples (each 0-50, none twice).
+    **options
+        Keyword options of :func:`fit_report` (not ``nk``).
+
+    Returns
+    -------
+    dict
+        ``{nk: FitResult}`` in the order of ``nks``.
+    """
+    if "nk" in options:
+        raise TypeError("fit_readings fixes nk itself; give the delays as nks")
+    nks = [_check_int(k, "nk", 0, 50) for k in nks]
+    if not nks or len(set(nks)) != len(nks):
+        raise ValueError(f"nks must name at least one delay, none twice, got {nks!r}")
+    return {k: fit_report(kind, u, y, order, k, **options) for k in nks}
 
 
 def fit(kind: str, u: Any, y: Any, order: int, nk: int | None = None, **options) -> BlockModel:

@@ -8,18 +8,23 @@ false trip).  Writes one JSON document and prints a table.
 
     python studies/population/shares.py --readers 200 --seed 20261128 --duration 12 \
         --controller dob_learn_1khz steady_90wpm contact_onset pressing_90wpm
+
+``--nk 0`` or ``--nk 1`` runs the scenario's estimator with that reading of the paper's input
+delay (the paper prints none; docs/identification.md); it needs a paper model at its own rate.
 """
 from __future__ import annotations
 
 import argparse
 import collections
+import dataclasses
 import json
 import sys
 
 import numpy as np
 
+from ebraille_sim.estimation.registry import with_delay
 from ebraille_sim.scenarios.population import sample_devices
-from ebraille_sim.scenarios.runner import run_batch
+from ebraille_sim.scenarios.runner import design_firmware, run_batch
 from ebraille_sim.scenarios.spec import load_scenario
 
 
@@ -29,9 +34,20 @@ def cvar_low(x, alpha=0.1):
     return float(np.mean(x[:k]))
 
 
-def shares(scenario: str, readers: int, seed: int, duration_s: float, controller=None, base=None) -> dict:
-    """One row: readers drawn around ``base`` (default the scenario's device)."""
+def shares(scenario: str, readers: int, seed: int, duration_s: float, controller=None, base=None,
+           nk: int | None = None) -> dict:
+    """One row: readers drawn around ``base`` (default the scenario's device); with ``nk`` the
+    estimator runs with that reading of the paper's input delay (samples, 0 or 1)."""
     spec = load_scenario(scenario)
+    if nk is not None:
+        if design_firmware(spec.controller.name if controller is None else controller) is not None:
+            raise ValueError("a design runs on its own firmware preset's estimator; --nk sets the scenario's "
+                             "(give a controller or a gains file, not a design)")
+        est = spec.device.estimator
+        est = dataclasses.replace(est, model=with_delay(est.model, nk))
+        spec = dataclasses.replace(spec, device=dataclasses.replace(spec.device, estimator=est))
+        if base is not None:
+            base = dataclasses.replace(base, estimator=est)
     devs = sample_devices(seed, readers, base=spec.device if base is None else base)
     runs = [{"scenario": spec, "seed": spec.seed + 7 * i, "duration_s": duration_s, "device": d,
              **({} if controller is None else {"controller": controller})} for i, d in enumerate(devs)]
@@ -41,6 +57,7 @@ def shares(scenario: str, readers: int, seed: int, duration_s: float, controller
     faults = collections.Counter((r.supervisor or {}).get("fault") for r in ok if (r.supervisor or {}).get("fault"))
     worst = sorted(range(len(ok)), key=lambda i: ib[i])[:3]
     return {"scenario": scenario, "controller": controller or spec.controller.name, "readers": readers,
+            "estimator": spec.device.estimator.model,
             "runs": len(ok), "errors": [str(r) for r in res if isinstance(r, Exception)][:3],
             "share_in_band_0.9": float(np.mean(ib >= 0.9)), "median_in_band": float(np.median(ib)),
             "cvar10_in_band": cvar_low(ib), "peak_max_n": float(max(r.metrics["peak_force_n"] for r in ok)),
@@ -54,18 +71,33 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=20261128)
     ap.add_argument("--duration", type=float, default=12.0)
     ap.add_argument("--controller", default=None, help="controller, design or gains file (default: the scenario's)")
+    ap.add_argument("--nk", default=None,
+                    help="the estimator's input delay, samples: 0 (the paper's notation read literally) or 1 "
+                         "(MATLAB's convention); default: the scenario's estimator as it is")
     ap.add_argument("--out", default=None, help="write the rows as JSON here")
     a = ap.parse_args(argv)
+    nk = None
+    if a.nk is not None:
+        if a.nk not in ("0", "1"):
+            print(f"error: --nk must be 0 or 1 (the paper's two readings of its input delay), got {a.nk!r}",
+                  file=sys.stderr)
+            return 2
+        nk = int(a.nk)
     rows = []
     for sc in a.scenarios:
-        r = shares(sc, a.readers, a.seed, a.duration, a.controller)
+        try:
+            r = shares(sc, a.readers, a.seed, a.duration, a.controller, nk=nk)
+        except ValueError as exc:
+            print(f"error: {sc}: {exc}", file=sys.stderr)
+            return 2
         rows.append(r)
         print(f"{sc:24s} {r['controller']:16s} share>=0.9 {r['share_in_band_0.9']:.3f}  median {r['median_in_band']:.3f}"
               f"  CVaR10 {r['cvar10_in_band']:.3f}  peak max {r['peak_max_n']:.2f} N  latched {r['latched']}",
               flush=True)
     if a.out:
         with open(a.out, "w", encoding="utf-8") as f:
-            json.dump({"seed": a.seed, "readers": a.readers, "duration_s": a.duration, "rows": rows}, f, indent=1)
+            json.dump({"seed": a.seed, "readers": a.readers, "duration_s": a.duration, "nk": nk, "rows": rows}, f,
+                      indent=1)
     return 0
 
 

@@ -168,8 +168,9 @@ def loop_figures(results, recommended):
 
 
 def ms_maps(results, pop, designs):
-    """Ms of each design at every device and setpoint (sliding model), figure of three of them."""
-    pts = linearisation_points(pop, FORCES)
+    """Ms of each design at every device and setpoint (sliding model, the shipped estimator's delay
+    nk = 1; tune's check adds nk = 0), figure of three of them."""
+    pts = linearisation_points(pop, FORCES, delays=False)
     maps = {}
     for name, ctrl in designs.items():
         maps[name] = population_ms(ctrl, pts).reshape(len(pop), len(FORCES))
@@ -496,7 +497,7 @@ def main():
                TUNE_DEFAULT: ScheduledPID(MS_1_6).pid_config_at, REC: ScheduledPID(RECOMMENDED).pid_config_at,
                EARLIER: ScheduledPID(EARLIER_CONFIG).pid_config_at, "LQG": make_lqg().statespace()}
     ms_maps(results, pop, designs)
-    pts = linearisation_points(pop, FORCES)
+    pts = linearisation_points(pop, FORCES, delays=False)
     results["ms_map_friction_0.5"] = {name: _ms_grid(population_ms(c, pts, 0.5).reshape(len(pop), len(FORCES)))
                                       for name, c in designs.items() if name != "LQG"}
     for label, key in DESIGN_KEYS.items():
