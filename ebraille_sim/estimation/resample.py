@@ -50,7 +50,7 @@ import numpy as np
 
 from ebraille_sim.estimation.blockmodels import BlockModel, LinearBF
 
-__all__ = ["RATE_SEPARATOR", "split_rate", "continuous_equivalent", "resample"]
+__all__ = ["RATE_SEPARATOR", "split_rate", "continuous_equivalent", "zoh_discretised", "resample"]
 
 RATE_SEPARATOR = "@"
 """Separates an estimator's name from the rate it is re-discretised at (``"paper:wiener:5@1000"``)."""
@@ -133,6 +133,38 @@ def continuous_equivalent(linear: LinearBF, dt_s: float) -> tuple[float, np.ndar
     return gain, a_z, a_p
 
 
+
+def zoh_discretised(num_s, den_s, dt_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(num_z, den_z)`` of the continuous transfer function ``num_s / den_s`` (descending
+    powers, ``len(num_s) <= len(den_s)``, at least one pole) behind a zero-order hold of
+    ``dt_s``: the steps of ``scipy.signal.cont2discrete((num_s, den_s), dt_s, method="zoh")``
+    in its order (normalise, controller canonical state space, the exponential of the
+    augmented matrix, back to a transfer function), so the coefficients are SciPy's to the last
+    bit (tested) without importing its signal package.  ``num_z`` has one row."""
+    import scipy.linalg
+    den = np.atleast_1d(np.asarray(den_s, float))
+    den = den[int(np.argmax(den != 0.0)):]
+    num = np.atleast_1d(np.asarray(num_s, float)) / den[0]
+    den = den / den[0]
+    lead = 0
+    while lead < num.size - 1 and abs(num[lead]) <= 1e-14:
+        lead += 1
+    num = num[lead:]
+    k = den.size
+    num = np.concatenate((np.zeros(k - num.size), num))
+    a = np.r_[-np.array([den[1:]]), np.eye(k - 2, k - 1)]
+    b = np.eye(k - 1, 1)
+    c = np.array([num[1:] - num[0] * den[1:]])
+    d = np.array([[num[0]]])
+    n = a.shape[0]
+    em = np.vstack((np.hstack((a, b)), np.zeros((1, n + 1))))
+    ms = scipy.linalg.expm(dt_s * em)[:n, :]
+    ad, bd = ms[:, :n], ms[:, n:]
+    den_z = np.poly(ad)
+    num_z = np.empty((1, n + 1))
+    num_z[0] = np.poly(ad - np.dot(bd, c)) + (d[0] - 1) * den_z
+    return num_z, den_z
+
 def resample(model: BlockModel, rate_hz: float, sensor_rate_hz: float | None = None) -> BlockModel:
     """``model`` with its linear block re-discretised at ``rate_hz`` (the module's method).
 
@@ -168,7 +200,6 @@ def resample(model: BlockModel, rate_hz: float, sensor_rate_hz: float | None = N
         if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
             raise ValueError(f"estimator rate {rate_hz:g} Hz: its period must be a whole number of sensor periods "
                              f"(sensor rate {float(sensor_rate_hz):g} Hz, ratio {ratio:.6g})")
-    import scipy.signal
     gain, a_z, a_p = continuous_equivalent(model.linear, model.dt_s)
     num_s = gain * np.poly(-a_z) if a_z.size else np.array([gain])
     den_s = np.poly(-a_p) if a_p.size else np.array([1.0])
@@ -176,7 +207,7 @@ def resample(model: BlockModel, rate_hz: float, sensor_rate_hz: float | None = N
     if den_s.size == 1:
         b, f = (float(num_s[0] / den_s[0]),), ()
     else:
-        num_d, den_d, _ = scipy.signal.cont2discrete((num_s, den_s), dt_new, method="zoh")
+        num_d, den_d = zoh_discretised(num_s, den_s, dt_new)
         b = np.ravel(num_d) / den_d[0]
         f = tuple(np.asarray(den_d[1:], float) / den_d[0])
     b = np.asarray(b, float)
