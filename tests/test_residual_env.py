@@ -130,3 +130,14 @@ def test_action_slot_and_nan_policy_output():
     slot.action = math.nan
     with pytest.raises(ValueError, match="non-finite action"):
         pol.update(0.0, 1.0, 1e-3, 0.0)
+
+
+def test_registered_id_makes_the_residual_env():
+    import gymnasium as gym
+
+    from ebraille_sim.rl.registration import RESIDUAL_ENV_ID, register_envs
+    register_envs()
+    env = gym.make(RESIDUAL_ENV_ID, residual="dob_hold_1khz", history=2, **SHORT)
+    obs, _ = env.reset(seed=1)
+    assert obs.shape == (2 * N_FRAME,)
+    assert env.unwrapped.episode.device.estimator.model == "paper:wiener:5@1000"     # the design's firmware

@@ -53,10 +53,10 @@ from ebraille_sim.base.seeds import SeedNode
 from ebraille_sim.base.validation import check_number, check_range
 from ebraille_sim.plant.layout import S
 from ebraille_sim.rl.episode import EnvConfig, episode_from_spec, estimator_model, validate_options
+from ebraille_sim.rl.registration import RESIDUAL_ENV_ID
 
 __all__ = ["RESIDUAL_ENV_ID", "ResidualConfig", "ResidualEnv", "scaled_population", "residual_device"]
 
-RESIDUAL_ENV_ID = "EBraille/ContactForceResidual-v0"
 
 CURRICULUM_LEVELS = 16
 """The population spread of a curriculum is taken in steps of ``1 / CURRICULUM_LEVELS``."""
@@ -141,13 +141,15 @@ def _distribution_at(cfg: EnvConfig, level: int):
 class ResidualEnv(gym.Env):
     __doc__ = __doc__
 
-    metadata = {"render_modes": [], "render_fps": 25}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
 
     def __init__(self, residual: str = "dob_100hz", residual_limit_v: float = 1.0, history: int = 1,
                  curriculum_steps: int = 0, curriculum_start: float = 0.25, control_rate_hz: float = 1000.0,
                  render_mode: str | None = None, **env_kwargs):
-        if render_mode is not None:
-            raise ValueError(f"render_mode {render_mode!r} is not supported by the residual env; allowed: None")
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode {render_mode!r} is not supported; allowed: None, rgb_array")
+        self.render_mode = render_mode
+        self._renderer = None
         if env_kwargs.get("backend", "lumped") != "lumped":
             raise ValueError(f"the residual env runs the lumped plant, got backend {env_kwargs['backend']!r}")
         self.residual_config = ResidualConfig(residual=residual, residual_limit_v=residual_limit_v, history=history,
@@ -250,8 +252,20 @@ class ResidualEnv(gym.Env):
         return obs, float(r), bool(term), bool(truncated), info
 
 
-def register_residual_env() -> None:
-    """Register :data:`RESIDUAL_ENV_ID` with Gymnasium (once per process)."""
-    if RESIDUAL_ENV_ID in gym.registry:
-        return
-    gym.register(id=RESIDUAL_ENV_ID, entry_point="ebraille_sim.rl.residual:ResidualEnv")
+    def render(self):
+        """The display, the board and the finger now (``render_mode="rgb_array"``, as the plain env)."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
+            return None
+        if self.episode is None:
+            raise RuntimeError("call reset() before render()")
+        from ebraille_sim.rl.render import Renderer, snapshot_from
+        if self._renderer is None:
+            self._renderer = Renderer()
+        return self._renderer.draw(snapshot_from(self.plant.state[0], self.plant.inputs[0], self.episode, self._k,
+                                                 self.config.dt_s, self.config.safe_force_n))
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
