@@ -141,3 +141,22 @@ def test_registered_id_makes_the_residual_env():
     obs, _ = env.reset(seed=1)
     assert obs.shape == (2 * N_FRAME,)
     assert env.unwrapped.episode.device.estimator.model == "paper:wiener:5@1000"     # the design's firmware
+
+
+def test_refresh_share_reads_some_episodes_in_refresh_mode_and_keeps_the_rest():
+    plain = ResidualEnv(**SHORT)
+    mixed = ResidualEnv(refresh_probability=0.5, **SHORT)
+    modes = []
+    for seed in range(8):
+        plain.reset(seed=seed)
+        mixed.reset(seed=seed)
+        a, b = plain.episode.spec, mixed.episode.spec
+        modes.append(b.reading.mode)
+        assert a.device == b.device and a.reading.text == b.reading.text and a.seed == b.seed
+        if b.reading.mode == "refresh":
+            # the setpoint falls to the lift force between presses
+            assert mixed.episode.setpoint_n.min() < plain.episode.setpoint_n[plain.episode.setpoint_n > 0].min()
+    assert 0 < modes.count("refresh") < 8
+    always = ResidualEnv(refresh_probability=1.0, **SHORT)
+    always.reset(seed=0)
+    assert always.episode.spec.reading.mode == "refresh"

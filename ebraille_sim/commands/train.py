@@ -42,6 +42,12 @@ RECIPES = {
                        "first half of training; the policy starts as the design (near-zero mean, std 0.14 V)",
         "algo": "ppo", "control_rate_hz": 1000.0, "residual": "dob_100hz", "residual_limit_v": 1.0, "history": 4,
         "curriculum_fraction": 0.5, "curriculum_start": 0.25, "hyperparameters": _RESIDUAL_PPO},
+    "residual_ppo_refresh_1khz": {
+        "description": "residual_ppo_1khz with a quarter of the episodes read in refresh mode (each character "
+                       "pressed, held and released, as in the benchmark's refresh scenarios)",
+        "algo": "ppo", "control_rate_hz": 1000.0, "residual": "dob_100hz", "residual_limit_v": 1.0, "history": 4,
+        "curriculum_fraction": 0.5, "curriculum_start": 0.25, "refresh_probability": 0.25,
+        "hyperparameters": _RESIDUAL_PPO},
     "residual_ppo_hold_1khz": {
         "description": "residual_ppo_1khz on dob_hold_1khz (the fast_1khz firmware)",
         "algo": "ppo", "control_rate_hz": 1000.0, "residual": "dob_hold_1khz", "residual_limit_v": 1.0,
@@ -294,10 +300,12 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
         rc = ResidualConfig(residual=residual, residual_limit_v=settings["residual_limit_v"],
                             history=settings["history"],
                             curriculum_steps=int(settings.get("curriculum_fraction", 0.0) * steps / n_envs),
-                            curriculum_start=settings.get("curriculum_start", 0.25))
+                            curriculum_start=settings.get("curriculum_start", 0.25),
+                            refresh_probability=settings.get("refresh_probability", 0.0))
         cfg = EnvConfig(control_rate_hz=control_rate_hz, base_device=residual_device(residual, base))
         env_kwargs = {"residual": rc.residual, "residual_limit_v": rc.residual_limit_v, "history": rc.history,
                       "curriculum_steps": rc.curriculum_steps, "curriculum_start": rc.curriculum_start,
+                      "refresh_probability": rc.refresh_probability,
                       "control_rate_hz": cfg.control_rate_hz}
         extra_meta = rc.metadata()
     if base is not None:
@@ -337,6 +345,7 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
     if residual is not None:
         record["curriculum"] = {"steps_per_env": env_kwargs["curriculum_steps"],
                                 "start": env_kwargs["curriculum_start"]}
+        record["refresh_probability"] = env_kwargs["refresh_probability"]
     meta = {"format": POLICY_FORMAT, "algo": algo, "env_id": env_id, "env": {**cfg.policy_metadata(), **extra_meta},
             "training": record}
     (out / "policy.json").write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")

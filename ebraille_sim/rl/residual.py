@@ -35,6 +35,12 @@ every standard deviation scaled, by ``s = s0 + (1 - s0) min(1, n / curriculum_st
 that few distributions are built.  The draw of each episode depends only on its seed and
 ``s``, so the same seed gives the same episodes.
 
+**Refresh reading.**  With ``refresh_probability`` > 0 that share of the episodes (drawn from
+a child of the episode seed that the rest of the draw does not use) is read in refresh mode:
+every character is pressed to the setpoint, held and released to the reading spec's lift force
+(``[reading] mode = "refresh"``, the mode of the benchmark's ``refresh_*`` scenarios); the
+other draws of the episode stay as they are.
+
 Reset options are those of the plain env (:data:`ebraille_sim.rl.episode.OPTION_KEYS`).
 """
 from __future__ import annotations
@@ -73,6 +79,8 @@ class ResidualConfig:
                                                 "(0: the full population from the start)", nonneg=True)
     curriculum_start: float = sourced(0.25, "-", "population spread at the start of the curriculum, as a "
                                                  "fraction of the full spread", lo=0.0, hi=1.0)
+    refresh_probability: float = sourced(0.0, "-", "chance that an episode is read in refresh mode (every "
+                                                   "character pressed, held and released)", lo=0.0, hi=1.0)
 
     def __post_init__(self):
         import controllers
@@ -94,6 +102,7 @@ class ResidualConfig:
         object.__setattr__(self, "curriculum_steps",
                            check_number("curriculum_steps", self.curriculum_steps, 0, 10 ** 12, integer=True))
         check_range("curriculum_start", self.curriculum_start, 0.0, 1.0)
+        check_range("refresh_probability", self.refresh_probability, 0.0, 1.0)
 
     def metadata(self) -> dict:
         """The entries a policy file records so that a controller rebuilds the policy's loop."""
@@ -144,8 +153,8 @@ class ResidualEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
 
     def __init__(self, residual: str = "dob_100hz", residual_limit_v: float = 1.0, history: int = 1,
-                 curriculum_steps: int = 0, curriculum_start: float = 0.25, control_rate_hz: float = 1000.0,
-                 render_mode: str | None = None, **env_kwargs):
+                 curriculum_steps: int = 0, curriculum_start: float = 0.25, refresh_probability: float = 0.0,
+                 control_rate_hz: float = 1000.0, render_mode: str | None = None, **env_kwargs):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode {render_mode!r} is not supported; allowed: None, rgb_array")
         self.render_mode = render_mode
@@ -153,7 +162,8 @@ class ResidualEnv(gym.Env):
         if env_kwargs.get("backend", "lumped") != "lumped":
             raise ValueError(f"the residual env runs the lumped plant, got backend {env_kwargs['backend']!r}")
         self.residual_config = ResidualConfig(residual=residual, residual_limit_v=residual_limit_v, history=history,
-                                              curriculum_steps=curriculum_steps, curriculum_start=curriculum_start)
+                                              curriculum_steps=curriculum_steps, curriculum_start=curriculum_start,
+                                              refresh_probability=refresh_probability)
         base = residual_device(residual, env_kwargs.pop("base_device", None))
         self.config = EnvConfig(control_rate_hz=control_rate_hz, base_device=base, **env_kwargs)
         from controllers.residual import N_FRAME, frame_bounds
@@ -192,7 +202,11 @@ class ResidualEnv(gym.Env):
             self._master = SeedNode(int(self.np_random.integers(0, 2**63)))
         ss = self._master.spawn(1)[0]
         level = int(round(self.spread() * CURRICULUM_LEVELS))
-        ep = episode_from_spec(_distribution_at(self.config, level).draw(ss, opt))
+        spec = _distribution_at(self.config, level).draw(ss, opt)
+        p = self.residual_config.refresh_probability
+        if p > 0.0 and np.random.default_rng(ss.spawn(1)[0]).random() < p:     # a child the draw did not use
+            spec = dataclasses.replace(spec, reading=dataclasses.replace(spec.reading, mode="refresh"))
+        ep = episode_from_spec(spec)
         dev = ep.device
         self.plant = make_plant([dev], [ep.sensor_seed], backend="lumped", models=[estimator_model(dev.estimator.model)])
         self.plant.inputs[0] = ep.run.initial_inputs()
