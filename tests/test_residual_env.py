@@ -108,6 +108,8 @@ def test_curriculum_grows_the_population_spread():
     ({"residual_limit_v": 0.0}, "residual_limit_v"),
     ({"history": 0}, "history"),
     ({"curriculum_start": 1.5}, "curriculum_start"),
+    ({"refresh_probability": -0.1}, "refresh_probability"),
+    ({"nope": 1}, "unknown argument 'nope'"),
     ({"backend": "pymunk"}, "lumped plant"),
 ])
 def test_bad_arguments_are_one_line_errors(kwargs, match):

@@ -42,6 +42,27 @@ every character is pressed to the setpoint, held and released to the reading spe
 other draws of the episode stay as they are.
 
 Reset options are those of the plain env (:data:`ebraille_sim.rl.episode.OPTION_KEYS`).
+
+## Arguments
+
+Those of :class:`ResidualConfig` (``residual``, ``residual_limit_v``, ``history``,
+``curriculum_steps``, ``curriculum_start``, ``refresh_probability``), ``control_rate_hz``
+(default 1000 Hz) and any other argument of the plain env (:class:`~ebraille_sim.rl.episode.EnvConfig`:
+``safe_force_n``, ``effort_weight``, ``safety``, ``base_device``, ...); the plant is the lumped one.
+An unknown argument or a value out of range is a one-line ``ValueError`` naming it.
+
+Examples
+--------
+>>> import gymnasium as gym
+>>> import numpy as np
+>>> import ebraille_sim
+>>> env = gym.make("EBraille/ContactForceResidual-v0", residual="dob_100hz", history=4)
+>>> obs, info = env.reset(seed=0)
+>>> obs.shape
+(32,)
+>>> obs, reward, terminated, truncated, info = env.step(np.zeros(1, np.float32))
+>>> info["residual_v"]
+0.0
 """
 from __future__ import annotations
 
@@ -164,6 +185,11 @@ class ResidualEnv(gym.Env):
         self.residual_config = ResidualConfig(residual=residual, residual_limit_v=residual_limit_v, history=history,
                                               curriculum_steps=curriculum_steps, curriculum_start=curriculum_start,
                                               refresh_probability=refresh_probability)
+        allowed = [f.name for f in dataclasses.fields(EnvConfig) if f.name != "control_rate_hz"]
+        for key in env_kwargs:
+            if key not in allowed:
+                raise ValueError(f"unknown argument {key!r} of the residual env; allowed besides its own: "
+                                 f"{', '.join(allowed)}")
         base = residual_device(residual, env_kwargs.pop("base_device", None))
         self.config = EnvConfig(control_rate_hz=control_rate_hz, base_device=base, **env_kwargs)
         from controllers.residual import N_FRAME, frame_bounds
