@@ -73,7 +73,8 @@ def add_arguments(p):
     p.add_argument("--algo", default=None, metavar="ALGO", help="algorithm, ppo or sac (default: the recipe's)")
     p.add_argument("--steps", type=whole(1, MAX_STEPS), default=200_000, metavar="N",
                    help=f"environment steps, in [1, {MAX_STEPS:.0e}] (default: 200000)")
-    p.add_argument("--out", default=None, metavar="DIR", help="output folder (default: runs/train-ALGO)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="output folder (default: runs/train-ALGO, or runs/train-RECIPE with --recipe)")
     p.add_argument("--seed", type=whole(0, TRAIN_SEED_LIMIT - 1), default=0,
                    help="master seed of training; seed + envs at most 2**32 (default: 0)")
     p.add_argument("--envs", type=whole(1, 256), default=4, metavar="N",
