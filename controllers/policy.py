@@ -17,6 +17,13 @@ observation depends on):
   (``ebraille_sim/data/policies/NAME/``: ``policy.json`` and the NumPy actor
   ``policy.npz``, no ``policy.zip``), so they run deterministically only.
 
+A **residual policy** (trained on ``EBraille/ContactForceResidual-v0``, e.g. ``ebraille-sim
+train --recipe residual_ppo_1khz``) names in its metadata the design it corrects, the
+correction's limit and its observation history (``env.residual``, ``env.residual_limit_v``,
+``env.history``); ``controllers.make("policy:PATH")`` returns it as a
+:class:`controllers.residual.ResidualPolicy`: the design's controller with the learned
+correction added, run on the design's firmware preset by the scenario runner.
+
 The controller sees only what the microcontroller sees (estimated force, setpoint, time
 step, motor current) and builds the policy's observation with the same compiled function
 as the environment (:func:`ebraille_sim.rl.env.observe`), so a policy behaves in a scenario as
