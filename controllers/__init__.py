@@ -156,7 +156,7 @@ def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
     spec = os.fspath(name_or_path)
     if spec.startswith(_POLICY_PREFIX):
         from controllers.policy import load_policy  # imports stable-baselines3 only when a policy is loaded
-        return load_policy(spec[len(_POLICY_PREFIX):], **overrides)
+        return load_policy(spec[len(_POLICY_PREFIX):], make_base=make, **overrides)
     if spec in _REGISTRY:
         return _REGISTRY[spec](**overrides)
     from controllers.designs import designs

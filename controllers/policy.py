@@ -17,6 +17,13 @@ observation depends on):
   (``ebraille_sim/data/policies/NAME/``: ``policy.json`` and the NumPy actor
   ``policy.npz``, no ``policy.zip``), so they run deterministically only.
 
+A **residual policy** (trained on ``EBraille/ContactForceResidual-v0``, e.g. ``ebraille-sim
+train --recipe residual_ppo_1khz``) names in its metadata the design it corrects, the
+correction's limit and its observation history (``env.residual``, ``env.residual_limit_v``,
+``env.history``); ``controllers.make("policy:PATH")`` returns it as a
+:class:`controllers.residual.ResidualPolicy`: the design's controller with the learned
+correction added, run on the design's firmware preset by the scenario runner.
+
 The controller sees only what the microcontroller sees (estimated force, setpoint, time
 step, motor current) and builds the policy's observation with the same compiled function
 as the environment (:func:`ebraille_sim.rl.env.observe`), so a policy behaves in a scenario as
@@ -63,14 +70,14 @@ from controllers.features import (CURRENT_SCALE_A, N_OBS, N_Z, Z_PREV_ACTION, co
                                   write_observation)
 
 __all__ = ["ACTOR_FORMAT", "ALGORITHMS", "POLICY_FORMAT", "MlpActor", "PolicyController", "actor_from_sb3",
-           "load_actor", "load_policy", "save_actor", "shipped_policies", "policy_folder"]
+           "load_actor", "load_policy", "residual_design", "save_actor", "shipped_policies", "policy_folder"]
 
 POLICY_FORMAT = "ebraille-sim-policy/1"
 ALGORITHMS = ("ppo", "sac")
 _META_KEYS = ("format", "algo", "env_id", "env", "training")
 _ENV_KEYS = ("control_rate_hz", "safe_force_n", "warn_force_n", "rate_filter_s", "integral_time_s",
              "effort_weight", "violation_weight", "driver_supply_v")
-_ENV_OPTIONAL_KEYS = ("current_scale_a",)
+_ENV_OPTIONAL_KEYS = ("current_scale_a", "residual", "residual_limit_v", "history")
 _PERIOD_TOL = 1e-6
 
 
@@ -244,7 +251,24 @@ def read_metadata(json_path: str) -> dict:
         check_number(f"{json_path}: env.{key}", env.get(key))
     if "current_scale_a" in env:
         check_number(f"{json_path}: env.current_scale_a", env["current_scale_a"], lo=0.0, lo_open=True)
+    if "residual" in env:
+        from controllers.residual import MAX_HISTORY
+        if not isinstance(env["residual"], str) or not env["residual"]:
+            raise ValueError(f"{json_path}: env.residual must name a design, got {env['residual']!r}")
+        check_number(f"{json_path}: env.residual_limit_v", env.get("residual_limit_v"), lo=0.0, lo_open=True)
+        check_number(f"{json_path}: env.history", env.get("history"), 1, MAX_HISTORY, integer=True)
     return meta
+
+
+def residual_design(path) -> str | None:
+    """The design a residual policy at ``path`` corrects (``env.residual`` of its metadata), or
+    None (a policy of the whole command, or no readable policy there)."""
+    try:
+        _, json_path = _paths(path)
+        env = read_metadata(json_path)["env"]
+    except (ValueError, OSError):
+        return None
+    return env.get("residual")
 
 
 def _load_sb3(algo: str, zip_path: str):
@@ -352,7 +376,7 @@ class PolicyController:
         return self._command_v
 
 
-def load_policy(path, **overrides) -> PolicyController:
+def load_policy(path, make_base=None, **overrides):
     """Load a saved policy and its metadata (see the module docstring for the paths).
 
     Parameters
@@ -360,6 +384,10 @@ def load_policy(path, **overrides) -> PolicyController:
     path : str or path-like
         A folder written by ``ebraille-sim train``, or a model saved with ``model.save``
         (``PATH.zip`` or ``PATH``) with ``PATH.json`` beside it.
+    make_base : callable, optional
+        Builds the controller of a design by name (:func:`controllers.make`, which passes
+        itself); needed for a residual policy (``env.residual`` in its metadata), which is
+        returned as a :class:`controllers.residual.ResidualPolicy` around that design.
     **overrides
         ``deterministic`` (bool) only; anything else is an error.
     """
@@ -385,4 +413,15 @@ def load_policy(path, **overrides) -> PolicyController:
                          f"{zip_path!r}, model, env)")
     meta = read_metadata(json_path)
     model = load_actor(npz_path) if use_actor else _load_sb3(meta["algo"], zip_path)
-    return PolicyController(model, meta["env"], deterministic=det)
+    env = meta["env"]
+    if "residual" in env:
+        from controllers.residual import ResidualPolicy
+        if make_base is None:
+            raise ValueError(f"policy {json_path} corrects the design {env['residual']!r}; load it with "
+                             f"controllers.make('policy:{path}')")
+        return ResidualPolicy(make_base(env["residual"]), model, float(env["residual_limit_v"]),
+                              float(env["control_rate_hz"]), int(env["history"]), float(env["safe_force_n"]),
+                              float(env["warn_force_n"]), float(env["rate_filter_s"]), float(env["integral_time_s"]),
+                              float(env["driver_supply_v"]), float(env.get("current_scale_a", CURRENT_SCALE_A)),
+                              deterministic=det)
+    return PolicyController(model, env, deterministic=det)

@@ -86,6 +86,9 @@ OPTIONS = {
         "--control-rate": _floats(["0", "-1", "0.5", "3"], "1e9"),
         "--threads": _ints(["0", "-1", "65"]),
         "--estimator": ["nope=1", "hysteresis_compensation", "=true", "hysteresis_deadband_lsb=-1"],
+        "--recipe": ["nope", ""],
+        "--residual": ["no_such_design", "{tmp}/missing.toml"],
+        "--history": _ints(["0", "-1", "65"]),
     },
     "regress": {
         "--only": ["no_such_scenario", "{tmp}/missing.toml"],

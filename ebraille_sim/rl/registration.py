@@ -10,13 +10,16 @@ from __future__ import annotations
 
 import sys
 
-__all__ = ["ENV_ID", "register_envs", "register_when_gymnasium_loads"]
+__all__ = ["ENV_ID", "RESIDUAL_ENV_ID", "register_envs", "register_when_gymnasium_loads"]
 
 ENV_ID = "EBraille/ContactForce-v0"
+RESIDUAL_ENV_ID = "EBraille/ContactForceResidual-v0"
+"""The residual env (:class:`ebraille_sim.rl.residual.ResidualEnv`): a correction on a design's command."""
 
 
 def register_envs() -> None:
-    """Register ``EBraille/ContactForce-v0`` with Gymnasium (once per process, silently).
+    """Register ``EBraille/ContactForce-v0`` and ``EBraille/ContactForceResidual-v0`` with
+    Gymnasium (once per process, silently).
 
     No ``max_episode_steps`` is registered: the env truncates itself when the excerpt ends,
     which bounds an episode by :meth:`ebraille_sim.rl.env.EnvConfig.max_episode_steps` at
@@ -24,10 +27,11 @@ def register_envs() -> None:
     episode after 1.4 s).
     """
     import gymnasium as gym
-    if ENV_ID in gym.registry:
-        return
-    gym.register(id=ENV_ID, entry_point="ebraille_sim.rl.env:ContactForceEnv",
-                 vector_entry_point="ebraille_sim.rl.vector_env:ContactForceVectorEnv")
+    if ENV_ID not in gym.registry:
+        gym.register(id=ENV_ID, entry_point="ebraille_sim.rl.env:ContactForceEnv",
+                     vector_entry_point="ebraille_sim.rl.vector_env:ContactForceVectorEnv")
+    if RESIDUAL_ENV_ID not in gym.registry:
+        gym.register(id=RESIDUAL_ENV_ID, entry_point="ebraille_sim.rl.residual:ResidualEnv")
 
 
 class _AfterGymnasium:

@@ -114,7 +114,7 @@ def wrap_controller(spec: ScenarioSpec, ctrl, dt_s: float, supervised: bool = Tr
 
 def design_firmware(controller) -> str | None:
     """The firmware preset of the design ``controller`` names (a shipped design's name or a design
-    file with a ``firmware`` key), or None (no design, or a design without a firmware).  A name
+    file with a ``firmware`` key; ``policy:PATH`` of a residual policy: its design's), or None (no design, or a design without a firmware).  A name
     that is no design, or a file that cannot be read, gives None here and its error when the
     controller is made."""
     import os
@@ -122,6 +122,10 @@ def design_firmware(controller) -> str | None:
         return None
     from controllers.designs import designs, get_design, is_design_file
     name = os.fspath(controller)
+    if name.startswith("policy:"):               # a residual policy runs on the firmware of its design
+        from controllers.policy import residual_design
+        base = residual_design(name[len("policy:"):])
+        return None if base is None or base.startswith("policy:") else design_firmware(base)
     if name not in designs() and not is_design_file(name):
         return None
     try:

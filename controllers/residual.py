@@ -1,0 +1,199 @@
+"""A learned, bounded correction on top of a design's controller: the residual policy.
+
+The design's controller (a shipped design such as ``dob_100hz``, or any controller) runs
+every control period as it would alone; a policy adds ``a * limit_v`` (``a`` in [-1, 1]) to
+its command.  With ``a = 0`` the command is the design's, to the last bit, so a residual
+policy starts from the design and training can only move away from it where the reward says
+so.
+
+The policy's observation is :data:`N_FRAME` numbers per frame, built from what the board
+measures (:mod:`controllers.features`: force estimate, setpoint, error, filtered rate of the
+estimate, error integral, the previous applied command and the sensed motor current), then
+the previous residual action; ``history`` frames are stacked, newest first (``history *
+N_FRAME`` numbers; older frames are zero until they exist).  The Gymnasium env
+:class:`ebraille_sim.rl.residual.ResidualEnv` runs this class with the agent's action handed
+in (:class:`ActionSlot`), so a trained policy meets in a scenario the observation it met in
+training.
+
+Sampling: the design runs at every ``update``; the policy is evaluated once per training
+period (``control_rate_hz`` of its metadata) of the ``dt_s`` it is handed and its correction
+held in between, as :class:`controllers.policy.PolicyController` holds its command.
+
+Examples
+--------
+>>> import numpy as np
+>>> import controllers
+>>> base = controllers.make("pid_dob")
+>>> res = ResidualPolicy(controllers.make("pid_dob"), ActionSlot(), limit_v=1.0, control_rate_hz=1000.0)
+>>> for c in (base, res):
+...     c.reset(force_est_n=0.0, setpoint_n=1.0)
+>>> base.update(0.1, 1.0, 1e-3, 0.0) == res.update(0.1, 1.0, 1e-3, 0.0)
+True
+>>> res.observation.shape
+(8,)
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from controllers.base import check_dt, check_finite
+from controllers.features import (CURRENT_SCALE_A, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, config_vector, observe,
+                                  reset_features, write_observation)
+
+__all__ = ["N_FRAME", "ActionSlot", "ResidualPolicy", "frame_bounds", "MAX_HISTORY"]
+
+N_FRAME = N_OBS + 1
+"""Numbers per frame: the features of :mod:`controllers.features` and the previous residual action."""
+
+MAX_HISTORY = 64
+"""Most frames of a residual policy's observation."""
+
+_PERIOD_TOL = 1e-6
+
+
+def frame_bounds(history: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(low, high)`` of an observation of ``history`` frames (float32)."""
+    lo = np.tile(np.append(OBS_LOW, np.float32(-1.0)), history).astype(np.float32)
+    hi = np.tile(np.append(OBS_HIGH, np.float32(1.0)), history).astype(np.float32)
+    return lo, hi
+
+
+class ActionSlot:
+    """A policy whose action is handed in from outside (an env's agent): ``predict`` returns
+    :attr:`action` and keeps the observation it was shown."""
+
+    def __init__(self):
+        self.action = 0.0
+        self.seen = None
+
+    def predict(self, observation, deterministic: bool = True):
+        self.seen = observation
+        return np.array([self.action], dtype=np.float64), None
+
+
+class ResidualPolicy:
+    """The design's controller ``base`` plus ``limit_v`` times a policy's action (module docstring).
+
+    Parameters
+    ----------
+    base : controller
+        The design's controller (``reset``/``update``; ``applied`` is forwarded when it has one).
+    model : object
+        ``predict(obs, deterministic) -> (action, state)`` on observations of ``history *
+        N_FRAME`` float32 numbers: an SB3 model, :class:`controllers.policy.MlpActor` or
+        :class:`ActionSlot`.
+    limit_v : float
+        The correction at ``|a| = 1``, V (> 0).
+    control_rate_hz : float
+        The rate the policy was trained at (the design's control rate), Hz.
+    history : int
+        Frames stacked in the observation, in [1, :data:`MAX_HISTORY`].
+    safe_force_n, warn_force_n, rate_filter_s, integral_time_s, driver_supply_v, current_scale_a
+        The feature scales (:func:`controllers.features.config_vector`).
+    deterministic : bool
+        The policy's mean action.
+    """
+
+    name = "residual"
+
+    def __init__(self, base, model, limit_v: float, control_rate_hz: float, history: int = 1,
+                 safe_force_n: float = 3.0, warn_force_n: float = 2.0, rate_filter_s: float = 0.02,
+                 integral_time_s: float = 0.1, driver_supply_v: float = 6.0,
+                 current_scale_a: float = CURRENT_SCALE_A, deterministic: bool = True):
+        if not (isinstance(limit_v, (int, float)) and math.isfinite(limit_v) and limit_v > 0):
+            raise ValueError(f"limit_v must be a positive number of volts, got {limit_v!r}")
+        if not (isinstance(control_rate_hz, (int, float)) and math.isfinite(control_rate_hz) and control_rate_hz > 0):
+            raise ValueError(f"control_rate_hz must be a positive number, got {control_rate_hz!r}")
+        if isinstance(history, bool) or not isinstance(history, (int, np.integer)) or not 1 <= history <= MAX_HISTORY:
+            raise ValueError(f"history must be a whole number in [1, {MAX_HISTORY}], got {history!r}")
+        if not driver_supply_v > 0:
+            raise ValueError(f"driver_supply_v must be > 0, got {driver_supply_v!r}")
+        self.base = base
+        self.model = model
+        self.limit_v = float(limit_v)
+        self.history = int(history)
+        self.deterministic = bool(deterministic)
+        self.period_s = 1.0 / float(control_rate_hz)
+        self.supply_v = float(driver_supply_v)
+        self._c = config_vector(float(control_rate_hz), safe_force_n, warn_force_n, rate_filter_s, integral_time_s,
+                                self.supply_v, current_scale_a=current_scale_a)
+        self._z = np.zeros(N_Z)
+        self._frames = np.zeros((self.history, N_FRAME), dtype=np.float32)
+        self._obs = np.zeros(self.history * N_FRAME, dtype=np.float32)
+        self._since_s = 0.0
+        self._first = True
+        self.residual = 0.0
+        self.residual_v = 0.0
+
+    @property
+    def observation(self) -> np.ndarray:
+        """The observation the policy was last shown (a view)."""
+        return self._obs
+
+    def reset(self, *, force_est_n: float, setpoint_n: float, command_v: float = 0.0) -> None:
+        """Reset the design's controller and forget the history; the next ``update`` evaluates."""
+        fe = check_finite("force_est_n", force_est_n)
+        check_finite("setpoint_n", setpoint_n)
+        u0 = check_finite("command_v", command_v)
+        self.base.reset(force_est_n=force_est_n, setpoint_n=setpoint_n, command_v=command_v)
+        reset_features(self._z, fe)
+        self._z[Z_PREV_ACTION] = min(1.0, max(-1.0, u0 / self.supply_v))
+        self._frames[:] = 0.0
+        self._since_s = 0.0
+        self._first = True
+        self.residual = 0.0
+        self.residual_v = 0.0
+
+    def applied(self, command_v: float) -> None:
+        """The command that reached the drive (V), from a supervisor: observed as the previous
+        command, and told to the design's controller when it listens."""
+        u = float(command_v)
+        if math.isfinite(u):
+            self._z[Z_PREV_ACTION] = min(1.0, max(-1.0, u / self.supply_v))
+        applied = getattr(self.base, "applied", None)
+        if applied is not None:
+            applied(command_v)
+
+    def _frame(self, z, frames, force_est_n, setpoint_n, current_a, since_s, first, obs) -> None:
+        """Advance the features ``z`` and the frame stack ``frames`` and write ``obs``."""
+        feat = np.empty(N_OBS, dtype=np.float32)
+        if first:
+            write_observation(z, self._c, force_est_n, setpoint_n, current_a, feat)
+        else:
+            observe(z, self._c, force_est_n, setpoint_n, current_a, since_s, feat)
+        frames[1:] = frames[:-1]
+        frames[0, :N_OBS] = feat
+        frames[0, N_OBS] = self.residual
+        obs[:] = frames.ravel()
+
+    def peek(self, force_est_n: float, setpoint_n: float, dt_s: float, current_a: float) -> np.ndarray:
+        """The observation the next :meth:`update` with these arguments shows the policy,
+        without changing anything (an env shows it to its agent before the period)."""
+        obs = np.empty_like(self._obs)
+        since = self._since_s + dt_s
+        self._frame(self._z.copy(), self._frames.copy(), float(force_est_n), float(setpoint_n), float(current_a),
+                    since, self._first, obs)
+        return obs
+
+    def update(self, force_est_n: float, setpoint_n: float, dt_s: float,
+               motor_current_a: float | None = None) -> float:
+        """The design's command plus the (held) correction, V."""
+        dt = check_dt(dt_s)
+        fe = check_finite("force_est_n", force_est_n)
+        sp = check_finite("setpoint_n", setpoint_n)
+        ia = 0.0 if motor_current_a is None else check_finite("motor_current_a", motor_current_a)
+        u = self.base.update(force_est_n, setpoint_n, dt_s, motor_current_a)
+        self._since_s += dt
+        if self._first or self._since_s >= self.period_s * (1.0 - _PERIOD_TOL):
+            self._frame(self._z, self._frames, fe, sp, ia, self._since_s, self._first, self._obs)
+            self._first = False
+            self._since_s = 0.0
+            action, _ = self.model.predict(self._obs, deterministic=self.deterministic)
+            a = float(np.asarray(action, dtype=np.float64).reshape(-1)[0])
+            if not math.isfinite(a):
+                raise ValueError(f"the residual policy returned a non-finite action {a!r}")
+            self.residual = min(1.0, max(-1.0, a))
+            self.residual_v = self.residual * self.limit_v
+        return u + self.residual_v
