@@ -151,3 +151,22 @@ def test_a_finger_beyond_the_boards_reach_is_not_a_stalled_motor():
     assert res.supervisor["fault"] is None
     assert tr["force_true_n"][at_stop].min() > 1.0 and tr["force_true_n"].max() <= MAX_SAFE_N
     assert SupervisorConfig().end_stop_travel_m < dev.drivetrain.travel_max_m
+
+
+def test_finger_withdrawn_for_good_latches_after_the_reapproach():
+    """The finger lifts 4.5 mm and stays away: the supervisor freezes, re-approaches after 0.6 s over
+    at most ``reapproach_travel_m`` beyond the board's place at the loss (2.29 mm), finds no contact,
+    latches ``contact_lost`` and retracts; the board never reaches the finger's new place."""
+    from controllers.supervisor import SupervisorConfig
+    spec = load_scenario("fault_finger_withdrawn")
+    gone = [{**spec.sections["faults"][0], "duration_s": 3.6, "distance_m": 4.5e-3}]
+    res = run_scenario(dataclasses.replace(spec, sections={**spec.sections, "faults": gone}), duration_s=7.0)
+    tr = res.trace
+    texts = [e for _, e in res.supervisor["events"]]
+    assert res.supervisor["fault"] == "contact_lost"
+    assert texts[:3] == ["contact lost: freeze", "contact not back: re-approach", "fault contact_lost: retract"]
+    t = tr["t_s"]
+    at_loss = tr["board_pos_m"][np.searchsorted(t, res.supervisor["events"][0][0])]
+    assert tr["board_pos_m"][t > 4.0].max() < at_loss + SupervisorConfig().reapproach_travel_m
+    assert tr["force_true_n"][(t > 4.1)].max() == 0.0
+    assert _retracted(tr)

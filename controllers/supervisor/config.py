@@ -364,6 +364,55 @@ class SupervisorConfig:
     mesh_stiffness_n_per_m: float = _NOMINAL.drivetrain.mesh_stiffness_n_per_m
     """Stiffness of the gear mesh that holds the board, N/m: the board gives way on it as a slip
     loads the pulp (the drive train's nominal constant, [E] plastic mesh contact 1e4-1e5 N/m)."""
+    slip_away_m: float = 0.5e-3
+    """Strap slip away from the board that a re-approach after a loss of contact searches for, m:
+    the largest the wearer's own motion produces ([E] 0.5 mm,
+    :func:`ebraille_sim.scenarios.disturbances.body_motion_budget`).  Beyond it, plus the soft
+    reader's compression at the contact threshold and the travel integral's margins
+    (:attr:`reapproach_travel_m`), no contact means the finger is gone or the sensor reads none:
+    ``contact_lost`` latches."""
+
+    @functools.cached_property
+    def reapproach_speed_m_per_s(self) -> float:
+        """Rack speed of the re-approach after a loss of contact, m/s: the speed at which the push of
+        the re-approach's command against a held pulp (:attr:`reapproach_command_v` at stall, the
+        steady push bound) plus the impact of the board arriving at that speed peaks at
+        :attr:`setpoint_max_n` on the design reader (eq. 1-3 of docs/safety.md; bisection to 1 um/s).
+        Blind (an open sensor reads no contact) the re-approach presses no harder than the loop may
+        ask; the current envelope bounds it on top."""
+        def excess(v):
+            e = limits.impact_energy_j(v, self.pinion_mass_kg, self.board_mass_kg, self.gear_efficiency)
+            room = limits.drive_force_for_impact_n(e, self.setpoint_max_n, self.reader_b_n_per_m,
+                                                   self.reader_m_per_m)
+            return self.push_force_n(self._reapproach_command_v(v) / self.motor_resistance_ohm) - room
+        lo, hi = 0.0, self.speed_limit_m_per_s
+        while hi - lo > 1e-6:
+            mid = 0.5 * (lo + hi)
+            if excess(mid) <= 0.0:
+                lo = mid
+            else:
+                hi = mid
+        return lo
+
+    def _reapproach_command_v(self, speed_m_per_s: float) -> float:
+        return self.back_emf_v_s_per_m * speed_m_per_s + self.motor_resistance_ohm * self.friction_current_a
+
+    @property
+    def reapproach_command_v(self) -> float:
+        """Command of the re-approach, V: the back-EMF of :attr:`reapproach_speed_m_per_s` plus the
+        calibrated friction current through R (the board moves at that speed against the friction
+        the firmware knows; a unit with more friction moves slower)."""
+        return self._reapproach_command_v(self.reapproach_speed_m_per_s)
+
+    @property
+    def reapproach_travel_m(self) -> float:
+        """Travel beyond the board's position at a loss of contact within which a re-approach must
+        find the finger, m: :attr:`slip_away_m`, the soft reader's compression at ``contact_on_n``,
+        the travel at :attr:`reapproach_speed_m_per_s` within the estimate's lag
+        (``stuck_response_s``) and ``stuck_travel_m`` (the backlash the back-EMF integral counts and
+        one estimator period of travel)."""
+        return (self.slip_away_m + compression_at_force_m(self.contact_on_n, self.soft_b_n_per_m, self.soft_m_per_m)
+                + self.reapproach_speed_m_per_s * self.stuck_response_s + self.stuck_travel_m)
 
     @functools.cached_property
     def slip_setpoint_cap_n(self) -> float:
