@@ -306,10 +306,13 @@ class SupervisorConfig:
     out_of_range_n: float = 4.0
     stuck_window_s: float = 0.1
     stuck_response_s: float = 0.05
-    travel_follow_s: float = 5.0
-    """Time constant with which the travel check's reference follows the finger's slow motion
-    (drift, pressing, strap slips) [E]: a board running into the finger faster than this while
-    the reading stays low is caught."""
+    travel_follow_s: float = 0.7
+    """Time constant with which the travel check's reference follows where the pulp's surface must
+    be, s [D]: half the pulp's slowest relaxation time constant (1.4 s), so that a soft pulp relaxing
+    under a sustained load, pressing and drift do not add up; a board running into the finger
+    faster than about the rule's allowance over this time while the reading stays low is caught.
+    The fault matrix's withdrawn finger with a stuck reading breaks at 0.2-0.35 s (trade-off:
+    studies/body_motion/travel_follow_tradeoff.py, docs/safety.md)."""
     """Time the estimate needs to show a command's effect [E]: the 10 ms estimator period, its
     two-sample mean and the 20 Hz anti-alias filter (about 40 ms), rounded up."""
     stuck_tolerance_n: float = 2e-3
