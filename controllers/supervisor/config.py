@@ -311,8 +311,8 @@ class SupervisorConfig:
     be, s [D]: half the pulp's slowest relaxation time constant (1.4 s), so that a soft pulp relaxing
     under a sustained load, pressing and drift do not add up; a board running into the finger
     faster than about the rule's allowance over this time while the reading stays low is caught.
-    The fault matrix's withdrawn finger with a stuck reading breaks at 0.2-0.35 s (trade-off:
-    studies/body_motion/travel_follow_tradeoff.py, docs/safety.md)."""
+    The fault matrix's withdrawn finger with a stuck reading breaks at 0.2-0.35 s (the trade-off:
+    docs/safety.md, "The travel rule's follow time")."""
     """Time the estimate needs to show a command's effect [E]: the 10 ms estimator period, its
     two-sample mean and the 20 Hz anti-alias filter (about 40 ms), rounded up."""
     stuck_tolerance_n: float = 2e-3
