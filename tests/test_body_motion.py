@@ -147,3 +147,29 @@ def test_a_loose_strap_setting_holds_a_larger_slip():
     assert mx.run_cell("slip_0.3mm", "1khz", 3.0, "nominal", stiff)["peak_n"] > mx.SAFE_N
     loose = mx.run_cell("slip_0.3mm", "1khz", 3.0, "nominal", stiff, supervisor={"slip_headroom_m": 0.3e-3})
     assert loose["peak_n"] <= mx.SAFE_N
+
+
+def test_the_reapproach_searches_the_budgets_slip_away():
+    """The supervisor's ``slip_away_m`` is the budget's largest slip away from the board."""
+    assert SupervisorConfig().slip_away_m == body_motion_budget()["slip_depth_max_m"]
+
+
+@pytest.mark.parametrize("firmware", ["default", "1khz"])
+def test_a_slip_away_from_the_board_resumes_in_band(firmware):
+    """The budget's 0.5 mm strap slip away from the board at 1 N unloads the stiff reader's pulp
+    entirely: the supervisor freezes and backs off, the finger does not come back by itself, and
+    after ``contact_loss_timeout_s`` the board re-approaches and the loop resumes.  No fault latches
+    and the force is in band over the last second of a 4.5 s run (a latched ``contact_lost`` would
+    hold the board retracted for the rest of the session)."""
+    import numpy as np
+    from ebraille_sim.scenarios.runner import run_scenario
+    bm = _matrix()
+    spec = bm.cell_spec("slip_away_0.5mm", firmware, 1.0, duration_s=4.5)
+    res = run_scenario(dataclasses.replace(spec, device=bm.readers(0)["stiff"]))
+    texts = [e for _, e in res.supervisor["events"]]
+    assert res.supervisor["fault"] is None
+    assert texts == ["contact lost: freeze", "contact not back: re-approach", "contact regained: resume"]
+    tr = res.trace
+    late = tr["t_s"] > 3.5
+    assert np.mean(np.abs(tr["force_true_n"][late] - 1.0) <= 0.1) == 1.0
+    assert tr["force_true_n"].max() <= bm.SAFE_N

@@ -151,3 +151,55 @@ def test_a_finger_beyond_the_boards_reach_is_not_a_stalled_motor():
     assert res.supervisor["fault"] is None
     assert tr["force_true_n"][at_stop].min() > 1.0 and tr["force_true_n"].max() <= MAX_SAFE_N
     assert SupervisorConfig().end_stop_travel_m < dev.drivetrain.travel_max_m
+
+
+def test_finger_withdrawn_for_good_latches_after_the_reapproach():
+    """The finger lifts 4.5 mm and stays away: the supervisor freezes, re-approaches after 0.6 s over
+    at most ``reapproach_travel_m`` beyond the board's place at the loss (2.29 mm), finds no contact,
+    latches ``contact_lost`` and retracts; the board never reaches the finger's new place."""
+    from controllers.supervisor import SupervisorConfig
+    spec = load_scenario("fault_finger_withdrawn")
+    gone = [{**spec.sections["faults"][0], "duration_s": 3.6, "distance_m": 4.5e-3}]
+    res = run_scenario(dataclasses.replace(spec, sections={**spec.sections, "faults": gone}), duration_s=7.0)
+    tr = res.trace
+    texts = [e for _, e in res.supervisor["events"]]
+    assert res.supervisor["fault"] == "contact_lost"
+    assert texts[:3] == ["contact lost: freeze", "contact not back: re-approach", "fault contact_lost: retract"]
+    t = tr["t_s"]
+    at_loss = tr["board_pos_m"][np.searchsorted(t, res.supervisor["events"][0][0])]
+    assert tr["board_pos_m"][t > 4.0].max() < at_loss + SupervisorConfig().reapproach_travel_m
+    assert tr["force_true_n"][(t > 4.1)].max() == 0.0
+    assert _retracted(tr)
+
+
+def test_the_travel_rule_follows_a_relaxing_soft_pulp_and_still_catches_a_withdrawn_finger():
+    """A healthy soft reader (b 140 N/m, relaxation weight 0.16: 1 N held relaxes to the compression
+    of 6 N) pressing and relaxing in ``pressing_90wpm`` moves the place of its pulp's surface by more
+    than a millimetre within seconds: a travel reference following it with a 5 s time constant trips
+    ``fsr_implausible`` at 6.23 s, the default 0.7 s does not.  The withdrawn finger with a reading
+    stuck at 0.45 V of the fault matrix still peaks at 3.12 N; a reference that follows within 0.2 s
+    lets the board follow the finger and the returning finger meets it at 17.6 N."""
+    import sys
+    import pathlib
+    from ebraille_sim.base.seeds import SeedNode
+    from ebraille_sim.scenarios.population import PopulationSpec, sample_device
+    spec = load_scenario("pressing_90wpm")
+    dev = sample_device(SeedNode(31337).spawn(115)[114], PopulationSpec(), spec.device)
+    assert dev.finger.stiffness_b_n_per_m == pytest.approx(139.77, abs=0.01)
+
+    def fault(follow_s=None):
+        sup = {} if follow_s is None else {"travel_follow_s": follow_s}
+        s = dataclasses.replace(spec, sections={**spec.sections, "supervisor": sup})
+        return run_scenario(s, seed=spec.seed + 7 * 114, duration_s=7.0, device=dev).supervisor["fault"]
+    assert fault() is None
+    assert fault(5.0) == "fsr_implausible"
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+    from test_fault_matrix import cell_spec
+
+    def peak(follow_s=None):
+        s = cell_spec(("finger_withdrawn", "fsr_at_0.45V"), "steady", 120)
+        if follow_s is not None:
+            s = dataclasses.replace(s, sections={**s.sections, "supervisor": {"travel_follow_s": follow_s}})
+        return float(run_scenario(s).trace["force_true_n"].max())
+    assert peak() <= MAX_SAFE_N
+    assert peak(0.2) > 10.0

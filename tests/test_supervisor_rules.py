@@ -240,13 +240,89 @@ def test_contact_lost_freeze_back_off_hold_then_regained_resume():
 
 
 def test_contact_loss_timeout_latches():
-    """No contact for more than 0.6 s after the freeze latches ``contact_lost``: 614/1024 =
-    0.5996 s, 615/1024 = 0.6006 s.  The retract then slews at 600/1024 V a period to -2 V."""
+    """No contact for more than 0.6 s after the freeze latches ``contact_lost`` when there is no
+    current measurement (no travel to bound a re-approach by): 614/1024 = 0.5996 s, 615/1024 =
+    0.6006 s.  The retract then slews at 600/1024 V a period to -2 V."""
     sup = make(1.0)
     settle(sup, 1.0)
     drive(sup, 615, 0.05)                          # periods 0..614 after the loss
     assert sup.mode == "freeze" and sup.fault is None
     assert drive(sup, 4, 0.05) == [-0.5859375, -1.171875, -1.7578125, -2.0]
+    assert sup.fault == "contact_lost"
+
+
+def test_reapproach_speed_is_where_its_push_and_impact_reach_the_top_setpoint():
+    """The re-approach command ``kE v + R I_f`` pushes a held pulp with ``P kE v / R + m_b g`` (eq. 1
+    at the current ``u / R``); the board arriving at ``v`` may drive at most the force whose impact
+    peaks at the top setpoint (eq. 2-3).  The two meet at the re-approach speed; the travel it
+    searches is the 0.5 mm slip, the soft reader's compression at 0.2 N, 50 ms at that speed and
+    ``stuck_travel_m``."""
+    from ebraille_sim.physics import limits
+    from ebraille_sim.physics.fingertip import compression_at_force_m
+    for c in (C, SupervisorConfig()):
+        v = c.reapproach_speed_m_per_s
+        u = c.reapproach_command_v
+        assert u == pytest.approx(c.back_emf_v_s_per_m * v + c.motor_resistance_ohm * c.friction_current_a, rel=1e-12)
+        push = c.push_force_per_a_n * c.back_emf_v_s_per_m * v / c.motor_resistance_ohm + c.weight_n
+        assert c.push_force_n(u / c.motor_resistance_ohm) == pytest.approx(push, rel=1e-9)
+        e = limits.impact_energy_j(v, c.pinion_mass_kg, c.board_mass_kg, c.gear_efficiency)
+        room = limits.drive_force_for_impact_n(e, c.setpoint_max_n, c.reader_b_n_per_m, c.reader_m_per_m)
+        assert push == pytest.approx(room, abs=2e-3)
+        assert c.reapproach_travel_m == pytest.approx(
+            0.5e-3 + compression_at_force_m(0.2, c.soft_b_n_per_m, c.soft_m_per_m) + 0.05 * v + c.stuck_travel_m,
+            rel=1e-12)
+    firmware = SupervisorConfig()
+    assert firmware.reapproach_speed_m_per_s == pytest.approx(6.35e-3, abs=0.01e-3)
+    assert firmware.reapproach_command_v == pytest.approx(0.818, abs=1e-3)
+    assert firmware.reapproach_travel_m == pytest.approx(2.29e-3, abs=0.01e-3)
+
+
+def _lost_for_the_timeout(cur=None):
+    """In contact at 1 N, then 0.05 N for 615 periods (0.6006 s): frozen, the timeout just passed."""
+    sup = make(1.0, slew_v_per_s=1e6)
+    settle(sup, 1.0)
+    drive(sup, 615, 0.05, cur=cur)
+    assert sup.mode == "freeze" and sup.fault is None
+    return sup
+
+
+def test_contact_not_back_reapproaches_and_resumes_on_contact():
+    """With a current measurement the timeout does not latch: the board re-approaches at the
+    re-approach command (the envelope's cap lies above it) and a contact resumes the inner
+    controller from 0 V.  Without the rule ``contact_lost`` would latch here."""
+    sup = _lost_for_the_timeout(cur=stalled)
+    v = C.reapproach_speed_m_per_s
+    out = drive(sup, 20, 0.05, cur=at_speed(v, C.friction_current_a))
+    assert out == [pytest.approx(C.reapproach_command_v, rel=1e-12)] * 20
+    assert sup.mode == "freeze" and sup.fault is None
+    assert sup.travel_m == pytest.approx(20 * v * DT, rel=1e-9)
+    resets = len(sup.inner.resets)
+    assert drive(sup, 1, 0.25, cur=at_speed(v, C.friction_current_a)) == [0.0] and sup.mode == "run"
+    assert sup.inner.resets[resets:] == [(0.25, 1.0, 0.0)]
+    assert drive(sup, 1, 0.25) == [1.0]
+    assert [e for _, e in sup.events] == ["contact lost: freeze", "contact not back: re-approach",
+                                          "contact regained: resume"]
+
+
+def test_reapproach_latches_beyond_its_travel_and_after_its_time():
+    """No contact within ``reapproach_travel_m`` of travel beyond the board's place at the loss
+    latches ``contact_lost`` (the finger is gone, or an open sensor reads none); so does a board
+    that stops on the way (a pulp pressed blind, a jam) once twice the travel's time at the
+    re-approach speed has passed."""
+    v, i = C.reapproach_speed_m_per_s, C.friction_current_a
+    n = C.reapproach_travel_m / (v * DT)
+    assert 0.05 < n % 1.0 < 0.95
+    sup = _lost_for_the_timeout(cur=stalled)
+    drive(sup, int(n), 0.05, cur=at_speed(v, i))
+    assert sup.fault is None
+    drive(sup, 1, 0.05, cur=at_speed(v, i))
+    assert sup.fault == "contact_lost" and sup.mode == "retract"
+    m = 2.0 * C.reapproach_travel_m / (v * DT)
+    assert 0.05 < m % 1.0 < 0.95
+    sup = _lost_for_the_timeout(cur=stalled)
+    drive(sup, 1 + int(m), 0.05, cur=stalled)
+    assert sup.fault is None and sup.travel_m == 0.0
+    drive(sup, 1, 0.05, cur=stalled)
     assert sup.fault == "contact_lost"
 
 

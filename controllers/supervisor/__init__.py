@@ -45,8 +45,13 @@ contact_lost       after contact (estimate > ``contact_on_n``), a loss of contac
                    start of that window, while pushing) starts a *freeze*: back off at
                    ``-retract_v`` for ``backoff_s`` then hold 0 V; contact regained
                    (estimate > ``contact_on_n`` and not falling) resumes the inner
-                   controller from 0 V; no contact within ``contact_loss_timeout_s`` is
-                   latched (an open FSR reads 0 V, i.e. no force, for good)
+                   controller from 0 V.  No contact within ``contact_loss_timeout_s``: with a
+                   current measurement the board re-approaches at ``reapproach_command_v``
+                   (the speed whose push and impact stay at the top setpoint) and a contact
+                   resumes as above; no contact within ``reapproach_travel_m`` beyond the
+                   board's place at the loss, or within twice that travel's time, is latched
+                   (an open FSR reads 0 V, i.e. no force, for good; a finger gone).  Without a
+                   current measurement the timeout latches.
 controller_nonfinite non-finite commands for longer than ``watchdog_timeout_s``
 fsr_stuck          (travel) in contact, the estimate stays within ``stuck_tolerance_n`` while
                    the powered motor moves the board ``stuck_travel_m`` net (back and forth

@@ -353,12 +353,15 @@ class SupervisorPolicy:
     stuck_response_s: float = sourced(0.05, "s", "[E] the 10 ms estimator period, its two-sample mean and the "
                                                  "20 Hz anti-alias filter (about 40 ms), rounded up",
                                       doc="Time the estimate needs to show a command's effect.")
-    travel_follow_s: float = sourced(5.0, "s", _SETTING, doc="Time constant with which the travel check's reference "
-                                                             "follows the finger's slow motion (drift, pressing, "
-                                                             "strap slips).")
-    """Time constant with which the travel check's reference follows the finger's slow motion
-    (drift, pressing, strap slips) [E]: a board running into the finger faster than this while
-    the reading stays low is caught."""
+    travel_follow_s: float = sourced(0.7, "s", "[D] half the pulp's slowest relaxation time constant (1.4 s)",
+                                     doc="Time constant with which the travel check's reference follows where the "
+                                         "pulp's surface must be.")
+    """Time constant with which the travel check's reference follows where the pulp's surface must
+    be, s [D]: half the pulp's slowest relaxation time constant (1.4 s), so that a soft pulp relaxing
+    under a sustained load, pressing and drift do not add up; a board running into the finger
+    faster than about the rule's allowance over this time while the reading stays low is caught.
+    The fault matrix's withdrawn finger with a stuck reading breaks at 0.2-0.35 s (the trade-off:
+    docs/safety.md, "The travel rule's follow time")."""
     stuck_tolerance_n: float = sourced(2e-3, "N", _SETTING, doc="Change of the estimate below which it counts as "
                                                                 "unchanged (stuck rules).")
     stuck_command_v: float = sourced(0.25, "V", _SETTING, doc="Change of the delayed command above which a stuck "
@@ -412,6 +415,15 @@ class SupervisorPolicy:
     standing force must leave the room (:attr:`slip_setpoint_cap_n`)."""
     slip_time_s: float = sourced(0.02, "s", "[E] the fastest strap slip",
                                  doc="Duration of the slip the setpoint leaves room for.")
+    slip_away_m: float = sourced(0.5e-3, "m", "[E] 0.5 mm, scenarios.disturbances.body_motion_budget",
+                                 doc="Strap slip away from the board that a re-approach after a loss of contact "
+                                     "searches for.")
+    """Strap slip away from the board that a re-approach after a loss of contact searches for, m:
+    the largest the wearer's own motion produces ([E] 0.5 mm,
+    :func:`ebraille_sim.scenarios.disturbances.body_motion_budget`).  Beyond it, plus the soft
+    reader's compression at the contact threshold and the travel integral's margins
+    (:attr:`reapproach_travel_m`), no contact means the finger is gone or the sensor reads none:
+    ``contact_lost`` latches."""
 
 
 POLICY_KEYS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(SupervisorPolicy))
@@ -440,6 +452,48 @@ class SupervisorConfig(DriveEnvelope, SupervisorPolicy):
     :meth:`for_device` derives it for another device.  Every numeric field must be a positive
     finite number (``friction_current_a`` may be 0).
     """
+
+    @functools.cached_property
+    def reapproach_speed_m_per_s(self) -> float:
+        """Rack speed of the re-approach after a loss of contact, m/s: the speed at which the push of
+        the re-approach's command against a held pulp (:attr:`reapproach_command_v` at stall, the
+        steady push bound) plus the impact of the board arriving at that speed peaks at
+        :attr:`setpoint_max_n` on the design reader (eq. 1-3 of docs/safety.md; bisection to 1 um/s).
+        Blind (an open sensor reads no contact) the re-approach presses no harder than the loop may
+        ask; the current envelope bounds it on top."""
+        def excess(v):
+            e = limits.impact_energy_j(v, self.pinion_mass_kg, self.board_mass_kg, self.gear_efficiency)
+            room = limits.drive_force_for_impact_n(e, self.setpoint_max_n, self.reader_b_n_per_m,
+                                                   self.reader_m_per_m)
+            return self.push_force_n(self._reapproach_command_v(v) / self.motor_resistance_ohm) - room
+        lo, hi = 0.0, self.speed_limit_m_per_s
+        while hi - lo > 1e-6:
+            mid = 0.5 * (lo + hi)
+            if excess(mid) <= 0.0:
+                lo = mid
+            else:
+                hi = mid
+        return lo
+
+    def _reapproach_command_v(self, speed_m_per_s: float) -> float:
+        return self.back_emf_v_s_per_m * speed_m_per_s + self.motor_resistance_ohm * self.friction_current_a
+
+    @property
+    def reapproach_command_v(self) -> float:
+        """Command of the re-approach, V: the back-EMF of :attr:`reapproach_speed_m_per_s` plus the
+        calibrated friction current through R (the board moves at that speed against the friction
+        the firmware knows; a unit with more friction moves slower)."""
+        return self._reapproach_command_v(self.reapproach_speed_m_per_s)
+
+    @property
+    def reapproach_travel_m(self) -> float:
+        """Travel beyond the board's position at a loss of contact within which a re-approach must
+        find the finger, m: :attr:`slip_away_m`, the soft reader's compression at ``contact_on_n``,
+        the travel at :attr:`reapproach_speed_m_per_s` within the estimate's lag
+        (``stuck_response_s``) and ``stuck_travel_m`` (the backlash the back-EMF integral counts and
+        one estimator period of travel)."""
+        return (self.slip_away_m + compression_at_force_m(self.contact_on_n, self.soft_b_n_per_m, self.soft_m_per_m)
+                + self.reapproach_speed_m_per_s * self.stuck_response_s + self.stuck_travel_m)
 
     @functools.cached_property
     def slip_setpoint_cap_n(self) -> float:

@@ -110,17 +110,36 @@ def supervise_begin(sv, cfg, f, sp, dt, cur):
             sv[SV.freeze_t0] = t
             sv[SV.contact_travel_m] = math.nan       # the compression check starts again at the next contact
             sv[SV.contact_travel_set] = 0.0
+            sv[SV.loss_travel_m] = sv[SV.travel_m]
+            sv[SV.approach_end_t] = 0.0
             _event(sv, cfg, EVENT.contact_lost, 0.0)
     if sv[SV.mode] == MODE.freeze:
         since = t - sv[SV.freeze_t0]
         if f > cfg[CF.contact_on_n] and f >= f_then and since > cfg[CF.backoff_s]:
             sv[SV.mode] = MODE.run
+            sv[SV.approach_end_t] = 0.0
             _event(sv, cfg, EVENT.contact_regained, 0.0)
             sv[SV.u_prev] = 0.0
             return 2, 0.0, _pymin(sp, cfg[CF.sp_max_n])
         if since > cfg[CF.contact_loss_timeout_s]:
-            _trip(sv, cfg, FAULT.contact_lost)
-            return 0, _safe(sv, cfg, cur, dt), math.nan
+            if not has_cur:
+                _trip(sv, cfg, FAULT.contact_lost)
+                return 0, _safe(sv, cfg, cur, dt), math.nan
+            # the finger did not come back by itself (a strap slip away from the board, a finger
+            # lifted and put down further away): re-approach at the speed whose push and impact stay
+            # at the top setpoint, over the travel a slip within the budget can have opened, within
+            # twice the time that travel takes; no contact there latches (an open sensor, a finger gone)
+            limit_m = sv[SV.loss_travel_m] + cfg[CF.reapproach_travel_m]
+            if sv[SV.approach_end_t] == 0.0:
+                sv[SV.approach_end_t] = t + 2.0 * _pymax(limit_m - sv[SV.travel_m], 0.0) / cfg[
+                    CF.reapproach_speed_m_per_s]
+                _event(sv, cfg, EVENT.reapproach, 0.0)
+            elif sv[SV.travel_m] > limit_m or t > sv[SV.approach_end_t]:
+                _trip(sv, cfg, FAULT.contact_lost)
+                return 0, _safe(sv, cfg, cur, dt), math.nan
+            u = _envelope_cap(sv, cfg, _slew(sv, cfg, cfg[CF.reapproach_v], dt), cur)
+            sv[SV.u_prev] = u
+            return 0, u, math.nan
         u = -cfg[CF.retract_v] if since <= cfg[CF.backoff_s] else 0.0
         sv[SV.u_prev] = u
         return 0, u, math.nan

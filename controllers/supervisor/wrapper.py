@@ -32,7 +32,7 @@ class Supervisor:
     Attributes
     ----------
     mode : str
-        ``"run"``, ``"freeze"`` (contact lost), ``"retract"`` or ``"hold"``.
+        ``"run"``, ``"freeze"`` (contact lost: back off, hold, re-approach), ``"retract"`` or ``"hold"``.
     fault : str or None
         Cause of the latched fault, if any.
     events : list of (float, str)

@@ -87,7 +87,8 @@ def _firmware_sections(firmware: str) -> dict:
     return {"estimator": {"firmware": "fast_1khz"}, "controller": {"name": "dob_learn_1khz"}}
 
 
-def cell_spec(motion: str, firmware: str, setpoint_n: float, seed: int = 7, supervisor: dict | None = None):
+def cell_spec(motion: str, firmware: str, setpoint_n: float, seed: int = 7, supervisor: dict | None = None,
+              duration_s: float = DURATION_S):
     """The scenario of one cell (the device is set by :func:`run_cell`); ``supervisor``: the
     ``[supervisor]`` section (default: the supervisor's defaults)."""
     section, entry, _ = motions()[motion]
@@ -97,7 +98,7 @@ def cell_spec(motion: str, firmware: str, setpoint_n: float, seed: int = 7, supe
         reading.update({"mode": "refresh", "refresh_lift_fraction": 0.10, "refresh_press_fraction": 0.30,
                         "refresh_release_fraction": 0.15, "refresh_lift_force_n": 0.4})
     data = {"name": "body_motion_cell", "description": "body-motion matrix cell", "seed": seed,
-            "duration_s": DURATION_S, "reading": reading,
+            "duration_s": duration_s, "reading": reading,
             "setpoint": {"force_n": setpoint_n, "band_fraction": 0.1},
             "finger": {"gap_m": 0.001}, "supervisor": dict(supervisor or {}),
             **_firmware_sections(firmware)}
@@ -118,9 +119,10 @@ def readers(n_drawn: int = 2) -> dict:
     return out
 
 
-def run_cell(motion, firmware, setpoint_n, fsr, device, supervised=True, supervisor=None) -> dict:
+def run_cell(motion, firmware, setpoint_n, fsr, device, supervised=True, supervisor=None,
+             duration_s: float = DURATION_S) -> dict:
     """Peak true force, time above 3.5 N and the supervisor's fault of one cell."""
-    spec = cell_spec(motion, firmware, setpoint_n, supervisor=supervisor)
+    spec = cell_spec(motion, firmware, setpoint_n, supervisor=supervisor, duration_s=duration_s)
     dev = dataclasses.replace(device, fsr=FSRS[fsr]) if fsr != "nominal" else device
     res = run_scenario(dataclasses.replace(spec, device=dev), supervised=supervised)
     f = res.trace["force_true_n"]

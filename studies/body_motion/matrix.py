@@ -17,7 +17,7 @@ import argparse
 import sys
 import time
 
-from ebraille_sim.tools.body_motion import FIRMWARES, SAFE_N, cells, motions, readers, run_cell
+from ebraille_sim.tools.body_motion import DURATION_S, MOTION_AT_S, SAFE_N, cells, motions, readers, run_cell
 
 
 def main(argv=None) -> int:
@@ -31,6 +31,9 @@ def main(argv=None) -> int:
     ap.add_argument("--reader", action="append", help="only these readers (repeatable)")
     ap.add_argument("--setpoint", action="append", type=float, help="only these setpoints (repeatable)")
     ap.add_argument("--firmware", action="append", help="only these firmwares (repeatable)")
+    ap.add_argument("--duration", type=float, default=DURATION_S,
+                    help=f"seconds per cell (default {DURATION_S}; a re-approach after a loss of contact ends "
+                    f"about 1.5 s after the motion at {MOTION_AT_S} s)")
     a = ap.parse_args(argv)
     ms = motions()
     devs = readers()
@@ -44,7 +47,8 @@ def main(argv=None) -> int:
         if ((a.motion and motion not in a.motion) or (a.fsr and fsr not in a.fsr) or (a.reader and reader not in a.reader)
                 or (a.setpoint and sp not in a.setpoint) or (a.firmware and fw not in a.firmware)):
             continue
-        r = run_cell(motion, fw, sp, fsr, devs[reader], supervised=not a.unsupervised, supervisor=sup)
+        r = run_cell(motion, fw, sp, fsr, devs[reader], supervised=not a.unsupervised, supervisor=sup,
+                     duration_s=a.duration)
         inside = ms[motion][2]
         rows.append((motion, fw, sp, fsr, reader, inside, r["peak_n"], r["above_s"], r["fault"]))
         print(f"{motion:22s} {fw:7s} {sp:3.1f} {fsr:7s} {reader:7s} {'in ' if inside else 'out'} "
