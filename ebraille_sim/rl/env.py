@@ -189,6 +189,7 @@ from ebraille_sim.plant.layout import S, U
 from ebraille_sim.rl.episode import (MAX_EPISODE_STEPS, OPTION_KEYS, EnvConfig, Episode, draw_episode,
                                      episode_from_spec, estimator_model, validate_options)
 from ebraille_sim.rl.registration import ENV_ID, register_envs
+from ebraille_sim.rl.render import RenderedEnv
 from controllers.compiled import KIND_EXTERNAL
 from controllers.supervisor import CF, FAULTS, MODES, SV
 from controllers.features import (C_CMD_SCALE, C_DT, C_SAFE, C_WARN, C_WU, C_WV, ERROR_SCALE_N, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, Z_STEP, _clip,
@@ -448,7 +449,7 @@ _MODE_NAMES = {float(i): name for i, name in enumerate(MODES)}
 _FAULT_NAMES = {0.0: None, **{float(i + 1): name for i, name in enumerate(FAULTS)}}
 
 
-class ContactForceEnv(gym.Env):
+class ContactForceEnv(RenderedEnv, gym.Env):
     __doc__ = __doc__
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
@@ -671,20 +672,5 @@ class ContactForceEnv(gym.Env):
         return self._obs.copy(), float(r), bool(term), truncated, info
 
     # -- rendering ---------------------------------------------------------------------------
-    def render(self):
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
-            return None
-        if self.episode is None:
-            raise RuntimeError("call reset() before render()")
-        from ebraille_sim.rl.render import Renderer, snapshot_from
-        if self._renderer is None:
-            self._renderer = Renderer()
-        snap = snapshot_from(self.plant.state[0], self.plant.inputs[0], self.episode, self._k,
-                             self.config.dt_s, self.config.safe_force_n, self._history)
-        return self._renderer.draw(snap)
-
-    def close(self):
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+    def _render_history(self):
+        return self._history

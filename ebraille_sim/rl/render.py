@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["RenderSnapshot", "Renderer", "snapshot_from"]
+__all__ = ["RenderSnapshot", "Renderer", "RenderedEnv", "snapshot_from"]
 
 WIDTH_PX, HEIGHT_PX, DPI = 720, 360, 100
 HISTORY_S = 3.0
@@ -191,3 +191,33 @@ class Renderer:
         ax.text(0.0, 1.0, f"true   {snap.force_true_n:5.2f} N\nest.   {snap.force_est_n:5.2f} N\n"
                 f"setpt  {snap.setpoint_n:5.2f} N\nmotor  {snap.command_v:+5.2f} V",
                 fontsize=7, family="monospace", va="top", transform=ax.transAxes)
+
+
+class RenderedEnv:
+    """``render()`` and ``close()`` of the envs (``render_mode="rgb_array"``): the display, the board
+    and the finger at the current step.  An env sets ``render_mode``, ``episode``, ``plant``, ``config``
+    and ``_k``; :meth:`_render_history` gives the recorded history the frame draws (none by default)."""
+
+    _renderer = None
+
+    def _render_history(self):
+        return None
+
+    def render(self):
+        """The display, the board and the finger now, an RGB array (``render_mode="rgb_array"``)."""
+        if self.render_mode is None:
+            import gymnasium as gym
+            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
+            return None
+        if self.episode is None:
+            raise RuntimeError("call reset() before render()")
+        if self._renderer is None:
+            self._renderer = Renderer()
+        snap = snapshot_from(self.plant.state[0], self.plant.inputs[0], self.episode, self._k,
+                             self.config.dt_s, self.config.safe_force_n, self._render_history())
+        return self._renderer.draw(snap)
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -81,6 +81,7 @@ from ebraille_sim.base.validation import check_number, check_range
 from ebraille_sim.plant.layout import S
 from ebraille_sim.rl.episode import EnvConfig, episode_from_spec, estimator_model, validate_options
 from ebraille_sim.rl.registration import RESIDUAL_ENV_ID
+from ebraille_sim.rl.render import RenderedEnv
 
 __all__ = ["RESIDUAL_ENV_ID", "ResidualConfig", "ResidualEnv", "scaled_population", "residual_device"]
 
@@ -168,7 +169,7 @@ def _distribution_at(cfg: EnvConfig, level: int):
     return dataclasses.replace(dist, population=scaled_population(dist.population, level / CURRICULUM_LEVELS))
 
 
-class ResidualEnv(gym.Env):
+class ResidualEnv(RenderedEnv, gym.Env):
     __doc__ = __doc__
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
@@ -290,22 +291,3 @@ class ResidualEnv(gym.Env):
                 "setpoint_n": float(ep.setpoint_n[self._k]), "command_v": float(rows.u_ext[0]),
                 "residual_v": self.controller.residual_v, "violation": float(v), "time_s": self._k * self.config.dt_s}
         return obs, float(r), bool(term), bool(truncated), info
-
-
-    def render(self):
-        """The display, the board and the finger now (``render_mode="rgb_array"``, as the plain env)."""
-        if self.render_mode is None:
-            gym.logger.warn("render() called without a render_mode; pass render_mode='rgb_array'")
-            return None
-        if self.episode is None:
-            raise RuntimeError("call reset() before render()")
-        from ebraille_sim.rl.render import Renderer, snapshot_from
-        if self._renderer is None:
-            self._renderer = Renderer()
-        return self._renderer.draw(snapshot_from(self.plant.state[0], self.plant.inputs[0], self.episode, self._k,
-                                                 self.config.dt_s, self.config.safe_force_n))
-
-    def close(self):
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
