@@ -11,12 +11,14 @@ configuration vector ``c`` (slots ``C_*``).
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ebraille_sim.base.compiled import njit
 
 __all__ = ["N_OBS", "OBS_LOW", "OBS_HIGH", "N_Z", "N_C", "config_vector", "observe", "write_observation",
-           "reset_features"]
+           "reset_features", "policy_action"]
 
 N_OBS = 7
 OBS_LOW = np.array([-1.0, 0.0, -2.0, -3.0, -1.0, -1.0, -3.0], dtype=np.float32)
@@ -117,3 +119,13 @@ def config_vector(control_rate_hz: float, safe_force_n: float, warn_force_n: flo
     c[C_WV] = violation_weight
     c[C_CURRENT_SCALE] = current_scale_a
     return c
+
+
+def policy_action(model, obs, deterministic: bool, what: str = "policy") -> float:
+    """The learned ``model``'s action on ``obs``, a scalar clipped to [-1, 1]; a non-finite action is
+    a one-line ``ValueError`` naming ``what`` returned it (never a NaN command)."""
+    action, _ = model.predict(obs, deterministic=deterministic)
+    a = float(np.asarray(action, dtype=np.float64).reshape(-1)[0])
+    if not math.isfinite(a):
+        raise ValueError(f"the {what} returned a non-finite action {a!r}")
+    return min(1.0, max(-1.0, a))

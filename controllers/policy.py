@@ -66,8 +66,8 @@ import numpy as np
 from ebraille_sim.base.validation import check_keys, check_number, read_table
 
 from controllers.base import check_dt, check_finite
-from controllers.features import (CURRENT_SCALE_A, N_OBS, N_Z, Z_PREV_ACTION, config_vector, observe, reset_features,
-                                  write_observation)
+from controllers.features import (CURRENT_SCALE_A, N_OBS, N_Z, Z_PREV_ACTION, config_vector, observe, policy_action,
+                                  reset_features, write_observation)
 
 __all__ = ["ACTOR_FORMAT", "ALGORITHMS", "POLICY_FORMAT", "MlpActor", "PolicyController", "actor_from_sb3",
            "load_actor", "load_policy", "residual_design", "save_actor", "shipped_policies", "policy_folder"]
@@ -366,11 +366,7 @@ class PolicyController:
             observe(self._z, self._c, fe, sp, ia, self._since_s, self._obs)
         self._first = False
         self._since_s = 0.0
-        action, _ = self.model.predict(self._obs, deterministic=self.deterministic)
-        a = float(np.asarray(action, dtype=np.float64).reshape(-1)[0])
-        if not math.isfinite(a):
-            raise ValueError(f"the policy returned a non-finite action {a!r}")
-        a = min(1.0, max(-1.0, a))
+        a = policy_action(self.model, self._obs, self.deterministic)
         self._z[Z_PREV_ACTION] = a
         self._command_v = a * self.supply_v
         return self._command_v

@@ -40,7 +40,7 @@ import numpy as np
 
 from controllers.base import check_dt, check_finite
 from controllers.features import (CURRENT_SCALE_A, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, config_vector, observe,
-                                  reset_features, write_observation)
+                                  policy_action, reset_features, write_observation)
 
 __all__ = ["N_FRAME", "ActionSlot", "ResidualPolicy", "frame_bounds", "MAX_HISTORY"]
 
@@ -190,10 +190,6 @@ class ResidualPolicy:
             self._frame(self._z, self._frames, fe, sp, ia, self._since_s, self._first, self._obs)
             self._first = False
             self._since_s = 0.0
-            action, _ = self.model.predict(self._obs, deterministic=self.deterministic)
-            a = float(np.asarray(action, dtype=np.float64).reshape(-1)[0])
-            if not math.isfinite(a):
-                raise ValueError(f"the residual policy returned a non-finite action {a!r}")
-            self.residual = min(1.0, max(-1.0, a))
+            self.residual = policy_action(self.model, self._obs, self.deterministic, "residual policy")
             self.residual_v = self.residual * self.limit_v
         return u + self.residual_v
