@@ -54,7 +54,7 @@ from ebraille_sim.base.compiled import njit
 from ebraille_sim.physics.fingertip import tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N
 
-__all__ = ["KIND_NONE", "KIND_PID", "KIND_LQG", "KIND_EXTERNAL", "KIND_DOB", "MAP_POINTS", "PS", "PP", "LS", "LP",
+__all__ = ["controller_resume", "resume_controller", "KIND_NONE", "KIND_PID", "KIND_LQG", "KIND_EXTERNAL", "KIND_DOB", "MAP_POINTS", "PS", "PP", "LS", "LP",
            "DS", "DP", "record", "pid_state", "pid_params", "lqg_state", "lqg_params", "lqg_order", "dob_state",
            "dob_params", "py_min", "py_max", "core_step", "core_reset", "pid_step", "pid_reset", "scheduled_gains",
            "map_reference", "model_feedforward_v", "feedforward_v", "lqg_step", "lqg_reset", "dob_step", "dob_reset",
@@ -536,7 +536,33 @@ def controller_reset(kind, s, p, force_est_n, setpoint_n, command_v):
         lqg_reset(s, p, force_est_n, setpoint_n, command_v)
 
 
+@njit(cache=True, inline="always")
+def controller_resume(kind, s, p, force_est_n, setpoint_n):
+    """The reset of a compiled controller of ``kind`` when the supervisor resumes it after a
+    regained contact: bumpless from 0 V (:func:`controller_reset`), with a PID-family or
+    disturbance-observer integrator raised to 0 V when the reset would start it below.
+
+    The returning finger reads under the setpoint for some milliseconds after its impact; a
+    bumpless start from 0 V then puts ``-kp e`` in the integrator and the board retracts from
+    the finger it has just found.  The start of a session keeps the plain reset: there the
+    negative integrator is the soft start of the approach and bounds the onset's overshoot.
+    """
+    controller_reset(kind, s, p, force_est_n, setpoint_n, 0.0)
+    if (kind == KIND_PID or kind == KIND_DOB) and s[PS.integrator_v] < 0.0:
+        s[PS.integrator_v] = 0.0
+
+
 def compiled_form(controller):
     """``controller.compiled()`` when it has one: ``(kind, state, params)``, else None."""
     get = getattr(controller, "compiled", None)
     return get() if callable(get) else None
+
+
+def resume_controller(controller, *, force_est_n: float, setpoint_n: float) -> None:
+    """:func:`controller_resume` on a controller object: its ``reset`` from 0 V, then, for a
+    controller with a compiled PID-family or disturbance-observer form, the integrator raised
+    to 0 V when the reset started it below (a controller without one keeps the plain reset)."""
+    controller.reset(force_est_n=force_est_n, setpoint_n=setpoint_n, command_v=0.0)
+    form = compiled_form(controller)
+    if form is not None and form[0] in (KIND_PID, KIND_DOB) and form[1][PS.integrator_v] < 0.0:
+        form[1][PS.integrator_v] = 0.0

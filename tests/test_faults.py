@@ -95,6 +95,17 @@ def test_finger_withdrawn_and_put_back_recovers():
     assert _recovered(tr, 6.0) >= 0.95                       # in band again within about a second
 
 
+def test_the_1khz_design_resumes_after_the_finger_comes_back():
+    """On the 1 kHz estimate the returning finger reads under the setpoint for some
+    milliseconds; the resume starts the integrator at 0 V, not below, so ``dob_hold_1khz``
+    pushes on instead of retracting from the finger (with the plain bumpless reset from 0 V
+    the board retracted and the second loss latched ``contact_lost``)."""
+    r = _run("fault_finger_withdrawn", controller="dob_hold_1khz", duration_s=8.0)
+    assert (r.supervisor or {}).get("fault") is None
+    assert _recovered(r.trace, 6.0) >= 0.95
+    assert r.trace["force_true_n"].max() <= MAX_SAFE_N
+
+
 def test_fault_runs_are_deterministic():
     a = _run("fault_finger_withdrawn", duration_s=5.0).trace
     b = _run("fault_finger_withdrawn", duration_s=5.0).trace

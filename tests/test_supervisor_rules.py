@@ -566,3 +566,42 @@ def test_event_log_and_its_capacity():
     assert ev[256] == (round(457 * DT, 6), "event log full: 44 events from here on not recorded")
     sup.reset(force_est_n=1.0, setpoint_n=1.0)
     assert sup.events == []
+
+
+def test_regained_contact_resumes_a_pid_with_its_integrator_not_below_zero():
+    """The contact-loss case above with a real PID inside: a bumpless reset from 0 V at 0.5 N on
+    a 1 N setpoint would start the integrator at ``-kp (b r - y)`` and the first command at 0 V;
+    the resume raises the integrator to 0 V, so the first command is the proportional part
+    ``kp b (1 - 0.5)`` and pushes towards the finger.  The session's start keeps the plain
+    bumpless reset (its integrator below 0 V: the soft start of the approach)."""
+    from controllers import PID, PIDConfig
+    from controllers.compiled import PS
+    cfg = PIDConfig(kp_v_per_n=2.0, ki_v_per_ns=10.0, kd_vs_per_n=0.0)
+    sup = Supervisor(PID(cfg), SupervisorConfig(**{**UNIT, "slew_v_per_s": 1e6}))
+    sup.reset(force_est_n=0.0, setpoint_n=1.0, command_v=0.0)
+    state = sup.inner.compiled()[1]
+    assert state[PS.integrator_v] == pytest.approx(-2.0 * cfg.setpoint_weight_p, rel=1e-12)
+    settle(sup, 1.0)
+    drive(sup, 1, 0.05)
+    drive(sup, 51, 0.51)
+    drive(sup, 30, 0.5)
+    assert drive(sup, 1, 0.5) == [0.0] and sup.mode == "run"
+    assert state[PS.integrator_v] == 0.0
+    u = drive(sup, 1, 0.5)[0]
+    assert u == pytest.approx(2.0 * cfg.setpoint_weight_p * 0.5 + 10.0 * DT * 0.0, abs=1e-9) and u > 0.0
+
+
+def test_resume_keeps_an_integrator_that_starts_above_zero():
+    """At an estimate above the setpoint the bumpless reset from 0 V starts the integrator above
+    0 V; the resume leaves it there (the floor only raises)."""
+    from controllers import make as make_controller
+    from controllers.compiled import PS, resume_controller
+    for name in ("pid", "pid_dob"):
+        a, b = make_controller(name), make_controller(name)
+        a.reset(force_est_n=1.4, setpoint_n=1.0, command_v=0.0)
+        resume_controller(b, force_est_n=1.4, setpoint_n=1.0)
+        assert a.compiled()[1][PS.integrator_v] > 0.0
+        assert list(a.compiled()[1]) == list(b.compiled()[1])
+        a.reset(force_est_n=0.3, setpoint_n=1.0, command_v=0.0)
+        resume_controller(b, force_est_n=0.3, setpoint_n=1.0)
+        assert a.compiled()[1][PS.integrator_v] < 0.0 == b.compiled()[1][PS.integrator_v]

@@ -32,8 +32,9 @@ def supervise_begin(sv, cfg, f, sp, dt, cur):
     code : int
         0: the command is ``u`` and the inner controller is not called.  1: call the inner
         controller with ``(f, sp_inner, dt, current)`` and pass its command to
-        :func:`supervise_end`.  2: contact regained; reset the inner controller with
-        ``force_est_n=f, setpoint_n=sp_inner, command_v=0.0``; the command is ``u`` (0 V).
+        :func:`supervise_end`.  2: contact regained; resume the inner controller from 0 V with
+        ``force_est_n=f, setpoint_n=sp_inner`` (:func:`controllers.compiled.controller_resume`: a
+        bumpless reset with its integrator not below 0 V); the command is ``u`` (0 V).
     u : float
         Command, V (NaN for code 1).
     sp_inner : float

@@ -8,6 +8,7 @@ import math
 import numpy as np
 
 from controllers.base import check_dt
+from controllers.compiled import resume_controller
 from controllers.supervisor.config import SupervisorConfig
 from controllers.supervisor.layout import CF, EVENT, FAULTS, MODES, SV, _EVENT_TEXTS, _N_HEADER, _initial_state
 from controllers.supervisor.period import supervise_begin, supervise_end
@@ -205,7 +206,7 @@ class Supervisor:
             if code == 1:
                 self.inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=reset_cmd)
         elif code == 2:
-            self.inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=0.0)
+            resume_controller(self.inner, force_est_n=f, setpoint_n=sp_inner)
         applied = getattr(self.inner, "applied", None)
         if applied is not None:
             applied(u)
