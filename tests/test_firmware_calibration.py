@@ -11,6 +11,8 @@ from __future__ import annotations
 import dataclasses
 import itertools
 
+import numpy as np
+
 import pytest
 
 from controllers.supervisor import SupervisorConfig
@@ -154,7 +156,10 @@ def test_the_population_draws_the_chain_errors_within_their_bounds_on_a_fifth_se
                         ("offset_v", cs0.offset_max_v)):
         v = [getattr(d.current_sense, name) for d in drawn]
         assert max(map(abs, v)) <= bound and min(v) < -0.5 * bound and max(v) > 0.5 * bound
-    assert len(BOARD_UNIFORMS) == 4
+    assert len(BOARD_UNIFORMS) == 7
+    # the table's load errors come after the first four: those four draw as before
+    u_b = np.random.default_rng(SeedNode(99).spawn(5)[4]).random(4)
+    assert np.array_equal(np.random.default_rng(SeedNode(99).spawn(5)[4]).random(7)[:4], u_b)
     # the board's child is the fifth: the reader, FSR, motor and drive draws keep their children
     assert [c.spawn_key for c in SeedNode(5).spawn(5)[:4]] == [c.spawn_key for c in SeedNode(5).spawn(4)]
 

@@ -5,6 +5,7 @@ analytic case, with tolerances far below 5 %: a 5 % change of any law fails its 
 (``tests/law_perturbation.py`` checks that).  The last tests check that the kernel is
 nothing but the composition of these functions, and that the static helpers use them too.
 """
+import dataclasses
 import math
 import subprocess
 import sys
@@ -1009,3 +1010,40 @@ def test_assembly_measures_the_units_hysteresis_and_the_firmware_packs_it():
         assert p[P.comp_hyst_halfwidth] == pytest.approx(-math.log(1.0 - expect) / (2.0 * nominal.exponent), rel=1e-12)
     with pytest.raises(ValueError, match="hysteresis_fraction"):
         EstimatorParams(hysteresis_fraction=1.0)
+
+
+def test_calibration_table_maps_each_bench_reading_onto_its_load():
+    """The unit's table (readings 0.57, 1.0, 1.44, 1.94 N at 0.5, 1, 1.5, 2 N): each reading gives
+    its load; between two points the map is linear, below the first and above the last the
+    proportional one of that point (zero stays zero, a negative estimate keeps its sign); an
+    empty table passes the estimate unchanged."""
+    reads, loads = [0.57, 1.0, 1.44, 1.94], [0.5, 1.0, 1.5, 2.0]
+    p = np.array(reads + loads)
+    n = 4
+
+    def t(f):
+        return firmware.table_calibrated_n(f, p, 0, n, n)
+
+    for r, f in zip(reads, loads):
+        assert t(r) == pytest.approx(f, rel=1e-15)
+    assert t(1.22) == pytest.approx(1.0 + 0.5 * (1.22 - 1.0) / 0.44, rel=1e-14)
+    assert t(0.75) == pytest.approx(0.5 + 0.5 * (0.75 - 0.57) / 0.43, rel=1e-14)
+    assert t(0.2) == pytest.approx(0.2 * 0.5 / 0.57, rel=1e-14)
+    assert t(0.0) == 0.0 and t(-0.1) == pytest.approx(-0.1 * 0.5 / 0.57, rel=1e-14)
+    assert t(3.0) == pytest.approx(3.0 * 2.0 / 1.94, rel=1e-14)
+    assert firmware.table_calibrated_n(1.3, p, 0, n, 0) == 1.3
+
+
+def test_bench_creep_per_decade_recovers_the_units_creep_law():
+    """The bench's reading of a unit's creep from its 1 N holds (2 s and 20 s): with the nominal
+    exponent, no press scatter and no conversion noise it is the unit's creep per decade to 0.1 %
+    (the creep law inverted over the decade of the nominal retardation times; the film's turn-on
+    factor moves with the crept force by a few 1e-4); the noise of 256 conversions (0.125 mV on
+    the 2 s and 20 s readings) and a 2 % load error move it by less than 0.001 per decade."""
+    from ebraille_sim.estimation.calibration import bench_creep_per_decade
+    for per_decade in (0.01, 0.0275, 0.05):
+        quiet = DeviceParams(fsr=dataclasses.replace(FSRS["nominal"], creep_per_decade=per_decade,
+                                                     noise_v_rms=0.0, press_repeatability=0.0))
+        assert bench_creep_per_decade(quiet) == pytest.approx(per_decade, rel=1e-3)
+        noisy = DeviceParams(fsr=dataclasses.replace(FSRS["nominal"], creep_per_decade=per_decade))
+        assert bench_creep_per_decade(noisy, load_error=0.02) == pytest.approx(per_decade, abs=1e-3)

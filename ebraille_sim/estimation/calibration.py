@@ -354,6 +354,137 @@ def calibrate_device_reference(device: DeviceParams, force_n: float = 1.0, hold_
     return dataclasses.replace(device, circuit=dataclasses.replace(circuit, r2_ohm=math.exp(log_r2)))
 
 
+# ---- the unit's calibration table ---------------------------------------------------------------
+
+TABLE_LOADS_N = (0.5, 1.0, 1.5, 2.0)
+"""Known loads of the calibration table, N [E]: the reading range of the paper's tactile forces
+(0.5-2 N) in four weights, the divider's own 1 N among them."""
+
+TABLE_PRESSES = 3
+"""Presses of each table load, averaged [E]: the film's press-to-press repeatability (2 %) is a
+new draw at every press, so the mean of three halves its variance and more."""
+
+TABLE_HOLD_S = 20.0
+"""Hold of every table press before the reading, s [E]: that of the divider's calibration (the
+creep compensation's reference hold)."""
+
+TABLE_CONVERSIONS = 256
+"""ADC conversions averaged for each table reading [E] (as the drive's calibration averages its
+current, :data:`CALIBRATION_CONVERSIONS`): the divider's noise (0.4 LSB) dithers the
+quantisation, so the mean is the voltage to ``noise / 16``."""
+
+
+def _fsr_unit_seed(fsr, circuit) -> int:
+    """The noise of a unit's table: a fixed function of its FSR unit and divider (the bench ran
+    once; its press scatter and conversion noise are the unit's, not the session's)."""
+    import zlib
+    return zlib.crc32(repr((fsr, circuit)).encode()) % (1 << 31)
+
+
+def table_reading_n(model, force_n: float, fsr, circuit, hold_s: float, press_z: float = 0.0,
+                    noise_v: float = 0.0) -> float:
+    """The model's steady estimate on the bench (N): the film pressed from no load to ``force_n``
+    (loading branch) and held ``hold_s``, its resistance scaled by the press's scatter
+    ``exp(press_repeatability * press_z)`` (:func:`ebraille_sim.physics.fsr.press_scatter`), the
+    divider voltage read with the error ``noise_v`` of the conversions' mean, tared by the
+    no-load reading (:func:`steady_estimate` with the press and the noise)."""
+    g = static_conductance(force_n * loading_branch_factor(fsr), fsr, load_time_s=hold_s)
+    g_standoff = 1.0 / fsr.standoff_resistance_ohm
+    g = g_standoff + (g - g_standoff) / math.exp(fsr.press_repeatability * press_z)
+    u = divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + noise_v - _tare(fsr, circuit)
+    return float(model.steady_state(u))
+
+
+def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=None) -> tuple | None:
+    """The bench's calibration table of ``device`` (its divider already set): ``(loads, readings)``,
+    or None when the readings do not rise with the load (no table can be stored).
+
+    Each known load of ``loads_n`` is pressed :data:`TABLE_PRESSES` times from no load and held
+    :data:`TABLE_HOLD_S`; each press reads the model's steady estimate from the mean of
+    :data:`TABLE_CONVERSIONS` conversions (:func:`table_reading_n`), and the readings of a load are
+    averaged.  The film carries ``load (1 + error)`` (``load_errors``, one a load, the fixture's
+    placement; default none) while the bench stores the nominal load; each press draws its own
+    scatter and each reading its own conversion noise from the unit's seed
+    (:func:`_fsr_unit_seed`).  Nothing of the unit but its readings reaches the table.
+
+    >>> from ebraille_sim.physics.params import DeviceParams
+    >>> loads, reads = calibration_table(calibrate_device(DeviceParams()))
+    >>> loads, [round(r, 2) for r in reads]
+    ((0.5, 1.0, 1.5, 2.0), [0.57, 0.99, 1.44, 2.0])
+    """
+    errors = (0.0,) * len(loads_n) if load_errors is None else tuple(load_errors)
+    if len(errors) != len(loads_n):
+        raise ValueError(f"calibration_table: {len(errors)} load errors for {len(loads_n)} loads")
+    model = cached_model(device.estimator.model)
+    fsr, circuit = device.fsr, device.circuit
+    rng = np.random.default_rng(_fsr_unit_seed(fsr, circuit))
+    sd_v = fsr.noise_v_rms / math.sqrt(TABLE_CONVERSIONS)
+    readings = []
+    for load, err in zip(loads_n, errors):
+        presses = [table_reading_n(model, load * (1.0 + err), fsr, circuit, TABLE_HOLD_S,
+                                   press_z=float(rng.standard_normal()), noise_v=sd_v * float(rng.standard_normal()))
+                   for _ in range(TABLE_PRESSES)]
+        readings.append(float(np.mean(presses)))
+    if not (readings[0] > 0.0 and all(a < b for a, b in zip(readings, readings[1:]))):
+        return None
+    return tuple(float(x) for x in loads_n), tuple(readings)
+
+
+CREEP_READ_S = (2.0, 20.0)
+"""Times into the table's 1 N holds at which the bench reads the divider for the unit's creep, s:
+one decade of load time, the second the hold's reading."""
+
+
+def bench_creep_per_decade(device: DeviceParams, load_n: float = 1.0, load_error: float = 0.0) -> float:
+    """The unit's creep per decade as the bench measures it in the calibration table's holds of
+    ``load_n``: in each of the :data:`TABLE_PRESSES` presses the mean of :data:`TABLE_CONVERSIONS`
+    conversions at 2 s and at 20 s (:data:`CREEP_READ_S`), each turned back into the film's path
+    conductance with the divider's inverse and the nominal stand-off; the ratio of the two, to
+    the power ``1 / n`` of the nominal film's exponent, is the creep gain's growth over the decade,
+    and the nominal film's creep law (its retardation times, ``F_c/F = 1 + w sum(1 - e^(-t/tau))``,
+    :func:`ebraille_sim.physics.fsr.held_creep_gain`) gives the per-decade rise that grows so.
+    The press's scatter cancels in the ratio; the unit's exponent, unknown to the bench, scales
+    the result by ``n_nominal / n_unit`` (about +/- 12 %).  Clipped to [0, 0.2]."""
+    from ebraille_sim.estimation.firmware import FIRMWARE_FSR
+    from ebraille_sim.physics.fsr import N_CREEP, divider_conductance_s, held_creep_gain
+    fsr, circuit = device.fsr, device.circuit
+    nom = FIRMWARE_FSR
+    rng = np.random.default_rng(_fsr_unit_seed(fsr, circuit) + 1)
+    sd_v = fsr.noise_v_rms / math.sqrt(TABLE_CONVERSIONS)
+    f_eff = load_n * (1.0 + load_error) * loading_branch_factor(fsr)
+    g_off = 1.0 / nom.standoff_resistance_ohm
+    ratios = []
+    for _ in range(TABLE_PRESSES):
+        scale = math.exp(fsr.press_repeatability * float(rng.standard_normal()))
+        g_path = []
+        for t in CREEP_READ_S:
+            g = static_conductance(f_eff, fsr, load_time_s=t)                                  # plant truth (bench)
+            g = 1.0 / fsr.standoff_resistance_ohm + (g - 1.0 / fsr.standoff_resistance_ohm) / scale  # plant truth
+            v = divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + sd_v * float(rng.standard_normal())
+            g_path.append(divider_conductance_s(v, circuit.r2_ohm, circuit.supply_v) - g_off)
+        ratios.append((g_path[1] / g_path[0]) ** (1.0 / nom.exponent))
+    ratio = float(np.mean(ratios))
+    a = [held_creep_gain(t, 1.0, nom.creep_tau_min_s, nom.creep_tau_max_s, N_CREEP) - 1.0 for t in CREEP_READ_S]
+    w = (ratio - 1.0) / (a[1] - ratio * a[0])
+    per_decade = w * (N_CREEP - 1) / math.log10(nom.creep_tau_max_s / nom.creep_tau_min_s)
+    return float(min(max(per_decade, 0.0), 0.2))
+
+
+def with_calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=None) -> DeviceParams:
+    """``device`` with its estimator's calibration table (:func:`calibration_table`) and the creep
+    per decade the table's 1 N holds measure (:func:`bench_creep_per_decade`, for the creep
+    compensation) stored; without a table (the readings do not rise with the load) the creep
+    alone."""
+    errors = (0.0,) * len(loads_n) if load_errors is None else tuple(load_errors)
+    one = min(range(len(loads_n)), key=lambda j: abs(loads_n[j] - 1.0))
+    creep = bench_creep_per_decade(device, loads_n[one], errors[one] if len(errors) == len(loads_n) else 0.0)
+    table = calibration_table(device, loads_n, load_errors)
+    fields = {"creep_per_decade": creep}
+    if table is not None:
+        fields.update(calibration_loads_n=table[0], calibration_readings_n=table[1])
+    return replace_fields(device, estimator=replace_fields(device.estimator, **fields))
+
+
 BENCH_R2_RANGE_OHM = (500.0, 50000.0)
 """R2 range of :func:`bench_calibrate_device`, ohm (that of :func:`calibrate_device`)."""
 

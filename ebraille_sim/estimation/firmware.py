@@ -12,7 +12,10 @@ this order (:func:`ebraille_sim.plant.kernel.advance` calls the functions):
    then the inverse of the film's play operators, which puts the voltage back on the
    loading branch the estimator was calibrated on;
 3. **tare** (:func:`tared_v`): the no-load voltage measured at start-up subtracted;
-4. **anti-alias filter** (:func:`biquad_step`): a second-order section at the sensor rate.
+4. **anti-alias filter** (:func:`biquad_step`): a second-order section at the sensor rate;
+
+and after the estimator, **the unit's calibration table** (when the bench stored one,
+:func:`table_calibrated_n`): the model's estimate mapped onto the known loads it read on the bench.
 
 The firmware assumes the nominal FSR (:data:`FIRMWARE_FSR`), not the individual unit.
 Each function advances its own state slots (declared here, composed by
@@ -25,11 +28,11 @@ import math
 from ebraille_sim.base.compiled import njit
 from ebraille_sim.physics.fsr import (F_EPS_N, N_CREEP, N_PLAYS, creep_force, divider_conductance_s, divider_voltage,
                                       inverse_hysteresis, log_force, play)
-from ebraille_sim.physics.params import FSRS
+from ebraille_sim.physics.params import CALIBRATION_TABLE_MAX_POINTS, FSRS
 
 __all__ = [
     "FIRMWARE_FSR", "HYSTERESIS_MEDIAN", "biquad_step", "tared_v", "creep_compensated_v", "running_median_v",
-    "turn_tested_v", "hysteresis_compensated_v",
+    "turn_tested_v", "hysteresis_compensated_v", "CALIBRATION_TABLE_POINTS", "table_calibrated_n",
 ]
 
 FIRMWARE_FSR = FSRS["nominal"]
@@ -46,6 +49,9 @@ TARE_SLOTS = ("tare_v",)
 CREEP_COMP_SLOTS = tuple(f"comp_creep_{j}_n" for j in range(N_CREEP))
 """State slots of the firmware's creep prediction: the hereditary terms of its own force
 estimate (N), advanced by :func:`ebraille_sim.physics.fsr.creep_force`."""
+
+CALIBRATION_TABLE_POINTS = CALIBRATION_TABLE_MAX_POINTS
+"""Most points of a unit's calibration table (:func:`table_calibrated_n`)."""
 
 HYSTERESIS_MEDIAN = 5
 """ADC samples in the hysteresis compensation's running median (odd)."""
@@ -238,3 +244,30 @@ def hysteresis_compensated_v(v, s, v0, x0, play0, m0, t0, p, width0, weight0, n_
     f_load = math.exp(x - log_halfwidth) - F_EPS_N
     g_u = g_standoff_s + (f_load ** exponent / k_ohm if f_load > 0.0 else 0.0)
     return divider_voltage(g_u, r2_ohm, supply_v)
+
+
+@njit(cache=True, inline="always")
+def table_calibrated_n(f, p, x0, y0, n):
+    """The estimate ``f`` (N) through the unit's calibration table: ``n`` points, the model's
+    steady readings ``p[x0:x0+n]`` (ascending, > 0) at the known loads ``p[y0:y0+n]`` (N) of the
+    bench (:func:`ebraille_sim.estimation.calibration.calibration_table`).
+
+    Between two points the map is linear; below the first and above the last it is the
+    proportional one of that end point (``f`` times its load over its reading), so it passes
+    through zero, keeps the sign and stays continuous.  With ``n = 0`` the estimate is returned
+    unchanged.  The table corrects what one divider setting cannot: a unit whose conduction
+    exponent differs from the one the model was identified on reads a force away from the
+    calibration load off by a factor that grows with the distance.
+    """
+    if n == 0:
+        return f
+    if f <= p[x0]:
+        return f * (p[y0] / p[x0])
+    last = n - 1
+    if f >= p[x0 + last]:
+        return f * (p[y0 + last] / p[x0 + last])
+    j = 0
+    while f > p[x0 + j + 1]:
+        j += 1
+    xa, xb = p[x0 + j], p[x0 + j + 1]
+    return p[y0 + j] + (p[y0 + j + 1] - p[y0 + j]) * ((f - xa) / (xb - xa))

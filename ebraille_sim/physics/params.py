@@ -590,6 +590,10 @@ class CurrentSenseParams(_Checked):
         return min(self.reference_v, self.adc_ref_v - self.reference_v) / self.nominal_v_per_a
 
 
+CALIBRATION_TABLE_MAX_POINTS = 6
+"""Most points of a unit's calibration table (:class:`EstimatorParams`)."""
+
+
 @dataclass(frozen=True)
 class EstimatorParams(_Checked):
     """In-loop force estimator: anti-alias filter, decimation, block-oriented model.
@@ -637,12 +641,36 @@ class EstimatorParams(_Checked):
                                        "reversal still needs the plain deadband's swing of twice that)")
     hysteresis_turn_time_s: float = _pos(0.008, "s", "[E] time constant of the turn test's exponential "
                                          "average: at 1 kHz and 0.4 LSB of noise its noise is about 0.1 LSB")
+    creep_per_decade: float | None = _p(None, "-", "[D] the creep per decade the creep compensation runs: None "
+                                        "the nominal film's (FSRParams.creep_per_decade); a drawn unit's bench "
+                                        "measures its own from the conductance at 2 s and 20 s of the calibration "
+                                        "table's 1 N holds (estimation.calibration.bench_creep_per_decade)")
+    calibration_loads_n: tuple = _p((), "N", "[D] known loads of the unit's calibration table, ascending (each "
+                                    "pressed from no load and held on the bench, estimation.calibration."
+                                    "calibration_table); empty: no table, the model's estimate is the firmware's")
+    calibration_readings_n: tuple = _p((), "N", "[D] the model's steady estimate the bench read at each of "
+                                       "calibration_loads_n (the mean of the unit's presses through its ADC); "
+                                       "ascending, > 0; the firmware maps its estimate onto the loads through "
+                                       "them (estimation.firmware.table_calibrated_n)")
 
     def __post_init__(self):
         super().__post_init__()
         h = self.hysteresis_fraction
         if h is not None and not (isinstance(h, (int, float)) and 0.0 <= h < 1.0):
             raise ValueError(f"EstimatorParams.hysteresis_fraction = {h!r} must be None or in [0, 1)")
+        c = self.creep_per_decade
+        if c is not None and not (isinstance(c, (int, float)) and not isinstance(c, bool) and 0.0 <= c < 0.5):
+            raise ValueError(f"EstimatorParams.creep_per_decade = {c!r} must be None or in [0, 0.5)")
+        loads, reads = self.calibration_loads_n, self.calibration_readings_n
+        for name, v in (("calibration_loads_n", loads), ("calibration_readings_n", reads)):
+            if not (isinstance(v, tuple) and len(v) <= CALIBRATION_TABLE_MAX_POINTS
+                    and all(isinstance(x, (int, float)) and not isinstance(x, bool) and 0.0 < x < math.inf for x in v)
+                    and all(a < b for a, b in zip(v, v[1:]))):
+                raise ValueError(f"EstimatorParams.{name} = {v!r} must be a tuple of at most "
+                                 f"{CALIBRATION_TABLE_MAX_POINTS} ascending positive forces, N")
+        if len(loads) != len(reads):
+            raise ValueError(f"EstimatorParams.calibration_loads_n has {len(loads)} points and "
+                             f"calibration_readings_n {len(reads)}: one reading per load")
         if self.hysteresis_turn_lsb > 0.0 and self.hysteresis_follow_lsb > self.hysteresis_deadband_lsb:
             raise ValueError(f"EstimatorParams.hysteresis_follow_lsb = {self.hysteresis_follow_lsb!r} must not exceed "
                              f"hysteresis_deadband_lsb = {self.hysteresis_deadband_lsb!r} with the turn test on")

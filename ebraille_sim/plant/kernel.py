@@ -39,7 +39,8 @@ from __future__ import annotations
 from ebraille_sim.base.compiled import njit
 
 from ebraille_sim.estimation.blockmodels import estimator_step
-from ebraille_sim.estimation.firmware import biquad_step, creep_compensated_v, hysteresis_compensated_v, tared_v
+from ebraille_sim.estimation.firmware import (biquad_step, creep_compensated_v, hysteresis_compensated_v,
+                                              table_calibrated_n, tared_v)
 from ebraille_sim.physics.current_sense import NOISE_INDEX_OFFSET, amplifier_v, rc_step, sample_current_a
 from ebraille_sim.physics.drivetrain import (end_stop, friction_velocity_update, gear_loss_n, loaded_friction_n,
                                              mesh_force, shaft_speed_rad_per_s, stribeck, viscous_force_n,
@@ -56,12 +57,14 @@ assert MAX_TF_LEN >= 2 and MAX_BREAKPOINTS >= 2
 
 @njit(cache=True, inline="always")
 def estimator_update(s, p, u):
-    """One sample of the in-loop estimator on the filtered voltage ``u``; returns the estimate."""
-    return estimator_step(u, s, S.est_z0, S.est_raw_prev_n, p,
-                          P.est_in_x0, P.est_in_y0, int(p[P.est_n_in]),
-                          P.est_num0, P.est_den0, int(p[P.est_len]),
-                          P.est_out_x0, P.est_out_y0, int(p[P.est_n_out]),
-                          p[P.est_nyquist_average] > 0.0, p[P.est_clamp] > 0.0)
+    """One sample of the in-loop estimator on the filtered voltage ``u``, through the unit's
+    calibration table; returns the estimate."""
+    f = estimator_step(u, s, S.est_z0, S.est_raw_prev_n, p,
+                       P.est_in_x0, P.est_in_y0, int(p[P.est_n_in]),
+                       P.est_num0, P.est_den0, int(p[P.est_len]),
+                       P.est_out_x0, P.est_out_y0, int(p[P.est_n_out]),
+                       p[P.est_nyquist_average] > 0.0, p[P.est_clamp] > 0.0)
+    return table_calibrated_n(f, p, P.est_cal_x0, P.est_cal_y0, int(p[P.est_cal_n]))
 
 
 @njit(cache=True, inline="always")

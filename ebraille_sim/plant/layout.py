@@ -137,7 +137,9 @@ PARAM_NAMES = [
   + [f"comp_play_w{j}" for j in range(N_PLAYS)] + [f"comp_play_weight{j}" for j in range(N_PLAYS)] \
   + [f"est_num{j}" for j in range(MAX_TF_LEN)] + [f"est_den{j}" for j in range(MAX_TF_LEN)] \
   + [f"est_in_x{j}" for j in range(MAX_BREAKPOINTS)] + [f"est_in_y{j}" for j in range(MAX_BREAKPOINTS)] \
-  + [f"est_out_x{j}" for j in range(MAX_BREAKPOINTS)] + [f"est_out_y{j}" for j in range(MAX_BREAKPOINTS)]
+  + [f"est_out_x{j}" for j in range(MAX_BREAKPOINTS)] + [f"est_out_y{j}" for j in range(MAX_BREAKPOINTS)] \
+  + ["est_cal_n"] + [f"est_cal_x{j}" for j in range(_fw.CALIBRATION_TABLE_POINTS)] \
+  + [f"est_cal_y{j}" for j in range(_fw.CALIBRATION_TABLE_POINTS)]
 P = slots("ParamSlots", PARAM_NAMES)
 N_PARAM = len(PARAM_NAMES)
 

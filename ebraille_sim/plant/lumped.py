@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ebraille_sim.estimation.blockmodels import pwl_eval
-from ebraille_sim.estimation.firmware import FIRMWARE_FSR, HYSTERESIS_MEDIAN
+from ebraille_sim.estimation.firmware import CALIBRATION_TABLE_POINTS, FIRMWARE_FSR, HYSTERESIS_MEDIAN, table_calibrated_n
 from ebraille_sim.estimation.calibration import measured_hysteresis_fraction
 from ebraille_sim.estimation.registry import load_estimator
 from ebraille_sim.physics.drivetrain import (mesh_damping_n_s_per_m, reflected_force_n, reflected_inertia_kg,
@@ -165,6 +165,7 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     _pack_model(p, model)
     p[P.est_clamp] = 1.0 if e.clamp_nonnegative else 0.0
     p[P.est_nyquist_average] = 1.0 if e.nyquist_average else 0.0
+    _pack_calibration_table(p, e)
     _pack_creep_compensation(p, e, dt_sensor)
     _pack_hysteresis_compensation(p, e, c, s, float(r.sensor_rate_hz))
     _pack_current_sense(p, device.current_sense, h)
@@ -239,10 +240,21 @@ def _cached_slots(fill, *key) -> tuple[np.ndarray, np.ndarray]:
     return slots, values
 
 
+def _pack_calibration_table(p: np.ndarray, e) -> None:
+    """The unit's calibration table (:func:`ebraille_sim.estimation.firmware.table_calibrated_n`):
+    its size, the readings and the loads (unused slots 0)."""
+    n = len(e.calibration_loads_n)
+    p[P.est_cal_n] = n
+    p[P.est_cal_x0:P.est_cal_x0 + CALIBRATION_TABLE_POINTS] = 0.0
+    p[P.est_cal_y0:P.est_cal_y0 + CALIBRATION_TABLE_POINTS] = 0.0
+    p[P.est_cal_x0:P.est_cal_x0 + n] = e.calibration_readings_n
+    p[P.est_cal_y0:P.est_cal_y0 + n] = e.calibration_loads_n
+
+
 def _pack_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
     """The estimator's creep compensation: on/off, and the creep law of the nominal FSR
     (:data:`~ebraille_sim.estimation.firmware.FIRMWARE_FSR`, the nominal unit: the firmware does not know the individual sensor's parameters)
-    at the sensor rate, with the creep gain of the calibration hold as its reference.
+    with the creep per decade the bench measured when the estimator carries one, at the sensor rate, with the creep gain of the calibration hold as its reference.
     Depends only on the estimator and the sensor period: the slots are computed once per pair."""
     slots, values = _creep_compensation_slots(e, float(dt_sensor_s))
     p[slots] = values
@@ -254,7 +266,8 @@ def _creep_compensation_slots(e, dt_sensor_s: float) -> tuple[np.ndarray, np.nda
 
 
 def _fill_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
-    nominal = FIRMWARE_FSR
+    nominal = FIRMWARE_FSR if e.creep_per_decade is None else dataclasses.replace(
+        FIRMWARE_FSR, creep_per_decade=e.creep_per_decade)
     p[P.est_creep_comp] = 1.0 if e.creep_compensation else 0.0
     p[P.comp_creep_weight] = creep_term_weight(nominal.creep_per_decade, nominal.creep_tau_min_s,
                                                nominal.creep_tau_max_s)
@@ -412,6 +425,7 @@ def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None
     s[S.comp_hyst_x] = lf
     s[_COMP_PLAY_STATE_SLOTS] = lf
     _estimator_steady_state(s, p, v_read - s[S.tare_v])
+    s[S.force_est_n] = table_calibrated_n(s[S.force_est_n], p, P.est_cal_x0, P.est_cal_y0, int(p[P.est_cal_n]))
     v_rest = p[P.isense_ref_v] + p[P.isense_gain] * p[P.isense_offset_v]       # no current: the filters settled
     s[S.isense_filter1_v] = v_rest
     s[S.isense_filter2_v] = v_rest

@@ -25,11 +25,15 @@ current-sense shunt error   uniform +/- shunt_tolerance  [R] 1 % resistor; unifo
 current-sense gain error    uniform +/- gain_error_max   [R] INA240 +/-0.20 % max; uniform [E]
 current-sense offset        uniform +/- offset_max_v     [R] INA240 +/-25 uV max; uniform [E]
 divider calibration load    uniform +/- 2 %              [E] the 1 N load as the fixture applies it
+table loads 0.5, 1.5, 2 N   uniform +/- 2 % each         [E] the same fixture, each load placed anew
 ==========================  ==========================  =========================================
 
 With ``calibrate=True`` (default) each drawn device's divider is re-calibrated for its own
 FSR unit at assembly (:func:`calibrate_device`, one press to 1 N held 20 s, the load off by
-its drawn error); the spread of hysteresis and creep remains an uncalibrated error.
+its drawn error), and with ``calibration_table=True`` (default) the bench then stores the
+unit's calibration table (:func:`~ebraille_sim.estimation.calibration.with_calibration_table`:
+0.5, 1, 1.5 and 2 N, each pressed three times and held 20 s, each load off by its own drawn
+error); the spread of hysteresis and creep remains an uncalibrated error.
 
 Examples
 --------
@@ -51,7 +55,7 @@ from numpy.random.bit_generator import ISpawnableSeedSequence
 
 from ebraille_sim.base.seeds import SeedNode
 from ebraille_sim.base.validation import check_bool, check_number, check_pair, replace_fields
-from ebraille_sim.estimation.calibration import calibrate_device
+from ebraille_sim.estimation.calibration import TABLE_LOADS_N, calibrate_device, with_calibration_table
 from ebraille_sim.physics.params import DeviceParams, replace_checked
 
 
@@ -71,11 +75,12 @@ class PopulationSpec:
     guide_coulomb_n: tuple[float, float] = (0.05, 0.3)
     backlash_m: tuple[float, float] = (0.03e-3, 0.2e-3)
     calibrate: bool = True
+    calibration_table: bool = True
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
             v, name = getattr(self, f.name), f"PopulationSpec.{f.name}"
-            if f.name == "calibrate":
+            if f.name in ("calibrate", "calibration_table"):
                 check_bool(name, v)
             elif isinstance(f.default, tuple):
                 check_pair(name, v, lo=0.0)
@@ -110,11 +115,15 @@ DEVICE_UNIFORMS = ("finger_b_scale", "finger_m_scale", "relax_c0", "fsr_exponent
 (``finger_b_scale`` and ``guide_coulomb_n`` log-uniform, the others uniform)."""
 DEVICE_NORMALS = ("fsr_k_sigma_ln", "motor_r_sigma", "motor_k_sigma")
 """The :class:`PopulationSpec` spreads of a device's standard normal variates, in their order."""
-BOARD_UNIFORMS = ("shunt_error", "gain_error", "offset_v", "calibration_load_error")
+BOARD_UNIFORMS = ("shunt_error", "gain_error", "offset_v", "calibration_load_error", "table_load_error_0",
+                  "table_load_error_2", "table_load_error_3")
 """The board's uniform variates, after :data:`DEVICE_UNIFORMS`: the current chain's unit errors
 within their datasheet bounds (``shunt_tolerance``, ``gain_error_max``, ``offset_max_v`` of
-the base device's :class:`~ebraille_sim.physics.params.CurrentSenseParams`) and the error of
-the divider calibration's known load within :data:`CALIBRATION_LOAD_TOLERANCE`."""
+the base device's :class:`~ebraille_sim.physics.params.CurrentSenseParams`), the error of
+the divider calibration's known load within :data:`CALIBRATION_LOAD_TOLERANCE`, and those of
+the calibration table's other loads (:data:`~ebraille_sim.estimation.calibration.TABLE_LOADS_N`
+but the 1 N one, which is the divider's load and keeps its error) within the same tolerance.
+Drawn after the first four, so adding them changed none of those."""
 CALIBRATION_LOAD_TOLERANCE = 0.02
 """Relative error of the 1 N load the divider calibration applies through the board [E]: a
 102 g weight is exact to far better, its alignment on the fixture is not."""
@@ -133,7 +142,7 @@ def device_variates(seed_sequence) -> tuple[list, list]:
     u_s = r_s.random(3).tolist()
     z_m = r_m.standard_normal(2).tolist()               # motor R, kM
     u_d = r_d.random(3).tolist()                        # gear efficiency, guide friction, backlash
-    u_b = r_b.random(len(BOARD_UNIFORMS)).tolist()      # current chain, divider calibration load
+    u_b = r_b.random(len(BOARD_UNIFORMS)).tolist()      # current chain, calibration loads
     return u_f + u_s + u_d + u_b, [z_k] + z_m
 
 
@@ -168,11 +177,17 @@ def device_from_variates(u, z, spec: PopulationSpec = PopulationSpec(),
                             back_emf_v_s_per_rad=m.back_emf_v_s_per_rad * kscale)
     drivetrain = replace_checked(d, name=d.name, gear_efficiency=gear_eff, guide_coulomb_n=guide_n, backlash_m=backlash)
     cs = base.current_sense
-    e_shunt, e_gain, e_offset, e_load = (2.0 * v - 1.0 for v in u[len(DEVICE_UNIFORMS):])
+    e_shunt, e_gain, e_offset, e_load, e_t0, e_t2, e_t3 = (2.0 * v - 1.0 for v in u[len(DEVICE_UNIFORMS):])
     board = replace_checked(cs, shunt_error=cs.shunt_tolerance * e_shunt, gain_error=cs.gain_error_max * e_gain,
                             offset_v=cs.offset_max_v * e_offset)
     dev = replace_fields(base, finger=finger, fsr=fsr, motor=motor, drivetrain=drivetrain, current_sense=board)
-    return calibrate_device(dev, load_error=CALIBRATION_LOAD_TOLERANCE * e_load) if spec.calibrate else dev
+    if not spec.calibrate:
+        return dev
+    dev = calibrate_device(dev, load_error=CALIBRATION_LOAD_TOLERANCE * e_load)
+    if not spec.calibration_table:
+        return dev
+    return with_calibration_table(dev, TABLE_LOADS_N, tuple(CALIBRATION_LOAD_TOLERANCE * e
+                                                            for e in (e_t0, e_load, e_t2, e_t3)))
 
 
 def sample_device(rng_or_seed, spec: PopulationSpec = PopulationSpec(), base: DeviceParams = DeviceParams()

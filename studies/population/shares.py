@@ -23,7 +23,7 @@ import sys
 import numpy as np
 
 from ebraille_sim.estimation.registry import with_delay
-from ebraille_sim.scenarios.population import sample_devices
+from ebraille_sim.scenarios.population import PopulationSpec, sample_devices
 from ebraille_sim.scenarios.runner import design_firmware, run_batch
 from ebraille_sim.scenarios.spec import load_scenario
 
@@ -35,7 +35,7 @@ def cvar_low(x, alpha=0.1):
 
 
 def shares(scenario: str, readers: int, seed: int, duration_s: float, controller=None, base=None,
-           nk: int | None = None) -> dict:
+           nk: int | None = None, table: bool = True) -> dict:
     """One row: readers drawn around ``base`` (default the scenario's device); with ``nk`` the
     estimator runs with that reading of the paper's input delay (samples, 0 or 1)."""
     spec = load_scenario(scenario)
@@ -48,7 +48,8 @@ def shares(scenario: str, readers: int, seed: int, duration_s: float, controller
         spec = dataclasses.replace(spec, device=dataclasses.replace(spec.device, estimator=est))
         if base is not None:
             base = dataclasses.replace(base, estimator=est)
-    devs = sample_devices(seed, readers, base=spec.device if base is None else base)
+    devs = sample_devices(seed, readers, PopulationSpec(calibration_table=table),
+                          base=spec.device if base is None else base)
     runs = [{"scenario": spec, "seed": spec.seed + 7 * i, "duration_s": duration_s, "device": d,
              **({} if controller is None else {"controller": controller})} for i, d in enumerate(devs)]
     res = run_batch(runs, keep_traces=False)
@@ -74,6 +75,8 @@ def main(argv=None) -> int:
     ap.add_argument("--nk", default=None,
                     help="the estimator's input delay, samples: 0 (the paper's notation read literally) or 1 "
                          "(MATLAB's convention); default: the scenario's estimator as it is")
+    ap.add_argument("--no-table", action="store_true",
+                    help="drawn units with the divider's one-point calibration only (no calibration table)")
     ap.add_argument("--out", default=None, help="write the rows as JSON here")
     a = ap.parse_args(argv)
     nk = None
@@ -86,7 +89,7 @@ def main(argv=None) -> int:
     rows = []
     for sc in a.scenarios:
         try:
-            r = shares(sc, a.readers, a.seed, a.duration, a.controller, nk=nk)
+            r = shares(sc, a.readers, a.seed, a.duration, a.controller, nk=nk, table=not a.no_table)
         except ValueError as exc:
             print(f"error: {sc}: {exc}", file=sys.stderr)
             return 2
@@ -96,7 +99,8 @@ def main(argv=None) -> int:
               flush=True)
     if a.out:
         with open(a.out, "w", encoding="utf-8") as f:
-            json.dump({"seed": a.seed, "readers": a.readers, "duration_s": a.duration, "nk": nk, "rows": rows}, f,
+            json.dump({"seed": a.seed, "readers": a.readers, "duration_s": a.duration, "nk": nk,
+                       "calibration_table": not a.no_table, "rows": rows}, f,
                       indent=1)
     return 0
 
