@@ -94,6 +94,8 @@ LAWS = [
      ["test_calibration_table_maps_each_bench_reading_onto_its_load"]),
     ("bench creep reading", "ebraille_sim/estimation/calibration.py", "bench_creep_per_decade",
      ["test_bench_creep_per_decade_recovers_the_units_creep_law"]),
+    ("bench loop reading", "ebraille_sim/estimation/calibration.py", "bench_hysteresis_fraction",
+     ["test_bench_loop_less_the_bench_creep_is_the_units_play_loop"]),
     ("push force bound", "ebraille_sim/physics/limits.py", "push_force_bound_n",
      ["test_push_force_bound_is_eta_km_n_over_r_less_friction_plus_weight"]),
     ("current for a push force", "ebraille_sim/physics/limits.py", "current_for_push_force_a",

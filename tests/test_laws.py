@@ -1047,3 +1047,20 @@ def test_bench_creep_per_decade_recovers_the_units_creep_law():
         assert bench_creep_per_decade(quiet) == pytest.approx(per_decade, rel=1e-3)
         noisy = DeviceParams(fsr=dataclasses.replace(FSRS["nominal"], creep_per_decade=per_decade))
         assert bench_creep_per_decade(noisy, load_error=0.02) == pytest.approx(per_decade, abs=1e-3)
+
+
+def test_bench_loop_less_the_bench_creep_is_the_units_play_loop():
+    """The bench's loop of a unit (1 N up and down a 0-2-0 N cycle in 1 s legs, creep included)
+    less the share its own creep law gives in that cycle is the unit's rate-independent loop
+    (``measured_hysteresis_fraction``, the creep-free check) to 3 %, for units with little and
+    much creep and loop; the loop with the creep in it is larger than the play part by the
+    creep's share."""
+    from ebraille_sim.estimation.calibration import bench_hysteresis_fraction, measured_hysteresis_fraction
+    for h, c in ((0.05, 0.01), (0.10, 0.0275), (0.15, 0.05), (0.15, 0.01)):
+        unit = dataclasses.replace(FSRS["nominal"], hysteresis_fraction=h, creep_per_decade=c)
+        bench = bench_hysteresis_fraction(DeviceParams(fsr=unit))
+        play = fsr.play_loop_fraction(dataclasses.replace(FSRS["nominal"], hysteresis_fraction=bench,
+                                                          creep_per_decade=c))
+        truth = measured_hysteresis_fraction(unit)
+        assert play == pytest.approx(truth, rel=0.03)
+        assert bench > truth + 0.5 * fsr.creep_loop_fraction(unit)

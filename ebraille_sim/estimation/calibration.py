@@ -470,16 +470,37 @@ def bench_creep_per_decade(device: DeviceParams, load_n: float = 1.0, load_error
     return float(min(max(per_decade, 0.0), 0.2))
 
 
+LOOP_FORCE_N, LOOP_PEAK_N, LOOP_RAMP_S = 1.0, 2.0, 1.0
+"""The bench's load cycle for the unit's hysteresis: 0 to 2 N and back in 1 s legs, the film's
+resistance read at 1 N on the way up and on the way down (the datasheet's cycle, 1 kg in 2 kg in
+1 s legs, scaled to the reading range), N, N, s."""
+
+
+def bench_hysteresis_fraction(device: DeviceParams) -> float:
+    """The unit's loop ``(R_F+ - R_F-)/R_F+`` at 1 N as the bench measures it: the cycle of
+    :data:`LOOP_FORCE_N`, :data:`LOOP_PEAK_N`, :data:`LOOP_RAMP_S` on a recovered film, sampled at
+    1 kHz (:func:`ebraille_sim.physics.fsr.datasheet_hysteresis`, the film's own laws, its creep
+    included, as the bench's fixture meets them).  The firmware keeps this number, creep and all:
+    it leaves the play operators the part the bench's creep (:func:`bench_creep_per_decade`) does
+    not explain (:func:`ebraille_sim.physics.fsr.play_loop_fraction` of the nominal film with that
+    creep).  Single conversions on the ramps read the resistance to about 0.1 %, 1 % of the loop:
+    left out."""
+    from ebraille_sim.physics.fsr import datasheet_hysteresis
+    return float(datasheet_hysteresis(device.fsr, ramp_s=LOOP_RAMP_S, force_n=LOOP_FORCE_N,   # plant truth (bench)
+                                      peak_n=LOOP_PEAK_N))
+
+
 def with_calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=None) -> DeviceParams:
-    """``device`` with its estimator's calibration table (:func:`calibration_table`) and the creep
-    per decade the table's 1 N holds measure (:func:`bench_creep_per_decade`, for the creep
-    compensation) stored; without a table (the readings do not rise with the load) the creep
-    alone."""
+    """``device`` with what the unit's bench measures stored in its estimator: the calibration
+    table (:func:`calibration_table`), the creep per decade the table's 1 N holds give
+    (:func:`bench_creep_per_decade`, for the creep compensation) and the unit's loop on the bench's
+    load cycle (:func:`bench_hysteresis_fraction`, for the hysteresis compensation); without a
+    table (the readings do not rise with the load) the creep and the loop alone."""
     errors = (0.0,) * len(loads_n) if load_errors is None else tuple(load_errors)
     one = min(range(len(loads_n)), key=lambda j: abs(loads_n[j] - 1.0))
     creep = bench_creep_per_decade(device, loads_n[one], errors[one] if len(errors) == len(loads_n) else 0.0)
     table = calibration_table(device, loads_n, load_errors)
-    fields = {"creep_per_decade": creep}
+    fields = {"creep_per_decade": creep, "hysteresis_fraction": bench_hysteresis_fraction(device)}
     if table is not None:
         fields.update(calibration_loads_n=table[0], calibration_readings_n=table[1])
     return replace_fields(device, estimator=replace_fields(device.estimator, **fields))

@@ -425,12 +425,14 @@ def play_loop_fraction(fsr) -> float:
     return max(0.0, 1.0 - (1.0 - fsr.hysteresis_fraction) / (1.0 - creep_loop_fraction(fsr)))
 
 
-def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: float = 1e-3) -> float:
-    """``(R_F+ - R_F-)/R_F+`` at :data:`HYSTERESIS_TEST_FORCE_N`, measured the datasheet's way on a
-    recovered film: the force rises linearly to :data:`HYSTERESIS_TEST_PEAK_N` in ``ramp_s`` and
-    falls back in as long, sampled every ``dt_s`` through the plant's own laws (mechanical lag,
-    :func:`hysteresis`, :func:`creep_force`, :func:`conductance_s`); the stand-off path is left out
-    and the resistances at the force are interpolated between samples."""
+def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: float = 1e-3,
+                         force_n: float = HYSTERESIS_TEST_FORCE_N, peak_n: float = HYSTERESIS_TEST_PEAK_N) -> float:
+    """``(R_F+ - R_F-)/R_F+`` at ``force_n`` (default :data:`HYSTERESIS_TEST_FORCE_N`), measured the
+    datasheet's way on a recovered film: the force rises linearly to ``peak_n`` (default
+    :data:`HYSTERESIS_TEST_PEAK_N`) in ``ramp_s`` and falls back in as long, sampled every ``dt_s``
+    through the plant's own laws (mechanical lag, :func:`hysteresis`, :func:`creep_force`,
+    :func:`conductance_s`); the stand-off path is left out and the resistances at the force are
+    interpolated between samples."""
     widths, weights = play_widths(fsr)
     p = np.array(list(widths) + list(weights)
                  + [creep_decay(dt_s, tau) for tau in creep_taus_s(fsr.creep_tau_min_s, fsr.creep_tau_max_s)])
@@ -439,8 +441,7 @@ def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: floa
     w = creep_term_weight(fsr.creep_per_decade, fsr.creep_tau_min_s, fsr.creep_tau_max_s)
     a_lag = lag_alpha(dt_s, fsr.mechanical_lag_s)
     n = int(round(ramp_s / dt_s))
-    force = np.concatenate([np.linspace(0.0, HYSTERESIS_TEST_PEAK_N, n + 1), np.linspace(HYSTERESIS_TEST_PEAK_N, 0.0,
-                                                                                       n + 1)[1:]])
+    force = np.concatenate([np.linspace(0.0, peak_n, n + 1), np.linspace(peak_n, 0.0, n + 1)[1:]])
     f_lag = 0.0
     res = np.empty(force.size)
     lagged = np.empty(force.size)
@@ -452,8 +453,8 @@ def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: floa
                                      fsr.turn_on_steepness)
         lagged[i] = f_lag
     peak = int(np.argmax(lagged))
-    r_up = np.interp(HYSTERESIS_TEST_FORCE_N, lagged[:peak + 1], res[:peak + 1])
-    r_dn = np.interp(HYSTERESIS_TEST_FORCE_N, lagged[peak:][::-1], res[peak:][::-1])
+    r_up = np.interp(force_n, lagged[:peak + 1], res[:peak + 1])
+    r_dn = np.interp(force_n, lagged[peak:][::-1], res[peak:][::-1])
     return float(1.0 - r_dn / r_up)
 
 

@@ -624,7 +624,9 @@ class EstimatorParams(_Checked):
                                            "let-down to 1 N, estimation.calibration."
                                            "measured_hysteresis_fraction, its rate-independent part); 0.10 is "
                                            "the datasheet's nominal, creep included (the part left to the "
-                                           "play operators by the nominal creep law is inverted)")
+                                           "play operators by the nominal creep law, with creep_per_decade when "
+                                           "set, is inverted); a drawn unit's bench stores its own "
+                                           "(estimation.calibration.bench_hysteresis_fraction)")
     hysteresis_deadband_lsb: float = _nn(1.5, "LSB", "[E] after a 5-sample running median, changes of the "
                                          "ADC voltage up to this many counts are taken as noise by the "
                                          "hysteresis compensation (the median removes single noisy samples; "

@@ -283,15 +283,18 @@ def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr, sensor_rate_hz
     """The estimator's hysteresis compensation: on/off; play operators of the nominal FSR's
     exponent (:data:`~ebraille_sim.estimation.firmware.FIRMWARE_FSR`, whose resistance at 1 N is packed too and whose exponent and
     stand-off are packed with the creep compensation) with the rate-independent part of the loop
-    the estimator was given (a datasheet loop, creep included: its play part by the nominal creep
-    law, :func:`~ebraille_sim.physics.fsr.play_loop_fraction`), or, when it was given none, the
+    the estimator was given (a datasheet or bench loop, creep included: its play part by the nominal creep
+    law with the bench's creep per decade when the estimator carries one,
+    :func:`~ebraille_sim.physics.fsr.play_loop_fraction`), or, when it was given none, the
     unit's rate-independent loop as measured at assembly
     (:func:`ebraille_sim.estimation.calibration.measured_hysteresis_fraction`); the noise
     deadband, the turn test's threshold and following deadband in volts and its average's weight
     per sensor sample.  Given the loop, the slots depend only on the estimator, the ADC's LSB and
     the sensor rate: they are computed once per combination."""
     if e.hysteresis_fraction is not None:
-        h = play_loop_fraction(dataclasses.replace(FIRMWARE_FSR, hysteresis_fraction=e.hysteresis_fraction))
+        creep = FIRMWARE_FSR.creep_per_decade if e.creep_per_decade is None else e.creep_per_decade
+        h = play_loop_fraction(dataclasses.replace(FIRMWARE_FSR, hysteresis_fraction=e.hysteresis_fraction,
+                                                   creep_per_decade=creep))
     else:
         h = measured_hysteresis_fraction(fsr) if e.hysteresis_compensation else play_loop_fraction(FIRMWARE_FSR)
     slots, values = _hysteresis_compensation_slots(e, float(circuit.adc_lsb_v), h, sensor_rate_hz)
