@@ -81,10 +81,10 @@ def test_drawn_units_follow_the_scenario_calibration():
 
 
 def test_drawn_units_read_the_reading_range_through_their_calibration_table():
-    """Each drawn unit's bench stores its table (0.5, 1, 1.5, 2 N, three presses each) and its
-    creep; through the table the steady reading of a press held 20 s is within 5 % of the force
-    from 0.5 to 2 N on every one of 20 units (the loads' 2 % and the mean scatter of three presses
-    remain: 4.2 % on the worst unit at 2 N),
+    """Each drawn unit's bench stores its table (0.5, 1, 1.5, 2 N, five presses each), its creep
+    and its loop; through the table the steady reading of a press held 20 s is within 5 % of the force
+    from 0.5 to 2 N on every one of 20 units (the loads' 2 % and the mean scatter of five presses
+    remain),
     where the divider's one-point calibration leaves units 6 % and more off at 0.5 or 2 N (the
     units whose exponent is far from the model's).  The table changes no other draw: the divider's
     R2 and the units are the same."""

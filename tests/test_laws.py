@@ -1064,3 +1064,4 @@ def test_bench_loop_less_the_bench_creep_is_the_units_play_loop():
         truth = measured_hysteresis_fraction(unit)
         assert play == pytest.approx(truth, rel=0.03)
         assert bench > truth + 0.5 * fsr.creep_loop_fraction(unit)
+

@@ -360,9 +360,9 @@ TABLE_LOADS_N = (0.5, 1.0, 1.5, 2.0)
 """Known loads of the calibration table, N [E]: the reading range of the paper's tactile forces
 (0.5-2 N) in four weights, the divider's own 1 N among them."""
 
-TABLE_PRESSES = 3
+TABLE_PRESSES = 5
 """Presses of each table load, averaged [E]: the film's press-to-press repeatability (2 %) is a
-new draw at every press, so the mean of three halves its variance and more."""
+new draw at every press, so the mean of five has a fifth of its variance."""
 
 TABLE_HOLD_S = 20.0
 """Hold of every table press before the reading, s [E]: that of the divider's calibration (the
@@ -395,7 +395,8 @@ def table_reading_n(model, force_n: float, fsr, circuit, hold_s: float, press_z:
     return float(model.steady_state(u))
 
 
-def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=None) -> tuple | None:
+def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=None,
+                      anchor_n: float | None = 1.0) -> tuple | None:
     """The bench's calibration table of ``device`` (its divider already set): ``(loads, readings)``,
     or None when the readings do not rise with the load (no table can be stored).
 
@@ -407,10 +408,15 @@ def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=N
     scatter and each reading its own conversion noise from the unit's seed
     (:func:`_fsr_unit_seed`).  Nothing of the unit but its readings reaches the table.
 
+    With ``anchor_n`` (default 1 N, the divider's load) the readings are scaled so that the load
+    nearest it reads itself: the divider's calibration keeps the level it set there and the table
+    corrects the shape (the readings' ratios), so the presses' scatter of that one load does not
+    move the level of every force.  None keeps the readings as read.
+
     >>> from ebraille_sim.physics.params import DeviceParams
     >>> loads, reads = calibration_table(calibrate_device(DeviceParams()))
-    >>> loads, [round(r, 2) for r in reads]
-    ((0.5, 1.0, 1.5, 2.0), [0.57, 0.99, 1.44, 2.0])
+    >>> loads, [round(r, 3) for r in reads]
+    ((0.5, 1.0, 1.5, 2.0), [0.571, 1.0, 1.453, 1.996])
     """
     errors = (0.0,) * len(loads_n) if load_errors is None else tuple(load_errors)
     if len(errors) != len(loads_n):
@@ -427,7 +433,11 @@ def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=N
         readings.append(float(np.mean(presses)))
     if not (readings[0] > 0.0 and all(a < b for a, b in zip(readings, readings[1:]))):
         return None
-    return tuple(float(x) for x in loads_n), tuple(readings)
+    if anchor_n is not None:
+        one = min(range(len(loads_n)), key=lambda j: abs(loads_n[j] - anchor_n))
+        level = loads_n[one] / readings[one]
+        readings = [r * level for r in readings]
+    return tuple(float(x) for x in loads_n), tuple(float(r) for r in readings)
 
 
 CREEP_READ_S = (2.0, 20.0)
@@ -486,21 +496,22 @@ def bench_hysteresis_fraction(device: DeviceParams) -> float:
     creep).  Single conversions on the ramps read the resistance to about 0.1 %, 1 % of the loop:
     left out."""
     from ebraille_sim.physics.fsr import datasheet_hysteresis
-    return float(datasheet_hysteresis(device.fsr, ramp_s=LOOP_RAMP_S, force_n=LOOP_FORCE_N,   # plant truth (bench)
-                                      peak_n=LOOP_PEAK_N))
+    film = device.fsr                                                  # plant truth (the bench's fixture)
+    return float(datasheet_hysteresis(film, ramp_s=LOOP_RAMP_S, force_n=LOOP_FORCE_N, peak_n=LOOP_PEAK_N))
 
 
 def with_calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=None) -> DeviceParams:
     """``device`` with what the unit's bench measures stored in its estimator: the calibration
     table (:func:`calibration_table`), the creep per decade the table's 1 N holds give
-    (:func:`bench_creep_per_decade`, for the creep compensation) and the unit's loop on the bench's
+    (:func:`bench_creep_per_decade`, for the creep and hysteresis compensations) and the unit's loop on the bench's
     load cycle (:func:`bench_hysteresis_fraction`, for the hysteresis compensation); without a
     table (the readings do not rise with the load) the creep and the loop alone."""
     errors = (0.0,) * len(loads_n) if load_errors is None else tuple(load_errors)
     one = min(range(len(loads_n)), key=lambda j: abs(loads_n[j] - 1.0))
-    creep = bench_creep_per_decade(device, loads_n[one], errors[one] if len(errors) == len(loads_n) else 0.0)
+    creep = bench_creep_per_decade(device, loads_n[one], errors[one])
     table = calibration_table(device, loads_n, load_errors)
-    fields = {"creep_per_decade": creep, "hysteresis_fraction": bench_hysteresis_fraction(device)}
+    fields = {"creep_per_decade": creep, "hysteresis_fraction": bench_hysteresis_fraction(device),
+              "calibration_loads_n": (), "calibration_readings_n": ()}
     if table is not None:
         fields.update(calibration_loads_n=table[0], calibration_readings_n=table[1])
     return replace_fields(device, estimator=replace_fields(device.estimator, **fields))

@@ -23,6 +23,7 @@ Each function advances its own state slots (declared here, composed by
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from ebraille_sim.base.compiled import njit
@@ -31,7 +32,7 @@ from ebraille_sim.physics.fsr import (F_EPS_N, N_CREEP, N_PLAYS, creep_force, di
 from ebraille_sim.physics.params import CALIBRATION_TABLE_MAX_POINTS, FSRS
 
 __all__ = [
-    "FIRMWARE_FSR", "HYSTERESIS_MEDIAN", "biquad_step", "tared_v", "creep_compensated_v", "running_median_v",
+    "FIRMWARE_FSR", "firmware_fsr", "HYSTERESIS_MEDIAN", "biquad_step", "tared_v", "creep_compensated_v", "running_median_v",
     "turn_tested_v", "hysteresis_compensated_v", "CALIBRATION_TABLE_POINTS", "table_calibrated_n",
 ]
 
@@ -39,6 +40,16 @@ FIRMWARE_FSR = FSRS["nominal"]
 """The FSR model the estimator's creep and hysteresis compensations assume (the firmware does
 not know the individual unit's parameters; the hysteresis compensation takes the unit's
 measured loop width, :mod:`ebraille_sim.plant.lumped`)."""
+
+def firmware_fsr(estimator):
+    """The film the firmware's creep and hysteresis compensations assume: :data:`FIRMWARE_FSR`,
+    with the creep per decade the unit's bench measured where the estimator carries one
+    (:class:`~ebraille_sim.physics.params.EstimatorParams` ``creep_per_decade``; None keeps the
+    nominal's)."""
+    if estimator.creep_per_decade is None:
+        return FIRMWARE_FSR
+    return dataclasses.replace(FIRMWARE_FSR, creep_per_decade=estimator.creep_per_decade)
+
 
 ANTIALIAS_SLOTS = ("aa_z1", "aa_z2")
 """State slots of the anti-alias biquad (direct form II transposed)."""

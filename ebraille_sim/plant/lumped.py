@@ -29,7 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ebraille_sim.estimation.blockmodels import pwl_eval
-from ebraille_sim.estimation.firmware import CALIBRATION_TABLE_POINTS, FIRMWARE_FSR, HYSTERESIS_MEDIAN, table_calibrated_n
+from ebraille_sim.estimation.firmware import (CALIBRATION_TABLE_POINTS, FIRMWARE_FSR, HYSTERESIS_MEDIAN, firmware_fsr,
+                                              table_calibrated_n)
 from ebraille_sim.estimation.calibration import measured_hysteresis_fraction
 from ebraille_sim.estimation.registry import load_estimator
 from ebraille_sim.physics.drivetrain import (mesh_damping_n_s_per_m, reflected_force_n, reflected_inertia_kg,
@@ -254,7 +255,8 @@ def _pack_calibration_table(p: np.ndarray, e) -> None:
 def _pack_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
     """The estimator's creep compensation: on/off, and the creep law of the nominal FSR
     (:data:`~ebraille_sim.estimation.firmware.FIRMWARE_FSR`, the nominal unit: the firmware does not know the individual sensor's parameters)
-    with the creep per decade the bench measured when the estimator carries one, at the sensor rate, with the creep gain of the calibration hold as its reference.
+    with the creep per decade the bench measured when the estimator carries one
+    (:func:`~ebraille_sim.estimation.firmware.firmware_fsr`), at the sensor rate, with the creep gain of the calibration hold as its reference.
     Depends only on the estimator and the sensor period: the slots are computed once per pair."""
     slots, values = _creep_compensation_slots(e, float(dt_sensor_s))
     p[slots] = values
@@ -266,8 +268,7 @@ def _creep_compensation_slots(e, dt_sensor_s: float) -> tuple[np.ndarray, np.nda
 
 
 def _fill_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
-    nominal = FIRMWARE_FSR if e.creep_per_decade is None else dataclasses.replace(
-        FIRMWARE_FSR, creep_per_decade=e.creep_per_decade)
+    nominal = firmware_fsr(e)
     p[P.est_creep_comp] = 1.0 if e.creep_compensation else 0.0
     p[P.comp_creep_weight] = creep_term_weight(nominal.creep_per_decade, nominal.creep_tau_min_s,
                                                nominal.creep_tau_max_s)
@@ -292,9 +293,7 @@ def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr, sensor_rate_hz
     per sensor sample.  Given the loop, the slots depend only on the estimator, the ADC's LSB and
     the sensor rate: they are computed once per combination."""
     if e.hysteresis_fraction is not None:
-        creep = FIRMWARE_FSR.creep_per_decade if e.creep_per_decade is None else e.creep_per_decade
-        h = play_loop_fraction(dataclasses.replace(FIRMWARE_FSR, hysteresis_fraction=e.hysteresis_fraction,
-                                                   creep_per_decade=creep))
+        h = play_loop_fraction(dataclasses.replace(firmware_fsr(e), hysteresis_fraction=e.hysteresis_fraction))
     else:
         h = measured_hysteresis_fraction(fsr) if e.hysteresis_compensation else play_loop_fraction(FIRMWARE_FSR)
     slots, values = _hysteresis_compensation_slots(e, float(circuit.adc_lsb_v), h, sensor_rate_hz)
@@ -307,7 +306,7 @@ def _hysteresis_compensation_slots(e, adc_lsb_v: float, h, sensor_rate_hz: float
 
 
 def _fill_hysteresis_compensation(p: np.ndarray, e, adc_lsb_v: float, h, sensor_rate_hz: float) -> None:
-    nominal = FIRMWARE_FSR
+    nominal = firmware_fsr(e)
     p[P.est_hyst_comp] = 1.0 if e.hysteresis_compensation else 0.0
     widths, weights = play_loop_widths(h, nominal.exponent)
     for j in range(N_PLAYS):

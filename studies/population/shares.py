@@ -35,7 +35,7 @@ def cvar_low(x, alpha=0.1):
 
 
 def shares(scenario: str, readers: int, seed: int, duration_s: float, controller=None, base=None,
-           nk: int | None = None, table: bool = True) -> dict:
+           nk: int | None = None, table: bool = True, bound: bool = False) -> dict:
     """One row: readers drawn around ``base`` (default the scenario's device); with ``nk`` the
     estimator runs with that reading of the paper's input delay (samples, 0 or 1)."""
     spec = load_scenario(scenario)
@@ -55,6 +55,15 @@ def shares(scenario: str, readers: int, seed: int, duration_s: float, controller
     res = run_batch(runs, keep_traces=False)
     ok = [r for r in res if not isinstance(r, Exception)]
     ib = np.array([r.metrics["in_band_fraction"] for r in ok])
+    gap = {}
+    if bound:
+        # the actuator bound (the true force at the control rate) on the same readers and seeds
+        ref = run_batch([{**r, "controller": "actuator_bound"} for r in runs], keep_traces=False)
+        pairs = [(a.metrics["in_band_fraction"], b.metrics["in_band_fraction"]) for a, b in zip(res, ref)
+                 if not isinstance(a, Exception) and not isinstance(b, Exception)]
+        d = np.array([b - a for a, b in pairs])
+        gap = {"bound_median_in_band": float(np.median([b for _, b in pairs])),
+               "share_within_0.05_of_bound": float(np.mean(d <= 0.05)), "bound_gap_p90": float(np.percentile(d, 90))}
     faults = collections.Counter((r.supervisor or {}).get("fault") for r in ok if (r.supervisor or {}).get("fault"))
     worst = sorted(range(len(ok)), key=lambda i: ib[i])[:3]
     return {"scenario": scenario, "controller": controller or spec.controller.name, "readers": readers,
@@ -62,7 +71,8 @@ def shares(scenario: str, readers: int, seed: int, duration_s: float, controller
             "runs": len(ok), "errors": [str(r) for r in res if isinstance(r, Exception)][:3],
             "share_in_band_0.9": float(np.mean(ib >= 0.9)), "median_in_band": float(np.median(ib)),
             "cvar10_in_band": cvar_low(ib), "peak_max_n": float(max(r.metrics["peak_force_n"] for r in ok)),
-            "latched": dict(faults), "worst_readers": [int(i) for i in worst]}
+            "latched": dict(faults), "worst_readers": [int(i) for i in worst], **gap,
+            "in_band": [round(float(x), 4) for x in ib]}
 
 
 def main(argv=None) -> int:
@@ -77,6 +87,8 @@ def main(argv=None) -> int:
                          "(MATLAB's convention); default: the scenario's estimator as it is")
     ap.add_argument("--no-table", action="store_true",
                     help="drawn units with the divider's one-point calibration only (no calibration table)")
+    ap.add_argument("--bound", action="store_true",
+                    help="also run the actuator bound on the same readers: the share within 0.05 of it")
     ap.add_argument("--out", default=None, help="write the rows as JSON here")
     a = ap.parse_args(argv)
     nk = None
@@ -89,14 +101,15 @@ def main(argv=None) -> int:
     rows = []
     for sc in a.scenarios:
         try:
-            r = shares(sc, a.readers, a.seed, a.duration, a.controller, nk=nk, table=not a.no_table)
+            r = shares(sc, a.readers, a.seed, a.duration, a.controller, nk=nk, table=not a.no_table, bound=a.bound)
         except ValueError as exc:
             print(f"error: {sc}: {exc}", file=sys.stderr)
             return 2
         rows.append(r)
         print(f"{sc:24s} {r['controller']:16s} share>=0.9 {r['share_in_band_0.9']:.3f}  median {r['median_in_band']:.3f}"
-              f"  CVaR10 {r['cvar10_in_band']:.3f}  peak max {r['peak_max_n']:.2f} N  latched {r['latched']}",
-              flush=True)
+              f"  CVaR10 {r['cvar10_in_band']:.3f}  peak max {r['peak_max_n']:.2f} N  latched {r['latched']}"
+              + (f"  within 0.05 of the bound {r['share_within_0.05_of_bound']:.3f} (bound median "
+                 f"{r['bound_median_in_band']:.3f})" if a.bound else ""), flush=True)
     if a.out:
         with open(a.out, "w", encoding="utf-8") as f:
             json.dump({"seed": a.seed, "readers": a.readers, "duration_s": a.duration, "nk": nk,
