@@ -227,7 +227,9 @@ class DeviceSpec:
     current_sense_overrides: dict | None = _key(None, "-", "overrides", target=_params.CurrentSenseParams,
                                                 doc="Field overrides of the motor current chain.")
     calibrate: bool = _key(True, "-", "bool", "true: R2 set on the bench for this FSR unit and estimator (presses "
-                           "to 0.5-2 N held 5-60 s, least squares; drawn units are trimmed at 1 N held 20 s); "
+                           "to 0.5-2 N held 5-60 s, least squares; drawn units are trimmed at 1 N held 20 s and "
+                           "their bench stores a calibration table at 0.5-2 N, their creep and their loop, "
+                           "estimation.calibration.with_calibration_table); "
                            "false: a miscalibrated unit on purpose, with the circuit's R2",
                            doc="Calibrate the divider's R2 for this FSR unit and estimator.")
 
