@@ -135,7 +135,7 @@ def test_metadata_for_a_plain_sb3_zip_and_the_missing_file_error(tmp_path):
     assert meta["env"] == venv.config.policy_metadata() and meta["env"]["control_rate_hz"] == 500.0
     assert policy_metadata("SAC", {"control_rate_hz": 500.0})["env"] == meta["env"]   # kwargs give the same
     assert json.loads((tmp_path / "ppo.json").read_text())["training"] == {
-        "source": "stable-baselines3", "estimator": dataclasses.asdict(EstimatorParams())}
+        "source": "stable-baselines3", "estimator": json.loads(json.dumps(dataclasses.asdict(EstimatorParams())))}
     with pytest.raises(ValueError, match="algorithm must be one of ppo, sac"):
         policy_metadata("dqn", venv)
     with pytest.raises(ValueError, match="cannot find the env configuration"):
