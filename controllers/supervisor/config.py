@@ -461,19 +461,12 @@ class SupervisorConfig(DriveEnvelope, SupervisorPolicy):
         :attr:`setpoint_max_n` on the design reader (eq. 1-3 of docs/safety.md; bisection to 1 um/s).
         Blind (an open sensor reads no contact) the re-approach presses no harder than the loop may
         ask; the current envelope bounds it on top."""
-        def excess(v):
-            e = limits.impact_energy_j(v, self.pinion_mass_kg, self.board_mass_kg, self.gear_efficiency)
-            room = limits.drive_force_for_impact_n(e, self.setpoint_max_n, self.reader_b_n_per_m,
-                                                   self.reader_m_per_m)
-            return self.push_force_n(self._reapproach_command_v(v) / self.motor_resistance_ohm) - room
-        lo, hi = 0.0, self.speed_limit_m_per_s
-        while hi - lo > 1e-6:
-            mid = 0.5 * (lo + hi)
-            if excess(mid) <= 0.0:
-                lo = mid
-            else:
-                hi = mid
-        return lo
+        from controllers.supervisor.envelope import _envelope_memo, reapproach_speed_m_per_s
+        return reapproach_speed_m_per_s(self.speed_limit_m_per_s, self.pinion_mass_kg, self.board_mass_kg,
+                                        self.gear_efficiency, self.setpoint_max_n, self.reader_b_n_per_m,
+                                        self.reader_m_per_m, self.back_emf_v_s_per_m, self.motor_resistance_ohm,
+                                        self.friction_current_a, self.push_force_per_a_n, self.weight_n,
+                                        _envelope_memo(self.setpoint_max_n, self.reader_b_n_per_m, self.reader_m_per_m))
 
     def _reapproach_command_v(self, speed_m_per_s: float) -> float:
         return self.back_emf_v_s_per_m * speed_m_per_s + self.motor_resistance_ohm * self.friction_current_a
