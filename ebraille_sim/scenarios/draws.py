@@ -1,0 +1,200 @@
+"""The random numbers of a drawn device, a drawn episode and a run's inputs, in compiled calls.
+
+A seed (any NumPy ``SeedSequence`` or :class:`~ebraille_sim.base.seeds.SeedNode`) gives one
+64-bit key, its first state word (:func:`key_of`); every random number drawn from it is a
+fixed function of ``(key, stream, index)`` (SplitMix64 hashing, the counter-based scheme of
+the sensor noise, :mod:`ebraille_sim.physics.noise`): no generator is made and no draw
+depends on how many came before it in another stream.  One call of :func:`draw_numbers`
+draws all of them:
+
+==========  ======================================================  ===================
+stream      numbers                                                 used by
+==========  ======================================================  ===================
+reader      3 uniforms: pulp b, m, relaxation c0                    the device draw
+FSR unit    1 standard normal (k), 3 uniforms (n, hysteresis,       the device draw
+            creep)
+motor       2 standard normals (R, kM)                              the device draw
+drive       3 uniforms: gear efficiency, guide friction, backlash   the device draw
+board       4 uniforms: shunt, gain, offset, calibration load       the device draw
+episode     the run seed (52 bits), then the episode's uniforms     the episode draw
+==========  ======================================================  ===================
+
+:func:`~ebraille_sim.scenarios.population.sample_device` (a population sweep's reader) and
+:meth:`~ebraille_sim.scenarios.episodes.EpisodeDistribution.draw` (an env episode, and a
+scenario run of its spec) both draw through :func:`device_numbers` and
+:func:`episode_numbers`: the reader of a seed is the same device in a sweep and in an episode
+of that seed.  Uniforms lie in [0, 1) (53 bits); a standard normal is Box-Muller of two
+uniforms of its stream.
+
+A run's seed (the spec's ``seed``, an integer) gives its key the same way (:func:`run_numbers`,
+one compiled call): the sensor noise's seed (stream ``sensor``) and the states of the two NumPy
+generators (PCG64) that draw the reading's dwell jitter (stream ``reading``) and the
+disturbances (stream ``inputs``; each disturbance kind draws from a child generator whose
+state is a hash of that generator's state and the kind's index, :func:`child_generator`).
+:func:`ebraille_sim.scenarios.inputs.build_run_inputs` makes them for the scenario runner and
+the env alike.
+
+Examples
+--------
+>>> from ebraille_sim.base.seeds import SeedNode
+>>> u, z = device_numbers(SeedNode(7))
+>>> len(u), len(z), all(0.0 <= x < 1.0 for x in u)
+(13, 3, True)
+>>> device_numbers(SeedNode(7)) == (u, z)
+True
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ebraille_sim.base.compiled import njit
+from ebraille_sim.physics.noise import splitmix64
+
+__all__ = ["DEVICE_NUMBERS", "RUN_STREAMS", "STREAMS", "child_generator", "device_numbers", "draw_numbers",
+           "episode_numbers", "generator_of", "key_of", "run_numbers"]
+
+STREAMS = ("reader", "fsr", "motor", "drive", "board", "episode")
+"""The streams of a seed's key, in the order of their numbers (module table)."""
+(_READER, _FSR, _MOTOR, _DRIVE, _BOARD, _EPISODE) = range(len(STREAMS))
+RUN_STREAMS = ("sensor", "reading", "inputs")
+"""The streams of a run seed's key (module docstring)."""
+_SENSOR, _READING, _INPUTS = range(len(STREAMS), len(STREAMS) + len(RUN_STREAMS))
+_RUN_KEY = np.uint64(0x5851F42D4C957F2D)
+_M64 = (1 << 64) - 1
+
+DEVICE_NUMBERS = 16
+"""Numbers of a device at the start of :func:`draw_numbers`' output: its 13 uniforms (reader,
+FSR unit, drive train, board, in the order of
+:data:`~ebraille_sim.scenarios.population.DEVICE_UNIFORMS` and
+:data:`~ebraille_sim.scenarios.population.BOARD_UNIFORMS`), then its 3 normals (FSR k,
+motor R, motor kM)."""
+
+_STREAM_MULT = np.uint64(0x94D049BB133111EB)
+_INDEX_MULT = np.uint64(0x9E3779B97F4A7C15)
+_INV53 = 1.0 / 9007199254740992.0
+
+
+@njit(cache=True, inline="always")
+def _word(key, stream, index):
+    """The 64-bit word ``index`` of ``stream`` of ``key``."""
+    base = splitmix64(key ^ (np.uint64(stream + 1) * _STREAM_MULT))
+    return splitmix64(base + np.uint64(index) * _INDEX_MULT)
+
+
+@njit(cache=True, inline="always")
+def _uniform(key, stream, index):
+    """Uniform on [0, 1): the top 53 bits of word ``index``."""
+    return float(_word(key, stream, index) >> np.uint64(11)) * _INV53
+
+
+@njit(cache=True, inline="always")
+def _normal(key, stream, index):
+    """Standard normal from words ``index`` and ``index + 1`` (Box-Muller)."""
+    u1 = (float(_word(key, stream, index) >> np.uint64(11)) + 1.0) * _INV53       # (0, 1]
+    u2 = float(_word(key, stream, index + 1) >> np.uint64(11)) * _INV53
+    return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)
+
+
+@njit(cache=True)
+def draw_numbers(key, n_episode_uniforms, out):
+    """Every number of the key ``key[0]`` (a uint64 array, :func:`key_of`) into ``out`` (float64, length ``DEVICE_NUMBERS + 1 +
+    n_episode_uniforms``): the device's 13 uniforms and 3 normals (:data:`DEVICE_NUMBERS`),
+    the run seed (an integer below 2**52, exact as a float), the episode's uniforms."""
+    k = key[0]
+    for i in range(3):                                      # reader: pulp b, m, c0
+        out[i] = _uniform(k, _READER, i)
+    for i in range(3):                                      # FSR unit: n, hysteresis, creep (after k's normal)
+        out[3 + i] = _uniform(k, _FSR, 2 + i)
+    for i in range(3):                                      # drive train: efficiency, guide friction, backlash
+        out[6 + i] = _uniform(k, _DRIVE, i)
+    for i in range(4):                                      # board: shunt, gain, offset, calibration load
+        out[9 + i] = _uniform(k, _BOARD, i)
+    out[13] = _normal(k, _FSR, 0)                           # FSR k
+    out[14] = _normal(k, _MOTOR, 0)                         # motor R
+    out[15] = _normal(k, _MOTOR, 2)                         # motor kM
+    out[16] = float(_word(k, _EPISODE, 0) >> np.uint64(12))
+    for i in range(n_episode_uniforms):
+        out[17 + i] = _uniform(k, _EPISODE, 1 + i)
+
+
+def key_of(seed_sequence) -> np.ndarray:
+    """The 64-bit key of a seed sequence: its first state word (``generate_state(1, uint64)``,
+    an array of one uint64)."""
+    return seed_sequence.generate_state(1, np.uint64)
+
+
+def episode_numbers(seed_sequence, n_episode_uniforms: int) -> tuple[list, list, int, list]:
+    """``(u, z, run_seed, v)`` of a seed in one compiled call: the device's uniforms ``u`` and
+    normals ``z`` (:func:`device_numbers`), the run seed and ``n_episode_uniforms`` uniforms ``v``."""
+    out = np.empty(DEVICE_NUMBERS + 1 + n_episode_uniforms)
+    draw_numbers(key_of(seed_sequence), n_episode_uniforms, out)
+    x = out.tolist()
+    return x[:13], x[13:16], int(x[16]), x[17:]
+
+
+def device_numbers(seed_sequence) -> tuple[list, list]:
+    """The uniforms on [0, 1) and standard normals of the device of a seed (the lists
+    :func:`~ebraille_sim.scenarios.population.device_from_variates` takes)."""
+    u, z, _, _ = episode_numbers(seed_sequence, 0)
+    return u, z
+
+
+@njit(cache=True)
+def _run_words(seed, out):
+    """The run seed's words into ``out`` (uint64, 9): the sensor seed's word, then four words of
+    the reading generator's state and four of the inputs generator's."""
+    k = splitmix64(np.uint64(seed) ^ _RUN_KEY)
+    out[0] = _word(k, _SENSOR, 0) >> np.uint64(12)
+    for i in range(4):
+        out[1 + i] = _word(k, _READING, i)
+        out[5 + i] = _word(k, _INPUTS, i)
+
+
+@njit(cache=True)
+def _child_words(parent, k, out):
+    """Four words of child ``k`` of a generator whose state and increment are the words ``parent``."""
+    key = splitmix64(parent[0] ^ splitmix64(parent[1] ^ splitmix64(parent[2] ^ splitmix64(parent[3]))))
+    for i in range(4):
+        out[i] = _word(key, k, i)
+
+
+_TEMPLATE = np.random.SeedSequence(0)
+"""The seed a PCG64 is made with before its state is set (hashed once, here)."""
+
+
+def generator_of(words) -> np.random.Generator:
+    """A NumPy ``Generator`` (PCG64) whose 128-bit state and increment are the four 64-bit
+    ``words`` (the increment made odd, as PCG64 needs)."""
+    w = [int(x) for x in words]
+    bits = np.random.PCG64(_TEMPLATE)
+    bits.state = {"bit_generator": "PCG64", "state": {"state": (w[0] << 64) | w[1], "inc": (w[2] << 64) | w[3] | 1},
+                  "has_uint32": 0, "uinteger": 0}
+    return np.random.Generator(bits)
+
+
+def run_numbers(seed: int) -> tuple[float, np.ndarray, np.ndarray]:
+    """``(sensor_seed, reading_words, inputs_words)`` of a run seed in one compiled call: the
+    sensor noise's seed (an integer below 2**52 as a float) and the words of the reading's and
+    the inputs' generators (:func:`generator_of`)."""
+    out = np.empty(9, dtype=np.uint64)
+    _run_words(np.uint64(seed), out)
+    return float(out[0]), out[1:5], out[5:9]
+
+
+def child_generator(rng: np.random.Generator, k: int) -> np.random.Generator:
+    """Child ``k`` of the generator ``rng``: a PCG64 whose state is a hash of ``rng``'s state
+    and ``k`` (``rng`` is left as it was); for another bit generator, child ``k`` of its seed
+    sequence (its spawn key extended by ``k``)."""
+    bits = rng.bit_generator
+    st = bits.state
+    if st["bit_generator"] == "PCG64":
+        s, inc = st["state"]["state"], st["state"]["inc"]
+        parent = np.array([s >> 64, s & _M64, inc >> 64, inc & _M64], dtype=np.uint64)
+        out = np.empty(4, dtype=np.uint64)
+        _child_words(parent, k, out)
+        return generator_of(out)
+    from ebraille_sim.base.seeds import child_seed
+    parent = bits.seed_seq
+    return type(rng)(type(bits)(seed=child_seed(parent, parent.n_children_spawned + k)))
