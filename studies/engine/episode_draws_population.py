@@ -29,6 +29,7 @@ tremor and drift RMS, first setpoint, supply) and the sweep's reader parameters.
 
 Run:  python studies/engine/episode_draws_population.py --ref REF_TREE [--episodes 400]
       [--readers 200] [--duration 12] [--jobs 1] [--json FILE]
+"""
 from __future__ import annotations
 
 import argparse
