@@ -5,7 +5,7 @@ import numpy as np
 from scipy import stats
 
 from ebraille_sim.base.seeds import SeedNode
-from ebraille_sim.scenarios.draws import (DEVICE_NUMBERS, child_generator, device_numbers, episode_numbers,
+from ebraille_sim.scenarios.draws import (DEVICE_NUMBERS, StreamSeed, child_generator, device_numbers, episode_numbers,
                                           generator_of, run_numbers)
 
 
@@ -49,14 +49,29 @@ def test_run_streams_are_fixed_functions_of_the_seed_and_differ_between_streams(
     assert a.random(5).tolist() == b.random(5).tolist()
 
 
-def test_children_are_independent_of_each_other_and_leave_the_parent_as_it_was():
+def test_children_are_independent_of_each_other_and_of_the_parents_draws_and_leave_it_as_it_was():
     g = generator_of(run_numbers(5)[2])
     state = g.bit_generator.state
     c0, c1 = child_generator(g, 0), child_generator(g, 1)
     assert g.bit_generator.state == state
     x0, x1 = c0.standard_normal(4000), c1.standard_normal(4000)
+    g.random(7)                                                  # whatever the parent has drawn
     assert child_generator(g, 0).standard_normal(4000).tolist() == x0.tolist()
     assert abs(np.corrcoef(x0, x1)[0, 1]) < 0.06
     philox = child_generator(np.random.Generator(np.random.Philox(3)), 2)   # another bit generator: its seed's child
     want = np.random.Generator(np.random.Philox(np.random.SeedSequence(3, spawn_key=(2,))))
     assert philox.random(3).tolist() == want.random(3).tolist()
+
+
+def test_a_stream_seed_gives_its_words_and_refuses_more():
+    seed = StreamSeed(np.array([1, 2, 3, 2**64 - 1], dtype=np.uint64))
+    assert seed.generate_state(2, np.uint64).tolist() == [1, 2]
+    assert seed.generate_state(8, np.uint32).tolist()[-2:] == [2**32 - 1, 2**32 - 1]
+    a, b = seed.spawn(2)
+    assert a.words.tolist() == seed.child(0).words.tolist() and b.words.tolist() == seed.child(1).words.tolist()
+    try:
+        seed.generate_state(5, np.uint64)
+    except ValueError as exc:
+        assert "holds 4 words" in str(exc)
+    else:
+        raise AssertionError("five words of four were given")

@@ -29,8 +29,8 @@ uniforms of its stream.
 A run's seed (the spec's ``seed``, an integer) gives its key the same way (:func:`run_numbers`,
 one compiled call): the sensor noise's seed (stream ``sensor``) and the states of the two NumPy
 generators (PCG64) that draw the reading's dwell jitter (stream ``reading``) and the
-disturbances (stream ``inputs``; each disturbance kind draws from a child generator whose
-state is a hash of that generator's state and the kind's index, :func:`child_generator`).
+disturbances (stream ``inputs``; each disturbance kind draws from a child generator seeded
+with a hash of that generator's seed and the kind's index, :func:`child_generator`).
 :func:`ebraille_sim.scenarios.inputs.build_run_inputs` makes them for the scenario runner and
 the env alike.
 
@@ -48,11 +48,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numpy.random.bit_generator import ISpawnableSeedSequence
 
 from ebraille_sim.base.compiled import njit
 from ebraille_sim.physics.noise import splitmix64
 
-__all__ = ["DEVICE_NUMBERS", "RUN_STREAMS", "STREAMS", "child_generator", "device_numbers", "draw_numbers",
+__all__ = ["DEVICE_NUMBERS", "RUN_STREAMS", "STREAMS", "StreamSeed", "child_generator", "device_numbers", "draw_numbers",
            "episode_numbers", "generator_of", "key_of", "run_numbers"]
 
 STREAMS = ("reader", "fsr", "motor", "drive", "board", "episode")
@@ -62,7 +63,6 @@ RUN_STREAMS = ("sensor", "reading", "inputs")
 """The streams of a run seed's key (module docstring)."""
 _SENSOR, _READING, _INPUTS = range(len(STREAMS), len(STREAMS) + len(RUN_STREAMS))
 _RUN_KEY = np.uint64(0x5851F42D4C957F2D)
-_M64 = (1 << 64) - 1
 
 DEVICE_NUMBERS = 16
 """Numbers of a device at the start of :func:`draw_numbers`' output: its 13 uniforms (reader,
@@ -160,18 +160,39 @@ def _child_words(parent, k, out):
         out[i] = _word(key, k, i)
 
 
-_TEMPLATE = np.random.SeedSequence(0)
-"""The seed a PCG64 is made with before its state is set (hashed once, here)."""
+class StreamSeed(ISpawnableSeedSequence):
+    """A seed sequence whose state is four given 64-bit words: what a NumPy bit generator made
+    from it (:func:`generator_of`) is seeded with, without hashing; its children
+    (:meth:`spawn`) are hashes of the words and their index (:func:`_child_words`)."""
+
+    __slots__ = ("words", "n_children_spawned")
+
+    def __init__(self, words):
+        self.words = np.ascontiguousarray(words, dtype=np.uint64)
+        self.n_children_spawned = 0
+
+    def generate_state(self, n_words: int, dtype=np.uint32) -> np.ndarray:
+        """The first ``n_words`` words of ``dtype`` (uint64: the words; uint32: their halves)."""
+        w = self.words if np.dtype(dtype) == np.uint64 else self.words.view(np.uint32)
+        if n_words > w.size:
+            raise ValueError(f"a StreamSeed holds {w.size} words of {np.dtype(dtype).name}, {n_words} asked")
+        return w[:n_words].copy()
+
+    def child(self, k: int) -> StreamSeed:
+        """Child ``k`` (independent of how many were spawned)."""
+        out = np.empty(4, dtype=np.uint64)
+        _child_words(self.words, k, out)
+        return StreamSeed(out)
+
+    def spawn(self, n_children: int) -> list:
+        k0 = self.n_children_spawned
+        self.n_children_spawned = k0 + n_children
+        return [self.child(k) for k in range(k0, k0 + n_children)]
 
 
 def generator_of(words) -> np.random.Generator:
-    """A NumPy ``Generator`` (PCG64) whose 128-bit state and increment are the four 64-bit
-    ``words`` (the increment made odd, as PCG64 needs)."""
-    w = [int(x) for x in words]
-    bits = np.random.PCG64(_TEMPLATE)
-    bits.state = {"bit_generator": "PCG64", "state": {"state": (w[0] << 64) | w[1], "inc": (w[2] << 64) | w[3] | 1},
-                  "has_uint32": 0, "uinteger": 0}
-    return np.random.Generator(bits)
+    """A NumPy ``Generator`` (PCG64) seeded with the four 64-bit ``words`` (a :class:`StreamSeed`)."""
+    return np.random.Generator(np.random.PCG64(StreamSeed(words)))
 
 
 def run_numbers(seed: int) -> tuple[float, np.ndarray, np.ndarray]:
@@ -184,17 +205,12 @@ def run_numbers(seed: int) -> tuple[float, np.ndarray, np.ndarray]:
 
 
 def child_generator(rng: np.random.Generator, k: int) -> np.random.Generator:
-    """Child ``k`` of the generator ``rng``: a PCG64 whose state is a hash of ``rng``'s state
-    and ``k`` (``rng`` is left as it was); for another bit generator, child ``k`` of its seed
-    sequence (its spawn key extended by ``k``)."""
+    """Child ``k`` of the generator ``rng``: a generator of the same bit generator seeded with
+    child ``k`` of ``rng``'s seed (:meth:`StreamSeed.child`, or a NumPy seed sequence's child,
+    its spawn key extended by ``k``), whatever ``rng`` has drawn; ``rng`` is left as it was."""
     bits = rng.bit_generator
-    st = bits.state
-    if st["bit_generator"] == "PCG64":
-        s, inc = st["state"]["state"], st["state"]["inc"]
-        parent = np.array([s >> 64, s & _M64, inc >> 64, inc & _M64], dtype=np.uint64)
-        out = np.empty(4, dtype=np.uint64)
-        _child_words(parent, k, out)
-        return generator_of(out)
-    from ebraille_sim.base.seeds import child_seed
     parent = bits.seed_seq
+    if type(parent) is StreamSeed:
+        return type(rng)(type(bits)(parent.child(k)))
+    from ebraille_sim.base.seeds import child_seed
     return type(rng)(type(bits)(seed=child_seed(parent, parent.n_children_spawned + k)))
