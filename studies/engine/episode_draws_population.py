@@ -189,7 +189,7 @@ def main(argv=None) -> int:
     if not a.ref:
         ap.error("--ref is required")
     rows = {}
-    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    here = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     with tempfile.TemporaryDirectory() as tmp:
         for name, tree in (("old", os.path.abspath(a.ref)), ("new", here)):
             path = os.path.join(tmp, f"{name}.json")
