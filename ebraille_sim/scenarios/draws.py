@@ -53,8 +53,8 @@ from numpy.random.bit_generator import ISpawnableSeedSequence
 from ebraille_sim.base.compiled import njit
 from ebraille_sim.physics.noise import splitmix64
 
-__all__ = ["DEVICE_NUMBERS", "RUN_STREAMS", "STREAMS", "StreamSeed", "child_generator", "device_numbers", "draw_numbers",
-           "episode_numbers", "generator_of", "key_of", "run_numbers"]
+__all__ = ["DEVICE_NUMBERS", "RUN_STREAMS", "STREAMS", "StreamSeed", "child_generator", "device_numbers",
+           "draw_numbers", "episode_numbers", "generator_of", "key_of", "run_numbers"]
 
 STREAMS = ("reader", "fsr", "motor", "drive", "board", "episode")
 """The streams of a seed's key, in the order of their numbers (module table)."""
@@ -99,9 +99,10 @@ def _normal(key, stream, index):
 
 @njit(cache=True)
 def draw_numbers(key, n_episode_uniforms, out):
-    """Every number of the key ``key[0]`` (a uint64 array, :func:`key_of`) into ``out`` (float64, length ``DEVICE_NUMBERS + 1 +
-    n_episode_uniforms``): the device's 13 uniforms and 3 normals (:data:`DEVICE_NUMBERS`),
-    the run seed (an integer below 2**52, exact as a float), the episode's uniforms."""
+    """Every number of the key ``key[0]`` (a uint64 array, :func:`key_of`) into ``out``
+    (float64, length ``DEVICE_NUMBERS + 1 + n_episode_uniforms``): the device's 13 uniforms and
+    3 normals (:data:`DEVICE_NUMBERS`), the run seed (an integer below 2**52, exact as a
+    float), the episode's uniforms."""
     k = key[0]
     for i in range(3):                                      # reader: pulp b, m, c0
         out[i] = _uniform(k, _READER, i)
