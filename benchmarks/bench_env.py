@@ -149,7 +149,8 @@ def reset_parts(n: int = 300, seed: int = 0) -> dict:
 
     * ``episode draw``: :meth:`~ebraille_sim.scenarios.episodes.EpisodeDistribution.draw` (the
       spec, the device draw and its R2 calibration included);
-    * ``device draw``: :func:`~ebraille_sim.scenarios.population.sample_device` alone;
+    * ``device draw``: :func:`~ebraille_sim.scenarios.population.sample_device` alone (its
+      numbers, the device and its R2 calibration);
     * ``inputs``: :func:`~ebraille_sim.rl.episode.episode_from_spec` (schedule, setpoint, the
       input table with its band-limited noises, the cell index);
     * ``plant rows``: :func:`~ebraille_sim.plant.backends.make_plant` of the drawn device;
@@ -198,8 +199,7 @@ def reset_parts(n: int = 300, seed: int = 0) -> dict:
 
     specs = []
     parts = {"episode draw": timed(lambda s: specs.append(dist.draw(s)), seeds[:n])}
-    parts["device draw"] = timed(lambda s: sample_device(s.spawn(2)[0], dist.population, dist.base_device),
-                                 seeds[n:2 * n])
+    parts["device draw"] = timed(lambda s: sample_device(s, dist.population, dist.base_device), seeds[n:2 * n])
     parts["inputs"] = timed(episode_from_spec, specs)
     parts["plant rows"] = timed(lambda s: make_plant([s.device], [float(s.seed)],
                                                      models=[estimator_model(s.device.estimator.model)]), specs)

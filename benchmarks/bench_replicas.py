@@ -43,10 +43,6 @@ from ebraille_sim.rl.env import ContactForceEnv
 RESETS = 200
 
 
-def _library_child_seed(parent, k):
-    return np.random.SeedSequence(parent.entropy, spawn_key=parent.spawn_key + (k,), pool_size=parent.pool_size)
-
-
 def _library_seed_node(entropy, **kwargs):
     return np.random.SeedSequence(entropy, **kwargs)
 
@@ -55,10 +51,9 @@ def _patches(variant: str) -> list:
     """(module, name, value) rebindings that put the library call in place of ``variant``'s copy."""
     from controllers.supervisor import envelope as supervisor
     from ebraille_sim.rl import env
-    from ebraille_sim.scenarios import disturbances, inputs, population
+    from ebraille_sim.scenarios import population
     if variant == "seeds":
-        return [(env, "SeedNode", _library_seed_node), (inputs, "SeedNode", _library_seed_node),
-                (population, "SeedNode", _library_seed_node), (disturbances, "child_seed", _library_child_seed)]
+        return [(env, "SeedNode", _library_seed_node), (population, "SeedNode", _library_seed_node)]
     if variant == "memo":
         return [(supervisor, "_envelope_memo", lambda *args: np.empty(0))]
     return []

@@ -159,20 +159,19 @@ def test_a_slip_away_from_the_board_resumes_in_band(firmware):
     """The budget's 0.5 mm strap slip away from the board at 1 N unloads the stiff reader's pulp
     entirely: the supervisor freezes and backs off, the finger does not come back by itself, and
     after ``contact_loss_timeout_s`` the board re-approaches and the loop resumes.  No fault latches
-    and the force is within 0.1 N of the setpoint over the last second of a 4.5 s run (a latched
-    ``contact_lost`` would hold the board retracted for the rest of the session).  On the 100 Hz
-    path within 0.12 N: after the re-approach its estimate reads 7-9 % under the true force on this
-    reader, and the resume, which starts the integrator at 0 V, reaches that estimate's 1 N within
-    the run (true 1.07-1.10 N)."""
+    and the force is in band over the last second of a 5.5 s run (a latched ``contact_lost`` would
+    hold the board retracted for the rest of the session).  After the resume at 2.3 s the 100 Hz
+    firmware takes 1.2-1.7 s to settle into band, depending on the noise's seed (nine seeds), the
+    1 kHz firmware 0.9-1.4 s, so the window starts at 4.5 s."""
     import numpy as np
     from ebraille_sim.scenarios.runner import run_scenario
     bm = _matrix()
-    spec = bm.cell_spec("slip_away_0.5mm", firmware, 1.0, duration_s=4.5)
+    spec = bm.cell_spec("slip_away_0.5mm", firmware, 1.0, duration_s=5.5)
     res = run_scenario(dataclasses.replace(spec, device=bm.readers(0)["stiff"]))
     texts = [e for _, e in res.supervisor["events"]]
     assert res.supervisor["fault"] is None
     assert texts == ["contact lost: freeze", "contact not back: re-approach", "contact regained: resume"]
     tr = res.trace
-    late = tr["t_s"] > 3.5
-    assert np.mean(np.abs(tr["force_true_n"][late] - 1.0) <= {"default": 0.12, "1khz": 0.1}[firmware]) == 1.0
+    late = tr["t_s"] > 4.5
+    assert np.mean(np.abs(tr["force_true_n"][late] - 1.0) <= 0.1) == 1.0
     assert tr["force_true_n"].max() <= bm.SAFE_N

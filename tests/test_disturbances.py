@@ -337,7 +337,7 @@ def test_every_section_module_names_the_inputs_it_builds():
 
 
 def test_profiles_are_rows_of_one_table_with_the_values_of_separate_arrays():
-    from ebraille_sim.base.seeds import SeedNode
+    from ebraille_sim.scenarios.draws import generator_of, run_numbers
     from ebraille_sim.scenarios.inputs import build_run_inputs, profile_table
     from ebraille_sim.scenarios.spec import load_scenario
     spec = load_scenario("everyday_session")
@@ -346,8 +346,8 @@ def test_profiles_are_rows_of_one_table_with_the_values_of_separate_arrays():
     assert list(run.profiles) == ["est_creep_preload", "finger_pos_m", "fsr_temp_offset_k"]
     assert profile_table(run.profiles, n) is not None                     # no copy for the loop
     # the same profiles as separate arrays, the finger's summed as constant + (pressing + slips)
-    ss_inputs = SeedNode(spec.seed).spawn(3)[2]
-    built = D.build_inputs(spec.sections["disturbances"], run.t_s[:n], np.random.default_rng(ss_inputs), spec.device)
+    built = D.build_inputs(spec.sections["disturbances"], run.t_s[:n], generator_of(run_numbers(spec.seed)[2]),
+                           spec.device)
     assert np.array_equal(run.profiles["finger_pos_m"], spec.finger.gap_m + built["finger_pos_m"][1])
     for name in ("est_creep_preload", "fsr_temp_offset_k"):
         assert np.array_equal(run.profiles[name], built[name][1])

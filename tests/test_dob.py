@@ -165,12 +165,18 @@ def test_a_loop_hunting_in_the_films_blind_stretch_keeps_its_reader(tmp_path):
     import dataclasses
 
     from ebraille_sim.base.validation import replace_checked
-    from ebraille_sim.scenarios.population import sample_devices
+    from ebraille_sim.scenarios.population import PopulationSpec, device_from_variates
     from ebraille_sim.scenarios.runner import run_scenario
     from ebraille_sim.scenarios.spec import load_scenario
 
     spec = dataclasses.replace(load_scenario("everyday_session"), duration_s=30.0)
-    dev = sample_devices(7, 16, base=spec.device)[10]
+    # the reader's variates (reader 10 of sample_devices(7, 16) when it was found)
+    u = [0.03346309410131321, 0.0860764174995925, 0.7158117766832316, 0.3528727667205068, 0.8810219675745605,
+         0.17433970317309355, 0.8048277296724904, 0.056284863606242186, 0.2079689863560683, 0.6333254424690574,
+         0.1373528461365472, 0.3267278546210698, 0.12831147091754547,
+         0.5, 0.5, 0.5]
+    z = [0.05659414445728581, -0.40928074198110254, 0.8152429237691882]
+    dev = device_from_variates(u, z, PopulationSpec(), spec.device)
     dev = dataclasses.replace(dev, estimator=replace_checked(
         dev.estimator, hysteresis_compensation=True, model="paper:wiener:5@1000", antialias_cutoff_hz=50.0))
     gains = tmp_path / "fast.json"

@@ -155,7 +155,7 @@ def test_fixed_components_do_not_shift_the_others():
 
 def test_each_drawn_value_follows_its_own_variate():
     """Widening one range moves that value only, for a device and for an episode; the
-    episode's device is the population's draw of the episode seed's first child."""
+    episode's device is the population's draw of the episode's seed."""
     from ebraille_sim.scenarios.population import PopulationSpec, device_from_variates, device_variates, sample_device
     u, z = device_variates(np.random.SeedSequence(4))
     a = device_from_variates(u, z, PopulationSpec(calibrate=False))
@@ -169,7 +169,7 @@ def test_each_drawn_value_follows_its_own_variate():
     assert wide.device == free.device and wide.seed == free.seed and wide.sections == free.sections
     assert [f for _, f in wide.setpoint.steps] == [f for _, f in free.setpoint.steps]   # times follow the length
     assert wide.reading.wpm != free.reading.wpm and wide.finger != free.finger
-    drawn = sample_device(np.random.SeedSequence(9).spawn(1)[0])
+    drawn = sample_device(np.random.SeedSequence(9))
     assert free.device == dataclasses.replace(drawn, driver_supply_v=free.device.driver_supply_v)
     assert free.device.driver_supply_v <= drawn.driver_supply_v        # a sag or the full supply
 

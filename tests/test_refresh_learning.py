@@ -152,12 +152,17 @@ def test_learning_holds_refresh_characters_a_plain_loop_loses():
     import dataclasses
 
     from ebraille_sim.base.validation import replace_checked
-    from ebraille_sim.scenarios.population import PopulationSpec, sample_devices
+    from ebraille_sim.scenarios.population import PopulationSpec, device_from_variates
     from ebraille_sim.scenarios.runner import run_scenario
     from ebraille_sim.scenarios.spec import load_scenario
 
     spec = dataclasses.replace(load_scenario("refresh_60wpm"), duration_s=8.0)
-    dev = sample_devices(7, 8, PopulationSpec(calibration_table=False), base=spec.device)[7]
+    u = [0.9392319175306981, 0.561609565908339, 0.6593547338892862, 0.3350060645830333, 0.8789727001447462,
+         0.09272620183087377, 0.9556861372102897, 0.13084888412029827, 0.021039366640042245, 0.8808671159452015,
+         0.505193468155093, 0.7116741461475302, 0.6267461490195707,
+         0.5, 0.5, 0.5]             # reader 7 of sample_devices(7, 8)
+    z = [-0.5813121625236413, 3.3602500555335917, -0.10800992319986062]        # when it was found
+    dev = device_from_variates(u, z, PopulationSpec(calibration_table=False), spec.device)
     dev = dataclasses.replace(dev, estimator=replace_checked(
         dev.estimator, hysteresis_compensation=True, model="paper:wiener:5@1000", antialias_cutoff_hz=50.0,
         hysteresis_turn_lsb=1.75))

@@ -198,13 +198,17 @@ def test_transcriptions_of_excerpts_are_cached_and_shared():
     assert _cells_of.cache_info().maxsize >= 432              # every word start of the shipped passages
 
 
-def test_disturbance_generators_are_the_children_of_spawn():
+def test_disturbance_generators_are_the_children_of_the_inputs_generator():
     from ebraille_sim.scenarios import disturbances as dist
+    from ebraille_sim.scenarios.draws import child_generator
     t = np.arange(1500) * 5e-3
     section = dist.validate_section("test", {"tremor": {"rms_m": 1e-5}, "pressing": {"rms_m": 1e-4},
                                              "battery": {"soc_start": 0.5}})
-    got = dist.build_inputs(section, t, np.random.default_rng(77), DeviceParams())
-    children = dict(zip(dist.KINDS, np.random.default_rng(77).spawn(len(dist.KINDS))))
+    rng = np.random.default_rng(77)
+    before = rng.bit_generator.state
+    got = dist.build_inputs(section, t, rng, DeviceParams())
+    assert rng.bit_generator.state == before                  # the parent is left as it was
+    children = {k: child_generator(np.random.default_rng(77), i) for i, k in enumerate(dist.KINDS)}
     want_x = (section["tremor"].inputs(t, children["tremor"], DeviceParams())["finger_pos_m"][1]
               + section["pressing"].inputs(t, children["pressing"], DeviceParams())["finger_pos_m"][1])
     np.testing.assert_array_equal(got["finger_pos_m"][1], want_x)

@@ -94,6 +94,20 @@ UNIT_FIELDS = {"motor": ("resistance_ohm", "torque_constant_nm_per_a", "back_emf
 firmware knows their datasheet values only (:func:`datasheet_device`)."""
 
 
+@functools.lru_cache(maxsize=None)
+def _other_fields(cls, part: str) -> tuple:
+    """The fields of the dataclass ``cls`` of ``part`` that are not :data:`UNIT_FIELDS`."""
+    return tuple(f.name for f in dataclasses.fields(cls) if f.name not in UNIT_FIELDS[part])
+
+
+def _differs_in_unit_fields_only(unit, sheet, part: str) -> bool:
+    """Whether ``unit`` equals ``sheet`` in every field but the :data:`UNIT_FIELDS` of ``part``."""
+    if type(unit) is not type(sheet):
+        return False
+    a, b = unit.__dict__, sheet.__dict__
+    return all(a[k] == b[k] for k in _other_fields(type(unit), part))
+
+
 def datasheet_device(device: DeviceParams) -> DeviceParams:
     """The device as its designer knows it: the motor and drive train of ``device`` with the
     :data:`UNIT_FIELDS` of their part's datasheet (the preset of the same name; a part with no
@@ -104,7 +118,10 @@ def datasheet_device(device: DeviceParams) -> DeviceParams:
     for part, presets in (("motor", MOTORS), ("drivetrain", DRIVETRAINS)):
         unit = getattr(device, part)
         sheet = presets.get(unit.name, unit)
-        parts[part] = replace_fields(unit, **{f: getattr(sheet, f) for f in UNIT_FIELDS[part]})
+        if _differs_in_unit_fields_only(unit, sheet, part):
+            parts[part] = sheet                 # the unit with the datasheet's values is the datasheet
+        else:
+            parts[part] = replace_fields(unit, **{f: getattr(sheet, f) for f in UNIT_FIELDS[part]})
     cs = replace_fields(device.current_sense, shunt_error=0.0, gain_error=0.0, offset_v=0.0)
     return replace_fields(device, current_sense=cs, **parts)
 
@@ -461,19 +478,12 @@ class SupervisorConfig(DriveEnvelope, SupervisorPolicy):
         :attr:`setpoint_max_n` on the design reader (eq. 1-3 of docs/safety.md; bisection to 1 um/s).
         Blind (an open sensor reads no contact) the re-approach presses no harder than the loop may
         ask; the current envelope bounds it on top."""
-        def excess(v):
-            e = limits.impact_energy_j(v, self.pinion_mass_kg, self.board_mass_kg, self.gear_efficiency)
-            room = limits.drive_force_for_impact_n(e, self.setpoint_max_n, self.reader_b_n_per_m,
-                                                   self.reader_m_per_m)
-            return self.push_force_n(self._reapproach_command_v(v) / self.motor_resistance_ohm) - room
-        lo, hi = 0.0, self.speed_limit_m_per_s
-        while hi - lo > 1e-6:
-            mid = 0.5 * (lo + hi)
-            if excess(mid) <= 0.0:
-                lo = mid
-            else:
-                hi = mid
-        return lo
+        from controllers.supervisor.envelope import _envelope_memo, reapproach_speed_m_per_s
+        return reapproach_speed_m_per_s(self.speed_limit_m_per_s, self.pinion_mass_kg, self.board_mass_kg,
+                                        self.gear_efficiency, self.setpoint_max_n, self.reader_b_n_per_m,
+                                        self.reader_m_per_m, self.back_emf_v_s_per_m, self.motor_resistance_ohm,
+                                        self.friction_current_a, self.push_force_per_a_n, self.weight_n,
+                                        _envelope_memo(self.setpoint_max_n, self.reader_b_n_per_m, self.reader_m_per_m))
 
     def _reapproach_command_v(self, speed_m_per_s: float) -> float:
         return self.back_emf_v_s_per_m * speed_m_per_s + self.motor_resistance_ohm * self.friction_current_a

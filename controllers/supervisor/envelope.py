@@ -1,6 +1,8 @@
 """The drive's current and speed envelope: the current limit against rack speed, built once
 per configuration (:func:`_envelope_table`, compiled) from the laws of
-:mod:`ebraille_sim.physics.limits`."""
+:mod:`ebraille_sim.physics.limits`, and the re-approach speed's bisection over the same laws
+(:func:`reapproach_speed_m_per_s`, compiled: 17 steps of the drive-force bisection in one call,
+its bisections memoised as the envelope's)."""
 from __future__ import annotations
 
 import functools
@@ -17,6 +19,33 @@ ENVELOPE_POINTS = 34
 
 _impact_energy_j = njit(cache=True)(limits.impact_energy_j)
 _current_for_push_force_a = njit(cache=True)(limits.current_for_push_force_a)
+
+
+@njit(cache=True)
+def reapproach_speed_m_per_s(speed_limit_m_per_s, pinion_mass_kg, board_mass_kg, gear_efficiency, setpoint_max_n,
+                             reader_b_n_per_m, reader_m_per_m, back_emf_v_s_per_m, motor_resistance_ohm,
+                             friction_current_a, push_force_per_a_n, weight_n, memo):
+    """The bisection of :attr:`SupervisorConfig.reapproach_speed_m_per_s
+    <controllers.supervisor.SupervisorConfig.reapproach_speed_m_per_s>` (to 1 um/s) over the laws of
+    :mod:`ebraille_sim.physics.limits`: the largest speed whose steady push at the re-approach's
+    command plus its impact peaks at most at ``setpoint_max_n`` on the design reader, m/s;
+    ``memo`` keeps the drive-force bisections' midpoints (:func:`_envelope_memo` of
+    ``setpoint_max_n`` and the design reader)."""
+    energies = np.empty(1)
+    room = np.empty(1)
+    lo, hi = 0.0, speed_limit_m_per_s
+    while hi - lo > 1e-6:
+        mid = 0.5 * (lo + hi)
+        energies[0] = _impact_energy_j(mid, pinion_mass_kg, board_mass_kg, gear_efficiency)
+        limits.drive_forces_for_impacts_n(energies, setpoint_max_n, reader_b_n_per_m, reader_m_per_m, room, memo)
+        command_v = back_emf_v_s_per_m * mid + motor_resistance_ohm * friction_current_a
+        push = limits.push_force_bound_n(command_v / motor_resistance_ohm, push_force_per_a_n, 1.0, 1.0,
+                                         friction_current_a * push_force_per_a_n, weight_n)
+        if push - room[0] <= 0.0:
+            lo = mid
+        else:
+            hi = mid
+    return lo
 
 
 ENVELOPE_MEMO_NODES = 1 << 14

@@ -2,9 +2,9 @@
 
 A :class:`numpy.random.SeedSequence` hashes its entropy and spawn key into a pool of 32-bit
 words when it is made, and hashes the pool again for every state it generates; both run
-element by element in NumPy's own code, about 5 us each.  An env reset makes about a dozen
-of them (the episode's seed and its two children, the device's four, the run's three, one per
-disturbance), so :class:`SeedNode` computes the same pool and
+element by element in NumPy's own code, about 5 us each.  The env and the population
+sweeps spawn a child per episode or reader and take its first state word as the key of
+:mod:`ebraille_sim.scenarios.draws`, so :class:`SeedNode` computes the same pool and
 the same words (NumPy's documented algorithm, ``SeedSequence.mix_entropy`` and
 ``generate_state``) in one compiled call each, and only when asked.  A node is a
 ``SeedSequence`` for every purpose of NumPy's generators (``numpy.random.default_rng(node)``,
@@ -14,9 +14,11 @@ the same words (NumPy's documented algorithm, ``SeedSequence.mix_entropy`` and
 (``tests/test_seeds.py`` compares them with NumPy's over many entropies and keys).
 
 What it buys (``python benchmarks/bench_replicas.py``, NumPy's ``SeedSequence`` in its place in
-the same run, 2-core machine at a load average of about 3): a reset of the default env 411 us
-with nodes, 480 us with NumPy's sequences (69 us, 17 % of the reset, 14 env steps); a seed of
-three children and their generators 7 us against 43 us.
+the same run, 2-core machine at a load average of about 7): an episode's key (a child spawned
+and its first word) 2.8 us against 8.4 us, about one env step of a reset; a seed of three
+children and their generators 8.8 us against 34 us.  Since an episode's numbers come from one
+compiled call on one key, the whole reset's difference (685 us with nodes, 673 us with NumPy's
+sequences) is within the reset figure's noise.
 
 Examples
 --------

@@ -46,6 +46,7 @@ Examples
 """
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -395,8 +396,15 @@ def _ramp_creep_terms(fsr) -> tuple[np.ndarray, np.ndarray]:
     :data:`HYSTERESIS_TEST_PEAK_N` -> 0, each leg :data:`HYSTERESIS_TEST_RAMP_S`), from the exact
     solution of ``dz/dt = (F - z)/tau`` for a ramp of rate ``r``: rising
     ``z = r (t - tau (1 - e^(-t/tau)))``; falling, ``t'`` after the peak where ``z = z_p``,
-    ``z = F_p - r t' + r tau - (F_p + r tau - z_p) e^(-t'/tau)``."""
-    taus = np.array(creep_taus_s(fsr.creep_tau_min_s, fsr.creep_tau_max_s))
+    ``z = F_p - r t' + r tau - (F_p + r tau - z_p) e^(-t'/tau)``.  They depend on the creep's
+    time constants only, which a drawn unit shares with its part: computed once per pair
+    (read-only arrays; 28 us a call, three calls a drawn device)."""
+    return _ramp_creep_terms_of(fsr.creep_tau_min_s, fsr.creep_tau_max_s)
+
+
+@functools.lru_cache(maxsize=64)
+def _ramp_creep_terms_of(tau_min_s: float, tau_max_s: float) -> tuple[np.ndarray, np.ndarray]:
+    taus = np.array(creep_taus_s(tau_min_s, tau_max_s))
     t_r = HYSTERESIS_TEST_RAMP_S
     r = 1.0 / t_r                                          # per unit peak force
     t_up = HYSTERESIS_TEST_FORCE_N / HYSTERESIS_TEST_PEAK_N * t_r
@@ -404,6 +412,8 @@ def _ramp_creep_terms(fsr) -> tuple[np.ndarray, np.ndarray]:
     z_peak = r * (t_r + taus * np.expm1(-t_r / taus))
     t_dn = t_r - t_up                                      # time after the peak of the falling pass
     z_dn = 1.0 - r * t_dn + r * taus - (1.0 + r * taus - z_peak) * np.exp(-t_dn / taus)
+    z_up.flags.writeable = False
+    z_dn.flags.writeable = False
     return z_up, z_dn
 
 

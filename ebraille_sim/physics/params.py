@@ -505,6 +505,16 @@ class CircuitParams(_Checked):
 INA240 = "[R] TI INA240 datasheet (SBOS662), electrical characteristics"
 
 
+@functools.lru_cache(maxsize=None)
+def _bounded_fields(cls) -> tuple:
+    """``(name, lo, hi)`` of the unit errors and tolerances :class:`CurrentSenseParams` checks
+    against their declared bounds (read once per class)."""
+    names = ("shunt_tolerance", "gain_error_max", "offset_max_v", "adc_noise_lsb", "shunt_error", "gain_error",
+             "offset_v")
+    meta = {f.name: f.metadata for f in dataclasses.fields(cls)}
+    return tuple((name, meta[name]["lo"], meta[name]["hi"]) for name in names)
+
+
 @dataclass(frozen=True)
 class CurrentSenseParams(_Checked):
     """The board's motor-current sensing chain (:mod:`ebraille_sim.physics.current_sense`):
@@ -547,13 +557,16 @@ class CurrentSenseParams(_Checked):
 
     def __post_init__(self):
         super().__post_init__()
+        d = self.__dict__
         for name, lo, hi in (("adc_bits", 1, ADC_BITS_MAX), ("zero_samples", 1, 1_000_000), ("filter_stages", 1, 2)):
-            v = check_number(f"CurrentSenseParams.{name}", getattr(self, name), lo=lo, hi=hi, integer=True)
-            object.__setattr__(self, name, v)
-        for name in ("shunt_tolerance", "gain_error_max", "offset_max_v", "adc_noise_lsb", "shunt_error",
-                     "gain_error", "offset_v"):
-            f = next(f for f in dataclasses.fields(self) if f.name == name)
-            check_number(f"CurrentSenseParams.{name}", getattr(self, name), lo=f.metadata["lo"], hi=f.metadata["hi"])
+            v = d[name]
+            if not (type(v) is int and lo <= v <= hi):          # an int within its bounds is what the check returns
+                object.__setattr__(self, name, check_number(f"CurrentSenseParams.{name}", v, lo=lo, hi=hi,
+                                                            integer=True))
+        for name, lo, hi in _bounded_fields(type(self)):
+            v = d[name]
+            if not (type(v) is float and lo <= v <= hi):        # a float within its bounds passes the check
+                check_number(f"CurrentSenseParams.{name}", v, lo=lo, hi=hi)
         if abs(self.gain_error) > self.gain_error_max or abs(self.shunt_error) > self.shunt_tolerance \
                 or abs(self.offset_v) > self.offset_max_v:
             raise ValueError("CurrentSenseParams: the unit's gain_error, shunt_error and offset_v must lie within "

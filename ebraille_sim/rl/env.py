@@ -88,9 +88,10 @@ excerpt as ``[reading]`` text, a ``[setpoint]`` with steps, the ``[finger]`` gap
 ``[disturbances]`` section with the scenario models and the drawn device.  The episode's
 arrays come from :func:`ebraille_sim.scenarios.inputs.build_run_inputs`, the function the
 scenario runner uses, so ``run_scenario(env.episode.spec)`` replays the same episode
-(``tests/test_episodes.py``).  The device comes from the episode seed's first child, every
-other component from fixed draws of one generator of its second, so fixing one never shifts
-another:
+(``tests/test_episodes.py``).  Every random number of an episode comes from one compiled call
+on the episode seed (:func:`ebraille_sim.scenarios.draws.episode_numbers`): the device from
+streams of its own (the reader a population sweep draws from the same seed), every other
+component from fixed draws of the episode's stream, so fixing one never shifts another:
 
 ==============  ===========================================================  ==========
 component       draw                                                         source

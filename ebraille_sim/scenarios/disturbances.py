@@ -79,7 +79,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ebraille_sim.base.fields import sourced
-from ebraille_sim.base.seeds import child_seed
+from ebraille_sim.scenarios.draws import child_generator
 from ebraille_sim.base.validation import check_keys, check_number, check_pair
 from ebraille_sim.estimation.firmware import FIRMWARE_FSR
 from ebraille_sim.physics.fsr import held_resistance_factor, temperature_offset_k, temperature_scale
@@ -690,8 +690,8 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
         Start times of the control periods, s.
     rng : numpy.random.Generator
         The run's input generator; kind ``k`` of :data:`KINDS` draws from its child ``k``
-        (the ``SeedSequence`` that ``rng.spawn(len(KINDS))`` would give it; only the children
-        of the kinds present are made, and ``rng`` is left as it was).
+        (:func:`ebraille_sim.scenarios.draws.child_generator`; only the children of the kinds
+        present are made, and ``rng`` is left as it was).
     device : DeviceParams
     out : dict, optional
         ``{input_name: ndarray of shape (n,)}``: arrays a "set" profile computed in chunks
@@ -703,17 +703,13 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
         ``{input_name: ("set" | "add", ndarray of shape (n,))}``.
     """
     t_s = np.asarray(t_s, dtype=float)
-    # child k of rng.spawn(len(KINDS)) (its spawn key extended by k), made only for the kinds present
-    bits = rng.bit_generator
-    parent = bits.seed_seq
     rows = out or {}
     built: dict = {}
     for k, name in enumerate(KINDS):
         obj = section.get(name)
         if obj is None or not hasattr(obj, "inputs"):
             continue
-        seed = child_seed(parent, parent.n_children_spawned + k)
-        child = type(rng)(type(bits)(seed=seed))
+        child = child_generator(rng, k)
         for inp, (mode, arr) in obj.inputs(t_s, child, device).items():
             if inp in built and mode == "add" and built[inp][0] == "add":
                 np.add(built[inp][1], arr, out=built[inp][1])  # the kinds return arrays of their own

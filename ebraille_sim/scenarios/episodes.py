@@ -11,14 +11,16 @@ excursions, a Li-ion ``battery``) and the drawn device.  Arrays are made from th
 :func:`ebraille_sim.scenarios.inputs.build_run_inputs`, the function the scenario runner
 uses, so an episode and a scenario run of the same spec see the same inputs.
 
-Seeds: the episode's ``SeedSequence`` spawns two children.  The first draws the device
-(:func:`~ebraille_sim.scenarios.population.sample_device`: the draw of a population sweep's
-reader).  One NumPy ``Generator`` of the second draws, in this order and always all of them,
-the run seed (the spec's ``seed``: sensor noise and disturbance realisations) and one uniform
-variate per drawn scalar (passage, excerpt start, rate, number of setpoint levels, gap,
-tremor, drift, battery or not, state of charge, sag; then ``max_setpoint_levels`` levels and
-one fewer step times).  Every drawn value is a fixed function of its own variate, so fixing
-a component (``fixed`` of :meth:`draw`) or changing one range shifts no other draw.
+Seeds: every random number of an episode comes from one compiled call on its seed's key
+(:func:`ebraille_sim.scenarios.draws.episode_numbers`).  The device streams give the device
+(:func:`~ebraille_sim.scenarios.population.device_from_variates`: the seed's reader is the
+device :func:`~ebraille_sim.scenarios.population.sample_device` draws from the same seed in a
+population sweep); the episode stream gives, always all of them, the run seed (the spec's
+``seed``: sensor noise and disturbance realisations) and one uniform variate per drawn scalar
+(passage, excerpt start, rate, number of setpoint levels, gap, tremor, drift, battery or not,
+state of charge, sag; then ``max_setpoint_levels`` levels and one fewer step times).  Every
+drawn value is a fixed function of its own variate, so fixing a component (``fixed`` of
+:meth:`draw`) or changing one range shifts no other draw.
 
 ==============  ===========================================================  ==========
 component       draw                                                         source
@@ -64,6 +66,7 @@ import numpy as np
 
 from ebraille_sim.base.validation import replace_fields
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, DeviceParams
+from ebraille_sim.scenarios.draws import episode_numbers
 from ebraille_sim.scenarios.population import PopulationSpec
 from ebraille_sim.scenarios.spec import ControllerSpec, FingerSpec, ReadingSpec, ScenarioSpec, SetpointSpec
 
@@ -289,25 +292,22 @@ class EpisodeDistribution:
             Source ``"episode"``, ``duration_s`` None (the run ends with the excerpt).
         """
         from ebraille_sim.scenarios.passages import list_passages
-        from ebraille_sim.scenarios.population import sample_device
+        from ebraille_sim.scenarios.population import device_from_variates
         from ebraille_sim.scenarios.reading import mean_dwell_s
 
         opt = fixed or {}
         unknown = set(opt) - set(FIXED_KEYS)
         if unknown:
             raise ValueError(f"unknown fixed component {sorted(unknown)[0]!r}; allowed: {', '.join(FIXED_KEYS)}")
-        # the device from the first child, every other component from one generator of the
-        # second: a fixed number of draws in a fixed order (module docstring)
-        ss_dev, ss_rest = seed_sequence.spawn(2)
-        rng = np.random.default_rng(ss_rest)
-        run_seed = int(rng.integers(0, 2 ** 52))
+        # every number of the episode in one compiled call: the device's streams, then the run
+        # seed and a fixed number of uniforms in a fixed order (module docstring)
         levels_max = self.max_setpoint_levels
-        u = rng.random(_N_EPISODE_UNIFORMS + 2 * levels_max - 1).tolist()
+        u_dev, z_dev, run_seed, u = episode_numbers(seed_sequence, _N_EPISODE_UNIFORMS + 2 * levels_max - 1)
         base = self.base_device
         if "device" in opt:
             dev = dataclasses.replace(opt["device"], rates=base.rates)
         elif self.population is not None:
-            dev = sample_device(ss_dev, self.population, base)
+            dev = device_from_variates(u_dev, z_dev, self.population, base)
         else:
             dev = base
 

@@ -8,9 +8,9 @@ and the reinforcement-learning environment (:mod:`ebraille_sim.rl.env`, which dr
 per episode from :class:`ebraille_sim.scenarios.episodes.EpisodeDistribution`) both call
 it, so a policy trains on the disturbance models it is evaluated on.
 
-Seeds: the run's seed gives ``SeedSequence(seed).spawn(3)``, children in the order
-sensor noise, reading schedule (dwell jitter), plant inputs (disturbance draws); they are
-hashed by :class:`~ebraille_sim.base.seeds.SeedNode` (the same words).
+Seeds: the run's seed gives, in one compiled call (:func:`ebraille_sim.scenarios.draws.run_numbers`),
+the sensor noise's seed and the generators of the reading schedule (dwell jitter) and of the
+plant inputs (disturbance draws), each from its own stream of the seed's key.
 
 Times: control period ``k`` (``k = 0 .. n - 1``) starts at ``t_k = (k + 1) dt - dt`` (the
 runner's sample time minus one period, written so that the runner's historic arrays are
@@ -36,9 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ebraille_sim.base.seeds import SeedNode
-from ebraille_sim.physics.noise import seed_from
 from ebraille_sim.plant.layout import N_INPUT, U
+from ebraille_sim.scenarios.draws import generator_of, run_numbers
 from ebraille_sim.scenarios.spec import DELEGATES, ScenarioError, ScenarioSpec
 
 __all__ = ["RunInputs", "SCHEDULE_CELL_MARGIN", "MAX_RUN_BYTES", "BYTES_PER_CONTROL_SAMPLE", "MAX_CONTROL_SAMPLES",
@@ -424,8 +423,8 @@ def build_run_inputs(spec: ScenarioSpec, seed: int | None = None) -> RunInputs:
         A validated scenario (a parsed file or one drawn by
         :meth:`ebraille_sim.scenarios.episodes.EpisodeDistribution.draw`).
     seed : int, optional
-        The run's master seed (default ``spec.seed``); children of ``SeedSequence(seed)``
-        in the order sensor, reading, inputs (module docstring).
+        The run's master seed (default ``spec.seed``): it gives the sensor seed and the
+        reading's and the inputs' generators (module docstring).
 
     Returns
     -------
@@ -440,16 +439,16 @@ def build_run_inputs(spec: ScenarioSpec, seed: int | None = None) -> RunInputs:
     seed = spec.seed if seed is None else int(seed)
     if seed < 0:
         raise ScenarioError(f"seed must be >= 0, got {seed}")
-    ss_sensor, ss_reading, ss_inputs = SeedNode(seed).spawn(3)
+    sensor_seed, w_reading, w_inputs = run_numbers(seed)
     # the reading generator draws only the dwell jitter (made only for a jittered schedule)
     jittered = spec.reading.jitter_fraction > 0
-    schedule = build_schedule_for(spec, np.random.default_rng(ss_reading) if jittered else None)
+    schedule = build_schedule_for(spec, generator_of(w_reading) if jittered else None)
     dt, n = run_length(spec, schedule)
     # the period starts (k + 1) dt - dt, in one array: a one-hour run holds 3.6 million periods
     t_start = period_starts(n + 1, dt)
     sp = setpoint_profile(spec, t_start, schedule)
     base = base_input_row(spec.device, spec.finger.gap_m)
-    profiles = input_profiles(spec, t_start[:n], np.random.default_rng(ss_inputs), base)   # rows of one array
+    profiles = input_profiles(spec, t_start[:n], generator_of(w_inputs), base)   # rows of one array
     del t_start
-    return RunInputs(spec=spec, seed=seed, sensor_seed=seed_from(ss_sensor), schedule=schedule, dt_s=dt,
+    return RunInputs(spec=spec, seed=seed, sensor_seed=sensor_seed, schedule=schedule, dt_s=dt,
                      n_steps=n, setpoint_n=sp, base_inputs=base, profiles=profiles)

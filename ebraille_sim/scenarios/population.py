@@ -1,8 +1,9 @@
 """Populations of readers, FSR units and drive trains: stated distributions, seeded draws.
 
-Each device is drawn from a :class:`PopulationSpec` with NumPy ``Generator`` s: every
-component (reader, sensor, motor, drive train) has its own child ``SeedSequence``
-(:func:`device_variates`), and each parameter is a fixed function of its own variate
+Each device is drawn from a :class:`PopulationSpec` by one compiled call
+(:mod:`ebraille_sim.scenarios.draws`): every component (reader, sensor, motor, drive train,
+board) has its own random stream of the seed's key (:func:`device_variates`), and each
+parameter is a fixed function of its own variate
 (:func:`device_from_variates`), so that changing one distribution does not change the draws
 of another.  Distributions and their
 sources:
@@ -57,6 +58,7 @@ from ebraille_sim.base.seeds import SeedNode
 from ebraille_sim.base.validation import check_bool, check_number, check_pair, replace_fields
 from ebraille_sim.estimation.calibration import TABLE_LOADS_N, calibrate_device, with_calibration_table
 from ebraille_sim.physics.params import DeviceParams, replace_checked
+from ebraille_sim.scenarios.draws import device_numbers
 
 
 @dataclass(frozen=True)
@@ -132,18 +134,11 @@ CALIBRATION_LOAD_TOLERANCE = 0.02
 def device_variates(seed_sequence) -> tuple[list, list]:
     """The random numbers of one device: the uniforms on [0, 1) of :data:`DEVICE_UNIFORMS` and
     the standard normals of :data:`DEVICE_NORMALS`, in their orders, the uniforms followed by
-    the board's :data:`BOARD_UNIFORMS`.  Each component draws from its own child of
-    ``seed_sequence`` (reader, FSR unit, motor, drive train, board: ``seed_sequence.spawn(5)``,
-    the first four the children ``spawn(4)`` gives), so that a component's draws do not depend
+    the board's :data:`BOARD_UNIFORMS`.  Each component (reader, FSR unit, motor, drive train,
+    board) draws from its own stream of the seed's key (:func:`ebraille_sim.scenarios.draws.device_numbers`,
+    the compiled call an episode's draw makes too), so that a component's draws do not depend
     on another's."""
-    r_f, r_s, r_m, r_d, r_b = (np.random.default_rng(c) for c in seed_sequence.spawn(5))
-    u_f = r_f.random(3).tolist()                        # pulp b, m, c0
-    z_k = float(r_s.standard_normal())                  # FSR: k, then exponent, hysteresis, creep
-    u_s = r_s.random(3).tolist()
-    z_m = r_m.standard_normal(2).tolist()               # motor R, kM
-    u_d = r_d.random(3).tolist()                        # gear efficiency, guide friction, backlash
-    u_b = r_b.random(len(BOARD_UNIFORMS)).tolist()      # current chain, calibration loads
-    return u_f + u_s + u_d + u_b, [z_k] + z_m
+    return device_numbers(seed_sequence)
 
 
 def device_from_variates(u, z, spec: PopulationSpec = PopulationSpec(),
