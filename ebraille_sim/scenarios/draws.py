@@ -40,7 +40,7 @@ Examples
 >>> from ebraille_sim.base.seeds import SeedNode
 >>> u, z = device_numbers(SeedNode(7))
 >>> len(u), len(z), all(0.0 <= x < 1.0 for x in u)
-(13, 3, True)
+(16, 3, True)
 >>> device_numbers(SeedNode(7)) == (u, z)
 True
 """
