@@ -432,6 +432,17 @@ class SupervisorPolicy:
     standing force must leave the room (:attr:`slip_setpoint_cap_n`)."""
     slip_time_s: float = sourced(0.02, "s", "[E] the fastest strap slip",
                                  doc="Duration of the slip the setpoint leaves room for.")
+    search_gap_m: float = sourced(DESIGN_GAP_M, "m", "[E] the design gap (DESIGN_GAP_M): the largest gap at the start "
+                                                   "of a session",
+                                  doc="Travel before the first contact beyond which the board searches for the finger "
+                                      "at the re-approach speed.")
+    """Travel of the board (back-EMF integral) before the first contact beyond which it searches for
+    the finger at the re-approach speed (:attr:`reapproach_command_v`) instead of the loop's command,
+    m: a reader within the design gap is met by the loop's approach; one further away (a finger
+    lifted at the start of a session) may come back onto the board at any moment, and the board
+    must not have run far beyond where the finger rests.  The search ends at the first contact (the
+    loop resumes from 0 V, as after a regained contact) or at ``first_contact_travel_m``
+    (``fsr_no_contact``)."""
     slip_away_m: float = sourced(0.5e-3, "m", "[E] 0.5 mm, scenarios.disturbances.body_motion_budget",
                                  doc="Strap slip away from the board that a re-approach after a loss of contact "
                                      "searches for.")

@@ -59,7 +59,7 @@ _CFG_SCALARS = ("force_cap_n", "cap_margin_n", "sp_max_n", "slew_v_per_s", "rate
                 "push_force_per_a_n", "breakaway_friction_n", "push_weight_n", "guide_static_n", "impact_mass_kg",
                 "implausible_s", "out_of_range_n", "stuck_response_s", "stuck_emf_v", "stuck_command_v",
                 "drop_window_s", "drop_n", "drop_keep_fraction", "backoff_s", "contact_loss_timeout_s", "retract_v", "watchdog_timeout_s",
-                "reapproach_v", "reapproach_travel_m", "reapproach_speed_m_per_s",
+                "reapproach_v", "reapproach_travel_m", "reapproach_speed_m_per_s", "search_travel_m",
                 "retract_s", "retract_moving_s", "max_retract_s", "min_dt_s", "events_base", "events_cap",
                 "envelope_n", "envelope_base", "state_len", "sense_error_a", "sense_gain_error_max")
 
@@ -121,7 +121,7 @@ def _pack(c) -> np.ndarray:
         "drop_keep_fraction": c.drop_keep_fraction,
         "backoff_s": c.backoff_s, "contact_loss_timeout_s": c.contact_loss_timeout_s, "retract_v": c.retract_v,
         "reapproach_v": c.reapproach_command_v, "reapproach_travel_m": c.reapproach_travel_m,
-        "reapproach_speed_m_per_s": c.reapproach_speed_m_per_s,
+        "reapproach_speed_m_per_s": c.reapproach_speed_m_per_s, "search_travel_m": c.search_gap_m,
         "watchdog_timeout_s": c.watchdog_timeout_s, "retract_s": c.retract_s,
         "retract_moving_s": c.retract_moving_s, "max_retract_s": c.max_retract_s, "min_dt_s": min_dt,
         "events_cap": EVENT_CAPACITY, "envelope_n": ENVELOPE_POINTS, "envelope_base": len(CF),

@@ -196,6 +196,10 @@ def supervise_end(sv, cfg, u, f, sp, dt, cur):
         u = -cfg[CF.retract_v]
     elif f > lo and u > 0.0:
         u *= 1.0 - (f - lo) / cfg[CF.cap_margin_n]
+    if not math.isnan(cur) and sv[SV.in_contact] == 0.0 and sv[SV.travel_m] > cfg[CF.search_travel_m]:
+        # no contact yet beyond the design gap: the finger may be lifted and come back onto the
+        # board at any moment, so the board searches no faster than the re-approach
+        u = _pymin(u, cfg[CF.reapproach_v])
     u = _slew(sv, cfg, u, dt)
     if not math.isnan(cur):
         u = _envelope_cap(sv, cfg, u, cur)
