@@ -221,7 +221,7 @@ def test_the_travel_rule_follows_a_relaxing_soft_pulp_and_still_catches_a_withdr
     from test_fault_matrix import cell_spec
 
     def peak(follow_s=None):
-        s = dataclasses.replace(cell_spec(("finger_withdrawn", "fsr_at_0.45V"), "steady", 120), seed=2)
+        s = cell_spec(("finger_withdrawn", "fsr_at_0.45V"), "steady", 120)
         if follow_s is not None:
             s = dataclasses.replace(s, sections={**s.sections, "supervisor": {"travel_follow_s": follow_s}})
         return float(run_scenario(s).trace["force_true_n"].max())
