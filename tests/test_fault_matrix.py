@@ -155,7 +155,7 @@ drawn readers the matrix runs over: ``sample_devices(13, 3)`` under the streams 
 Over other readers the finger withdrawn at the onset pressed harder than 3.5 N while the board's
 approach ran on beyond the design gap (8 of 120 onset cells of 60 readers of seed 777 at 60 and
 120 wpm, worst 4.11 N); with the search beyond the design gap at the re-approach speed
-(``search_gap_m``) none does (worst 2.62 N; ``studies/safety/withdrawn_onset.py``), and
+(``search_gap_m``) none does (worst 2.62 N), and
 :data:`WITHDRAWN_READER` pins one of them."""
 
 WITHDRAWN_READER = (
