@@ -19,7 +19,9 @@ class PwmPid:
     """The scenario PID with its command quantised to 2^-16 of the driver supply (a PWM duty).
 
     A duty ``d = m / 2^16`` times the supply is computed by the env from the action ``d`` with
-    the same floating-point product, so replaying the duties reproduces the volts exactly.
+    the same floating-point product, so replaying the duties reproduces the volts exactly.  The
+    duties are the whole run's: a reset (the supervisor resumes the controller after its search
+    for the first contact) does not clear them.
     """
 
     name = "pwm_pid"
@@ -31,7 +33,6 @@ class PwmPid:
 
     def reset(self, *, force_est_n, setpoint_n, command_v=0.0):
         self.pid.reset(force_est_n=force_est_n, setpoint_n=setpoint_n, command_v=command_v)
-        self.duties = []
 
     def update(self, force_est_n, setpoint_n, dt_s, motor_current_a=None):
         u = self.pid.update(force_est_n, setpoint_n, dt_s, motor_current_a)

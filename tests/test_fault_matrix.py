@@ -152,8 +152,30 @@ READERS = [
 ]
 """The variates (:func:`ebraille_sim.scenarios.population.device_from_variates`) of the three
 drawn readers the matrix runs over: ``sample_devices(13, 3)`` under the streams of their time.
-Over other readers the finger withdrawn at the onset can press harder than 3.5 N (6 of 36 cells
-of 18 readers drawn now, 2 of 36 of 18 drawn under those streams, worst 4.54 N)."""
+Over other readers the finger withdrawn at the onset pressed harder than 3.5 N while the board's
+approach ran on beyond the design gap (8 of 120 onset cells of 60 readers of seed 777 at 60 and
+120 wpm, worst 4.11 N); with the search beyond the design gap at the re-approach speed
+(``search_gap_m``) none does (worst 2.62 N), and
+:data:`WITHDRAWN_READER` pins one of them."""
+
+WITHDRAWN_READER = (
+    [0.9875053380731504, 0.7804184456359456, 0.502702237334992, 0.8453322837791956, 0.2868284256904131,
+     0.728969758612706, 0.2308806312025159, 0.2051358454019513, 0.39461956917293706, 0.5337029652673523,
+     0.7436115029476208, 0.4815846432780435, 0.5400862664822943, 0.645485152329661, 0.29648545502476675,
+     0.5472848147027809],
+    [1.0475460285529972, 0.1043592333774521, -1.4474962556950697])
+"""Variates of reader 4 of ``sample_devices(2024, 40)`` (a stiff pulp, b = 519 N/m): its finger
+withdrawn at the onset returned onto a board 3.5 mm out and pressed 4.20 N before the search
+beyond the design gap, 2.72 N with it."""
+
+
+def test_a_finger_lifted_at_the_onset_returns_onto_a_board_that_did_not_run_on():
+    dev = device_from_variates(*WITHDRAWN_READER)
+    r = run_cell(("finger_withdrawn",), "onset", device=dev)
+    tr = r["trace"]
+    assert r["peak_n"] <= SAFE_N                             # 4.20 N while the approach ran on
+    late = tr["t_s"] > DURATION_S - 1.0
+    assert abs(np.median(tr["force_true_n"][late]) - 1.0) < 0.1   # and the reading goes on at 1 N
 
 
 @pytest.mark.slow

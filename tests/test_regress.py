@@ -122,7 +122,7 @@ def test_assert_scenario_one_liner():
     with pytest.raises(AssertionError, match=r"scenario contact_onset: peak_force_n = 1\.\d+, expected <= 1"):
         assert_scenario("contact_onset", peak_force_n__le=1.0)
     fails = check_scenario_metrics("contact_onset", contact_loss_count__eq=0, onset_overshoot_fraction__lt=0.01)
-    assert len(fails) == 1 and fails[0].startswith("onset_overshoot_fraction = 0.07")
+    assert len(fails) == 1 and fails[0].startswith("onset_overshoot_fraction = 0.11")
     assert fails[0].endswith("expected < 0.01")
 
 

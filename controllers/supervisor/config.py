@@ -432,6 +432,17 @@ class SupervisorPolicy:
     standing force must leave the room (:attr:`slip_setpoint_cap_n`)."""
     slip_time_s: float = sourced(0.02, "s", "[E] the fastest strap slip",
                                  doc="Duration of the slip the setpoint leaves room for.")
+    search_gap_m: float = sourced(DESIGN_GAP_M, "m", "[E] the design gap (DESIGN_GAP_M): the largest gap at the start "
+                                                   "of a session",
+                                  doc="Gap to the pulp beyond which the board searches for the first contact at the "
+                                      "re-approach speed.")
+    """Gap to the pulp at the start of a session beyond which the board searches for the finger at
+    the re-approach speed (:attr:`reapproach_command_v`) instead of the loop's command, m, until the
+    first contact: a reader within the design gap is met by the loop's approach; with no contact
+    beyond it (:attr:`search_travel_m` of travel) the finger may be lifted and come back onto the
+    board at any moment, and the board must not have run far beyond where the finger rests.  The
+    search ends at the first contact (the loop resumes from 0 V, as after a regained contact) or at
+    ``first_contact_travel_m`` (``fsr_no_contact``)."""
     slip_away_m: float = sourced(0.5e-3, "m", "[E] 0.5 mm, scenarios.disturbances.body_motion_budget",
                                  doc="Strap slip away from the board that a re-approach after a loss of contact "
                                      "searches for.")
@@ -504,6 +515,15 @@ class SupervisorConfig(DriveEnvelope, SupervisorPolicy):
         one estimator period of travel)."""
         return (self.slip_away_m + compression_at_force_m(self.contact_on_n, self.soft_b_n_per_m, self.soft_m_per_m)
                 + self.reapproach_speed_m_per_s * self.stuck_response_s + self.stuck_travel_m)
+
+    @property
+    def search_travel_m(self) -> float:
+        """Travel before the first contact beyond which the board searches at the re-approach
+        speed, m: :attr:`search_gap_m`, the soft reader's compression at ``contact_on_n`` (a reader
+        at that gap has shown contact by then, the estimate's lag aside) and the largest backlash
+        the back-EMF integral counts."""
+        return (self.search_gap_m + compression_at_force_m(self.contact_on_n, self.soft_b_n_per_m, self.soft_m_per_m)
+                + BACKLASH_MAX_M)
 
     @functools.cached_property
     def slip_setpoint_cap_n(self) -> float:

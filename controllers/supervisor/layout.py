@@ -50,7 +50,7 @@ estimates of the drop rule."""
 _STATE_SCALARS = ("mode", "fault", "t", "u_prev", "theta", "nan_s", "in_contact", "freeze_t0", "retract_t0",
                   "moving_s", "speed", "accel", "travel_m", "stuck_ref_n", "stuck_travel_m", "contact_travel_m",
                   "contact_travel_set", "cut_t", "sp_last", "fall_t", "stall_s", "implausible_s", "current_limit_a",
-                  "last_f", "loss_travel_m", "approach_end_t", "event_count", "events_dropped", "first_dropped_t")
+                  "last_f", "loss_travel_m", "approach_end_t", "searching", "event_count", "events_dropped", "first_dropped_t")
 _CFG_SCALARS = ("force_cap_n", "cap_margin_n", "sp_max_n", "slew_v_per_s", "rated_current_sq_a2", "i2t_limit_a2s",
                 "motor_resistance_ohm", "driver_supply_v", "back_emf_v_s_per_m", "powered_current_a",
                 "moving_speed_m_per_s", "stuck_tolerance_n", "contact_lost_n", "contact_on_n", "stuck_travel_m",
@@ -59,7 +59,7 @@ _CFG_SCALARS = ("force_cap_n", "cap_margin_n", "sp_max_n", "slew_v_per_s", "rate
                 "push_force_per_a_n", "breakaway_friction_n", "push_weight_n", "guide_static_n", "impact_mass_kg",
                 "implausible_s", "out_of_range_n", "stuck_response_s", "stuck_emf_v", "stuck_command_v",
                 "drop_window_s", "drop_n", "drop_keep_fraction", "backoff_s", "contact_loss_timeout_s", "retract_v", "watchdog_timeout_s",
-                "reapproach_v", "reapproach_travel_m", "reapproach_speed_m_per_s",
+                "reapproach_v", "reapproach_travel_m", "reapproach_speed_m_per_s", "search_travel_m",
                 "retract_s", "retract_moving_s", "max_retract_s", "min_dt_s", "events_base", "events_cap",
                 "envelope_n", "envelope_base", "state_len", "sense_error_a", "sense_gain_error_max")
 
@@ -121,7 +121,7 @@ def _pack(c) -> np.ndarray:
         "drop_keep_fraction": c.drop_keep_fraction,
         "backoff_s": c.backoff_s, "contact_loss_timeout_s": c.contact_loss_timeout_s, "retract_v": c.retract_v,
         "reapproach_v": c.reapproach_command_v, "reapproach_travel_m": c.reapproach_travel_m,
-        "reapproach_speed_m_per_s": c.reapproach_speed_m_per_s,
+        "reapproach_speed_m_per_s": c.reapproach_speed_m_per_s, "search_travel_m": c.search_travel_m,
         "watchdog_timeout_s": c.watchdog_timeout_s, "retract_s": c.retract_s,
         "retract_moving_s": c.retract_moving_s, "max_retract_s": c.max_retract_s, "min_dt_s": min_dt,
         "events_cap": EVENT_CAPACITY, "envelope_n": ENVELOPE_POINTS, "envelope_base": len(CF),

@@ -164,7 +164,9 @@ def supervise_end(sv, cfg, u, f, sp, dt, cur):
     -------
     code : int
         1: the command is finite again after a non-finite stretch; reset the inner controller
-        with ``force_est_n=f, setpoint_n=sp_inner, command_v=reset_cmd``.  0 otherwise.
+        with ``force_est_n=f, setpoint_n=sp_inner, command_v=reset_cmd``.  2: the search before
+        the first contact (``search_gap_m``) found the finger; resume the inner controller from
+        0 V (as for :func:`supervise_begin`'s code 2).  0 otherwise.
     u : float
         Command, V.
     reset_cmd : float
@@ -190,6 +192,21 @@ def supervise_end(sv, cfg, u, f, sp, dt, cur):
         code = 1
         reset_cmd = sv[SV.u_prev]
         u = sv[SV.u_prev]
+    if not math.isnan(cur):
+        if sv[SV.in_contact] == 0.0 and sv[SV.travel_m] > cfg[CF.search_travel_m]:
+            # no contact yet beyond the search travel: the finger may be lifted and come back onto
+            # the board at any moment, so search at the re-approach speed rather than let the
+            # loop's integrator run the board on (its wind-up is dropped at the first contact)
+            sv[SV.searching] = 1.0
+            target = cfg[CF.reapproach_v] if math.isfinite(sp) and sp > cfg[CF.contact_on_n] else 0.0
+            u = _envelope_cap(sv, cfg, _slew(sv, cfg, target, dt), cur)
+            sv[SV.u_prev] = u
+            return code, u, reset_cmd
+        if sv[SV.searching] != 0.0:
+            # the search found the finger: the loop resumes from 0 V, as after a regained contact
+            sv[SV.searching] = 0.0
+            sv[SV.u_prev] = 0.0
+            return 2, 0.0, math.nan
     u_inner = u
     lo = cfg[CF.force_cap_n] - cfg[CF.cap_margin_n]
     if f >= cfg[CF.force_cap_n]:

@@ -205,6 +205,8 @@ class Supervisor:
             code, u, reset_cmd = supervise_end(self._sv, self._cfg, float(u_inner), f, sp, dt, cur)
             if code == 1:
                 self.inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=reset_cmd)
+            elif code == 2:
+                resume_controller(self.inner, force_est_n=f, setpoint_n=sp_inner)
         elif code == 2:
             resume_controller(self.inner, force_est_n=f, setpoint_n=sp_inner)
         applied = getattr(self.inner, "applied", None)

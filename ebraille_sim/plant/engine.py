@@ -94,6 +94,8 @@ def command(kind, cstate, cparams, u_ext, supervised, sv, cfg, f, sp, dt, cur):
             code2, u, reset_cmd = supervise_end(sv, cfg, u_inner, f, sp, dt, cur)
             if code2 == 1 and kind != KIND_EXTERNAL:
                 controller_reset(kind, cstate, cparams, f, sp_inner, reset_cmd)
+            elif code2 == 2 and kind != KIND_EXTERNAL:
+                controller_resume(kind, cstate, cparams, f, sp_inner)
         elif code == 2 and kind != KIND_EXTERNAL:
             controller_resume(kind, cstate, cparams, f, sp_inner)
         return u
