@@ -54,7 +54,7 @@ from ebraille_sim.base.compiled import njit
 from ebraille_sim.physics.fingertip import tangent_stiffness_n_per_m
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N, TACTILE_FORCE_MIN_N
 
-__all__ = ["controller_resume", "resume_controller", "KIND_NONE", "KIND_PID", "KIND_LQG", "KIND_EXTERNAL", "KIND_DOB", "MAP_POINTS", "PS", "PP", "LS", "LP",
+__all__ = ["controller_resume", "integrator_floor", "resume_controller", "KIND_NONE", "KIND_PID", "KIND_LQG", "KIND_EXTERNAL", "KIND_DOB", "MAP_POINTS", "PS", "PP", "LS", "LP",
            "DS", "DP", "record", "pid_state", "pid_params", "lqg_state", "lqg_params", "lqg_order", "dob_state",
            "dob_params", "py_min", "py_max", "core_step", "core_reset", "pid_step", "pid_reset", "scheduled_gains",
            "map_reference", "model_feedforward_v", "feedforward_v", "lqg_step", "lqg_reset", "dob_step", "dob_reset",
@@ -548,6 +548,13 @@ def controller_resume(kind, s, p, force_est_n, setpoint_n):
     negative integrator is the soft start of the approach and bounds the onset's overshoot.
     """
     controller_reset(kind, s, p, force_est_n, setpoint_n, 0.0)
+    integrator_floor(kind, s)
+
+
+@njit(cache=True, inline="always")
+def integrator_floor(kind, s):
+    """Raise a PID-family or disturbance-observer integrator that starts below 0 V to 0 V (the
+    resume's rule, :func:`controller_resume`); other kinds are left as they are."""
     if (kind == KIND_PID or kind == KIND_DOB) and s[PS.integrator_v] < 0.0:
         s[PS.integrator_v] = 0.0
 
@@ -564,5 +571,5 @@ def resume_controller(controller, *, force_est_n: float, setpoint_n: float) -> N
     to 0 V when the reset started it below (a controller without one keeps the plain reset)."""
     controller.reset(force_est_n=force_est_n, setpoint_n=setpoint_n, command_v=0.0)
     form = compiled_form(controller)
-    if form is not None and form[0] in (KIND_PID, KIND_DOB) and form[1][PS.integrator_v] < 0.0:
-        form[1][PS.integrator_v] = 0.0
+    if form is not None:
+        integrator_floor(form[0], form[1])

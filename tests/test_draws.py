@@ -75,3 +75,10 @@ def test_a_stream_seed_gives_its_words_and_refuses_more():
         assert "holds 4 words" in str(exc)
     else:
         raise AssertionError("five words of four were given")
+
+
+def test_the_board_stream_draws_one_uniform_per_named_board_variate():
+    from ebraille_sim.scenarios.draws import BOARD_NUMBERS, DEVICE_UNIFORM_NUMBERS
+    from ebraille_sim.scenarios.population import BOARD_UNIFORMS, DEVICE_UNIFORMS
+    assert BOARD_NUMBERS == len(BOARD_UNIFORMS)
+    assert DEVICE_UNIFORM_NUMBERS == len(DEVICE_UNIFORMS) + len(BOARD_UNIFORMS)
