@@ -381,18 +381,24 @@ def _fsr_unit_seed(fsr, circuit) -> int:
     return zlib.crc32(repr((fsr, circuit)).encode()) % (1 << 31)
 
 
-def table_reading_n(model, force_n: float, fsr, circuit, hold_s: float, press_z: float = 0.0,
-                    noise_v: float = 0.0) -> float:
+def table_reading_n(model, force_n: float, fsr, circuit, hold_s: float, press_z=0.0, noise_v=0.0):
     """The model's steady estimate on the bench (N): the film pressed from no load to ``force_n``
     (loading branch) and held ``hold_s``, its resistance scaled by the press's scatter
     ``exp(press_repeatability * press_z)`` (:func:`ebraille_sim.physics.fsr.press_scatter`), the
     divider voltage read with the error ``noise_v`` of the conversions' mean, tared by the
-    no-load reading (:func:`steady_estimate` with the press and the noise)."""
-    g = static_conductance(force_n * loading_branch_factor(fsr), fsr, load_time_s=hold_s)
+    no-load reading (:func:`steady_estimate` with the press and the noise).  ``force_n``,
+    ``press_z`` and ``noise_v`` may be arrays of presses (one reading each, an array back)."""
+    branch = loading_branch_factor(fsr)
+    if np.ndim(force_n) == 0:
+        g = static_conductance(force_n * branch, fsr, load_time_s=hold_s)
+    else:
+        g = np.array([static_conductance(f * branch, fsr, load_time_s=hold_s) for f in np.asarray(force_n, float)])
     g_standoff = 1.0 / fsr.standoff_resistance_ohm
-    g = g_standoff + (g - g_standoff) / math.exp(fsr.press_repeatability * press_z)
-    u = divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + noise_v - _tare(fsr, circuit)
-    return float(model.steady_state(u))
+    z, e = np.asarray(press_z, dtype=float), np.asarray(noise_v, dtype=float)
+    g = g_standoff + (g - g_standoff) / np.exp(fsr.press_repeatability * z)
+    u = divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + e - _tare(fsr, circuit)
+    y = model.steady_state(u)
+    return float(y) if np.ndim(y) == 0 else np.asarray(y, dtype=float)
 
 
 def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=None,
@@ -425,12 +431,11 @@ def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=N
     fsr, circuit = device.fsr, device.circuit
     rng = np.random.default_rng(_fsr_unit_seed(fsr, circuit))
     sd_v = fsr.noise_v_rms / math.sqrt(TABLE_CONVERSIONS)
-    readings = []
-    for load, err in zip(loads_n, errors):
-        presses = [table_reading_n(model, load * (1.0 + err), fsr, circuit, TABLE_HOLD_S,
-                                   press_z=float(rng.standard_normal()), noise_v=sd_v * float(rng.standard_normal()))
-                   for _ in range(TABLE_PRESSES)]
-        readings.append(float(np.mean(presses)))
+    draws = rng.standard_normal(2 * TABLE_PRESSES * len(loads_n))   # each press: its scatter, then its noise
+    carried = np.repeat([load * (1.0 + err) for load, err in zip(loads_n, errors)], TABLE_PRESSES)
+    presses = table_reading_n(model, carried, fsr, circuit, TABLE_HOLD_S, press_z=draws[0::2],
+                              noise_v=sd_v * draws[1::2]).reshape(len(loads_n), TABLE_PRESSES)
+    readings = [float(np.mean(row)) for row in presses]
     if not (readings[0] > 0.0 and all(a < b for a, b in zip(readings, readings[1:]))):
         return None
     if anchor_n is not None:

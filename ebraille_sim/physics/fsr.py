@@ -435,6 +435,24 @@ def play_loop_fraction(fsr) -> float:
     return max(0.0, 1.0 - (1.0 - fsr.hysteresis_fraction) / (1.0 - creep_loop_fraction(fsr)))
 
 
+@njit(cache=True)
+def _cycle_resistances(force, a_lag, s, p, weight, threshold_n, k_ohm, exponent, actuation_n, steepness):
+    """The film's resistance (stand-off path left out) and its lagged force at each sample of the
+    applied ``force`` (one sample a step), through :func:`lag_step`, :func:`hysteresis`,
+    :func:`creep_force` and :func:`conductance_s` from the recovered state ``s`` (plays, then creep
+    terms) with the widths, weights and creep decays in ``p``."""
+    res = np.empty(force.size)
+    lagged = np.empty(force.size)
+    f_lag = 0.0
+    for i in range(force.size):
+        f_lag = lag_step(f_lag, force[i], a_lag)
+        f_eff = hysteresis(f_lag, s, 0, p, 0, N_PLAYS, N_PLAYS)
+        f_c = creep_force(f_eff, f_lag, s, N_PLAYS, p, 2 * N_PLAYS, weight, threshold_n, N_CREEP)
+        res[i] = 1.0 / conductance_s(f_c, k_ohm, exponent, 0.0, 1.0, actuation_n, steepness)
+        lagged[i] = f_lag
+    return res, lagged
+
+
 def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: float = 1e-3,
                          force_n: float = HYSTERESIS_TEST_FORCE_N, peak_n: float = HYSTERESIS_TEST_PEAK_N) -> float:
     """``(R_F+ - R_F-)/R_F+`` at ``force_n`` (default :data:`HYSTERESIS_TEST_FORCE_N`), measured the
@@ -452,16 +470,8 @@ def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: floa
     a_lag = lag_alpha(dt_s, fsr.mechanical_lag_s)
     n = int(round(ramp_s / dt_s))
     force = np.concatenate([np.linspace(0.0, peak_n, n + 1), np.linspace(peak_n, 0.0, n + 1)[1:]])
-    f_lag = 0.0
-    res = np.empty(force.size)
-    lagged = np.empty(force.size)
-    for i, f in enumerate(force):
-        f_lag = lag_step(f_lag, float(f), a_lag)
-        f_eff = hysteresis(f_lag, s, 0, p, 0, N_PLAYS, N_PLAYS)
-        f_c = creep_force(f_eff, f_lag, s, N_PLAYS, p, 2 * N_PLAYS, w, fsr.load_threshold_n, N_CREEP)
-        res[i] = 1.0 / conductance_s(f_c, fsr.resistance_at_1n_ohm, fsr.exponent, 0.0, 1.0, fsr.actuation_force_n,
-                                     fsr.turn_on_steepness)
-        lagged[i] = f_lag
+    res, lagged = _cycle_resistances(force, a_lag, s, p, w, fsr.load_threshold_n, fsr.resistance_at_1n_ohm,
+                                     fsr.exponent, fsr.actuation_force_n, fsr.turn_on_steepness)
     peak = int(np.argmax(lagged))
     r_up = np.interp(force_n, lagged[:peak + 1], res[:peak + 1])
     r_dn = np.interp(force_n, lagged[peak:][::-1], res[peak:][::-1])
