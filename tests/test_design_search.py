@@ -128,6 +128,8 @@ def test_tune_search_writes_a_design_that_run_and_benchmark_take(tmp_path, capsy
     (["--family", "pid"], "--family"),
     (["steady_90wpm"], "steady_90wpm"),
     (["--name", "dob_100hz"], "dob_100hz"),
+    (["--validate", "-1"], "--validate"),
+    (["--validation-readers", "0"], "--validation-readers"),
 ])
 def test_bad_search_input_is_one_line_and_writes_nothing(tmp_path, capsys, extra, named):
     out = tmp_path / "o"
@@ -161,3 +163,31 @@ def test_the_api_refuses_bad_input_in_one_line():
         check_statistic("mean")
     with pytest.raises(ValueError, match="at least 1 evaluation"):
         _search(evaluations=0)
+
+
+def test_validation_chooses_among_the_best_on_other_readers(tmp_path):
+    journal = tmp_path / "journal.jsonl"
+    s = DesignSearch(_space(BAD), suite="quick", readers=1, seed=3, evaluations=8, validate=3, journal=journal)
+    res = s.run()
+    top = sorted({(h["value"], i): h for i, h in enumerate(res.history)}.items(), key=lambda kv: (-kv[0][0], kv[0][1]))
+    firsts = []
+    for _, h in top:
+        if h["gains"] not in [f["gains"] for f in firsts]:
+            firsts.append(h)
+    assert [h["gains"] for h in sorted(res.validated, key=lambda h: h["training_rank"])] == \
+        [h["gains"] for h in firsts[:3]]                          # the three best distinct on the training readers
+    vals = [h["validation_value"] for h in res.validated]
+    assert vals == sorted(vals, reverse=True) and res.validation_value == vals[0]
+    assert res.best.gains == res.validated[0]["gains"] and res.train_value == res.validated[0]["value"]
+    # the validation readers are neither the training readers nor the benchmark's
+    for sc in s.suite.scenarios:
+        assert not any(v == t for v in s.validation_devices[sc.key] for t in s.devices[sc.key])
+        assert not any(v == h for v in s.validation_devices[sc.key] for h in bm.scenario_devices(sc, 4))
+    # journalled: a rerun runs nothing and gives the same choice
+    again = DesignSearch(_space(BAD), suite="quick", readers=1, seed=3, evaluations=8, validate=3,
+                         journal=journal).run()
+    assert again.cached == 8 and again.validated == res.validated and again.best == res.best
+    with pytest.raises(ValueError, match="validate"):
+        DesignSearch(_space(BAD), suite="quick", readers=1, validate=-1)
+    with pytest.raises(ValueError, match="validation readers"):
+        DesignSearch(_space(BAD), suite="quick", readers=1, validate=2, validation_readers=0)

@@ -42,7 +42,7 @@ MAX_EVALUATIONS = 10_000
 """Most cost evaluations of ``--evaluations``."""
 
 ROBUST_DEFAULTS = {"population": 8, "family": "pid_scheduled", "scenarios": "standard", "ms_max": 1.6, "ms_gain": 1.0}
-SEARCH_DEFAULTS = {"suite": "standard", "statistic": "score", "readers": 4, "jobs": 1, "optimiser": "de"}
+SEARCH_DEFAULTS = {"suite": "standard", "statistic": "score", "readers": 4, "jobs": 1, "optimiser": "de", "validate": 5}
 
 TUNE_OWNED = ("gains.toml", "gains_tuned.toml", "gains_hand.toml", "report.md", "report.json", "bode.png",
               "nyquist.png", "population.png")
@@ -91,6 +91,12 @@ def add_arguments(p):
                         "cvar10_char_in_band, median_in_band, median_char_in_band")
     g.add_argument("--readers", type=whole(1, MAX_POPULATION), default=None, metavar="N",
                    help=f"training readers per scenario, drawn from --seed (default 4, at most {MAX_POPULATION})")
+    g.add_argument("--validate", type=whole(0, MAX_EVALUATIONS), default=None, metavar="K",
+                   help="run the K best candidates on the training readers again on validation readers (drawn from "
+                        "--seed + 1000003) and keep the best there (default 5; 0 keeps the best on the training "
+                        "readers)")
+    g.add_argument("--validation-readers", type=whole(1, MAX_POPULATION), default=None, metavar="N",
+                   help=f"validation readers per scenario (default: --readers, at most {MAX_POPULATION})")
     g.add_argument("--optimiser", default=None, metavar="NAME",
                    help="de (default: SciPy's differential evolution) or optuna (Optuna's TPE sampler, the optional "
                         "extra 'search')")
@@ -279,7 +285,7 @@ def main(args) -> int:
     search = args.search is not None
     other, own = (ROBUST_DEFAULTS, SEARCH_DEFAULTS) if search else (SEARCH_DEFAULTS, ROBUST_DEFAULTS)
     given = [k for k in other if getattr(args, k) is not None] + \
-        [k for k in ("firmware", "name") if not search and getattr(args, k) is not None] + \
+        [k for k in ("firmware", "name", "validation_readers") if not search and getattr(args, k) is not None] + \
         (["no_starts"] if not search and args.no_starts else []) + \
         (["duration"] if search and args.duration is not None else [])
     if given:
@@ -461,7 +467,8 @@ def _search_main(args) -> int:
     journal = out / ds.JOURNAL
     search = ds.DesignSearch(space, suite=suite.name, statistic=args.statistic, readers=args.readers,
                              seed=args.seed, evaluations=evaluations, jobs=args.jobs, journal=journal,
-                             optimiser=args.optimiser)
+                             optimiser=args.optimiser, validate=args.validate,
+                             validation_readers=args.validation_readers)
     if journal.exists():
         try:
             search.check_journal()
@@ -504,7 +511,9 @@ def _search_main(args) -> int:
                                                                      f" --suite {suite.name}")
             desc = (f"{best.controller} on {best.firmware or 'the scenario firmware'} found by tune --search "
                     f"(seed {args.seed}, {res.evaluations} evaluations, {args.readers} training readers per "
-                    f"scenario, statistic {args.statistic}): training score {res.train_score:.2f}, held-out "
+                    f"scenario, statistic {args.statistic}" +
+                    (f", the best of {len(res.validated)} on {search.validation_readers} validation readers"
+                     if res.validated else "") + f"): training score {res.train_score:.2f}, held-out "
                     f"score {held:.2f}" + (f" ({100 * held / ref_score:.1f} % of {ref}, {ref_score:.2f})"
                                            if ref_score else "") + ".")
             draft.write_text(ds.design_text(name, desc, best, {"score": held, "suite": suite.name,
@@ -515,6 +524,8 @@ def _search_main(args) -> int:
                    "training_readers": args.readers,
                    "seed": args.seed, "evaluations": res.evaluations, "from_journal": res.cached,
                    "training_statistic": res.train_value, "training_score": res.train_score,
+                   "validate": args.validate, "validation_readers": search.validation_readers if args.validate else None,
+                   "validation_statistic": res.validation_value, "validated": res.validated,
                    "held_out_score": held, "held_out_readers": val.readers,
                    "reference": {"design": ref, "score": ref_score,
                                  "source": "recorded in the firmware preset" if recorded else "run with the check"}
@@ -529,12 +540,18 @@ def _search_main(args) -> int:
     get_design(out / "design.toml")
     con.result({k: rep[k] for k in ("name", "design", "suite", "statistic", "optimiser", "training_readers", "seed",
                                     "evaluations", "from_journal", "training_statistic", "training_score",
+                                    "validation_statistic",
                                     "held_out_score", "held_out_readers", "reference", "ratio_to_reference",
                                     "wall_s")} | {"out": str(out), "files": [str(out / f) for f in ds.SEARCH_FILES]})
     con.say(f"searched {res.evaluations} designs ({res.cached} from the journal) in {t_search:.0f} s: "
             f"{best.controller} on {best.firmware}")
     con.say(f"  training {args.statistic} {res.train_value:.2f} (score {res.train_score:.2f}) on {args.readers} "
             f"readers per scenario drawn from seed {args.seed}")
+    if res.validated:
+        rank = res.validated[0]["training_rank"]
+        con.say(f"  validation {args.statistic} {res.validation_value:.2f} on {search.validation_readers} other readers "
+                f"per scenario: the best of the {len(res.validated)} best on the training readers (its rank there: "
+                f"{rank})")
     con.say(f"  held-out score {held:.2f} on the benchmark's {val.readers} readers ({suite.name} suite)" +
             (f"; {ref} {ref_score:.2f}, ratio {held / ref_score:.3f}" if ref_score else ""))
     same = [h["start"] for h in res.starts if (h["controller"], h["firmware"], h["gains"]) ==

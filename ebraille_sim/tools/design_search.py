@@ -40,6 +40,14 @@ the optimiser from its seed and takes every evaluation the journal holds instead
 it: it continues where the earlier run stopped, and gives the design an uninterrupted run
 gives.  A journal of other settings is refused in one line.
 
+Validation.  With ``validate`` = K > 0 the K best distinct candidates on the training readers
+are run again on *validation* readers, a third population (drawn from
+:func:`validation_seed` of the search's seed, never the benchmark's), and the design is the
+best of them there.  The best of many candidates on a few readers is the one those readers
+flatter most (its training score overstates it); the validation readers did not take part in
+the choice that put the K candidates forward, so their statistic ranks the K without that
+bias.  The validation runs are journalled too.
+
 Examples
 --------
 >>> space = default_space(["fast_1khz"])
@@ -60,7 +68,7 @@ from dataclasses import dataclass, field
 __all__ = ["Param", "Arm", "SearchSpace", "STATISTICS", "DIGITS", "check_statistic", "default_space",
            "load_space", "check_space", "training_devices", "Candidate", "DesignSearch", "SearchResult",
            "design_text", "report_markdown", "JOURNAL", "SEARCH_FILES", "OPTIMISERS",
-           "check_optimiser"]
+           "check_optimiser", "validation_seed"]
 
 DIGITS = 4
 """Significant digits of a searched gain."""
@@ -314,6 +322,23 @@ def training_devices(scenario: str, seed: int, n: int):
     return sample_devices(seed, n, base=load_scenario(scenario).device)
 
 
+VALIDATION_SEED_STEP = 1_000_003
+"""The validation readers' seed is the search's seed plus this (one more when that is the
+benchmark's reader seed)."""
+
+
+def validation_seed(seed: int) -> int:
+    """The seed of the validation readers of a search of ``seed``: neither the search's own nor
+    the benchmark's reader seed.
+
+    >>> validation_seed(0)
+    1000003
+    """
+    from ebraille_sim.tools.benchmark import POPULATION_SEED
+    v = (int(seed) + VALIDATION_SEED_STEP) % (2 ** 63)
+    return v + 1 if v == POPULATION_SEED else v
+
+
 def _scenario_spec(sc):
     """The spec of one suite scenario, as the benchmark builds it."""
     from ebraille_sim.tools.benchmark import scenario_spec
@@ -346,7 +371,9 @@ def _statistic(summary: dict, statistic: str, suite) -> float:
 
 @dataclass
 class SearchResult:
-    """What a search found: the best candidate, its training statistic and score, the history."""
+    """What a search found: the best candidate, its training statistic and score, the history;
+    with validation, the candidates validated (training and validation statistic and score,
+    best on the validation readers first) and the chosen one's validation statistic."""
     best: Candidate
     train_value: float
     train_score: float
@@ -354,6 +381,8 @@ class SearchResult:
     cached: int
     history: list
     starts: list
+    validated: list = field(default_factory=list)
+    validation_value: float | None = None
 
 
 class DesignSearch:
@@ -376,13 +405,20 @@ class DesignSearch:
         Local worker processes; the result does not depend on it.
     optimiser : str
         One of :data:`OPTIMISERS`.
+    validate : int
+        Candidates (the best distinct ones on the training readers) run again on the
+        validation readers, the design the best of them there; 0 (default) chooses on the
+        training readers.
+    validation_readers : int, optional
+        Validation readers per scenario (default: ``readers``), drawn from
+        :func:`validation_seed`.
     journal : path, optional
         The journal file (module docstring); None keeps no journal.
     """
 
     def __init__(self, space: SearchSpace, suite: str = "standard", statistic: str = "score", readers: int = 4,
                  seed: int = 0, evaluations: int = 60, jobs: int = 1, journal=None, progress=None,
-                 optimiser: str = "de"):
+                 optimiser: str = "de", validate: int = 0, validation_readers: int | None = None):
         from ebraille_sim.tools.benchmark import get_suite
         check_statistic(statistic)
         self.optimiser = check_optimiser(optimiser)
@@ -392,10 +428,19 @@ class DesignSearch:
             raise ValueError(f"training readers must be at least 1, got {readers!r}")
         if jobs < 1:
             raise ValueError(f"jobs must be >= 1, got {jobs}")
+        if isinstance(validate, bool) or not isinstance(validate, int) or validate < 0:
+            raise ValueError(f"validate must be a whole number of candidates >= 0, got {validate!r}")
+        validation_readers = readers if validation_readers is None else validation_readers
+        if isinstance(validation_readers, bool) or not isinstance(validation_readers, int) or validation_readers < 1:
+            raise ValueError(f"validation readers must be at least 1, got {validation_readers!r}")
+        self.validate, self.validation_readers = validate, validation_readers
         self.space, self.suite, self.statistic = space, get_suite(suite), statistic
         self.readers, self.seed, self.evaluations, self.jobs = readers, int(seed), evaluations, int(jobs)
         self.progress = progress
         self.devices = {sc.key: training_devices(sc.scenario, self.seed, readers) for sc in self.suite.scenarios}
+        self.validation_devices = {} if not validate else {
+            sc.key: training_devices(sc.scenario, validation_seed(self.seed), validation_readers)
+            for sc in self.suite.scenarios}
         self.journal = None if journal is None else pathlib.Path(journal)
         self.cache: dict = {}
         self.history: list = []
@@ -404,10 +449,13 @@ class DesignSearch:
     def header(self) -> dict:
         """What a journal's first line records: a rerun continues only under the same settings."""
         from ebraille_sim.tools.benchmark import SUITE_VERSION
-        return {"journal": "ebraille-sim design search", "suite": self.suite.name, "suite_version": SUITE_VERSION,
+        head = {"journal": "ebraille-sim design search", "suite": self.suite.name, "suite_version": SUITE_VERSION,
                 "statistic": self.statistic, "readers": self.readers, "seed": self.seed,
                 "optimiser": self.optimiser,
                 "space": self.space.describe()}
+        if self.validate:
+            head.update(validate=self.validate, validation_readers=self.validation_readers)
+        return head
 
     def check_journal(self) -> list:
         """The entries of the journal, refused (one-line ``ValueError``) when it is not this
@@ -438,34 +486,42 @@ class DesignSearch:
             self.journal.parent.mkdir(parents=True, exist_ok=True)
             self.journal.write_text(json.dumps(self.header(), sort_keys=True) + "\n", encoding="utf-8")
 
-    def _tasks(self, cand: Candidate) -> list:
+    def _tasks(self, cand: Candidate, validation: bool = False) -> list:
+        devices, seed = (self.validation_devices, validation_seed(self.seed)) if validation else (self.devices, self.seed)
         out = []
         for i, sc in enumerate(self.suite.scenarios):
-            base = _scenario_spec(sc).seed + 1_000_003 * (self.seed % 1_000_000_007 + 1) + 7919 * (i + 1)
-            out += [(cand, sc, dev, (base + 101 * r) % (2 ** 63), r) for r, dev in enumerate(self.devices[sc.key])]
+            base = _scenario_spec(sc).seed + 1_000_003 * (seed % 1_000_000_007 + 1) + 7919 * (i + 1)
+            out += [(cand, sc, dev, (base + 101 * r) % (2 ** 63), r) for r, dev in enumerate(devices[sc.key])]
         return out
 
-    def _summary(self, rows: list) -> dict:
+    def _summary(self, rows: list, readers: int) -> dict:
         from ebraille_sim.tools.benchmark import BenchmarkResult, summarise
-        return summarise(BenchmarkResult(self.suite, ["candidate"], self.readers, rows, 0.0, self.jobs))["candidate"]
+        return summarise(BenchmarkResult(self.suite, ["candidate"], readers, rows, 0.0, self.jobs))["candidate"]
+
+    def _run_entries(self, cands: list, validation: bool = False) -> None:
+        """Run the candidates of ``cands`` that the cache does not hold (on the validation readers
+        when ``validation``, cached and journalled under ``validation:`` and their key)."""
+        prefix = "validation:" if validation else ""
+        by_key = {prefix + c.key(): c for c in cands}
+        todo = [k for k in by_key if k not in self.cache]
+        tasks = [t for k in todo for t in self._tasks(by_key[k], validation)]
+        per = len(tasks) // max(1, len(todo))
+        if not tasks:
+            return
+        readers = self.validation_readers if validation else self.readers
+        for k, rows in zip(todo, self._rows(tasks, per, todo)):
+            s = self._summary(rows, readers)
+            e = {"key": k, "value": _statistic(s, self.statistic, self.suite), "score": s["score"],
+                 "errors": s["errors"]}
+            self.cache[k] = e
+            self.ran += 0 if validation else 1
+            if self.journal is not None:
+                with open(self.journal, "a", encoding="utf-8") as f:
+                    f.write(json.dumps(e, sort_keys=True) + "\n")
 
     def _evaluate(self, cands: list) -> list:
         """Statistics of ``cands`` (journal entries where held, else run), in order."""
-        todo = [c for c in dict.fromkeys(c.key() for c in cands) if c not in self.cache]
-        by_key = {c.key(): c for c in cands}
-        tasks = [t for k in todo for t in self._tasks(by_key[k])]
-        per = len(tasks) // max(1, len(todo))
-        if tasks:
-            rows_of = self._rows(tasks, per, todo)
-            for k, rows in zip(todo, rows_of):
-                s = self._summary(rows)
-                e = {"key": k, "value": _statistic(s, self.statistic, self.suite), "score": s["score"],
-                     "errors": s["errors"]}
-                self.cache[k] = e
-                self.ran += 1
-                if self.journal is not None:
-                    with open(self.journal, "a", encoding="utf-8") as f:
-                        f.write(json.dumps(e, sort_keys=True) + "\n")
+        self._run_entries(cands)
         out = []
         for c in cands:
             e = self.cache[c.key()]
@@ -519,7 +575,8 @@ class DesignSearch:
         return pop, len(starts)
 
     def run(self) -> SearchResult:
-        """Search; the best candidate over every evaluation (the starts included)."""
+        """Search; the best candidate over every evaluation (the starts included), or with
+        ``validate`` the best on the validation readers of the best on the training readers."""
         import numpy as np
         from scipy.optimize import differential_evolution
         self._open_journal()
@@ -548,6 +605,29 @@ class DesignSearch:
                 self._evaluate([self.space.decode(x) for x in xs])
         return self._result(n_starts)
 
+    def _validated(self) -> list:
+        """The ``validate`` best distinct candidates on the training readers (ties: the earlier),
+        run on the validation readers: history entries with ``validation_value`` and
+        ``validation_score``, the best on the validation readers first (ties: the better
+        training statistic)."""
+        order = sorted(range(len(self.history)), key=lambda j: (-self.history[j]["value"], j))
+        top, seen = [], set()
+        for j in order:
+            h = self.history[j]
+            cand = Candidate(h["controller"], h["firmware"], h["gains"])
+            if cand.key() not in seen:
+                seen.add(cand.key())
+                top.append((j, cand))
+            if len(top) == self.validate:
+                break
+        self._run_entries([c for _, c in top], validation=True)
+        out = []
+        for rank, (j, cand) in enumerate(top):
+            e = self.cache["validation:" + cand.key()]
+            out.append(dict(self.history[j], validation_value=e["value"], validation_score=e["score"],
+                            training_rank=rank + 1))
+        return sorted(out, key=lambda h: (-h["validation_value"], -h["value"], h["training_rank"]))
+
     def _run_optuna(self, starts) -> None:
         import optuna
         optuna.logging.set_verbosity(optuna.logging.WARNING)
@@ -567,11 +647,16 @@ class DesignSearch:
         return k, h["gains"]
 
     def _result(self, n_starts: int) -> SearchResult:
-        i = max(range(len(self.history)), key=lambda j: (self.history[j]["value"], -j))
-        h = self.history[i]
+        evaluations = len(self.history)
+        validated = self._validated() if self.validate else []
+        if validated:
+            h = validated[0]
+        else:
+            h = self.history[max(range(len(self.history)), key=lambda j: (self.history[j]["value"], -j))]
         starts = [dict(e, start=label) for e, label in zip(self.history[:n_starts], self.start_labels)]
         return SearchResult(Candidate(h["controller"], h["firmware"], h["gains"]), h["value"], h["score"],
-                            len(self.history), len(self.history) - self.ran, list(self.history), starts)
+                            evaluations, evaluations - self.ran, list(self.history), starts,
+                            validated, h.get("validation_value"))
 
 
 def _defaults(arm: Arm) -> dict:
@@ -616,6 +701,12 @@ def report_markdown(rep: dict, held_out_tables: str) -> str:
            f"{rep['wall_s']['search']:.0f} s, held-out check {rep['wall_s']['held_out']:.0f} s.", "",
            "| | training (search readers) | held-out (benchmark readers) |", "|---|---:|---:|",
            f"| score | {rep['training_score']:.2f} | {rep['held_out_score']:.2f} |"]
+    if rep.get("validated"):
+        out += ["", f"Chosen on {rep['validation_readers']} validation readers per scenario (seed "
+                f"{validation_seed(rep['seed'])}) among the {len(rep['validated'])} best on the training readers:", "",
+                "| training rank | controller | firmware | training score | validation score |", "|---:|---|---|---:|---:|"]
+        out += [f"| {h['training_rank']} | {h['controller']} | {h['firmware']} | {h['score']:.2f} | "
+                f"{h['validation_score']:.2f} |" for h in rep["validated"]]
     if ref is not None and ref.get("score") is not None:
         out += ["", f"Best shipped design on `{d['firmware']}`: `{ref['design']}`, {ref['score']:.2f} "
                 f"({ref['source']}); the found design reaches {100 * rep['ratio_to_reference']:.1f} % of it."]
