@@ -392,7 +392,9 @@ def table_reading_n(model, force_n: float, fsr, circuit, hold_s: float, press_z=
     if np.ndim(force_n) == 0:
         g = static_conductance(force_n * branch, fsr, load_time_s=hold_s)
     else:
-        g = np.array([static_conductance(f * branch, fsr, load_time_s=hold_s) for f in np.asarray(force_n, float)])
+        forces = np.asarray(force_n, dtype=float)
+        at = {f: static_conductance(f * branch, fsr, load_time_s=hold_s) for f in dict.fromkeys(forces.tolist())}
+        g = np.array([at[f] for f in forces.tolist()])
     g_standoff = 1.0 / fsr.standoff_resistance_ohm
     z, e = np.asarray(press_z, dtype=float), np.asarray(noise_v, dtype=float)
     g = g_standoff + (g - g_standoff) / np.exp(fsr.press_repeatability * z)
@@ -469,11 +471,11 @@ def bench_creep_per_decade(device: DeviceParams, load_n: float = 1.0, load_error
     f_eff = load_n * (1.0 + load_error) * loading_branch_factor(fsr)
     g_off = 1.0 / nom.standoff_resistance_ohm
     ratios = []
+    held = [static_conductance(f_eff, fsr, load_time_s=t) for t in CREEP_READ_S]             # plant truth (bench)
     for _ in range(TABLE_PRESSES):
         scale = math.exp(fsr.press_repeatability * float(rng.standard_normal()))
         g_path = []
-        for t in CREEP_READ_S:
-            g = static_conductance(f_eff, fsr, load_time_s=t)                                  # plant truth (bench)
+        for g in held:
             g = 1.0 / fsr.standoff_resistance_ohm + (g - 1.0 / fsr.standoff_resistance_ohm) / scale  # plant truth
             v = divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + sd_v * float(rng.standard_normal())
             g_path.append(divider_conductance_s(v, circuit.r2_ohm, circuit.supply_v) - g_off)
