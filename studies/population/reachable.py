@@ -323,7 +323,10 @@ def main(argv=None) -> int:
         except (OSError, ValueError, KeyError) as exc:
             print(f"error: --tables: {str(exc).splitlines()[0]}", file=sys.stderr)
             return 2
-        print(table(sums), "", table(sums, "within_0.05_of_actuator_bound"), "", mechanism_table(sums), sep="\n")
+        print("Share of readers at >= 0.9 in band", "", table(sums), "",
+              "Share of readers within 0.05 of the actuator bound's in-band fraction on the same reader", "",
+              table(sums, "within_0.05_of_actuator_bound"), "", "Failing readers by mechanism", "",
+              mechanism_table(sums), sep="\n")
         return 0
     runs = [r.strip() for r in a.runs.split(",") if r.strip()]
     bad = [r for r in runs if r not in RUNS]
