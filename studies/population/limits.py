@@ -9,7 +9,8 @@ leaves the band by the loop.
 
 ``--oracle`` removes the two per-unit errors no firmware can know: the film's press-to-press
 repeatability (``FSRParams.press_repeatability``, a resistance factor drawn per press) and the
-error of the calibration fixture's known load (the units are calibrated at exactly 1 N).
+error of the calibration fixture's known loads (the divider at exactly 1 N, the table at its
+exact loads).
 What the loop still loses then is the rest of the sensor chain and the control.
 
     python studies/population/limits.py pressing_90wpm --readers 40 --seed 11 --controller dob_hold_1khz
@@ -24,7 +25,7 @@ import sys
 import numpy as np
 
 from ebraille_sim.base.validation import replace_fields
-from ebraille_sim.estimation.calibration import calibrate_device
+from ebraille_sim.estimation.calibration import TABLE_LOADS_N, calibrate_device, with_calibration_table
 from ebraille_sim.scenarios.population import PopulationSpec, sample_devices
 from ebraille_sim.scenarios.runner import run_batch
 from ebraille_sim.scenarios.spec import load_scenario
@@ -34,13 +35,14 @@ BATCH = 50
 
 
 def readers(scenario: str, n: int, seed: int, oracle: bool = False) -> list:
-    """The drawn devices of one scenario; with ``oracle`` without press scatter and with an exact
-    calibration load."""
+    """The drawn devices of one scenario; with ``oracle`` without press scatter and calibrated
+    (divider and table, as the drawn units are) with exact loads."""
     spec = load_scenario(scenario)
     if not oracle:
         return sample_devices(seed, n, base=spec.device)
     raw = sample_devices(seed, n, PopulationSpec(calibrate=False), base=spec.device)
-    return [calibrate_device(replace_fields(d, fsr=replace_fields(d.fsr, press_repeatability=0.0))) for d in raw]
+    exact = [calibrate_device(replace_fields(d, fsr=replace_fields(d.fsr, press_repeatability=0.0))) for d in raw]
+    return [with_calibration_table(d, TABLE_LOADS_N) for d in exact]
 
 
 def decompose(scenario: str, n: int, seed: int, duration_s: float, controller=None, firmware=None,
