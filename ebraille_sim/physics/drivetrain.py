@@ -87,7 +87,12 @@ def weight_along_n(mass_kg, gravity_along_m_per_s2):
 
 @njit(cache=True, inline="always")
 def stribeck(v_abs, f_coulomb, f_static, v_stribeck):
-    """Kinetic friction magnitude at speed ``v_abs`` (N), without the viscous term."""
+    """Kinetic friction magnitude at speed ``v_abs`` (N), without the viscous term.
+
+    At rest the curve is ``Fs`` (``exp(0) = 1``), returned without calling ``exp``: a stuck body
+    is the common case in a loop that holds a force."""
+    if v_abs == 0.0:
+        return f_coulomb + (f_static - f_coulomb)
     r = v_abs / v_stribeck
     return f_coulomb + (f_static - f_coulomb) * math.exp(-r * r)
 
