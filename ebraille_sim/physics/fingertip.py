@@ -54,9 +54,9 @@ _LN2 = math.log(2.0)
 def exp_minus_one(x):
     """``exp(x) - 1`` within 2 ulp: ``math.exp(x) - 1`` where ``exp(x) >= 2`` (the subtraction is
     exact there, and the result at least half of ``exp(x)``), ``math.expm1`` below, where the
-    subtraction would cancel.  The C library's ``exp`` takes about a third of the time of its
-    ``expm1`` (glibc, 2.9 against 9.9 ns a call: ``python benchmarks/bench_kernel.py``), and the
-    pulp law runs at every physics step."""
+    subtraction would cancel.  The C library's ``exp`` takes a third to a half of the time of its
+    ``expm1`` (glibc, 2.9-3.2 against 7.8-10.5 ns a call: ``python benchmarks/bench_kernel.py``),
+    and the pulp law runs at every physics step."""
     if x >= _LN2:
         return math.exp(x) - 1.0
     return math.expm1(x)
