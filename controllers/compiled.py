@@ -23,7 +23,8 @@ commands to the last bit whichever way it is stepped.
 reference counting (``_nrt=False``), and the dispatchers :func:`controller_step` and
 :func:`controller_reset` are inlined into their callers: a compiled loop then steps the PID
 without an atomic reference count per array per call, which cost more than the PID's own
-arithmetic.  The LQG step allocates its small vectors and keeps the runtime.
+arithmetic.  The LQG step allocates its small vectors and keeps the runtime (``_nrt=True``
+set explicitly: a caller compiled without it, the loop engine, would otherwise pass it on).
 
 PID family (one step for all variants, switched by the parameters):
 
@@ -406,7 +407,7 @@ def _lqg_blocks(p):
     return n, A, B, C, K, L, Nx
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def lqg_reset(s, p, y, r, command_v):
     """Bumpless reset of the LQG (:meth:`controllers.lqg.LQG.reset`)."""
     n, A, B, C, K, L, Nx = _lqg_blocks(p)
@@ -421,7 +422,7 @@ def lqg_reset(s, p, y, r, command_v):
     s[LS.command_v] = u0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def lqg_step(s, p, force_est_n, setpoint_n, dt_s):
     """One call of the sampled-data LQG (:meth:`controllers.lqg.LQG.update`); returns the command, V."""
     ts = p[LP.sample_s]

@@ -53,12 +53,12 @@ def test_motor_current_step_follows_the_closed_form_exponential():
     i_ss = (v - ke * w) / r
     i = i0
     for k in range(1, 31):
-        i = current_step(i, v, w, r, ke, decay)
+        i = current_step(i, v, w, 1.0 / r, ke, decay)
         t = k * h
         assert i == pytest.approx(i_ss + (i0 - i_ss) * math.exp(-t * r / l_h), rel=1e-12)
     # far past L/R the current is the quasi-static (V - kE w)/R
     for _ in range(1000):
-        i = current_step(i, v, w, r, ke, decay)
+        i = current_step(i, v, w, 1.0 / r, ke, decay)
     assert i == pytest.approx(i_ss, rel=1e-12)
 
 
@@ -71,7 +71,7 @@ def test_armature_ode_is_the_rate_of_the_exact_current_step():
     rate = current_rate_a_per_s(i0, v, w, r, l_h, ke)
     assert rate == pytest.approx((i_ss - i0) * r / l_h, rel=1e-12)
     h = 1e-4 * l_h / r
-    stepped = (current_step(i0, v, w, r, ke, current_decay(h, r, l_h)) - i0) / h
+    stepped = (current_step(i0, v, w, 1.0 / r, ke, current_decay(h, r, l_h)) - i0) / h
     assert stepped == pytest.approx(rate, rel=1e-4)
     assert current_rate_a_per_s(i_ss, v, w, r, l_h, ke) == pytest.approx(0.0, abs=1e-9 * abs(rate))
     # linear: its values on unit inputs are its partial derivatives
@@ -125,15 +125,16 @@ def test_gear_loss_reproduces_the_forward_efficiency():
 
 def test_friction_sticks_below_breakaway_and_slips_above():
     m, h, fk, fs_ = 0.01, 1e-4, 0.1, 0.125
-    assert friction_velocity_update(0.0, 0.12, m, h, fk, fs_) == 0.0           # stuck
-    assert friction_velocity_update(0.0, -0.12, m, h, fk, fs_) == 0.0
-    assert friction_velocity_update(0.0, 0.2, m, h, fk, fs_) == pytest.approx(h * (0.2 - fk) / m, rel=1e-12)
-    assert friction_velocity_update(0.0, -0.2, m, h, fk, fs_) == pytest.approx(-h * (0.2 - fk) / m, rel=1e-12)
+    hm = h / m
+    assert friction_velocity_update(0.0, 0.12, hm, fk, fs_) == 0.0           # stuck
+    assert friction_velocity_update(0.0, -0.12, hm, fk, fs_) == 0.0
+    assert friction_velocity_update(0.0, 0.2, hm, fk, fs_) == pytest.approx(h * (0.2 - fk) / m, rel=1e-12)
+    assert friction_velocity_update(0.0, -0.2, hm, fk, fs_) == pytest.approx(-h * (0.2 - fk) / m, rel=1e-12)
     # sliding: friction removes h fk/m of speed and never reverses the motion
-    assert friction_velocity_update(0.01, 0.0, m, h, fk, fs_) == pytest.approx(0.01 - h * fk / m, rel=1e-12)
-    assert friction_velocity_update(1e-4, 0.0, m, h, fk, fs_) == 0.0
-    assert friction_velocity_update(-0.01, 0.05, m, h, fk, fs_) == pytest.approx(-0.01 + h * (0.05 + fk) / m,
-                                                                                  rel=1e-12)
+    assert friction_velocity_update(0.01, 0.0, hm, fk, fs_) == pytest.approx(0.01 - h * fk / m, rel=1e-12)
+    assert friction_velocity_update(1e-4, 0.0, hm, fk, fs_) == 0.0
+    assert friction_velocity_update(-0.01, 0.05, hm, fk, fs_) == pytest.approx(-0.01 + h * (0.05 + fk) / m,
+                                                                                rel=1e-12)
 
 
 def test_end_stops_viscous_and_weight():
@@ -657,7 +658,7 @@ def _substep_by_hand(s, p, u):
     g = p[P.n_over_r_per_m]
     v_cmd = driver_voltage(u[U.command_v], u[U.driver_supply_v])
     vp, vb = s[S.pinion_vel_m_per_s], s[S.board_vel_m_per_s]
-    i = current_step(s[S.current_a], v_cmd, shaft_speed_rad_per_s(vp, g), p[P.motor_r_ohm], p[P.motor_ke],
+    i = current_step(s[S.current_a], v_cmd, shaft_speed_rad_per_s(vp, g), 1.0 / p[P.motor_r_ohm], p[P.motor_ke],
                      p[P.motor_current_decay])
     f_motor = rack_force_n(i, p[P.motor_kt], g)
     f_mesh = mesh_force(s[S.pinion_pos_m] - s[S.board_pos_m], vp - vb, p[P.half_backlash_m], p[P.mesh_k_n_per_m],
@@ -665,11 +666,11 @@ def _substep_by_hand(s, p, u):
     fk_p, fs_p = loaded_friction_n(abs(vp), p[P.pinion_coulomb_n], p[P.pinion_static_n], p[P.stribeck_v_m_per_s],
                                    gear_loss_n(p[P.gear_mu], f_mesh))
     vp_new = friction_velocity_update(vp, f_motor - f_mesh - viscous_force_n(p[P.pinion_viscous_n_s_per_m], vp),
-                                      p[P.pinion_mass_kg], h, fk_p, fs_p)
+                                      h / p[P.pinion_mass_kg], fk_p, fs_p)
     f_b = (f_mesh - s[S.contact_force_n] + weight_along_n(p[P.board_mass_kg], u[U.gravity_along_m_per_s2])
            - viscous_force_n(p[P.guide_viscous_n_s_per_m], vb))
     fk_b = stribeck(abs(vb), p[P.guide_coulomb_n], p[P.guide_static_n], p[P.stribeck_v_m_per_s])
-    vb_new = friction_velocity_update(vb, f_b, p[P.board_mass_kg], h, fk_b, p[P.guide_static_n])
+    vb_new = friction_velocity_update(vb, f_b, h / p[P.board_mass_kg], fk_b, p[P.guide_static_n])
     xp = s[S.pinion_pos_m] + h * vp_new
     xb, vb_new = end_stop(s[S.board_pos_m] + h * vb_new, vb_new, p[P.travel_min_m], p[P.travel_max_m])
     d = compression_m(xb, u[U.finger_pos_m])

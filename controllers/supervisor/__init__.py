@@ -108,7 +108,11 @@ The two functions are compiled without Numba's reference counting (``_nrt=False`
 allocate nothing) and every helper of a normal period is inlined into them; only the rare
 paths (a fault, an event, the safe states) call out.  Counting the references of the two
 arrays at every helper, an atomic operation each, would cost more than the period's own
-arithmetic.
+arithmetic.  They are compiled with NumPy's error model (``error_model="numpy"``): every divisor
+in them is a configuration value checked positive, the control period (at least ``min_dt_s``) or
+the difference of two of the envelope's increasing speeds, so no division checks for a zero
+divisor, and a period costs about half (150 against 82 ns with the default controller in
+``steady_90wpm``).
 
 Examples
 --------

@@ -10,7 +10,7 @@ from controllers.supervisor.detectors import _detect, _envelope_cap, _event, _mo
 from controllers.supervisor.layout import CF, EVENT, FAULT, MODE, SV
 from ebraille_sim.base.compiled import njit
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def supervise_begin(sv, cfg, f, sp, dt, cur):
     """First half of one supervised period: detectors, contact tracking, the safe states.
 
@@ -147,7 +147,7 @@ def supervise_begin(sv, cfg, f, sp, dt, cur):
     return 1, math.nan, _pymin(sp, cfg[CF.sp_max_n])
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model="numpy")
 def supervise_end(sv, cfg, u, f, sp, dt, cur):
     """Second half of a period whose :func:`supervise_begin` gave code 1: shape the inner command.
 

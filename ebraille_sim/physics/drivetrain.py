@@ -87,7 +87,12 @@ def weight_along_n(mass_kg, gravity_along_m_per_s2):
 
 @njit(cache=True, inline="always")
 def stribeck(v_abs, f_coulomb, f_static, v_stribeck):
-    """Kinetic friction magnitude at speed ``v_abs`` (N), without the viscous term."""
+    """Kinetic friction magnitude at speed ``v_abs`` (N), without the viscous term.
+
+    At rest the curve is ``Fs`` (``exp(0) = 1``), returned without calling ``exp``: a stuck body
+    is the common case in a loop that holds a force."""
+    if v_abs == 0.0:
+        return f_coulomb + (f_static - f_coulomb)
     r = v_abs / v_stribeck
     return f_coulomb + (f_static - f_coulomb) * math.exp(-r * r)
 
@@ -108,7 +113,7 @@ def loaded_friction_n(v_abs, f_coulomb, f_static, v_stribeck, load_n):
 
 
 @njit(cache=True, inline="always")
-def friction_velocity_update(v, f_applied, mass, h, f_kinetic, f_static):
+def friction_velocity_update(v, f_applied, h_per_mass, f_kinetic, f_static):
     """New velocity of a body with dry friction after one step.
 
     Parameters
@@ -117,8 +122,8 @@ def friction_velocity_update(v, f_applied, mass, h, f_kinetic, f_static):
         Velocity at the start of the step, m/s (exactly 0.0 while stuck).
     f_applied : float
         Sum of all forces except dry friction, N.
-    mass, h : float
-        Mass (kg) and step (s).
+    h_per_mass : float
+        Step over mass ``h/m`` (s/kg): a force ``F`` changes the velocity by ``F h/m``.
     f_kinetic, f_static : float
         Kinetic friction at ``|v|`` and the break-away level, N.
     """
@@ -126,9 +131,9 @@ def friction_velocity_update(v, f_applied, mass, h, f_kinetic, f_static):
         if abs(f_applied) <= f_static:
             return 0.0
         s = 1.0 if f_applied > 0.0 else -1.0
-        return h * (f_applied - s * f_kinetic) / mass
-    v_free = v + h * f_applied / mass
-    dv = h * f_kinetic / mass
+        return (f_applied - s * f_kinetic) * h_per_mass
+    v_free = v + f_applied * h_per_mass
+    dv = f_kinetic * h_per_mass
     if abs(v_free) <= dv:
         return 0.0
     if v_free > 0.0:

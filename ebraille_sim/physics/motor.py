@@ -47,7 +47,7 @@ def driver_voltage(command_v, supply_v):
 
 
 @njit(cache=True, inline="always")
-def current_step(i_a, v_v, omega_rad_s, r_ohm, ke_v_s, decay):
+def current_step(i_a, v_v, omega_rad_s, g_s, ke_v_s, decay):
     """Advance the armature current over one step, exactly for held V and w.
 
     Parameters
@@ -58,12 +58,13 @@ def current_step(i_a, v_v, omega_rad_s, r_ohm, ke_v_s, decay):
         Terminal voltage, V.
     omega_rad_s : float
         Shaft speed, rad/s.
-    r_ohm, ke_v_s : float
-        Armature resistance and back-EMF constant.
+    g_s, ke_v_s : float
+        Armature conductance ``1/R`` (S) and back-EMF constant: the kernel forms ``1/R`` once
+        per call, so the step multiplies where a division would sit on its critical path.
     decay : float
         ``exp(-h R / L)`` for the step ``h``.
     """
-    i_ss = (v_v - ke_v_s * omega_rad_s) / r_ohm
+    i_ss = (v_v - ke_v_s * omega_rad_s) * g_s
     return i_ss + (i_a - i_ss) * decay
 
 

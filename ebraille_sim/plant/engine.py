@@ -137,7 +137,7 @@ def period(state, params, inputs, n_sub, kind, cstate, cparams, u_ext, u_max, su
     return OK, u
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def run(states, params, inputs, n_sub, kinds, cstates, cparams, u_ext, supervised, sv_states, sv_cfgs,
         setpoints, dt, i_feedback, slots, counts, tables, k0, n_periods, every, f_true, f_est, kept,
         status, periods, values):
@@ -158,6 +158,9 @@ def run(states, params, inputs, n_sub, kinds, cstates, cparams, u_ext, supervise
     ``kept[r]`` (rows :data:`KEPT`).  A row that fails gets its status, ``periods[r]`` the
     period it failed in and ``values[r]`` the offending command; a row that runs gets
     ``periods[r] = k0 + n_periods``.
+
+    Compiled without Numba's reference counting (``_nrt=False``, like the kernel): the loop
+    allocates nothing (the LQG step, which does, keeps its own runtime, ``_nrt=True``).
     """
     recording = f_true.shape[1] > 0
     for r in range(states.shape[0]):

@@ -30,6 +30,11 @@ Per physics step ``h`` (default 0.1 ms), with the command held over the control 
    when on) and the anti-alias filter; at every estimator
    sample the block-oriented estimator (:func:`~ebraille_sim.estimation.blockmodels.estimator_step`).
 
+Speed: :func:`advance` keeps the per-step states in local variables over its steps and forms
+``h/m`` and ``1/R`` once per call; it and its batch and sensor-only forms allocate nothing and
+are compiled without Numba's reference counting (``_nrt=False``): with it, every inlined call
+that takes an array counted that array up and down atomically, which cost more than the laws.
+
 Stability: the semi-implicit step is stable while ``w h < 2`` for the stiffest
 oscillation, the board on the mesh and the pulp; :func:`ebraille_sim.plant.lumped.check_step`
 rejects physics rates that give ``w h > 1``.
@@ -107,17 +112,6 @@ def sensor_sample(s, p, u):
 
 
 @njit(cache=True, inline="always")
-def current_sense_substep(s, p):
-    """The motor-current chain at the physics rate: the amplifier's image of the armature
-    current through the RC sections (:mod:`ebraille_sim.physics.current_sense`)."""
-    v = amplifier_v(s[S.current_a], p[P.isense_shunt_ohm], p[P.isense_gain], 0.0, p[P.isense_offset_v],
-                    p[P.isense_ref_v])
-    v1 = rc_step(s[S.isense_filter1_v], v, p[P.isense_decay])
-    s[S.isense_filter1_v] = v1
-    s[S.isense_filter2_v] = rc_step(s[S.isense_filter2_v], v1, p[P.isense_decay2])   # decay2 = 0: one section
-
-
-@njit(cache=True, inline="always")
 def current_sample(s, p):
     """The firmware's one conversion of the motor current at the end of a control period (its noise
     indexed by the physics steps so far: the reading at a time is the same at any control rate)."""
@@ -127,87 +121,112 @@ def current_sample(s, p):
 
 
 @njit(cache=True, inline="always")
-def sensor_substep(s, p, u, contact_force_n):
-    """FSR mechanical lag and the current chain's filter at the physics rate; an FSR ADC sample
-    when one is due."""
-    current_sense_substep(s, p)
-    s[S.fsr_force_lagged_n] = lag_step(s[S.fsr_force_lagged_n], contact_force_n, p[P.fsr_lag_alpha])
-    s[S.sensor_phase] += 1.0
-    if s[S.sensor_phase] >= p[P.substeps_per_sensor]:
-        s[S.sensor_phase] = 0.0
+def sensor_substep(s, p, u, lagged_n, filter1_v, filter2_v, phase, current_a, contact_force_n):
+    """The sensors at the physics rate: the motor-current chain's RC sections on the amplifier's
+    image of the armature current (:mod:`ebraille_sim.physics.current_sense`), the FSR mechanical
+    lag, and an FSR ADC sample when one is due.  Takes and returns the per-step sensor states
+    ``(lagged force, filter 1, filter 2, sample phase)``, which the loop keeps in registers; a
+    sample reads the lagged force from ``s``."""
+    v = amplifier_v(current_a, p[P.isense_shunt_ohm], p[P.isense_gain], 0.0, p[P.isense_offset_v],
+                    p[P.isense_ref_v])
+    filter1_v = rc_step(filter1_v, v, p[P.isense_decay])
+    filter2_v = rc_step(filter2_v, filter1_v, p[P.isense_decay2])       # decay2 = 0: one section
+    lagged_n = lag_step(lagged_n, contact_force_n, p[P.fsr_lag_alpha])
+    phase += 1.0
+    if phase >= p[P.substeps_per_sensor]:
+        phase = 0.0
+        s[S.fsr_force_lagged_n] = lagged_n
         sensor_sample(s, p, u)
+    return lagged_n, filter1_v, filter2_v, phase
 
 
 @njit(cache=True, inline="always")
-def mechanics_substep(s, p, u):
-    """One physics step of the lumped drive train, board and fingertip."""
-    h = p[P.h_s]
+def mechanics_substep(p, u, h, h_per_pinion_mass, h_per_board_mass, g_armature_s,
+                      xp, vp, xb, vb, i, fe, h1, h2, h3, fc):
+    """One physics step of the lumped drive train, board and fingertip, on the mechanical state
+    ``(pinion position and velocity, board position and velocity, current, elastic force, Prony
+    states, contact force)``; returns the new state and the electrical energy of the step (J)."""
     v_cmd = driver_voltage(u[U.command_v], u[U.driver_supply_v])
-    vp = s[S.pinion_vel_m_per_s]
-    vb = s[S.board_vel_m_per_s]
     g = p[P.n_over_r_per_m]
-    i = current_step(s[S.current_a], v_cmd, shaft_speed_rad_per_s(vp, g), p[P.motor_r_ohm], p[P.motor_ke],
-                     p[P.motor_current_decay])
-    s[S.current_a] = i
+    i = current_step(i, v_cmd, shaft_speed_rad_per_s(vp, g), g_armature_s, p[P.motor_ke], p[P.motor_current_decay])
     f_motor = rack_force_n(i, p[P.motor_kt], g)
-    f_mesh = mesh_force(s[S.pinion_pos_m] - s[S.board_pos_m], vp - vb, p[P.half_backlash_m],
-                        p[P.mesh_k_n_per_m], p[P.mesh_c_n_s_per_m])
+    f_mesh = mesh_force(xp - xb, vp - vb, p[P.half_backlash_m], p[P.mesh_k_n_per_m], p[P.mesh_c_n_s_per_m])
     # pinion side: reflected rotor inertia, brush/bearing friction grown by the gear loss
     fk_p, fs_p = loaded_friction_n(abs(vp), p[P.pinion_coulomb_n], p[P.pinion_static_n], p[P.stribeck_v_m_per_s],
                                    gear_loss_n(p[P.gear_mu], f_mesh))
     if u[U.motor_jammed] > 0.0:
         vp_new = 0.0
     else:
-        vp_new = friction_velocity_update(
-            vp, f_motor - f_mesh - viscous_force_n(p[P.pinion_viscous_n_s_per_m], vp),
-            p[P.pinion_mass_kg], h, fk_p, fs_p)
+        vp_new = friction_velocity_update(vp, f_motor - f_mesh - viscous_force_n(p[P.pinion_viscous_n_s_per_m], vp),
+                                          h_per_pinion_mass, fk_p, fs_p)
     # board: mesh, contact, gravity, guide friction
-    f_b = (f_mesh - s[S.contact_force_n] + weight_along_n(p[P.board_mass_kg], u[U.gravity_along_m_per_s2])
+    f_b = (f_mesh - fc + weight_along_n(p[P.board_mass_kg], u[U.gravity_along_m_per_s2])
            - viscous_force_n(p[P.guide_viscous_n_s_per_m], vb))
     fk_b = stribeck(abs(vb), p[P.guide_coulomb_n], p[P.guide_static_n], p[P.stribeck_v_m_per_s])
-    vb_new = friction_velocity_update(vb, f_b, p[P.board_mass_kg], h, fk_b, p[P.guide_static_n])
+    vb_new = friction_velocity_update(vb, f_b, h_per_board_mass, fk_b, p[P.guide_static_n])
     # positions (semi-implicit Euler), then the end stops
-    xp = s[S.pinion_pos_m] + h * vp_new
-    xb, vb_new = end_stop(s[S.board_pos_m] + h * vb_new, vb_new, p[P.travel_min_m], p[P.travel_max_m])
-    s[S.pinion_pos_m] = xp
-    s[S.pinion_vel_m_per_s] = vp_new
-    s[S.board_pos_m] = xb
-    s[S.board_vel_m_per_s] = vb_new
+    xp = xp + h * vp_new
+    xb, vb_new = end_stop(xb + h * vb_new, vb_new, p[P.travel_min_m], p[P.travel_max_m])
     # fingertip (QLV)
     d = compression_m(xb, u[U.finger_pos_m])
     fe_new = elastic_force(d, p[P.finger_b_n_per_m], p[P.finger_m_per_m])
-    dfe = fe_new - s[S.elastic_force_n]
-    s[S.prony_1_n] = prony_step(s[S.prony_1_n], p[P.relax_a1], p[P.relax_c1], p[P.relax_beta1], dfe)
-    s[S.prony_2_n] = prony_step(s[S.prony_2_n], p[P.relax_a2], p[P.relax_c2], p[P.relax_beta2], dfe)
-    s[S.prony_3_n] = prony_step(s[S.prony_3_n], p[P.relax_a3], p[P.relax_c3], p[P.relax_beta3], dfe)
-    s[S.elastic_force_n] = fe_new
-    s[S.contact_force_n] = contact_force(d, fe_new, p[P.relax_c0], s[S.prony_1_n], s[S.prony_2_n], s[S.prony_3_n])
-    s[S.energy_j] += electrical_power_w(v_cmd, i) * h
-    s[S.time_s] += h
+    dfe = fe_new - fe
+    h1 = prony_step(h1, p[P.relax_a1], p[P.relax_c1], p[P.relax_beta1], dfe)
+    h2 = prony_step(h2, p[P.relax_a2], p[P.relax_c2], p[P.relax_beta2], dfe)
+    h3 = prony_step(h3, p[P.relax_a3], p[P.relax_c3], p[P.relax_beta3], dfe)
+    fc = contact_force(d, fe_new, p[P.relax_c0], h1, h2, h3)
+    return xp, vp_new, xb, vb_new, i, fe_new, h1, h2, h3, fc, electrical_power_w(v_cmd, i) * h
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def advance(s, p, u, n_sub):
-    """Advance one device by ``n_sub`` physics steps with the inputs ``u`` held."""
+    """Advance one device by ``n_sub`` physics steps with the inputs ``u`` held.
+
+    The per-step states live in local variables over the steps (read from ``s`` once, written
+    back once), and ``h/m`` and ``1/R`` are formed once per call (for ``n_sub`` > 0)."""
+    if n_sub <= 0:
+        s[S.isense_count] += n_sub
+        return
+    h = p[P.h_s]
+    h_per_pinion_mass = h / p[P.pinion_mass_kg]
+    h_per_board_mass = h / p[P.board_mass_kg]
+    g_armature_s = 1.0 / p[P.motor_r_ohm]
+    xp, vp = s[S.pinion_pos_m], s[S.pinion_vel_m_per_s]
+    xb, vb = s[S.board_pos_m], s[S.board_vel_m_per_s]
+    i, fe, fc = s[S.current_a], s[S.elastic_force_n], s[S.contact_force_n]
+    h1, h2, h3 = s[S.prony_1_n], s[S.prony_2_n], s[S.prony_3_n]
+    energy, t = s[S.energy_j], s[S.time_s]
+    lag, f1, f2, phase = s[S.fsr_force_lagged_n], s[S.isense_filter1_v], s[S.isense_filter2_v], s[S.sensor_phase]
     for _ in range(n_sub):
-        mechanics_substep(s, p, u)
-        sensor_substep(s, p, u, s[S.contact_force_n])
+        xp, vp, xb, vb, i, fe, h1, h2, h3, fc, e = mechanics_substep(
+            p, u, h, h_per_pinion_mass, h_per_board_mass, g_armature_s, xp, vp, xb, vb, i, fe, h1, h2, h3, fc)
+        energy += e
+        t += h
+        lag, f1, f2, phase = sensor_substep(s, p, u, lag, f1, f2, phase, i, fc)
+    s[S.pinion_pos_m], s[S.pinion_vel_m_per_s] = xp, vp
+    s[S.board_pos_m], s[S.board_vel_m_per_s] = xb, vb
+    s[S.current_a], s[S.elastic_force_n], s[S.contact_force_n] = i, fe, fc
+    s[S.prony_1_n], s[S.prony_2_n], s[S.prony_3_n] = h1, h2, h3
+    s[S.energy_j], s[S.time_s] = energy, t
+    s[S.fsr_force_lagged_n], s[S.isense_filter1_v], s[S.isense_filter2_v], s[S.sensor_phase] = lag, f1, f2, phase
     s[S.isense_count] += n_sub
-    if n_sub > 0:
-        current_sample(s, p)
+    current_sample(s, p)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def advance_batch(s2, p2, u2, n_sub):
     """Advance ``n`` devices (rows of ``s2``, ``p2``, ``u2``) by ``n_sub`` physics steps."""
     for e in range(s2.shape[0]):
         advance(s2[e], p2[e], u2[e], n_sub)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def advance_sensor_only(s, p, u, contact_force_n, n_sub):
     """Sensor chain only, for plants simulated elsewhere (the pymunk mechanism)."""
+    s[S.contact_force_n] = contact_force_n
+    i = s[S.current_a]
+    lag, f1, f2, phase = s[S.fsr_force_lagged_n], s[S.isense_filter1_v], s[S.isense_filter2_v], s[S.sensor_phase]
     for _ in range(n_sub):
-        s[S.contact_force_n] = contact_force_n
-        sensor_substep(s, p, u, contact_force_n)
+        lag, f1, f2, phase = sensor_substep(s, p, u, lag, f1, f2, phase, i, contact_force_n)
+    s[S.fsr_force_lagged_n], s[S.isense_filter1_v], s[S.isense_filter2_v], s[S.sensor_phase] = lag, f1, f2, phase
     s[S.isense_count] += n_sub

@@ -303,12 +303,12 @@ def workspace_part(ws: np.ndarray, i: int) -> np.ndarray:
     return ws[int(ws[W_OFFSETS + i]):int(ws[W_OFFSETS + i + 1])]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _part(ws, i):
     return ws[int(ws[W_OFFSETS + i]):int(ws[W_OFFSETS + i + 1])]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def scalar_step(state, inputs, ws, k, action):
     """One step of the scalar env on a lumped plant, in one compiled call on its workspace.
 

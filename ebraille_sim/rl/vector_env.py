@@ -148,7 +148,7 @@ class ThreadChoice:
             self.threads = self._mean[True] < self._mean[False]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def step_row(i, state, params, inputs, z, c, slots, counts, tables, setpoint, n_steps, actions, n_sub,
              obs, reward, violation, terminated, truncated, safety, sv2, cfg2, dt_s):
     """One control period of row ``i``: the clipped action, as a command in volts, is the
@@ -191,7 +191,7 @@ def step_rows(state, params, inputs, z, c, slots, counts, tables, setpoint, n_st
                      obs, reward, violation, terminated, truncated, safety, sv2, cfg2, dt_s)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def step_rows_serial(state, params, inputs, z, c, slots, counts, tables, setpoint, n_steps, actions, active, n_sub,
                      obs, reward, violation, terminated, truncated, safety, sv2, cfg2, dt_s):
     """:func:`step_row` for every active row on one thread."""

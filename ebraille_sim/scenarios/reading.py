@@ -224,20 +224,30 @@ class ReadingSchedule:
 def _cell_indices(starts, t_end_s, t, out):
     """:meth:`ReadingSchedule.index_at` of the 1-D times ``t`` into ``out`` in one compiled pass:
     ``-1`` outside ``[starts[0], t_end_s)`` (NaN included), else the last ``k`` with
-    ``starts[k] <= t`` (``numpy.searchsorted(starts, t, side="right") - 1``, by bisection)."""
+    ``starts[k] <= t`` (``numpy.searchsorted(starts, t, side="right") - 1``).  The cell of the
+    previous time and the one after it are tried first (``starts[k] <= t < starts[k + 1]``
+    names the last such ``k``), then a bisection: a run's times rise, and most of them stay on
+    the cell of the time before."""
     n = starts.shape[0]
     t0 = starts[0]
+    k = 0
     for i in range(t.shape[0]):
         x = t[i]
         if x >= t0 and x < t_end_s:
-            lo, hi = 0, n
-            while lo < hi:
-                mid = (lo + hi) >> 1
-                if starts[mid] <= x:
-                    lo = mid + 1
-                else:
-                    hi = mid
-            out[i] = lo - 1
+            if starts[k] <= x and (k + 1 == n or x < starts[k + 1]):
+                pass
+            elif k + 1 < n and starts[k + 1] <= x and (k + 2 == n or x < starts[k + 2]):
+                k += 1
+            else:
+                lo, hi = 0, n
+                while lo < hi:
+                    mid = (lo + hi) >> 1
+                    if starts[mid] <= x:
+                        lo = mid + 1
+                    else:
+                        hi = mid
+                k = lo - 1
+            out[i] = k
         else:
             out[i] = -1
 

@@ -287,7 +287,7 @@ class Mechanism:
         # constants of the step loop
         self._const = (
             h, 1.0 / h, self.steps_per_control, self.sensor_sub, self.m_pinion, g,
-            p[P.motor_r_ohm], p[P.motor_ke], p[P.motor_kt], decay,
+            1.0 / p[P.motor_r_ohm], p[P.motor_ke], p[P.motor_kt], decay,
             p[P.pinion_coulomb_n], p[P.pinion_static_n], p[P.gear_mu],
             p[P.stribeck_v_m_per_s], self.half_gap, self.k_mesh,
             0.5 * p[P.guide_coulomb_n], d.guide_breakaway_ratio, mech.rod_friction_coefficient,
@@ -381,7 +381,7 @@ class Mechanism:
         constraints that the pymunk objects wrap.
         """
         self.apply_inputs(u)
-        (h, inv_h, n_steps, n_sens, mp, g, r_ohm, ke, kt, decay, pf_c, pf_s, gear_mu, vs,
+        (h, inv_h, n_steps, n_sens, mp, g, g_arm, ke, kt, decay, pf_c, pf_s, gear_mu, vs,
          half_gap, k_mesh, rf_c0, rf_ratio, rod_mu,
          pin, pin_fric, ra, rb, fr_a, fr_b, ba1, ba2, bb1, bb2, dmp_a, dmp_b, c_space,
          area_model, fsr_n, share_w, stopped, x_min, x_max) = self._const
@@ -423,7 +423,7 @@ class Mechanism:
             fm_a = get_j(dmp_a) * inv_h          # spring + damping impulse of the last step
             fm_b = get_j(dmp_b) * inv_h
             # motor and pinion
-            i_a = cur(i_a, v_cmd, vp * g, r_ohm, ke, decay)
+            i_a = cur(i_a, v_cmd, vp * g, g_arm, ke, decay)
             set_f(pin, (f_pin_x, kt * i_a * g + f_pin_g))
             load = gear_mu * (abs(fm_a) + abs(fm_b))
             set_max(pin_fric, math.inf if jammed else strib(abs(vp), pf_c + load, pf_s + load, vs))
