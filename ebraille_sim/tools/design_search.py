@@ -46,7 +46,8 @@ are run again on *validation* readers, a third population (drawn from
 best of them there.  The best of many candidates on a few readers is the one those readers
 flatter most (its training score overstates it); the validation readers did not take part in
 the choice that put the K candidates forward, so their statistic ranks the K without that
-bias.  The validation runs are journalled too.
+bias.  The validation runs are journalled too (under their readers' count: a rerun with other
+validation settings reuses the search's evaluations).
 
 Examples
 --------
@@ -453,8 +454,6 @@ class DesignSearch:
                 "statistic": self.statistic, "readers": self.readers, "seed": self.seed,
                 "optimiser": self.optimiser,
                 "space": self.space.describe()}
-        if self.validate:
-            head.update(validate=self.validate, validation_readers=self.validation_readers)
         return head
 
     def check_journal(self) -> list:
@@ -500,8 +499,8 @@ class DesignSearch:
 
     def _run_entries(self, cands: list, validation: bool = False) -> None:
         """Run the candidates of ``cands`` that the cache does not hold (on the validation readers
-        when ``validation``, cached and journalled under ``validation:`` and their key)."""
-        prefix = "validation:" if validation else ""
+        when ``validation``, cached and journalled under :meth:`_validation_prefix` and their key)."""
+        prefix = self._validation_prefix() if validation else ""
         by_key = {prefix + c.key(): c for c in cands}
         todo = [k for k in by_key if k not in self.cache]
         tasks = [t for k in todo for t in self._tasks(by_key[k], validation)]
@@ -605,6 +604,12 @@ class DesignSearch:
                 self._evaluate([self.space.decode(x) for x in xs])
         return self._result(n_starts)
 
+    def _validation_prefix(self) -> str:
+        """The journal key's prefix of a validation run: the validation readers' count, so that a
+        rerun with other validation settings reuses every search evaluation and no other count's
+        validation."""
+        return f"validation/{self.validation_readers}:"
+
     def _validated(self) -> list:
         """The ``validate`` best distinct candidates on the training readers (ties: the earlier),
         run on the validation readers: history entries with ``validation_value`` and
@@ -623,7 +628,7 @@ class DesignSearch:
         self._run_entries([c for _, c in top], validation=True)
         out = []
         for rank, (j, cand) in enumerate(top):
-            e = self.cache["validation:" + cand.key()]
+            e = self.cache[self._validation_prefix() + cand.key()]
             out.append(dict(self.history[j], validation_value=e["value"], validation_score=e["score"],
                             training_rank=rank + 1))
         return sorted(out, key=lambda h: (-h["validation_value"], -h["value"], h["training_rank"]))
