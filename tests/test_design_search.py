@@ -189,9 +189,9 @@ def test_validation_chooses_among_the_best_on_other_readers(tmp_path):
     assert again.cached == 8 and again.validated == res.validated and again.best == res.best
     # other validation settings reuse the search's evaluations and run their own validation
     other = DesignSearch(_space(BAD), suite="quick", readers=1, seed=3, evaluations=8, validate=2,
-                         validation_readers=2, journal=journal).run()
+                         validation_readers=3, journal=journal).run()
     assert other.cached == 8 and len(other.validated) == 2 and other.history == res.history
-    assert sum(1 for line in journal.read_text().splitlines() if '"validation/2:' in line) == 2
+    assert sum(1 for line in journal.read_text().splitlines() if '"validation/3:' in line) == 2
     with pytest.raises(ValueError, match="validate"):
         DesignSearch(_space(BAD), suite="quick", readers=1, validate=-1)
     with pytest.raises(ValueError, match="validation readers"):

@@ -411,7 +411,7 @@ class DesignSearch:
         validation readers, the design the best of them there; 0 (default) chooses on the
         training readers.
     validation_readers : int, optional
-        Validation readers per scenario (default: ``readers``), drawn from
+        Validation readers per scenario (default: twice ``readers``), drawn from
         :func:`validation_seed`.
     journal : path, optional
         The journal file (module docstring); None keeps no journal.
@@ -431,7 +431,7 @@ class DesignSearch:
             raise ValueError(f"jobs must be >= 1, got {jobs}")
         if isinstance(validate, bool) or not isinstance(validate, int) or validate < 0:
             raise ValueError(f"validate must be a whole number of candidates >= 0, got {validate!r}")
-        validation_readers = readers if validation_readers is None else validation_readers
+        validation_readers = 2 * readers if validation_readers is None else validation_readers
         if isinstance(validation_readers, bool) or not isinstance(validation_readers, int) or validation_readers < 1:
             raise ValueError(f"validation readers must be at least 1, got {validation_readers!r}")
         self.validate, self.validation_readers = validate, validation_readers
