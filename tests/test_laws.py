@@ -175,6 +175,18 @@ def test_pulp_elastic_force_at_the_paper_derived_compressions():
     assert compression_m(2.0e-3, 0.6e-3) == pytest.approx(1.4e-3, rel=1e-12)
 
 
+def test_the_pulp_laws_exp_minus_one_is_expm1_within_two_ulp():
+    """The kernel's ``exp(x) - 1`` (``exp`` above ln 2, ``expm1`` below) against ``math.expm1``
+    over the pulp's range of ``m d`` (0 to well past the travel's end), and exactly ``expm1``
+    near zero, where the subtraction would cancel."""
+    xs = np.concatenate([np.linspace(-1.0, 60.0, 20001), np.geomspace(1e-12, 0.69, 2000)])
+    got = np.array([fingertip.exp_minus_one(float(x)) for x in xs])
+    want = np.array([math.expm1(float(x)) for x in xs])
+    assert np.all(np.abs(got - want) <= 2.0 * np.spacing(np.abs(want)))
+    small = xs < math.log(2.0)
+    assert np.array_equal(got[small], want[small])
+
+
 def test_ramp_compression_follows_the_qlv_law_between_its_relaxed_and_instant_limits():
     from ebraille_sim.physics.fingertip import ramp_compression_at_force_m
     f = NOMINAL
