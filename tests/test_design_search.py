@@ -95,9 +95,10 @@ def test_tune_search_writes_a_design_that_run_and_benchmark_take(tmp_path, capsy
                      '[arm.gains]\nhold_damping_v_per_v = 0.5\n'
                      '[arm.ranges]\nkp_v_per_n = [1.0, 5.0]\nq_time_constant_s = [0.001, 0.01, "log"]\n')
     args = ["tune", "--search", str(space), "--suite", "quick", "--readers", "1", "--evaluations", "5",
-            "--out", str(out), "--name", "mine", "--json", "-q"]
+            "--validate", "3", "--out", str(out), "--name", "mine", "--json", "-q"]
     assert cli(args) == 0
     doc = json.loads(capsys.readouterr().out)
+    assert doc["validation_statistic"] is not None and "Chosen on 2 validation readers" in (out / "report.md").read_text()
     assert doc["evaluations"] == 5 and doc["from_journal"] == 0
     assert doc["reference"]["design"] == "dob_learn_1khz"
     assert sorted(p.name for p in out.iterdir()) == ["design.toml", "journal.jsonl", "report.json", "report.md"]

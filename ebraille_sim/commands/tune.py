@@ -42,7 +42,7 @@ MAX_EVALUATIONS = 10_000
 """Most cost evaluations of ``--evaluations``."""
 
 ROBUST_DEFAULTS = {"population": 8, "family": "pid_scheduled", "scenarios": "standard", "ms_max": 1.6, "ms_gain": 1.0}
-SEARCH_DEFAULTS = {"suite": "standard", "statistic": "score", "readers": 4, "jobs": 1, "optimiser": "de", "validate": 10}
+SEARCH_DEFAULTS = {"suite": "standard", "statistic": "score", "readers": 4, "jobs": 1, "optimiser": "de", "validate": 0}
 
 TUNE_OWNED = ("gains.toml", "gains_tuned.toml", "gains_hand.toml", "report.md", "report.json", "bode.png",
               "nyquist.png", "population.png")
@@ -93,8 +93,7 @@ def add_arguments(p):
                    help=f"training readers per scenario, drawn from --seed (default 4, at most {MAX_POPULATION})")
     g.add_argument("--validate", type=whole(0, MAX_EVALUATIONS), default=None, metavar="K",
                    help="run the K best candidates on the training readers again on validation readers (drawn from "
-                        "--seed + 1000003) and keep the best there (default 10; 0 keeps the best on the training "
-                        "readers)")
+                        "--seed + 1000003) and keep the best there (default 0: the best on the training readers)")
     g.add_argument("--validation-readers", type=whole(1, MAX_POPULATION), default=None, metavar="N",
                    help=f"validation readers per scenario (default: twice --readers, at most {MAX_POPULATION})")
     g.add_argument("--optimiser", default=None, metavar="NAME",
