@@ -470,17 +470,13 @@ def bench_creep_per_decade(device: DeviceParams, load_n: float = 1.0, load_error
     sd_v = fsr.noise_v_rms / math.sqrt(TABLE_CONVERSIONS)
     f_eff = load_n * (1.0 + load_error) * loading_branch_factor(fsr)
     g_off = 1.0 / nom.standoff_resistance_ohm
-    ratios = []
-    held = [static_conductance(f_eff, fsr, load_time_s=t) for t in CREEP_READ_S]             # plant truth (bench)
-    for _ in range(TABLE_PRESSES):
-        scale = math.exp(fsr.press_repeatability * float(rng.standard_normal()))
-        g_path = []
-        for g in held:
-            g = 1.0 / fsr.standoff_resistance_ohm + (g - 1.0 / fsr.standoff_resistance_ohm) / scale  # plant truth
-            v = divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + sd_v * float(rng.standard_normal())
-            g_path.append(divider_conductance_s(v, circuit.r2_ohm, circuit.supply_v) - g_off)
-        ratios.append((g_path[1] / g_path[0]) ** (1.0 / nom.exponent))
-    ratio = float(np.mean(ratios))
+    held = np.array([static_conductance(f_eff, fsr, load_time_s=t) for t in CREEP_READ_S])   # plant truth (bench)
+    draws = rng.standard_normal((TABLE_PRESSES, 1 + len(CREEP_READ_S)))   # each press: its scatter, its reads' noise
+    scale = np.exp(fsr.press_repeatability * draws[:, :1])
+    g = 1.0 / fsr.standoff_resistance_ohm + (held - 1.0 / fsr.standoff_resistance_ohm) / scale   # plant truth
+    v = divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + sd_v * draws[:, 1:]
+    g_path = divider_conductance_s(v, circuit.r2_ohm, circuit.supply_v) - g_off
+    ratio = float(np.mean((g_path[:, 1] / g_path[:, 0]) ** (1.0 / nom.exponent)))
     a = [held_creep_gain(t, 1.0, nom.creep_tau_min_s, nom.creep_tau_max_s, N_CREEP) - 1.0 for t in CREEP_READ_S]
     w = (ratio - 1.0) / (a[1] - ratio * a[0])
     per_decade = w * (N_CREEP - 1) / math.log10(nom.creep_tau_max_s / nom.creep_tau_min_s)

@@ -436,21 +436,31 @@ def play_loop_fraction(fsr) -> float:
 
 
 @njit(cache=True)
-def _cycle_resistances(force, a_lag, s, p, weight, threshold_n, k_ohm, exponent, actuation_n, steepness):
-    """The film's resistance (stand-off path left out) and its lagged force at each sample of the
-    applied ``force`` (one sample a step), through :func:`lag_step`, :func:`hysteresis`,
-    :func:`creep_force` and :func:`conductance_s` from the recovered state ``s`` (plays, then creep
+def _cycle_forces(force, a_lag, s, p, weight, threshold_n):
+    """The force the film's conduction sees (its plays and creep applied) and the lagged force at
+    each sample of the applied ``force`` (one sample a step), through :func:`lag_step`,
+    :func:`hysteresis` and :func:`creep_force` from the recovered state ``s`` (plays, then creep
     terms) with the widths, weights and creep decays in ``p``."""
-    res = np.empty(force.size)
+    seen = np.empty(force.size)
     lagged = np.empty(force.size)
     f_lag = 0.0
     for i in range(force.size):
         f_lag = lag_step(f_lag, force[i], a_lag)
         f_eff = hysteresis(f_lag, s, 0, p, 0, N_PLAYS, N_PLAYS)
-        f_c = creep_force(f_eff, f_lag, s, N_PLAYS, p, 2 * N_PLAYS, weight, threshold_n, N_CREEP)
-        res[i] = 1.0 / conductance_s(f_c, k_ohm, exponent, 0.0, 1.0, actuation_n, steepness)
+        seen[i] = creep_force(f_eff, f_lag, s, N_PLAYS, p, 2 * N_PLAYS, weight, threshold_n, N_CREEP)
         lagged[i] = f_lag
-    return res, lagged
+    return seen, lagged
+
+
+def _resistance_at(force_n: float, lagged: np.ndarray, seen: np.ndarray, fsr) -> float:
+    """The film's resistance (stand-off path left out) where the lagged force of one monotone
+    branch (``lagged`` increasing) passes ``force_n``: interpolated between the two samples around
+    it (``np.interp``), the conduction law evaluated at those two only."""
+    i = int(np.searchsorted(lagged, force_n, side="right"))
+    idx = np.array(sorted({max(i - 1, 0), min(i, lagged.size - 1)}))
+    res = np.array([1.0 / conductance_s(seen[j], fsr.resistance_at_1n_ohm, fsr.exponent, 0.0, 1.0,
+                                        fsr.actuation_force_n, fsr.turn_on_steepness) for j in idx])
+    return float(np.interp(force_n, lagged[idx], res))
 
 
 def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: float = 1e-3,
@@ -470,11 +480,10 @@ def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: floa
     a_lag = lag_alpha(dt_s, fsr.mechanical_lag_s)
     n = int(round(ramp_s / dt_s))
     force = np.concatenate([np.linspace(0.0, peak_n, n + 1), np.linspace(peak_n, 0.0, n + 1)[1:]])
-    res, lagged = _cycle_resistances(force, a_lag, s, p, w, fsr.load_threshold_n, fsr.resistance_at_1n_ohm,
-                                     fsr.exponent, fsr.actuation_force_n, fsr.turn_on_steepness)
+    seen, lagged = _cycle_forces(force, a_lag, s, p, w, fsr.load_threshold_n)
     peak = int(np.argmax(lagged))
-    r_up = np.interp(force_n, lagged[:peak + 1], res[:peak + 1])
-    r_dn = np.interp(force_n, lagged[peak:][::-1], res[peak:][::-1])
+    r_up = _resistance_at(force_n, lagged[:peak + 1], seen[:peak + 1], fsr)
+    r_dn = _resistance_at(force_n, lagged[peak:][::-1], seen[peak:][::-1], fsr)
     return float(1.0 - r_dn / r_up)
 
 
