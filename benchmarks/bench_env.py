@@ -12,8 +12,10 @@
   1,000,000 env-steps/s target.
 
 * kernel alone: physics substeps per second of ``advance_batch`` on ``--envs`` rows (one
-  thread, no controller, no observation): the vector env's substep rate with autoresets is
-  reported as a fraction of it (target 0.8).
+  thread, no controller, no observation), with the command held (the plants at rest) and
+  replaying the inputs a vector env applied (:func:`kernel_replay_substeps_per_s`, the same
+  physics as the env's): the vector env's substep rate with autoresets is reported as a
+  fraction of each (target 0.8 of the replay).
 * CartPole-v1: the single env's steps/s also against CartPole-v1 (with wrappers).
 * reset cost: the mean wall time of one ``reset()`` of the scalar env (a new device, its R2
   calibration, episode inputs and packing) in units of one env step (a control period at
@@ -301,6 +303,37 @@ def kernel_substeps_per_s(n_envs: int, seconds: float) -> float:
             return calls * n_envs * sub / dt
 
 
+def kernel_replay_substeps_per_s(n_envs: int, seconds: float, periods: int = 200) -> float:
+    """Physics substeps per second of the plant kernel alone doing the vector env's own physics:
+    the inputs of ``periods`` control periods of a vector env (one thread, 60 wpm, the
+    proportional-integral actions of :func:`_law`, no reset) recorded, then replayed from the
+    same start state by ``advance_batch``, one call a period (as the env calls it), over and over.
+    The plants move as they did in the env; a held command (:func:`kernel_substeps_per_s`)
+    leaves them at rest, which the kernel runs faster than any loop."""
+    from ebraille_sim.plant import kernel
+    venv = ContactForceVectorEnv(num_envs=n_envs, parallel=False)
+    obs, _ = venv.reset(seed=0, options={"wpm": 60.0})
+    for _ in range(20):
+        obs, *_ = venv.step(_law(obs))
+    s0, p = venv.state.copy(), venv.params.copy()
+    recorded = []
+    for _ in range(min(periods, int(venv.episodes[0].n_steps) - 60)):
+        obs, *_ = venv.step(_law(obs))
+        recorded.append(venv.inputs.copy())
+    sub = venv.config.substeps
+    venv.close()
+    calls = 0
+    t0 = time.perf_counter()
+    while True:
+        s = s0.copy()
+        for u in recorded:
+            kernel.advance_batch(s, p, u, sub)
+        calls += len(recorded)
+        dt = time.perf_counter() - t0
+        if dt >= seconds:
+            return calls * n_envs * sub / dt
+
+
 def only_resets(seconds: float, n_envs: int, repeat: int) -> dict:
     """The reset figures (medians of ``repeat`` timings): the scalar env's reset in ms and in
     env steps, and the vector env's env-steps/s with autoresets and without (one thread)."""
@@ -514,8 +547,14 @@ def main(argv=None):
     default = rows[0]
     res["kernel_alone_substeps_per_s"] = bound
     res["vector_default_to_kernel"] = default["physics_substeps_per_s"] / bound
-    print(f"kernel alone, {a.envs} rows, one thread: {bound / 1e6:.1f} M substeps/s; vector env default "
-          f"(autoresets) = {res['vector_default_to_kernel']:.2f} of it (target >= 0.8)")
+    print(f"kernel alone, {a.envs} rows, one thread, command held (plants at rest): {bound / 1e6:.1f} M substeps/s; "
+          f"vector env default (autoresets) = {res['vector_default_to_kernel']:.2f} of it")
+    replay = kernel_replay_substeps_per_s(a.envs, a.seconds)
+    res["kernel_replay_substeps_per_s"] = replay
+    res["vector_default_to_kernel_replay"] = default["physics_substeps_per_s"] / replay
+    print(f"kernel alone, {a.envs} rows, one thread, replaying the vector env's inputs: {replay / 1e6:.1f} M "
+          f"substeps/s; vector env default (autoresets) = {res['vector_default_to_kernel_replay']:.2f} of it "
+          f"(target >= 0.8)")
     res["machine"]["load_average_1min_at_end"] = os.getloadavg()[0]
     print(f"load average (1 min) at start {res['machine']['load_average_1min_at_start']:.2f}, "
           f"at end {res['machine']['load_average_1min_at_end']:.2f} on {os.cpu_count()} cores")
