@@ -387,14 +387,11 @@ def table_reading_n(model, force_n: float, fsr, circuit, hold_s: float, press_z=
     ``exp(press_repeatability * press_z)`` (:func:`ebraille_sim.physics.fsr.press_scatter`), the
     divider voltage read with the error ``noise_v`` of the conversions' mean, tared by the
     no-load reading (:func:`steady_estimate` with the press and the noise).  ``force_n``,
-    ``press_z`` and ``noise_v`` may be arrays of presses (one reading each, an array back)."""
+    ``press_z`` and ``noise_v`` may be arrays that broadcast together (one reading each, an
+    array back; e.g. a column of loads against a table of their presses)."""
     branch = loading_branch_factor(fsr)
-    if np.ndim(force_n) == 0:
-        g = static_conductance(force_n * branch, fsr, load_time_s=hold_s)
-    else:
-        forces = np.asarray(force_n, dtype=float)
-        at = {f: static_conductance(f * branch, fsr, load_time_s=hold_s) for f in dict.fromkeys(forces.tolist())}
-        g = np.array([at[f] for f in forces.tolist()])
+    forces = np.asarray(force_n, dtype=float)
+    g = np.array([static_conductance(f * branch, fsr, load_time_s=hold_s) for f in forces.ravel()]).reshape(forces.shape)
     g_standoff = 1.0 / fsr.standoff_resistance_ohm
     z, e = np.asarray(press_z, dtype=float), np.asarray(noise_v, dtype=float)
     g = g_standoff + (g - g_standoff) / np.exp(fsr.press_repeatability * z)
@@ -433,10 +430,10 @@ def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=N
     fsr, circuit = device.fsr, device.circuit
     rng = np.random.default_rng(_fsr_unit_seed(fsr, circuit))
     sd_v = fsr.noise_v_rms / math.sqrt(TABLE_CONVERSIONS)
-    draws = rng.standard_normal(2 * TABLE_PRESSES * len(loads_n))   # each press: its scatter, then its noise
-    carried = np.repeat([load * (1.0 + err) for load, err in zip(loads_n, errors)], TABLE_PRESSES)
-    presses = table_reading_n(model, carried, fsr, circuit, TABLE_HOLD_S, press_z=draws[0::2],
-                              noise_v=sd_v * draws[1::2]).reshape(len(loads_n), TABLE_PRESSES)
+    draws = rng.standard_normal((len(loads_n), TABLE_PRESSES, 2))   # each press: its scatter, then its noise
+    carried = np.array([[load * (1.0 + err)] for load, err in zip(loads_n, errors)])
+    presses = table_reading_n(model, carried, fsr, circuit, TABLE_HOLD_S, press_z=draws[..., 0],
+                              noise_v=sd_v * draws[..., 1])
     readings = [float(np.mean(row)) for row in presses]
     if not (readings[0] > 0.0 and all(a < b for a, b in zip(readings, readings[1:]))):
         return None
