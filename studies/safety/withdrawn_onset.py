@@ -7,10 +7,18 @@ supervisor's events).
 
     python studies/safety/withdrawn_onset.py --readers 40 --seed 2024
     python studies/safety/withdrawn_onset.py --readers 40 --seed 2024 --trace 7 --wpm 120
+
+With ``--durations`` it runs the onset cell only, for each time the finger stays away (the
+matrix's 3 mm lift, back within 50 ms), and prints per duration the readers above 3.5 N, the worst
+peak and the latched faults; ``--controller`` runs a design or controller instead of the
+scenario's default:
+
+    python studies/safety/withdrawn_onset.py --readers 40 --seed 9090 --durations 0.4 0.6 0.8 1.0 1.5 2.5
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import pathlib
 import sys
 
@@ -34,15 +42,46 @@ def _describe(dev) -> str:
             f"guide={d.guide_coulomb_n:.3f} N backlash={d.backlash_m * 1e6:.0f} um")
 
 
-def sweep(seed: int, n: int, phases=PHASES) -> list[tuple]:
+def sweep(seed: int, n: int, phases=PHASES, controller=None) -> list[tuple]:
     """``(k, wpm, phase, peak_n)`` of every cell of readers ``sample_devices(seed, n)``."""
     out = []
     for k, dev in enumerate(sample_devices(seed, n)):
         for wpm in RATES:
             for p in phases:
-                res = run_scenario(cell_spec(CELL, p, wpm, dev))
-                out.append((k, wpm, p, float(res.trace["force_true_n"].max())))
+                res = run_scenario(cell_spec(CELL, p, wpm, dev), controller=controller, trace_every=None)
+                out.append((k, wpm, p, float(res.metrics["peak_force_n"])))
     return out
+
+
+@contextlib.contextmanager
+def _away_for(duration_s: float):
+    """The matrix's withdrawn finger staying away ``duration_s`` instead of its own time."""
+    saved = FAULTS["finger_withdrawn"]
+    FAULTS["finger_withdrawn"] = {**saved, "duration_s": float(duration_s)}
+    try:
+        yield
+    finally:
+        FAULTS["finger_withdrawn"] = saved
+
+
+def durations(seed: int, n: int, times_s, controller=None) -> list[dict]:
+    """The onset cell of readers ``sample_devices(seed, n)`` (reader k at ``RATES[k % 2]`` wpm) for
+    each time away in ``times_s``: readers above 3.5 N, the worst peak and the latched faults."""
+    devs = sample_devices(seed, n)
+    rows = []
+    for away in times_s:
+        peaks, faults = [], {}
+        with _away_for(away):
+            for k, dev in enumerate(devs):
+                res = run_scenario(cell_spec(CELL, "onset", RATES[k % 2], dev), controller=controller,
+                                   trace_every=None)
+                peaks.append(float(res.metrics["peak_force_n"]))
+                fault = res.supervisor.get("fault")
+                if fault:
+                    faults[fault] = faults.get(fault, 0) + 1
+        rows.append({"away_s": away, "readers": n, "above": sum(p > SAFE_N for p in peaks),
+                     "worst_n": max(peaks), "median_n": sorted(peaks)[n // 2], "faults": faults})
+    return rows
 
 
 def trace(dev, wpm: int, phase: str, every_s: float = 0.005) -> None:
@@ -70,10 +109,23 @@ def main(argv=None) -> int:
     ap.add_argument("--trace", type=int, default=None, help="reader index to trace (onset phase)")
     ap.add_argument("--wpm", type=int, default=60, choices=RATES)
     ap.add_argument("--phase", default="onset", choices=PHASES)
+    ap.add_argument("--controller", default=None, help="a design or controller (default: the scenario's)")
+    ap.add_argument("--durations", type=float, nargs="+", default=None,
+                    help="times the finger stays away, s: the onset cell for each")
     a = ap.parse_args(argv)
     if a.readers < 1:
         print("error: --readers must be at least 1", file=sys.stderr)
         return 2
+    if a.durations is not None:
+        if not all(0.0 < d <= 3.0 for d in a.durations):
+            print("error: --durations must lie in (0, 3] s (the cell runs 4 s)", file=sys.stderr)
+            return 2
+        print(f"finger lifted 3 mm at the onset, {a.readers} readers of seed {a.seed}, "
+              f"controller {a.controller or 'the scenario default'}")
+        for r in durations(a.seed, a.readers, a.durations, a.controller):
+            print(f"  away {r['away_s']:.2f} s: {r['above']} of {r['readers']} above {SAFE_N} N, "
+                  f"worst {r['worst_n']:.2f} N, median {r['median_n']:.2f} N, latched {r['faults'] or 'none'}")
+        return 0
     devs = sample_devices(a.seed, a.readers)
     if a.trace is not None:
         if not 0 <= a.trace < a.readers:
@@ -82,7 +134,7 @@ def main(argv=None) -> int:
         print(_describe(devs[a.trace]))
         trace(devs[a.trace], a.wpm, a.phase)
         return 0
-    cells = sweep(a.seed, a.readers)
+    cells = sweep(a.seed, a.readers, controller=a.controller)
     above = [c for c in cells if c[3] > SAFE_N]
     for p in PHASES:
         pk = [c for c in cells if c[2] == p]
