@@ -42,6 +42,17 @@ def test_contact_onset_respects_its_overshoot_bound():
     assert res.metrics["settling_time_s"] is not None and res.metrics["settling_time_s"] < 1.5
 
 
+def test_the_first_contact_the_search_finds_starts_the_loop_softly_in_every_form():
+    # contact_onset's finger is 2 mm away: the search meets it and the loop starts from 0 V with a
+    # plain bumpless reset (its integrator may start below 0 V), whether the design runs compiled
+    # (dob_hold_1khz) or from Python (dob_learn_1khz, identical away from refresh reading); the
+    # resume of a regained contact (integrator raised to 0 V) overshot 16 % here
+    a = ebraille_sim.run_scenario("contact_onset", controller="dob_hold_1khz", duration_s=2.0)
+    b = ebraille_sim.run_scenario("contact_onset", controller="dob_learn_1khz", duration_s=2.0)
+    np.testing.assert_array_equal(a.trace["command_v"], b.trace["command_v"])
+    assert a.metrics["onset_overshoot_fraction"] < 0.10
+
+
 def test_same_seed_same_trace_exactly_and_other_seed_differs():
     a = ebraille_sim.run_scenario("steady_120wpm", seed=5, duration_s=2.0)
     b = ebraille_sim.run_scenario("steady_120wpm", seed=5, duration_s=2.0)

@@ -84,9 +84,9 @@ def test_degraded_gains_fail(suite, tmp_path, capsys):
 
 def test_criteria_fail_whatever_the_baseline(suite, capsys):
     p = suite / "contact_onset.toml"
-    p.write_text(p.read_text().replace("onset_overshoot_max = 0.15", "onset_overshoot_max = 0.01"))
+    p.write_text(p.read_text().replace("onset_overshoot_max = 0.15", "in_band_min = 0.99"))
     assert cli(["regress", "--scenarios", str(suite), "--only", "contact_onset", "--update"]) == 1
-    assert "criterion ([criteria] onset_overshoot_max)" in capsys.readouterr().out
+    assert "criterion ([criteria] in_band_min)" in capsys.readouterr().out
 
 
 def test_missing_baseline_and_bad_names(suite, capsys):
@@ -121,9 +121,9 @@ def test_assert_scenario_one_liner():
     assert m["characters"] > 0
     with pytest.raises(AssertionError, match=r"scenario contact_onset: peak_force_n = 1\.\d+, expected <= 1"):
         assert_scenario("contact_onset", peak_force_n__le=1.0)
-    fails = check_scenario_metrics("contact_onset", contact_loss_count__eq=0, onset_overshoot_fraction__lt=0.01)
-    assert len(fails) == 1 and fails[0].startswith("onset_overshoot_fraction = 0.11")
-    assert fails[0].endswith("expected < 0.01")
+    fails = check_scenario_metrics("contact_onset", contact_loss_count__eq=0, settling_time_s__lt=1.0)
+    assert len(fails) == 1 and fails[0].startswith("settling_time_s = 1.3")
+    assert fails[0].endswith("expected < 1")
 
 
 def test_helper_rejects_unknown_checks():

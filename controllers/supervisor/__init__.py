@@ -97,8 +97,10 @@ functions around the inner controller, which the loop engine composes
         code2, u, reset_cmd = supervise_end(sv, cfg, u_inner, f, sp, dt, cur)
         if code2 == 1:                              # finite command again: bumpless resume
             inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=reset_cmd)
-    elif code == 2:                                 # contact regained: resume from 0 V
-        inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=0.0)
+        elif code2 == 2:                            # the search found the finger: start from 0 V
+            inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=0.0)
+    elif code == 2:                                 # contact regained: resume from 0 V,
+        resume_controller(inner, force_est_n=f, setpoint_n=sp_inner)   # integrator not below 0 V
     # the command is u
 
 :meth:`Supervisor.update` is exactly this.  The windows are sized for control periods of at

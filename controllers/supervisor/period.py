@@ -165,8 +165,10 @@ def supervise_end(sv, cfg, u, f, sp, dt, cur):
     code : int
         1: the command is finite again after a non-finite stretch; reset the inner controller
         with ``force_est_n=f, setpoint_n=sp_inner, command_v=reset_cmd``.  2: the search before
-        the first contact (``search_gap_m``) found the finger; resume the inner controller from
-        0 V (as for :func:`supervise_begin`'s code 2).  0 otherwise.
+        the first contact (``search_gap_m``) found the finger; reset the inner controller from
+        0 V with ``force_est_n=f, setpoint_n=sp_inner`` (a plain bumpless reset, the soft start of
+        a session's first contact: unlike a regained contact its integrator may start below 0 V).
+        0 otherwise.
     u : float
         Command, V.
     reset_cmd : float
@@ -203,7 +205,8 @@ def supervise_end(sv, cfg, u, f, sp, dt, cur):
             sv[SV.u_prev] = u
             return code, u, reset_cmd
         if sv[SV.searching] != 0.0:
-            # the search found the finger: the loop resumes from 0 V, as after a regained contact
+            # the search found the finger: the loop starts from 0 V with a plain bumpless reset, the
+            # soft start of a session's first contact (not the resume of a regained contact)
             sv[SV.searching] = 0.0
             sv[SV.u_prev] = 0.0
             return 2, 0.0, math.nan

@@ -206,7 +206,7 @@ class Supervisor:
             if code == 1:
                 self.inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=reset_cmd)
             elif code == 2:
-                resume_controller(self.inner, force_est_n=f, setpoint_n=sp_inner)
+                self.inner.reset(force_est_n=f, setpoint_n=sp_inner, command_v=0.0)
         elif code == 2:
             resume_controller(self.inner, force_est_n=f, setpoint_n=sp_inner)
         applied = getattr(self.inner, "applied", None)

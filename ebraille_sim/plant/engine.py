@@ -79,7 +79,8 @@ def command(kind, cstate, cparams, u_ext, supervised, sv, cfg, f, sp, dt, cur):
     when it lets the inner controller run, the controller of ``kind`` proposes a command on the
     supervisor's inner setpoint (``u_ext`` for :data:`~controllers.compiled.KIND_EXTERNAL`) and
     the supervisor shapes it (:func:`~controllers.supervisor.supervise_end`); when it asks for a
-    bumpless resume the built-in controller is reset, and after regained contact it resumes
+    bumpless reset (a finite command again, the first contact the search found) the built-in
+    controller is reset, and after regained contact it resumes
     (:func:`~controllers.compiled.controller_resume`: its integrator not below 0 V).
     Without the supervisor the command is the controller's (or ``u_ext``).  ``cur`` is the
     measured motor current (NaN: none).
@@ -95,7 +96,7 @@ def command(kind, cstate, cparams, u_ext, supervised, sv, cfg, f, sp, dt, cur):
             if code2 == 1 and kind != KIND_EXTERNAL:
                 controller_reset(kind, cstate, cparams, f, sp_inner, reset_cmd)
             elif code2 == 2 and kind != KIND_EXTERNAL:
-                controller_resume(kind, cstate, cparams, f, sp_inner)
+                controller_reset(kind, cstate, cparams, f, sp_inner, 0.0)
         elif code == 2 and kind != KIND_EXTERNAL:
             controller_resume(kind, cstate, cparams, f, sp_inner)
         return u
