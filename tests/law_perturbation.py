@@ -90,6 +90,8 @@ LAWS = [
      ["test_hysteresis_compensation_reads_the_loading_branch"]),
     ("hysteresis turn test", "ebraille_sim/estimation/firmware.py", "turn_tested_v",
      ["test_turn_test_reads_slow_and_fast_reversals_and_not_noise"]),
+    ("hysteresis centring", "ebraille_sim/estimation/firmware.py", "centred_x",
+     ["test_centring_relaxes_the_input_to_the_middle_of_the_blind_stretch_and_snaps_on_a_move"]),
     ("calibration table", "ebraille_sim/estimation/firmware.py", "table_calibrated_n",
      ["test_calibration_table_maps_each_bench_reading_onto_its_load"]),
     ("bench creep reading", "ebraille_sim/estimation/calibration.py", "bench_creep_per_decade",

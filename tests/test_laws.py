@@ -918,33 +918,33 @@ def test_hysteresis_compensation_reads_the_loading_branch():
     x = math.log(1.2 + F_EPS_N)
     v_load = volts(math.exp(x - h) - F_EPS_N)
     st = state(x, -1.0, v_load)
-    out = firmware.hysteresis_compensated_v(v_load, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
+    out = firmware.hysteresis_compensated_v(v_load, st, 0, 1, 2, M0, T0, T0 + 4, pp, 0, n, n, h, db, db, 0.0, 0.1, 0.0, k, ex, gso, r2, vs)
     assert out == pytest.approx(v_load, rel=1e-12)
     assert st[1] == pytest.approx(x, abs=1e-12)
     v_unload = volts(math.exp(x + h) - F_EPS_N)
     st = state(x, +1.0, v_unload)
-    out = firmware.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
+    out = firmware.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, T0 + 4, pp, 0, n, n, h, db, db, 0.0, 0.1, 0.0, k, ex, gso, r2, vs)
     assert out == pytest.approx(v_load, rel=1e-12)
     assert v_unload > 1.05 * v_load
     # the film further down its unloading branch: the inversion moves the input with the output
     # (slope 1 on that branch) and the result is the loading branch 2 H lower
     v_down = v_unload - 3.0 * db
     st[M0:M0 + nm] = v_down                          # a sustained change: the median passes it
-    out3 = firmware.hysteresis_compensated_v(v_down, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
+    out3 = firmware.hysteresis_compensated_v(v_down, st, 0, 1, 2, M0, T0, T0 + 4, pp, 0, n, n, h, db, db, 0.0, 0.1, 0.0, k, ex, gso, r2, vs)
     vf = v_unload - 2.0 * db
     assert st[0] == vf
     f_down = (k * (fsr.divider_conductance_s(vf, r2, vs) - gso)) ** (1.0 / ex)
     assert st[1] == pytest.approx(math.log(f_down + F_EPS_N) - h, abs=1e-12)
     assert out3 == pytest.approx(volts(math.exp(math.log(f_down + F_EPS_N) - 2.0 * h) - F_EPS_N), rel=1e-12)
     st = state(x, +1.0, v_unload)
-    out = firmware.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs)
+    out = firmware.hysteresis_compensated_v(v_unload, st, 0, 1, 2, M0, T0, T0 + 4, pp, 0, n, n, h, db, db, 0.0, 0.1, 0.0, k, ex, gso, r2, vs)
     # within the deadband the held voltage is used: the output does not move
-    out2 = firmware.hysteresis_compensated_v(v_unload + 0.9 * db, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso,
+    out2 = firmware.hysteresis_compensated_v(v_unload + 0.9 * db, st, 0, 1, 2, M0, T0, T0 + 4, pp, 0, n, n, h, db, db, 0.0, 0.1, 0.0, k, ex, gso,
                                                 r2, vs)
     assert out2 == out and st[0] == v_unload
     # a railed or faulted divider passes unchanged
-    assert firmware.hysteresis_compensated_v(vs, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs) == vs
-    assert firmware.hysteresis_compensated_v(0.0, st, 0, 1, 2, M0, T0, pp, 0, n, n, h, db, db, 0.0, 0.1, k, ex, gso, r2, vs) == 0.0
+    assert firmware.hysteresis_compensated_v(vs, st, 0, 1, 2, M0, T0, T0 + 4, pp, 0, n, n, h, db, db, 0.0, 0.1, 0.0, k, ex, gso, r2, vs) == vs
+    assert firmware.hysteresis_compensated_v(0.0, st, 0, 1, 2, M0, T0, T0 + 4, pp, 0, n, n, h, db, db, 0.0, 0.1, 0.0, k, ex, gso, r2, vs) == 0.0
 
 
 def test_turn_test_reads_slow_and_fast_reversals_and_not_noise():
@@ -984,6 +984,36 @@ def test_turn_test_reads_slow_and_fast_reversals_and_not_noise():
     lo = [step(s, 107.0 + (k % 2)) for k in range(1000)]
     assert s[1] == -1.0 and min(lo) >= 107.5 + fo - 0.05
     assert step(s, 104.0) == 104.5                              # beyond the plain swing from the turn
+
+
+def test_centring_relaxes_the_input_to_the_middle_of_the_blind_stretch_and_snaps_on_a_move():
+    """While the film shows no move the input read relaxes by ``alpha`` of its distance to the
+    middle of the inputs the plays admit (``max(y - w) .. min(y + w)``); on a move it is the
+    inverse's own.  After a rise (plays at ``x - w``) the middle is the narrowest width below
+    ``x``, after a fall the same above it."""
+    widths = [0.02, 0.04, 0.06, 0.08]
+    n = len(widths)
+    pp = np.array(widths)
+    x = 0.3
+    s = np.array([x] + [x - w for w in widths])           # the input given, the plays after a rise
+    alpha = 0.1
+    assert firmware.centred_x(x, True, s, 0, 1, pp, 0, n, alpha) == x
+    want = x
+    for _ in range(5):
+        want += alpha * (x - widths[0] - want)
+        assert firmware.centred_x(x, False, s, 0, 1, pp, 0, n, alpha) == pytest.approx(want, abs=1e-12)
+    for _ in range(400):
+        firmware.centred_x(x, False, s, 0, 1, pp, 0, n, alpha)
+    assert s[0] == pytest.approx(x - widths[0], abs=1e-12)
+    # a move: the inverse's input at once; after a fall the middle lies above it
+    s[1:] = [x + w for w in widths]
+    assert firmware.centred_x(x, True, s, 0, 1, pp, 0, n, alpha) == x
+    assert firmware.centred_x(x, False, s, 0, 1, pp, 0, n, alpha) == pytest.approx(x + alpha * widths[0], abs=1e-12)
+    # plays left inside their bands by a minor loop: the middle of the narrowest admitted interval
+    s[1:] = [x - 0.01, x + 0.03, x - 0.05, x + 0.02]
+    lo, hi = max(y - w for y, w in zip(s[1:], widths)), min(y + w for y, w in zip(s[1:], widths))
+    s[0] = x
+    assert firmware.centred_x(x, False, s, 0, 1, pp, 0, n, 1.0) == pytest.approx(0.5 * (lo + hi), abs=1e-12)
 
 
 def test_running_median_passes_a_ramp_delayed_and_removes_a_spike():

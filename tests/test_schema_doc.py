@@ -272,7 +272,7 @@ def test_experimental_tables_are_marked_and_hold_the_study_knobs(rendered, js):
     experimental = {s.path for s in secs.values() if s.experimental}
     assert experimental == {"estimator.experimental", "controller.experimental"}
     assert {k.name for k in secs["estimator.experimental"].keys} == {
-        "hysteresis_turn_lsb", "hysteresis_follow_lsb", "hysteresis_turn_time_s"}
+        "hysteresis_turn_lsb", "hysteresis_follow_lsb", "hysteresis_turn_time_s", "hysteresis_centre_time_s"}
     assert {k.name for k in secs["controller.experimental"].keys} == {
         "refresh_learning_gain", "refresh_learning_lead_s", "refresh_learning_smoothing_s",
         "refresh_learning_after_s", "refresh_learning_limit_fraction", "refresh_hold_damping_v_per_v"}

@@ -10,7 +10,7 @@ from ebraille_sim.plant import kernel
 from ebraille_sim.estimation.calibration import calibrate_r2, loading_branch_factor, static_error_table
 from ebraille_sim.physics.fsr import static_resistance, static_voltage
 from ebraille_sim.physics.fsr import FAULT_OPEN, FAULT_SHORT, FAULT_STUCK, FAULT_VALUE
-from ebraille_sim.plant.layout import N_INPUT, S, U
+from ebraille_sim.plant.layout import N_INPUT, P, S, U
 from ebraille_sim.plant.lumped import initial_state, pack_params
 from ebraille_sim.estimation.paper_models import paper_model
 from ebraille_sim.physics.params import FSRS, CircuitParams, DeviceParams, EstimatorParams, FSRParams, RateParams
@@ -365,6 +365,31 @@ def test_turn_test_reads_a_relaxation_the_deadband_holds_and_keeps_a_standing_fo
     assert reads[1.75][0] < min(1.045, reads[0.0][0] - 0.01)
     assert abs(reads[1.75][1] - reads[0.0][1]) < 0.006
     assert reads[1.75][2] <= max(reads[0.0][2], 0.001)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_centring_reads_a_standing_press_one_narrowest_width_from_the_edge(seed):
+    """On the 1 kHz firmware with its noise, a press to 1.0 N in 50 ms held for a second: the
+    exact inverse reads the edge of the film's blind stretch it last crossed (the loading edge,
+    or the unloading one where the turn test took the press's end for a turn), the centred one
+    the middle of the stretch, one narrowest play width (ln N) away, to 5 %; the centring
+    adds no noise of its own."""
+    reads = {}
+    for centre in (0.0, 0.05):
+        est = dataclasses.replace(_fast_firmware(1.75), hysteresis_centre_time_s=centre)
+        dev, s, p, u = _sensor(estimator=est, seed=seed)
+        for f in np.linspace(0.0, 1.0, 50):
+            _hold(s, p, u, f, 0.001)
+        _hold(s, p, u, 1.0, 0.5)
+        held = []
+        for _ in range(500):
+            _hold(s, p, u, 1.0, 0.001)
+            held.append(s[S["force_est_n"]])
+        reads[centre] = (np.mean(held), np.ptp(held))
+        w1 = p[P["comp_play_w0"]]
+    moved = abs(math.log(reads[0.05][0] / reads[0.0][0]))
+    assert moved == pytest.approx(w1, rel=0.05)
+    assert reads[0.05][1] <= reads[0.0][1] + 0.001
 
 
 def test_turn_test_refuses_a_follow_deadband_wider_than_the_deadband_in_one_line():

@@ -110,6 +110,7 @@ def test_shipped_policies_record_their_firmware_or_load_without_the_record():
     assert set(rec) <= set(now) and rec == {k: now[k] for k in rec}
     assert {k: now[k] for k in set(now) - set(rec)} == {k: getattr(EstimatorParams(), k) for k in set(now) - set(rec)}
     assert set(now) - set(rec) == {"hysteresis_turn_lsb", "hysteresis_follow_lsb", "hysteresis_turn_time_s",
+                                   "hysteresis_centre_time_s",
                                    "creep_per_decade", "calibration_loads_n", "calibration_readings_n"}
     for name in ("ppo", "sac"):
         meta = read_metadata(str(pathlib.Path(shipped[name]) / "policy.json"))

@@ -33,7 +33,7 @@ from ebraille_sim.physics.params import CALIBRATION_TABLE_MAX_POINTS, FSRS
 
 __all__ = [
     "FIRMWARE_FSR", "firmware_fsr", "HYSTERESIS_MEDIAN", "biquad_step", "tared_v", "creep_compensated_v", "running_median_v",
-    "turn_tested_v", "hysteresis_compensated_v", "CALIBRATION_TABLE_POINTS", "table_calibrated_n",
+    "turn_tested_v", "centred_x", "hysteresis_compensated_v", "CALIBRATION_TABLE_POINTS", "table_calibrated_n",
 ]
 
 FIRMWARE_FSR = FSRS["nominal"]
@@ -68,14 +68,16 @@ HYSTERESIS_MEDIAN = 5
 """ADC samples in the hysteresis compensation's running median (odd)."""
 
 HYSTERESIS_COMP_SLOTS = ("comp_hyst_v", "comp_hyst_x") + tuple(f"comp_play_{j}" for j in range(N_PLAYS)) \
-    + tuple(f"comp_med_{j}" for j in range(HYSTERESIS_MEDIAN - 1)) + ("comp_turn_dir", "comp_turn_avg_v", "comp_turn_ext_v", "comp_turn_at_v")
+    + tuple(f"comp_med_{j}" for j in range(HYSTERESIS_MEDIAN - 1)) + ("comp_turn_dir", "comp_turn_avg_v", "comp_turn_ext_v", "comp_turn_at_v") \
+    + ("comp_centre_x",)
 """State slots of the firmware's hysteresis compensation: the voltage after its noise
 deadband (V), the last inverted operator input (ln N), its copy of the film's play
 operators (ln N), advanced by :func:`ebraille_sim.physics.fsr.inverse_hysteresis`, and the
 previous ADC voltages of its running median (V, newest first); with the turn test
 (:func:`turn_tested_v`), the direction the voltage is followed in (+1 rising, -1 falling, 0 none
 yet), the voltage's exponential average (V), the median's extreme since the last turn (V) and
-the median at that turn (V)."""
+the median at that turn (V); with the centring (:func:`centred_x`), the input it last gave
+(ln N)."""
 
 OWNED_STATE_SLOTS = ANTIALIAS_SLOTS + TARE_SLOTS + CREEP_COMP_SLOTS + HYSTERESIS_COMP_SLOTS
 """Every state slot the firmware's chain declares (see :mod:`ebraille_sim.plant.layout`)."""
@@ -215,8 +217,40 @@ def turn_tested_v(v, vm, s, v0, t0, deadband_v, follow_v, turn_v, turn_alpha):
 
 
 @njit(cache=True, inline="always")
-def hysteresis_compensated_v(v, s, v0, x0, play0, m0, t0, p, width0, weight0, n_plays, log_halfwidth,
-                             deadband_v, follow_v, turn_v, turn_alpha, k_ohm, exponent, g_standoff_s, r2_ohm,
+def centred_x(x, moved, s, c0, play0, p, width0, n_plays, centre_alpha):
+    """The input the hysteresis compensation reads (ln N): the inverse operator's ``x`` where the
+    film last showed a move, relaxing towards the middle of the inputs its plays allow while it
+    shows none.
+
+    The plays ``s[play0:...]`` (widths ``p[width0:...]``) admit every input within each play's
+    width of its output, ``max(y_j - w_j) .. min(y_j + w_j)``: after a move the exact inverse
+    sits at the edge it crossed, and the film's blind stretch of twice the narrowest width
+    lies behind it.  On a sample where the inverse moved (``moved``) the input read is the exact
+    ``x``; on the others it moves by ``centre_alpha`` of its distance to the middle of that
+    stretch (state ``s[c0]``).  An input that stands still in the stretch, or a pulp that
+    relaxes inside it, is read half a stretch back rather than at the edge, and the reversal that
+    crosses the stretch moves the reading by half of it rather than all of it.
+    """
+    if moved:
+        xo = x
+    else:
+        lo = s[play0] - p[width0]
+        hi = s[play0] + p[width0]
+        for j in range(1, n_plays):
+            a = s[play0 + j] - p[width0 + j]
+            b = s[play0 + j] + p[width0 + j]
+            if a > lo:
+                lo = a
+            if b < hi:
+                hi = b
+        xo = s[c0] + centre_alpha * (0.5 * (lo + hi) - s[c0])
+    s[c0] = xo
+    return xo
+
+
+@njit(cache=True, inline="always")
+def hysteresis_compensated_v(v, s, v0, x0, play0, m0, t0, c0, p, width0, weight0, n_plays, log_halfwidth,
+                             deadband_v, follow_v, turn_v, turn_alpha, centre_alpha, k_ohm, exponent, g_standoff_s, r2_ohm,
                              supply_v):
     """The divider voltage with the film's hysteresis branch replaced by its loading branch (V).
 
@@ -236,7 +270,9 @@ def hysteresis_compensated_v(v, s, v0, x0, play0, m0, t0, p, width0, weight0, n_
     offset that the rate-independent operator carries through, so only the nominal widths
     and exponent matter.  Inside the stretch after a reversal that the film does not show,
     and while the voltage stays within the deadband, the input is held at its last value.
-    Voltages outside ``(0, supply_v)`` pass unchanged.
+    With ``centre_alpha > 0`` the input read relaxes, while the film shows no move, to the
+    middle of the inputs the plays allow (:func:`centred_x`, state ``s[c0]``).  Voltages outside
+    ``(0, supply_v)`` pass unchanged.
     """
     if not 0.0 < v < supply_v:
         return v
@@ -246,12 +282,15 @@ def hysteresis_compensated_v(v, s, v0, x0, play0, m0, t0, p, width0, weight0, n_
     else:
         vf = play(vm, s[v0], deadband_v)
     x = s[x0]
-    if vf != s[v0]:
+    moved = vf != s[v0]
+    if moved:
         s[v0] = vf
         g_pow = divider_conductance_s(vf, r2_ohm, supply_v) - g_standoff_s
         f = (k_ohm * g_pow) ** (1.0 / exponent) if g_pow > 0.0 else 0.0
         x = inverse_hysteresis(log_force(f), x, s, play0, p, width0, weight0, n_plays)
         s[x0] = x
+    if centre_alpha > 0.0:
+        x = centred_x(x, moved, s, c0, play0, p, width0, n_plays, centre_alpha)
     f_load = math.exp(x - log_halfwidth) - F_EPS_N
     g_u = g_standoff_s + (f_load ** exponent / k_ohm if f_load > 0.0 else 0.0)
     return divider_voltage(g_u, r2_ohm, supply_v)

@@ -654,6 +654,9 @@ class EstimatorParams(_Checked):
     hysteresis_follow_lsb: float = _nn(0.5, "LSB", "[E] with the turn test, the deadband a move on in the "
                                        "followed direction passes (at most hysteresis_deadband_lsb; a fast "
                                        "reversal still needs the plain deadband's swing of twice that)")
+    hysteresis_centre_time_s: float = _nn(0.0, "s", "[E] time constant over which the hysteresis compensation's "
+                                          "input, while the film shows no move, relaxes to the middle of the "
+                                          "inputs its plays allow (estimation.firmware.centred_x); 0 is off")
     hysteresis_turn_time_s: float = _pos(0.008, "s", "[E] time constant of the turn test's exponential "
                                          "average: at 1 kHz and 0.4 LSB of noise its noise is about 0.1 LSB")
     creep_per_decade: float | None = _p(None, "-", "[D] the creep per decade the creep compensation runs: None "

@@ -99,9 +99,10 @@ def sensor_sample(s, p, u):
                                  p[P.divider_supply_v], u[U.est_creep_preload])
     if p[P.est_hyst_comp] > 0.0:
         vq = hysteresis_compensated_v(vq, s, S.comp_hyst_v, S.comp_hyst_x, S.comp_play_0, S.comp_med_0,
-                                      S.comp_turn_dir, p, P.comp_play_w0, P.comp_play_weight0, N_PLAYS,
+                                      S.comp_turn_dir, S.comp_centre_x, p, P.comp_play_w0, P.comp_play_weight0, N_PLAYS,
                                       p[P.comp_hyst_halfwidth], p[P.comp_hyst_deadband_v], p[P.comp_hyst_follow_v],
-                                      p[P.comp_hyst_turn_v], p[P.comp_turn_alpha], p[P.comp_fsr_k_ohm], p[P.comp_fsr_n],
+                                      p[P.comp_hyst_turn_v], p[P.comp_turn_alpha], p[P.comp_centre_alpha],
+                                      p[P.comp_fsr_k_ohm], p[P.comp_fsr_n],
                                       p[P.comp_g_standoff_s], p[P.r2_ohm], p[P.divider_supply_v])
     y = biquad_step(tared_v(vq, s[S.tare_v]), s, S.aa_z1, S.aa_z2,
                     p[P.aa_b0], p[P.aa_b1], p[P.aa_b2], p[P.aa_a1], p[P.aa_a2])

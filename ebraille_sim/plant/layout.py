@@ -127,7 +127,7 @@ PARAM_NAMES = [
     "comp_reference_gain",
     # the estimator's hysteresis compensation (the device's nominal FSR)
     "est_hyst_comp", "comp_fsr_k_ohm", "comp_hyst_halfwidth", "comp_hyst_deadband_v",
-    "comp_hyst_follow_v", "comp_hyst_turn_v", "comp_turn_alpha",
+    "comp_hyst_follow_v", "comp_hyst_turn_v", "comp_turn_alpha", "comp_centre_alpha",
     # the motor-current sensing chain: the unit's transfer, the filter, the ADC, the firmware's constants
     "isense_shunt_ohm", "isense_gain", "isense_offset_v", "isense_ref_v", "isense_decay", "isense_decay2",
     "isense_lsb_v", "isense_max_code", "isense_noise_v", "isense_zero_code", "isense_nominal_v_per_a",

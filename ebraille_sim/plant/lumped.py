@@ -317,6 +317,8 @@ def _fill_hysteresis_compensation(p: np.ndarray, e, adc_lsb_v: float, h, sensor_
     p[P.comp_hyst_deadband_v] = e.hysteresis_deadband_lsb * adc_lsb_v
     p[P.comp_hyst_turn_v] = e.hysteresis_turn_lsb * adc_lsb_v
     p[P.comp_hyst_follow_v] = e.hysteresis_follow_lsb * adc_lsb_v
+    p[P.comp_centre_alpha] = -math.expm1(-1.0 / (e.hysteresis_centre_time_s * sensor_rate_hz)) \
+        if e.hysteresis_centre_time_s > 0.0 else 0.0
     p[P.comp_turn_alpha] = -math.expm1(-1.0 / (e.hysteresis_turn_time_s * sensor_rate_hz))
 
 
@@ -425,6 +427,7 @@ def initial_state(device: DeviceParams, p: np.ndarray, board_pos_m: float | None
     s[S.comp_turn_at_v] = v_read
     s[_COMP_MEDIAN_SLOTS] = v_read
     s[S.comp_hyst_x] = lf
+    s[S.comp_centre_x] = lf
     s[_COMP_PLAY_STATE_SLOTS] = lf
     _estimator_steady_state(s, p, v_read - s[S.tare_v])
     s[S.force_est_n] = table_calibrated_n(s[S.force_est_n], p, P.est_cal_x0, P.est_cal_y0, int(p[P.est_cal_n]))

@@ -248,7 +248,8 @@ _PARAM = "see EstimatorParams"
 
 @dataclass(frozen=True)
 class EstimatorExperimentalSpec:
-    """``[estimator.experimental]``: the hysteresis compensation's turn test (study knobs, no stability promise)."""
+    """``[estimator.experimental]``: the hysteresis compensation's turn test and centring (study knobs, no
+    stability promise)."""
     hysteresis_turn_lsb: float | None = _key(None, "LSB", "float", _PARAM, lo=0, hi=1e3, experimental=True,
                                              doc="Turn test of the hysteresis compensation: reversal threshold "
                                                  "in ADC codes (0: off).")
@@ -258,6 +259,10 @@ class EstimatorExperimentalSpec:
     hysteresis_turn_time_s: float | None = _key(None, "s", "float", _PARAM, lo=0, hi=10, lo_open=True,
                                                 experimental=True,
                                                 doc="Time constant of the turn test's exponential average.")
+    hysteresis_centre_time_s: float | None = _key(None, "s", "float", _PARAM, lo=0, hi=10, experimental=True,
+                                                  doc="Time constant over which the compensation's input, while the "
+                                                      "film shows no move, relaxes to the middle of its blind "
+                                                      "stretch (0: off).")
 
 
 @dataclass(frozen=True)

@@ -34,7 +34,7 @@ HELD = 0.9
 def _compensation_off(firmware: str, folder: str) -> str:
     """A preset file: ``firmware`` with the hysteresis compensation off."""
     est = dict(get_firmware(firmware).estimator, hysteresis_compensation=False)
-    lines = [f'name = "{firmware}_no_hysteresis_compensation"', "[estimator]"]
+    lines = [f'name = "{pathlib.Path(firmware).stem}_no_hysteresis_compensation"', "[estimator]"]
     lines += [f"{k} = {json.dumps(v)}" for k, v in est.items()]
     path = pathlib.Path(folder) / "off.toml"
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
