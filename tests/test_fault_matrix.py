@@ -181,7 +181,7 @@ def test_a_finger_lifted_at_the_onset_returns_onto_a_board_that_did_not_run_on()
 
 
 @pytest.mark.parametrize("design", sorted(designs()))
-def test_every_shipped_design_meets_the_lifted_finger_at_the_onset_within_the_bound(design):
+def test_the_soft_start_keeps_every_design_within_the_bound_where_the_resume_pressed_the_lifted_finger(design):
     # drawn readers 1, 6 and 11 of seed 9090 reached 4.35, 4.48 and 5.40 N with dob_hold_1khz while
     # the search's first contact resumed its integrator at 0 V instead of starting it softly
     devs = sample_devices(9090, 12)
