@@ -162,3 +162,59 @@ def test_refresh_share_reads_some_episodes_in_refresh_mode_and_keeps_the_rest():
     always = ResidualEnv(refresh_probability=1.0, **SHORT)
     always.reset(seed=0)
     assert always.episode.spec.reading.mode == "refresh"
+
+
+def _bang_bang(env, seed):
+    """An episode under a +/- 1 correction switching every 50 steps: observations, (reward,
+    command, correction) per step, and the steps after which the supervisor had restarted the policy."""
+    obs, _ = env.reset(seed=seed)
+    out, steps, restarts = [obs], [], []
+    for k in range(env.episode.n_steps):
+        obs, r, term, trunc, info = env.step(np.array([1.0 if (k // 50) % 2 else -1.0], np.float32))
+        out.append(obs)
+        steps.append((r, info["command_v"], info["residual_v"], info["force_true_n"]))
+        if env.controller._first:
+            restarts.append(k + 1)
+        if term or trunc:
+            break
+    return np.array(out), np.array(steps), restarts
+
+
+@pytest.mark.parametrize("design", ["dob_100hz", "pid"])
+def test_compiled_step_is_the_python_shims_step(design, monkeypatch):
+    """The design's compiled controller plus the correction inside the loop engine gives the
+    observations, rewards and commands of the design and the residual policy stepped from
+    Python, through a supervisor's restart of the policy."""
+    import ebraille_sim.scenarios.runner as runner
+    fast = ResidualEnv(residual=design, history=2, **SHORT)
+    a = _bang_bang(fast, seed=0)
+    assert fast._fast is not None
+    monkeypatch.setattr(runner, "_USE_COMPILED_LOOP", False)
+    shim = ResidualEnv(residual=design, history=2, **SHORT)
+    b = _bang_bang(shim, seed=0)
+    assert shim._fast is None
+    assert a[2] and a[2] == b[2]                                   # the supervisor restarted the policy
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def test_a_design_without_a_compiled_form_runs_from_python():
+    env = ResidualEnv(residual="dob_learn_1khz", **SHORT)
+    env.reset(seed=1)
+    assert env._fast is None
+    obs, r, term, trunc, info = env.step(np.array([0.5], np.float32))
+    assert info["residual_v"] == 0.5 and math.isfinite(r)
+
+
+def test_resumed_policy_resumes_its_design_as_the_design_alone():
+    """A supervisor's resume after regained contact starts the design's integrator at 0 V or
+    above, as it starts the design alone (controllers.compiled.resume_controller)."""
+    from controllers.compiled import PS, resume_controller
+    alone = controllers.make("dob_100hz")
+    res = ResidualPolicy(controllers.make("dob_100hz"), ActionSlot(), limit_v=1.0, control_rate_hz=1000.0)
+    for c in (alone, res):
+        c.reset(force_est_n=0.0, setpoint_n=1.0)
+        c.update(0.2, 1.0, 1e-3, 0.01)
+        resume_controller(c, force_est_n=0.1, setpoint_n=1.0)     # bumpless from 0 V would start it below 0
+    assert alone.compiled()[1][PS.integrator_v] == 0.0
+    assert np.array_equal(res.base.compiled()[1], alone.compiled()[1])
+    assert res.residual == 0.0 and res.observation.shape == (N_FRAME,)

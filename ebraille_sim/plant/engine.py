@@ -58,7 +58,8 @@ from ebraille_sim.base.compiled import entry_point, njit
 from ebraille_sim.plant.kernel import advance
 from ebraille_sim.plant.layout import S, U
 
-__all__ = ["KEPT", "ROW", "OK", "BAD_CONTROLLER_INPUT", "BAD_COMMAND", "Rows", "command", "period", "run"]
+__all__ = ["KEPT", "ROW", "OK", "BAD_CONTROLLER_INPUT", "BAD_COMMAND", "INNER_SKIPPED", "INNER_RAN", "INNER_RESTARTED",
+           "Rows", "command", "inner_command", "period", "residual_period", "run"]
 
 KEPT = ("command_v", "fsr_voltage_v", "motor_current_a", "board_pos_m", "energy_j")
 """Rows of the ``kept`` array of :func:`run`, in order (trace column names)."""
@@ -69,6 +70,13 @@ ROW = record("KeptRows", KEPT)
 OK = 0
 BAD_CONTROLLER_INPUT = 1
 BAD_COMMAND = 2
+
+INNER_SKIPPED = 0
+"""The supervisor decided the period's command without calling the inner controller."""
+INNER_RAN = 1
+"""The inner controller proposed the period's command."""
+INNER_RESTARTED = 2
+"""The supervisor reset or resumed the inner controller in the period (after it ran, or not)."""
 
 
 @njit(cache=True, inline="always")
@@ -84,24 +92,51 @@ def command(kind, cstate, cparams, u_ext, supervised, sv, cfg, f, sp, dt, cur):
     Without the supervisor the command is the controller's (or ``u_ext``).  ``cur`` is the
     measured motor current (NaN: none).
     """
+    return inner_command(kind, cstate, cparams, u_ext, False, supervised, sv, cfg, f, sp, dt, cur)[0]
+
+
+@njit(cache=True, inline="always")
+def inner_command(kind, cstate, cparams, u_ext, residual, supervised, sv, cfg, f, sp, dt, cur):
+    """:func:`command`, with ``residual``: the inner controller's command is the built-in
+    controller's plus ``u_ext`` (a correction on a design, :class:`controllers.residual.ResidualPolicy`),
+    shaped by the supervisor as the sum.
+
+    Returns ``(u, inner, sp_inner)``: the command, what became of the inner controller
+    (:data:`INNER_SKIPPED`, :data:`INNER_RAN`, :data:`INNER_RESTARTED`: reset or resumed by
+    the supervisor, after running or not) and the setpoint it was handed (``sp`` without the
+    supervisor).
+    """
     if supervised:
         code, u, sp_inner = supervise_begin(sv, cfg, f, sp, dt, cur)
+        inner = INNER_SKIPPED
         if code == 1:
+            inner = INNER_RAN
             if kind == KIND_EXTERNAL:
                 u_inner = u_ext
             else:
                 u_inner = controller_step(kind, cstate, cparams, f, sp_inner, dt, cur)
+                if residual:
+                    u_inner = u_inner + u_ext
             code2, u, reset_cmd = supervise_end(sv, cfg, u_inner, f, sp, dt, cur)
-            if code2 == 1 and kind != KIND_EXTERNAL:
-                controller_reset(kind, cstate, cparams, f, sp_inner, reset_cmd)
-            elif code2 == 2 and kind != KIND_EXTERNAL:
+            if code2 == 1:
+                inner = INNER_RESTARTED
+                if kind != KIND_EXTERNAL:
+                    controller_reset(kind, cstate, cparams, f, sp_inner, reset_cmd)
+            elif code2 == 2:
+                inner = INNER_RESTARTED
+                if kind != KIND_EXTERNAL:
+                    controller_resume(kind, cstate, cparams, f, sp_inner)
+        elif code == 2:
+            inner = INNER_RESTARTED
+            if kind != KIND_EXTERNAL:
                 controller_resume(kind, cstate, cparams, f, sp_inner)
-        elif code == 2 and kind != KIND_EXTERNAL:
-            controller_resume(kind, cstate, cparams, f, sp_inner)
-        return u
+        return u, inner, sp_inner
     if kind == KIND_EXTERNAL:
-        return u_ext
-    return controller_step(kind, cstate, cparams, f, sp, dt, cur)
+        return u_ext, INNER_RAN, sp
+    u = controller_step(kind, cstate, cparams, f, sp, dt, cur)
+    if residual:
+        u = u + u_ext
+    return u, INNER_RAN, sp
 
 
 @njit(cache=True, inline="always")
@@ -117,6 +152,21 @@ def period(state, params, inputs, n_sub, kind, cstate, cparams, u_ext, u_max, su
     built-in controller handed a non-finite input, returns its status with the plant not
     advanced.
     """
+    out = residual_period(state, params, inputs, n_sub, kind, cstate, cparams, u_ext, u_max, False, supervised, sv,
+                          cfg, sp, dt, i_feedback, slots, table, k)
+    return out[0], out[1]
+
+
+@njit(cache=True, inline="always")
+def residual_period(state, params, inputs, n_sub, kind, cstate, cparams, u_ext, u_max, residual, supervised, sv,
+                    cfg, sp, dt, i_feedback, slots, table, k):
+    """:func:`period`, with ``residual`` the command of :func:`inner_command` (the built-in
+    controller's plus the correction ``u_ext``, inside the supervisor).
+
+    Returns ``(status, command_v, inner, sp_inner, f, cur)``: besides :func:`period`'s, what
+    became of the inner controller and the setpoint it was handed (:func:`inner_command`), and
+    the force and current the period read (``cur`` NaN when the reading is not finite).
+    """
     for j in range(slots.shape[0]):
         inputs[int(slots[j])] = table[j, k]
     f = state[i_feedback]
@@ -124,17 +174,17 @@ def period(state, params, inputs, n_sub, kind, cstate, cparams, u_ext, u_max, su
     if not math.isfinite(cur):
         cur = math.nan
     if not supervised and kind != KIND_EXTERNAL and not (math.isfinite(f) and math.isfinite(sp)):
-        return BAD_CONTROLLER_INPUT, 0.0
-    u = command(kind, cstate, cparams, u_ext, supervised, sv, cfg, f, sp, dt, cur)
+        return BAD_CONTROLLER_INPUT, 0.0, INNER_SKIPPED, sp, f, cur
+    u, inner, sp_inner = inner_command(kind, cstate, cparams, u_ext, residual, supervised, sv, cfg, f, sp, dt, cur)
     if not math.isfinite(u):
-        return BAD_COMMAND, u
+        return BAD_COMMAND, u, inner, sp_inner, f, cur
     if u > u_max:
         u = u_max
     elif u < -u_max:
         u = -u_max
     inputs[U.command_v] = u
     advance(state, params, inputs, n_sub)
-    return OK, u
+    return OK, u, inner, sp_inner, f, cur
 
 
 @njit(cache=True, _nrt=False)

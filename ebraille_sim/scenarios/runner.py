@@ -286,10 +286,14 @@ for all periods); False hands every controller's command in from Python, one per
 (:func:`python_periods`: for tests that compare the two)."""
 
 
-def _compiled_controller(ctrl, wrapped):
+def _compiled_controller(ctrl, wrapped, inner=None):
     """``(kind, state, params, sv_state, sv_cfg)`` of a controller ``ctrl`` with a compiled form
     (:func:`controllers.compiled.compiled_form`) that runs unwrapped (the supervisor's vectors
-    None) or wrapped only in an enabled safety supervisor; None for any other."""
+    None) or wrapped only in an enabled safety supervisor; None for any other.
+
+    ``inner`` (default ``ctrl``) is the object the supervisor wraps: a residual policy around
+    ``ctrl`` (:class:`controllers.residual.ResidualPolicy`), whose sum the loop engine composes
+    (:func:`ebraille_sim.plant.engine.inner_command`)."""
     if not _USE_COMPILED_LOOP:
         return None
     from controllers.compiled import compiled_form
@@ -297,10 +301,11 @@ def _compiled_controller(ctrl, wrapped):
     if form is None:
         return None
     kind, cstate, cparams = form
-    if wrapped is ctrl:
+    inner = ctrl if inner is None else inner
+    if wrapped is inner:
         return kind, cstate, cparams, None, None
     from controllers.supervisor import Supervisor
-    if type(wrapped) is Supervisor and wrapped.inner is ctrl:
+    if type(wrapped) is Supervisor and wrapped.inner is inner:
         sv = compiled_form(wrapped)
         if sv is not None:
             return kind, cstate, cparams, sv[0], sv[1]
