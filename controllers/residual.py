@@ -45,7 +45,8 @@ from controllers.features import (CURRENT_SCALE_A, N_OBS, N_Z, OBS_HIGH, OBS_LOW
 from ebraille_sim.base.compiled import njit
 
 __all__ = ["N_FRAME", "ActionSlot", "ResidualPolicy", "frame_bounds", "MAX_HISTORY", "advance_frame", "peek_frame",
-           "restart_frames"]
+           "restart_frames", "mlp_action", "P_FIRST", "P_RESIDUAL", "P_ACTION", "P_LIMIT", "P_SUPPLY",
+           "P_MODE", "N_P", "MODE_HANDED", "MODE_MLP"]
 
 N_FRAME = N_OBS + 1
 """Numbers per frame: the features of :mod:`controllers.features` and the previous residual action."""
@@ -54,6 +55,53 @@ MAX_HISTORY = 64
 """Most frames of a residual policy's observation."""
 
 _PERIOD_TOL = 1e-6
+
+P_FIRST, P_RESIDUAL, P_ACTION, P_LIMIT, P_SUPPLY, P_MODE = range(6)
+"""Slots of a compiled residual policy's scalars (:meth:`ResidualPolicy.compiled_policy`): the next
+frame is the first after a (re)start (1.0) or not; the residual action held, in [-1, 1]; the
+action handed in (:data:`MODE_HANDED`); the correction at ``|a| = 1``, V; the driver supply
+that scales the applied command, V; where the action comes from."""
+N_P = 6
+MODE_HANDED = 0.0
+"""The action is handed in each period (``P_ACTION``: an env's agent)."""
+MODE_MLP = 1.0
+"""The action is the MLP actor's (:func:`mlp_action`) on the period's observation."""
+
+@njit(cache=True)
+def mlp_action(layers, weights, obs, buf):
+    """The deterministic action of the MLP actor ``(layers, weights)`` (:meth:`controllers.policy.MlpActor.vectors`) on
+    ``obs`` (float32), in float32 as :class:`controllers.policy.MlpActor` computes it (the sums
+    in another order), clipped to [-1, 1] (or squashed by ``tanh``); ``buf`` is float32 scratch
+    of twice the widest layer."""
+    n = layers[0]
+    relu = layers[1] == 1
+    width = buf.shape[0] // 2
+    h = buf[:width]
+    g = buf[width:]
+    d_in = layers[3]
+    for i in range(d_in):
+        h[i] = obs[i]
+    pos = 0
+    for j in range(n):
+        d_out = layers[4 + j]
+        b0 = pos + d_out * d_in
+        for i in range(d_out):
+            acc = np.float32(0.0)
+            row = pos + i * d_in
+            for q in range(d_in):
+                acc += weights[row + q] * h[q]
+            v = acc + weights[b0 + i]
+            if j < n - 1:
+                v = (v if v > np.float32(0.0) else np.float32(0.0)) if relu else np.tanh(v)
+            g[i] = v
+        pos = b0 + d_out
+        for i in range(d_out):
+            h[i] = g[i]
+        d_in = d_out
+    a = h[0]
+    if layers[2] != 0:
+        return float(np.tanh(a))
+    return float(min(np.float32(1.0), max(np.float32(-1.0), a)))
 
 
 def frame_bounds(history: int) -> tuple[np.ndarray, np.ndarray]:
@@ -212,6 +260,41 @@ class ResidualPolicy:
         peek_frame(self._z, self._frames, self._c, float(force_est_n), float(setpoint_n), float(current_a),
                    self._since_s + dt_s, self._first, self.residual, obs)
         return obs
+
+    def compiled_policy(self, dt_s: float, handed: bool = False):
+        """The arrays of the loop engine's residual period (:func:`ebraille_sim.plant.engine.policy_period`)
+        over this policy's live features and frames, or None when it has none.
+
+        ``(p, z, frames, obs, c, layers, weights, z_scratch, frames_scratch, buf)``: the scalars
+        (slots ``P_*``, from this policy's), the features, the frame stack, the observation,
+        the feature scales, the MLP actor (:meth:`controllers.policy.MlpActor.vectors`) and scratch.  ``handed``: the
+        action is handed in each period (an env's agent), the model unused; otherwise the
+        model must be a deterministic MLP actor.  The policy must evaluate every period of
+        ``dt_s`` (its training rate at least the loop's).
+        """
+        if handed:
+            mlp = (np.zeros(4, dtype=np.int64), np.zeros(0, dtype=np.float32))
+        else:
+            vectors = getattr(self.model, "vectors", None)
+            mlp = vectors() if self.deterministic and callable(vectors) else None
+        if mlp is None or dt_s < self.period_s * (1.0 - _PERIOD_TOL):
+            return None
+        p = np.zeros(N_P)
+        p[P_FIRST] = 1.0 if self._first else 0.0
+        p[P_RESIDUAL] = self.residual
+        p[P_LIMIT] = self.limit_v
+        p[P_SUPPLY] = self.supply_v
+        p[P_MODE] = MODE_HANDED if handed else MODE_MLP
+        buf = np.zeros(2 * int(max(mlp[0][3:].max(initial=1), 1)), dtype=np.float32)
+        return (p, self._z, self._frames, self._obs, self._c, mlp[0], mlp[1], np.zeros_like(self._z),
+                np.zeros_like(self._frames), buf)
+
+    def took(self, p) -> None:
+        """Take the scalars of a compiled run's ``p`` (:meth:`compiled_policy`) back."""
+        self._first = bool(p[P_FIRST] != 0.0)
+        self.residual = float(p[P_RESIDUAL])
+        self.residual_v = self.residual * self.limit_v
+        self._since_s = 0.0
 
     def update(self, force_est_n: float, setpoint_n: float, dt_s: float,
                motor_current_a: float | None = None) -> float:

@@ -218,3 +218,51 @@ def test_resumed_policy_resumes_its_design_as_the_design_alone():
     assert alone.compiled()[1][PS.integrator_v] == 0.0
     assert np.array_equal(res.base.compiled()[1], alone.compiled()[1])
     assert res.residual == 0.0 and res.observation.shape == (N_FRAME,)
+
+
+def _random_actor(seed=0, history=4):
+    from controllers.policy import MlpActor
+    rng = np.random.default_rng(seed)
+    w = [rng.normal(0, 0.3, (64, history * N_FRAME)), rng.normal(0, 0.2, (64, 64)), rng.normal(0, 0.3, (1, 64))]
+    b = [rng.normal(0, 0.1, 64), rng.normal(0, 0.1, 64), np.array([0.05])]
+    return MlpActor(w, b, "tanh", False)
+
+
+def test_compiled_mlp_is_the_numpy_actor_to_float32_rounding():
+    from controllers.residual import mlp_action
+    actor = _random_actor()
+    layers, weights = actor.vectors()
+    buf = np.zeros(128, np.float32)
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        obs = rng.uniform(-2, 2, 4 * N_FRAME).astype(np.float32)
+        want = float(actor.predict(obs)[0][0])
+        assert mlp_action(layers, weights, obs, buf) == pytest.approx(want, abs=2e-6)
+    res = ResidualPolicy(controllers.make("dob_100hz"), ActionSlot(), 1.0, 1000.0)
+    assert res.compiled_policy(1e-3) is None and res.compiled_policy(1e-3, handed=True) is not None
+
+
+def test_a_residual_mlp_policy_runs_in_the_loop_engine_as_from_python(monkeypatch):
+    """``run`` of a residual policy with an MLP actor runs in the loop engine (the actor never
+    called from Python) and gives the run of the policy stepped from Python, to the float32
+    rounding of the actor's sums."""
+    import ebraille_sim.scenarios.runner as runner
+    actor = _random_actor()
+    calls = []
+    predict = actor.predict
+    monkeypatch.setattr(actor, "predict", lambda o, deterministic=True: calls.append(1) or predict(o, deterministic))
+
+    def policy():
+        return ResidualPolicy(controllers.make("dob_100hz"), actor, 1.0, 1000.0, 4)
+
+    fast = run_scenario("strap_slip", controller=policy(), duration_s=3.0, firmware="paper_100hz")
+    assert not calls
+    monkeypatch.setattr(runner, "_USE_COMPILED_LOOP", False)
+    slow = run_scenario("strap_slip", controller=policy(), duration_s=3.0, firmware="paper_100hz")
+    assert len(calls) == len(slow.trace["force_true_n"])
+    diff = np.abs(fast.trace["force_true_n"] - slow.trace["force_true_n"]).max()
+    assert diff < 1e-4
+    assert np.abs(fast.trace["command_v"] - slow.trace["command_v"]).max() < 1e-3
+    assert fast.metrics["in_band_fraction"] == pytest.approx(slow.metrics["in_band_fraction"], abs=2e-3)
+    assert not np.array_equal(fast.trace["force_true_n"], run_scenario(
+        "strap_slip", controller="dob_100hz", duration_s=3.0).trace["force_true_n"])     # the policy acts

@@ -75,8 +75,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from controllers.features import C_CMD_SCALE, C_SAFE, Z_PREV_ACTION, _clip
-from controllers.residual import advance_frame, peek_frame, restart_frames
+from controllers.features import C_SAFE
+from controllers.residual import P_ACTION, P_FIRST, P_RESIDUAL, peek_frame
 from ebraille_sim.base.compiled import entry_point, njit
 from ebraille_sim.base.fields import sourced
 from ebraille_sim.base.seeds import SeedNode
@@ -174,47 +174,28 @@ def _distribution_at(cfg: EnvConfig, level: int):
     return dataclasses.replace(dist, population=scaled_population(dist.population, level / CURRICULUM_LEVELS))
 
 
-F_FIRST, F_RESIDUAL = range(2)
-"""Slots of the fast step's ``flags``: the policy's next frame is the first after a (re)start
-(1.0) or not, and the residual action held (the previous one, in [-1, 1])."""
-
-
 @njit(cache=True)
 def residual_step(state, params, inputs, n_sub, kind, cstate, cparams, supervised, sv, cfg, setpoint, dt, slots,
-                  table, k, action, limit_v, z, frames, c, flags, obs_policy, obs_next):
-    """One step of the residual env in one compiled call: period ``k`` of the loop engine with
-    the design's compiled controller plus ``action * limit_v`` inside the supervisor
-    (:func:`ebraille_sim.plant.engine.residual_period`), the residual policy's features and
-    frames advanced as :meth:`controllers.residual.ResidualPolicy.update` advances them when the
-    supervisor calls it (``obs_policy``: the observation it evaluates on), restarted when the
-    supervisor resets or resumes it, the command that left the supervisor recorded as the
-    previous one (its ``applied``); then the reward and the next observation (``obs_next``,
+                  table, k, p, z, frames, obs_policy, c, layers, weights, zc, fc, buf, obs_next):
+    """One step of the residual env in one compiled call: period ``k`` of the residual policy
+    with the agent's action ``p[P_ACTION]`` on the design's compiled controller inside the
+    supervisor (:func:`ebraille_sim.plant.engine.policy_period`), then the reward (on the
+    residual action held) and the next observation (``obs_next``,
     :meth:`~controllers.residual.ResidualPolicy.peek`).
 
     Returns ``(status, command_v, force_true_n, force_est_n, reward, violation, terminated)``;
     a status other than :data:`ebraille_sim.plant.engine.OK` leaves the plant at the period's start.
     """
-    a_v = action * limit_v
-    status, u, inner, sp_inner, f, cur = engine.residual_period(
-        state, params, inputs, n_sub, kind, cstate, cparams, a_v, math.inf, True, supervised, sv, cfg, setpoint[k],
-        dt, S.force_est_n, slots, table, k)
+    status, u = engine.policy_period(state, params, inputs, n_sub, kind, cstate, cparams, supervised, sv, cfg,
+                                     setpoint[k], dt, S.force_est_n, slots, table, k, p, z, frames, obs_policy, c,
+                                     layers, weights, zc, fc, buf)
     if status != engine.OK:
         return status, u, math.nan, math.nan, math.nan, 0.0, False
-    if inner == engine.INNER_RAN:
-        advance_frame(z, frames, c, f, sp_inner, cur, dt, flags[F_FIRST] != 0.0, flags[F_RESIDUAL], obs_policy)
-        flags[F_FIRST] = 0.0
-        flags[F_RESIDUAL] = action
-    elif inner == engine.INNER_RESTARTED:
-        restart_frames(z, frames, f, 0.0, c[C_CMD_SCALE])
-        flags[F_FIRST] = 1.0
-        flags[F_RESIDUAL] = 0.0
-    if supervised:
-        z[Z_PREV_ACTION] = _clip(u / c[C_CMD_SCALE], -1.0, 1.0)
     ft = state[S.contact_force_n]
     fe = state[S.force_est_n]
-    r, v = reward_of(c, ft, setpoint[k], flags[F_RESIDUAL])
-    peek_frame(z, frames, c, fe, setpoint[k + 1], state[S.current_meas_a], dt, flags[F_FIRST] != 0.0,
-               flags[F_RESIDUAL], obs_next)
+    r, v = reward_of(c, ft, setpoint[k], p[P_RESIDUAL])
+    peek_frame(z, frames, c, fe, setpoint[k + 1], state[S.current_meas_a], dt, p[P_FIRST] != 0.0, p[P_RESIDUAL],
+               obs_next)
     return status, u, ft, fe, r, v, ft > c[C_SAFE]
 
 
@@ -319,26 +300,22 @@ class ResidualEnv(RenderedEnv, gym.Env):
         rows = _engine_rows(self.plant, [form], self._sp, [ep.run.profiles], self.plant.control_dt_s, S.force_est_n,
                             None, 0)
         c = int(rows.counts[0])
-        self._flags = np.array([1.0, 0.0])
+        bundle = pol.compiled_policy(rows.dt, handed=True)
         args = [rows.states[0], rows.params[0], rows.inputs[0], rows.n_sub, int(rows.kinds[0]), rows.cstates[0],
                 rows.cparams[0], bool(rows.supervised[0]), rows.sv_states[0], rows.sv_cfgs[0], ep.setpoint_n,
-                rows.dt, rows.slots[0, :c], rows.tables[0, :c], 0, 0.0, pol.limit_v, pol._z, pol._frames, self._c,
-                self._flags, pol._obs, np.empty_like(pol._obs)]
-        return entry_point(residual_step, *args), args
+                rows.dt, rows.slots[0, :c], rows.tables[0, :c], 0, *bundle[:4], self._c, *bundle[5:],
+                np.empty_like(pol._obs)]
+        return entry_point(residual_step, *args), args, bundle[0]
 
     def _step_fast(self, a: float, k: int):
-        step, args = self._fast
+        step, args, p = self._fast
         args[14] = k
-        args[15] = a
+        p[P_ACTION] = a
         status, u, ft, fe, r, v, term = step(*args)
         if status != engine.OK:
             raise ValueError(f"command_v must be finite, got {u}" if status == engine.BAD_COMMAND else
                              f"non-finite controller input at control period {k}")
-        pol = self.controller
-        flags = self._flags
-        pol._first = flags[F_FIRST] != 0.0
-        pol.residual = float(flags[F_RESIDUAL])
-        pol.residual_v = pol.residual * pol.limit_v
+        self.controller.took(p)
         return u, ft, fe, r, v, term, args[-1].copy()
 
     def _observe(self) -> np.ndarray:
