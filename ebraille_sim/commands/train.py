@@ -70,6 +70,13 @@ RECIPES = {
         "refresh_probability": 0.25, "zero_start": True,
         "validation": {"suite": "standard", "readers": 24, "seed": VALIDATION_SEED, "checkpoints": 6},
         "hyperparameters": _SELECT_PPO},
+    "residual_ppo_select_025v_1khz": {
+        "description": "residual_ppo_select_1khz with a correction of at most 0.25 V and a checkpoint every "
+                       "twelfth of the steps",
+        "algo": "ppo", "control_rate_hz": 1000.0, "residual": "dob_100hz", "residual_limit_v": 0.25, "history": 4,
+        "refresh_probability": 0.25, "zero_start": True,
+        "validation": {"suite": "standard", "readers": 24, "seed": VALIDATION_SEED, "checkpoints": 12},
+        "hyperparameters": _SELECT_PPO},
 }
 """Training recipes of ``--recipe``: the algorithm, the env and the learner's settings."""
 
