@@ -12,9 +12,12 @@ three differences:
 * **Residual action.**  The design's controller (:func:`controllers.make` of the name, on its
   firmware preset: every drawn device carries the preset's estimator settings) runs in the
   loop, inside the safety supervisor, exactly as ``ebraille-sim run --controller DESIGN``
-  runs it (:func:`ebraille_sim.scenarios.runner.python_periods`, the runner's shim for
-  Python controllers); the action ``a`` in [-1, 1] adds ``a * residual_limit_v`` volts to
-  its command (:class:`controllers.residual.ResidualPolicy`).  Zero actions reproduce
+  runs it; the action ``a`` in [-1, 1] adds ``a * residual_limit_v`` volts to its command
+  (:class:`controllers.residual.ResidualPolicy`).  A design with a compiled form runs in the
+  loop engine, one compiled call per step (:func:`residual_step`); one without (a refresh
+  learner) is called from Python through the runner's per-period shim
+  (:func:`ebraille_sim.scenarios.runner.python_periods`).  Both give the same steps to the
+  last bit.  Zero actions reproduce
   ``run_scenario(env.episode.spec, controller=DESIGN)`` to the last bit
   (``tests/test_residual_env.py``).
 * **Observation.**  What the board has, per frame: the features of
