@@ -569,7 +569,13 @@ def compiled_form(controller):
 def resume_controller(controller, *, force_est_n: float, setpoint_n: float) -> None:
     """:func:`controller_resume` on a controller object: its ``reset`` from 0 V, then, for a
     controller with a compiled PID-family or disturbance-observer form, the integrator raised
-    to 0 V when the reset started it below (a controller without one keeps the plain reset)."""
+    to 0 V when the reset started it below (a controller without one keeps the plain reset).  A
+    controller with its own ``resume(force_est_n=, setpoint_n=)`` (a wrapper around a design,
+    :class:`controllers.residual.ResidualPolicy`) resumes by it."""
+    resume = getattr(controller, "resume", None)
+    if resume is not None:
+        resume(force_est_n=force_est_n, setpoint_n=setpoint_n)
+        return
     controller.reset(force_est_n=force_est_n, setpoint_n=setpoint_n, command_v=0.0)
     form = compiled_form(controller)
     if form is not None:

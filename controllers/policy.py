@@ -85,6 +85,7 @@ ACTOR_FORMAT = "ebraille-sim-mlp/1"
 """Value of ``format`` in a ``policy.npz`` written by :func:`save_actor`."""
 
 _ACTIVATIONS = {"tanh": np.tanh, "relu": lambda x: np.maximum(x, np.float32(0.0))}
+_ACTIVATION_CODES = {"tanh": 0, "relu": 1}
 
 
 class MlpActor:
@@ -115,6 +116,20 @@ class MlpActor:
         self.activation = activation
         self.squash = bool(squash)
         self._act = _ACTIVATIONS[activation]
+
+    def vectors(self):
+        """``(layers, weights)`` of this actor for the compiled forward pass
+        (:func:`controllers.residual.mlp_action`), or None for one output other than a single
+        action.  ``layers`` (int64): the number of layers, the activation's code (0 tanh, 1
+        relu), the squash flag, then the widths from the input on; ``weights`` (float32): each
+        layer's matrix (row-major), then its bias."""
+        if self.weights[-1].shape[0] != 1:
+            return None
+        widths = [self.weights[0].shape[1]] + [w.shape[0] for w in self.weights]
+        layers = np.array([len(self.weights), _ACTIVATION_CODES[self.activation], int(self.squash)] + widths,
+                          dtype=np.int64)
+        weights = np.concatenate([np.concatenate([w.ravel(), b]) for w, b in zip(self.weights, self.biases)])
+        return layers, weights.astype(np.float32)
 
     def predict(self, observation, deterministic: bool = True):
         """``(action of shape (n_out,), None)`` for one observation, as SB3's ``predict``."""

@@ -39,10 +39,14 @@ import math
 import numpy as np
 
 from controllers.base import check_dt, check_finite
-from controllers.features import (CURRENT_SCALE_A, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_PREV_ACTION, config_vector, observe,
-                                  policy_action, reset_features, write_observation)
+from controllers.compiled import resume_controller
+from controllers.features import (CURRENT_SCALE_A, N_OBS, N_Z, OBS_HIGH, OBS_LOW, Z_EST_PREV, Z_PREV_ACTION, _clip,
+                                  config_vector, observe, policy_action, write_observation)
+from ebraille_sim.base.compiled import njit
 
-__all__ = ["N_FRAME", "ActionSlot", "ResidualPolicy", "frame_bounds", "MAX_HISTORY"]
+__all__ = ["N_FRAME", "ActionSlot", "ResidualPolicy", "frame_bounds", "MAX_HISTORY", "advance_frame", "peek_frame",
+           "restart_frames", "mlp_action", "P_FIRST", "P_RESIDUAL", "P_ACTION", "P_LIMIT", "P_SUPPLY",
+           "P_MODE", "N_P", "MODE_HANDED", "MODE_MLP"]
 
 N_FRAME = N_OBS + 1
 """Numbers per frame: the features of :mod:`controllers.features` and the previous residual action."""
@@ -52,12 +56,95 @@ MAX_HISTORY = 64
 
 _PERIOD_TOL = 1e-6
 
+P_FIRST, P_RESIDUAL, P_ACTION, P_LIMIT, P_SUPPLY, P_MODE = range(6)
+"""Slots of a compiled residual policy's scalars (:meth:`ResidualPolicy.compiled_policy`): the next
+frame is the first after a (re)start (1.0) or not; the residual action held, in [-1, 1]; the
+action handed in (:data:`MODE_HANDED`); the correction at ``|a| = 1``, V; the driver supply
+that scales the applied command, V; where the action comes from."""
+N_P = 6
+MODE_HANDED = 0.0
+"""The action is handed in each period (``P_ACTION``: an env's agent)."""
+MODE_MLP = 1.0
+"""The action is the MLP actor's (:func:`mlp_action`) on the period's observation."""
+
+@njit(cache=True)
+def mlp_action(layers, weights, obs, buf):
+    """The deterministic action of the MLP actor ``(layers, weights)`` (:meth:`controllers.policy.MlpActor.vectors`) on
+    ``obs`` (float32), in float32 as :class:`controllers.policy.MlpActor` computes it (the sums
+    in another order), clipped to [-1, 1] (or squashed by ``tanh``); ``buf`` is float32 scratch
+    of twice the widest layer."""
+    n = layers[0]
+    relu = layers[1] == 1
+    width = buf.shape[0] // 2
+    h = buf[:width]
+    g = buf[width:]
+    d_in = layers[3]
+    for i in range(d_in):
+        h[i] = obs[i]
+    pos = 0
+    for j in range(n):
+        d_out = layers[4 + j]
+        b0 = pos + d_out * d_in
+        for i in range(d_out):
+            acc = np.float32(0.0)
+            row = pos + i * d_in
+            for q in range(d_in):
+                acc += weights[row + q] * h[q]
+            v = acc + weights[b0 + i]
+            if j < n - 1:
+                v = (v if v > np.float32(0.0) else np.float32(0.0)) if relu else np.tanh(v)
+            g[i] = v
+        pos = b0 + d_out
+        for i in range(d_out):
+            h[i] = g[i]
+        d_in = d_out
+    a = h[0]
+    if layers[2] != 0:
+        return float(np.tanh(a))
+    return float(min(np.float32(1.0), max(np.float32(-1.0), a)))
+
 
 def frame_bounds(history: int) -> tuple[np.ndarray, np.ndarray]:
     """``(low, high)`` of an observation of ``history`` frames (float32)."""
     lo = np.tile(np.append(OBS_LOW, np.float32(-1.0)), history).astype(np.float32)
     hi = np.tile(np.append(OBS_HIGH, np.float32(1.0)), history).astype(np.float32)
     return lo, hi
+
+
+@njit(cache=True)
+def advance_frame(z, frames, c, force_est_n, setpoint_n, current_a, since_s, first, residual, obs):
+    """One evaluation's observation: the features ``z`` advanced by ``since_s`` on the
+    readings (only written, not advanced, on the ``first`` frame after a reset), pushed as the
+    newest frame of ``frames`` (shape ``(history, N_FRAME)``, float32) with the previous
+    residual action ``residual``; ``obs`` receives the stack, newest first."""
+    for i in range(frames.shape[0] - 1, 0, -1):
+        frames[i, :] = frames[i - 1, :]
+    row = frames[0, :N_OBS]
+    if first:
+        write_observation(z, c, force_est_n, setpoint_n, current_a, row)
+    else:
+        observe(z, c, force_est_n, setpoint_n, current_a, since_s, row)
+    frames[0, N_OBS] = residual
+    n = frames.shape[1]
+    for i in range(frames.shape[0]):
+        obs[i * n:(i + 1) * n] = frames[i, :]
+
+
+@njit(cache=True)
+def peek_frame(z, frames, c, force_est_n, setpoint_n, current_a, since_s, first, residual, obs):
+    """The observation :func:`advance_frame` would write, into ``obs``, with ``z`` and
+    ``frames`` left as they are."""
+    advance_frame(z.copy(), frames.copy(), c, force_est_n, setpoint_n, current_a, since_s, first, residual, obs)
+
+
+@njit(cache=True)
+def restart_frames(z, frames, force_est_n, command_v, supply_v):
+    """The features and frames of a (re)started policy (:meth:`ResidualPolicy.reset`): no
+    rate, no integral, the command ``command_v`` as the previous one, no frames."""
+    z[:] = 0.0
+    z[Z_EST_PREV] = force_est_n
+    z[Z_PREV_ACTION] = _clip(command_v / supply_v, -1.0, 1.0)
+    frames[:] = 0.0
 
 
 class ActionSlot:
@@ -138,9 +225,19 @@ class ResidualPolicy:
         check_finite("setpoint_n", setpoint_n)
         u0 = check_finite("command_v", command_v)
         self.base.reset(force_est_n=force_est_n, setpoint_n=setpoint_n, command_v=command_v)
-        reset_features(self._z, fe)
-        self._z[Z_PREV_ACTION] = min(1.0, max(-1.0, u0 / self.supply_v))
-        self._frames[:] = 0.0
+        self._restart(fe, u0)
+
+    def resume(self, *, force_est_n: float, setpoint_n: float) -> None:
+        """The supervisor's resume after regained contact: the design's controller resumes as it
+        does alone (:func:`controllers.compiled.resume_controller`: from 0 V, a PID-family or
+        disturbance-observer integrator not below 0 V), and the history is forgotten."""
+        fe = check_finite("force_est_n", force_est_n)
+        check_finite("setpoint_n", setpoint_n)
+        resume_controller(self.base, force_est_n=force_est_n, setpoint_n=setpoint_n)
+        self._restart(fe, 0.0)
+
+    def _restart(self, force_est_n: float, command_v: float) -> None:
+        restart_frames(self._z, self._frames, force_est_n, command_v, self.supply_v)
         self._since_s = 0.0
         self._first = True
         self.residual = 0.0
@@ -156,26 +253,48 @@ class ResidualPolicy:
         if applied is not None:
             applied(command_v)
 
-    def _frame(self, z, frames, force_est_n, setpoint_n, current_a, since_s, first, obs) -> None:
-        """Advance the features ``z`` and the frame stack ``frames`` and write ``obs``."""
-        feat = np.empty(N_OBS, dtype=np.float32)
-        if first:
-            write_observation(z, self._c, force_est_n, setpoint_n, current_a, feat)
-        else:
-            observe(z, self._c, force_est_n, setpoint_n, current_a, since_s, feat)
-        frames[1:] = frames[:-1]
-        frames[0, :N_OBS] = feat
-        frames[0, N_OBS] = self.residual
-        obs[:] = frames.ravel()
-
     def peek(self, force_est_n: float, setpoint_n: float, dt_s: float, current_a: float) -> np.ndarray:
         """The observation the next :meth:`update` with these arguments shows the policy,
         without changing anything (an env shows it to its agent before the period)."""
         obs = np.empty_like(self._obs)
-        since = self._since_s + dt_s
-        self._frame(self._z.copy(), self._frames.copy(), float(force_est_n), float(setpoint_n), float(current_a),
-                    since, self._first, obs)
+        peek_frame(self._z, self._frames, self._c, float(force_est_n), float(setpoint_n), float(current_a),
+                   self._since_s + dt_s, self._first, self.residual, obs)
         return obs
+
+    def compiled_policy(self, dt_s: float, handed: bool = False):
+        """The arrays of the loop engine's residual period (:func:`ebraille_sim.plant.engine.policy_period`)
+        over this policy's live features and frames, or None when it has none.
+
+        ``(p, z, frames, obs, c, layers, weights, z_scratch, frames_scratch, buf)``: the scalars
+        (slots ``P_*``, from this policy's), the features, the frame stack, the observation,
+        the feature scales, the MLP actor (:meth:`controllers.policy.MlpActor.vectors`) and scratch.  ``handed``: the
+        action is handed in each period (an env's agent), the model unused; otherwise the
+        model must be a deterministic MLP actor.  The policy must evaluate every period of
+        ``dt_s`` (its training rate at least the loop's).
+        """
+        if handed:
+            mlp = (np.zeros(4, dtype=np.int64), np.zeros(0, dtype=np.float32))
+        else:
+            vectors = getattr(self.model, "vectors", None)
+            mlp = vectors() if self.deterministic and callable(vectors) else None
+        if mlp is None or dt_s < self.period_s * (1.0 - _PERIOD_TOL):
+            return None
+        p = np.zeros(N_P)
+        p[P_FIRST] = 1.0 if self._first else 0.0
+        p[P_RESIDUAL] = self.residual
+        p[P_LIMIT] = self.limit_v
+        p[P_SUPPLY] = self.supply_v
+        p[P_MODE] = MODE_HANDED if handed else MODE_MLP
+        buf = np.zeros(2 * int(max(mlp[0][3:].max(initial=1), 1)), dtype=np.float32)
+        return (p, self._z, self._frames, self._obs, self._c, mlp[0], mlp[1], np.zeros_like(self._z),
+                np.zeros_like(self._frames), buf)
+
+    def took(self, p) -> None:
+        """Take the scalars of a compiled run's ``p`` (:meth:`compiled_policy`) back."""
+        self._first = bool(p[P_FIRST] != 0.0)
+        self.residual = float(p[P_RESIDUAL])
+        self.residual_v = self.residual * self.limit_v
+        self._since_s = 0.0
 
     def update(self, force_est_n: float, setpoint_n: float, dt_s: float,
                motor_current_a: float | None = None) -> float:
@@ -187,7 +306,8 @@ class ResidualPolicy:
         u = self.base.update(force_est_n, setpoint_n, dt_s, motor_current_a)
         self._since_s += dt
         if self._first or self._since_s >= self.period_s * (1.0 - _PERIOD_TOL):
-            self._frame(self._z, self._frames, fe, sp, ia, self._since_s, self._first, self._obs)
+            advance_frame(self._z, self._frames, self._c, fe, sp, ia, self._since_s, self._first, self.residual,
+                          self._obs)
             self._first = False
             self._since_s = 0.0
             self.residual = policy_action(self.model, self._obs, self.deterministic, "residual policy")

@@ -278,3 +278,22 @@ def test_workers_are_not_forked_from_a_process_that_loaded_pytorch(monkeypatch):
     monkeypatch.setitem(sys.modules, "torch", types.ModuleType("torch"))
     assert process_context().get_start_method() != "fork"
     assert plain in ("fork", "forkserver", "spawn")
+
+
+def test_validation_readers_and_seeds_are_apart_from_the_benchmarks():
+    """Readers drawn from a population seed of their own share no device and no episode seed
+    with the benchmark's 64 readers (and include no nominal reader); the score on them is
+    reproducible."""
+    sc = B.SUITES["quick"].scenarios[0]
+    spec = B.scenario_spec(sc)
+    bench = B.scenario_devices(sc, 64)
+    val = B.scenario_devices(sc, 8, 7001)
+    assert len(val) == 8 and all(v != d for v in val for d in bench)
+    assert val == B.scenario_devices(sc, 8, 7001) and val != B.scenario_devices(sc, 8, 7002)
+    seeds = {B.episode_seed(spec, r) for r in range(64)}
+    assert not seeds & {B.episode_seed(spec, r, 7001) for r in range(64)}
+    runs = [B.run_benchmark(["pid"], suite="quick", readers=2, bounds=False, population_seed=7001) for _ in range(2)]
+    assert [r["seed"] for r in runs[0].rows][:2] == [B.episode_seed(spec, 0, 7001), B.episode_seed(spec, 1, 7001)]
+    assert B.summarise(runs[0]) == B.summarise(runs[1])
+    assert B.summarise(runs[0])["pid"]["score"] != B.summarise(
+        B.run_benchmark(["pid"], suite="quick", readers=2, bounds=False))["pid"]["score"]

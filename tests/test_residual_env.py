@@ -162,3 +162,107 @@ def test_refresh_share_reads_some_episodes_in_refresh_mode_and_keeps_the_rest():
     always = ResidualEnv(refresh_probability=1.0, **SHORT)
     always.reset(seed=0)
     assert always.episode.spec.reading.mode == "refresh"
+
+
+def _bang_bang(env, seed):
+    """An episode under a +/- 1 correction switching every 50 steps: observations, (reward,
+    command, correction) per step, and the steps after which the supervisor had restarted the policy."""
+    obs, _ = env.reset(seed=seed)
+    out, steps, restarts = [obs], [], []
+    for k in range(env.episode.n_steps):
+        obs, r, term, trunc, info = env.step(np.array([1.0 if (k // 50) % 2 else -1.0], np.float32))
+        out.append(obs)
+        steps.append((r, info["command_v"], info["residual_v"], info["force_true_n"]))
+        if env.controller._first:
+            restarts.append(k + 1)
+        if term or trunc:
+            break
+    return np.array(out), np.array(steps), restarts
+
+
+@pytest.mark.parametrize("design", ["dob_100hz", "pid"])
+def test_compiled_step_is_the_python_shims_step(design, monkeypatch):
+    """The design's compiled controller plus the correction inside the loop engine gives the
+    observations, rewards and commands of the design and the residual policy stepped from
+    Python, through a supervisor's restart of the policy."""
+    import ebraille_sim.scenarios.runner as runner
+    fast = ResidualEnv(residual=design, history=2, **SHORT)
+    a = _bang_bang(fast, seed=0)
+    assert fast._fast is not None
+    monkeypatch.setattr(runner, "_USE_COMPILED_LOOP", False)
+    shim = ResidualEnv(residual=design, history=2, **SHORT)
+    b = _bang_bang(shim, seed=0)
+    assert shim._fast is None
+    assert a[2] and a[2] == b[2]                                   # the supervisor restarted the policy
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+def test_a_design_without_a_compiled_form_runs_from_python():
+    env = ResidualEnv(residual="dob_learn_1khz", **SHORT)
+    env.reset(seed=1)
+    assert env._fast is None
+    obs, r, term, trunc, info = env.step(np.array([0.5], np.float32))
+    assert info["residual_v"] == 0.5 and math.isfinite(r)
+
+
+def test_resumed_policy_resumes_its_design_as_the_design_alone():
+    """A supervisor's resume after regained contact starts the design's integrator at 0 V or
+    above, as it starts the design alone (controllers.compiled.resume_controller)."""
+    from controllers.compiled import PS, resume_controller
+    alone = controllers.make("dob_100hz")
+    res = ResidualPolicy(controllers.make("dob_100hz"), ActionSlot(), limit_v=1.0, control_rate_hz=1000.0)
+    for c in (alone, res):
+        c.reset(force_est_n=0.0, setpoint_n=1.0)
+        c.update(0.2, 1.0, 1e-3, 0.01)
+        resume_controller(c, force_est_n=0.1, setpoint_n=1.0)     # bumpless from 0 V would start it below 0
+    assert alone.compiled()[1][PS.integrator_v] == 0.0
+    assert np.array_equal(res.base.compiled()[1], alone.compiled()[1])
+    assert res.residual == 0.0 and res.observation.shape == (N_FRAME,)
+
+
+def _random_actor(seed=0, history=4):
+    from controllers.policy import MlpActor
+    rng = np.random.default_rng(seed)
+    w = [rng.normal(0, 0.3, (64, history * N_FRAME)), rng.normal(0, 0.2, (64, 64)), rng.normal(0, 0.3, (1, 64))]
+    b = [rng.normal(0, 0.1, 64), rng.normal(0, 0.1, 64), np.array([0.05])]
+    return MlpActor(w, b, "tanh", False)
+
+
+def test_compiled_mlp_is_the_numpy_actor_to_float32_rounding():
+    from controllers.residual import mlp_action
+    actor = _random_actor()
+    layers, weights = actor.vectors()
+    buf = np.zeros(128, np.float32)
+    rng = np.random.default_rng(1)
+    for _ in range(200):
+        obs = rng.uniform(-2, 2, 4 * N_FRAME).astype(np.float32)
+        want = float(actor.predict(obs)[0][0])
+        assert mlp_action(layers, weights, obs, buf) == pytest.approx(want, abs=2e-6)
+    res = ResidualPolicy(controllers.make("dob_100hz"), ActionSlot(), 1.0, 1000.0)
+    assert res.compiled_policy(1e-3) is None and res.compiled_policy(1e-3, handed=True) is not None
+
+
+def test_a_residual_mlp_policy_runs_in_the_loop_engine_as_from_python(monkeypatch):
+    """``run`` of a residual policy with an MLP actor runs in the loop engine (the actor never
+    called from Python) and gives the run of the policy stepped from Python, to the float32
+    rounding of the actor's sums."""
+    import ebraille_sim.scenarios.runner as runner
+    actor = _random_actor()
+    calls = []
+    predict = actor.predict
+    monkeypatch.setattr(actor, "predict", lambda o, deterministic=True: calls.append(1) or predict(o, deterministic))
+
+    def policy():
+        return ResidualPolicy(controllers.make("dob_100hz"), actor, 1.0, 1000.0, 4)
+
+    fast = run_scenario("strap_slip", controller=policy(), duration_s=3.0, firmware="paper_100hz")
+    assert not calls
+    monkeypatch.setattr(runner, "_USE_COMPILED_LOOP", False)
+    slow = run_scenario("strap_slip", controller=policy(), duration_s=3.0, firmware="paper_100hz")
+    assert len(calls) == len(slow.trace["force_true_n"])
+    diff = np.abs(fast.trace["force_true_n"] - slow.trace["force_true_n"]).max()
+    assert diff < 1e-4
+    assert np.abs(fast.trace["command_v"] - slow.trace["command_v"]).max() < 1e-3
+    assert fast.metrics["in_band_fraction"] == pytest.approx(slow.metrics["in_band_fraction"], abs=2e-3)
+    assert not np.array_equal(fast.trace["force_true_n"], run_scenario(
+        "strap_slip", controller="dob_100hz", duration_s=3.0).trace["force_true_n"])     # the policy acts

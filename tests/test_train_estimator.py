@@ -71,12 +71,15 @@ def test_train_builds_the_env_around_a_device_with_the_settings(tmp_path, monkey
     for seed in range(4):
         env.reset(seed=seed)
         devices.append(env.unwrapped.episode.device)
-    assert all(d.estimator == kwargs["base_device"].estimator for d in devices)
+    # the settings are kept on every drawn device; its unit's bench calibration is its own
+    assert all(d.estimator.hysteresis_compensation and d.estimator.hysteresis_deadband_lsb == 2.0 for d in devices)
     assert len({d.fsr for d in devices}) == 4                 # drawn devices, the estimator kept
     default = gym.make(env_id, **default_kwargs)
     default.reset(seed=0)
     dev = default.unwrapped.episode.device
-    assert dev.estimator == EstimatorParams() and dev.fsr == devices[0].fsr
+    assert not dev.estimator.hysteresis_compensation and dev.fsr == devices[0].fsr
+    assert dev.estimator.hysteresis_deadband_lsb == EstimatorParams().hysteresis_deadband_lsb
+    assert dev.estimator.calibration_readings_n == devices[0].estimator.calibration_readings_n
 
 
 def test_metadata_records_the_estimator_and_loads():

@@ -90,3 +90,29 @@ def test_residual_training_is_reproducible_and_records_its_curve(tmp_path):
     assert meta["env"]["residual"] == "dob_100hz" and meta["env"]["history"] == 2
     assert meta["env"]["control_rate_hz"] == 1000.0
     assert isinstance(controllers.make(f"policy:{tmp_path / 'p0'}"), ResidualPolicy)
+
+
+def test_select_recipe_starts_at_the_design_and_keeps_the_best_validation_score(tmp_path):
+    """The selecting recipe's step 0 is its design on the validation readers (the action head
+    zero), every checkpoint is scored there, and the policy written is the best of them, the
+    design on a tie."""
+    pytest.importorskip("stable_baselines3")
+    from ebraille_sim.commands.train import train, validation_score
+    from ebraille_sim.tools.benchmark import run_benchmark, summarise
+    settings = recipe_settings("residual_ppo_select_1khz", history=2)
+    assert settings["zero_start"] and settings["validation"]["readers"] >= 16
+    settings["hyperparameters"] = {**settings["hyperparameters"], "n_steps": 256, "batch_size": 128, "n_epochs": 2,
+                                   "learning_rate": 3e-3}
+    val = {"suite": "quick", "readers": 2, "seed": 7001, "checkpoints": 2}
+    settings["validation"] = val
+    rec = train("ppo", 1024, tmp_path / "sel", n_envs=2, recipe=settings)
+    v = rec["validation"]
+    steps = [c["steps"] for c in v["checkpoints"]]
+    assert steps[0] == 0 and steps[-1] == rec["steps"] and len(steps) >= 3
+    design = summarise(run_benchmark(["dob_100hz"], suite="quick", readers=2, bounds=False, population_seed=7001))
+    assert v["design_score"] == round(design["dob_100hz"]["score"], 3)
+    scores = [c["score"] for c in v["checkpoints"]]
+    assert v["chosen_score"] == max(scores) and scores[steps.index(v["chosen_steps"])] == max(scores)
+    assert steps.index(v["chosen_steps"]) == scores.index(max(scores))        # the first best: the design on a tie
+    assert validation_score(tmp_path / "sel", val)["score"] == pytest.approx(v["chosen_score"], abs=1e-3)
+    assert len(set(scores)) > 1                                                # training moved the policy

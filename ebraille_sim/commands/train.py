@@ -31,6 +31,14 @@ _RESIDUAL_PPO = {"n_steps": 2048, "batch_size": 512, "n_epochs": 10, "gamma": 0.
                  "learning_rate": 1e-4, "clip_range": 0.1, "ent_coef": 0.0,
                  "policy_kwargs": {"log_std_init": -2.0, "net_arch": [64, 64]}}
 
+_SELECT_PPO = {"n_steps": 1024, "batch_size": 512, "n_epochs": 10, "gamma": 0.99, "gae_lambda": 0.95,
+               "learning_rate": 1e-4, "clip_range": 0.1, "ent_coef": 0.0,
+               "policy_kwargs": {"log_std_init": -2.0, "net_arch": [64, 64]}}
+
+VALIDATION_SEED = 7001
+"""Population seed of the validation readers that choose a residual recipe's checkpoint (drawn
+apart from the benchmark's readers, :func:`ebraille_sim.tools.benchmark.scenario_devices`)."""
+
 RECIPES = {
     "ppo_200hz": {"description": "PPO on the plain env at 200 Hz (the command's default)",
                   "algo": "ppo", "control_rate_hz": 200.0, "hyperparameters": _PPO},
@@ -52,6 +60,23 @@ RECIPES = {
         "description": "residual_ppo_1khz on dob_hold_1khz (the fast_1khz firmware)",
         "algo": "ppo", "control_rate_hz": 1000.0, "residual": "dob_hold_1khz", "residual_limit_v": 1.0,
         "history": 4, "curriculum_fraction": 0.5, "curriculum_start": 0.25, "hyperparameters": _RESIDUAL_PPO},
+    "residual_ppo_select_1khz": {
+        "description": "PPO learning a correction of at most 1 V on dob_100hz at 1 kHz (4 frames, a quarter of "
+                       "the episodes in refresh mode, the full population from the start), starting exactly at "
+                       "the design (the action head's weights zero); the design and a checkpoint every sixth of "
+                       "the steps scored on the standard suite over 24 validation readers drawn apart from the "
+                       "benchmark's, the best kept (the design on a tie)",
+        "algo": "ppo", "control_rate_hz": 1000.0, "residual": "dob_100hz", "residual_limit_v": 1.0, "history": 4,
+        "refresh_probability": 0.25, "zero_start": True,
+        "validation": {"suite": "standard", "readers": 24, "seed": VALIDATION_SEED, "checkpoints": 6},
+        "hyperparameters": _SELECT_PPO},
+    "residual_ppo_select_025v_1khz": {
+        "description": "residual_ppo_select_1khz with a correction of at most 0.25 V and a checkpoint every "
+                       "twelfth of the steps",
+        "algo": "ppo", "control_rate_hz": 1000.0, "residual": "dob_100hz", "residual_limit_v": 0.25, "history": 4,
+        "refresh_probability": 0.25, "zero_start": True,
+        "validation": {"suite": "standard", "readers": 24, "seed": VALIDATION_SEED, "checkpoints": 12},
+        "hyperparameters": _SELECT_PPO},
 }
 """Training recipes of ``--recipe``: the algorithm, the env and the learner's settings."""
 
@@ -220,6 +245,95 @@ def _curve_callback(curve: list, every: int):
     return _Curve()
 
 
+def zero_action_head(model) -> None:
+    """Set the PPO policy's action head (``action_net``) to zero weights and biases: its mean
+    action is exactly 0 on every observation, so a residual policy starts as its design to the
+    last bit, and the gradient still reaches the head through the hidden layers' features."""
+    import torch
+    with torch.no_grad():
+        model.policy.action_net.weight.zero_()
+        model.policy.action_net.bias.zero_()
+
+
+def _write_policy(folder, model, meta: dict) -> None:
+    """``policy.zip``, ``policy.npz`` and ``policy.json`` of ``model`` into ``folder``."""
+    import json
+    import pathlib
+
+    from controllers.policy import actor_from_sb3, save_actor
+    folder = pathlib.Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    model.save(folder / "policy.zip")
+    save_actor(actor_from_sb3(model), folder / "policy.npz")
+    (folder / "policy.json").write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")
+
+
+def validation_score(folder, validation: dict) -> dict:
+    """The benchmark of the policy in ``folder`` on ``validation``'s suite over its readers,
+    drawn from its own seed (:func:`ebraille_sim.tools.benchmark.run_benchmark` with
+    ``population_seed``; no nominal reader, no bounds, one process): ``{"score", "scenarios"}``
+    (:func:`~ebraille_sim.tools.benchmark.summarise`)."""
+    from ebraille_sim.tools.benchmark import run_benchmark, summarise
+    name = f"policy:{folder}"
+    res = run_benchmark([name], suite=validation["suite"], readers=int(validation["readers"]), jobs=1, bounds=False,
+                        population_seed=int(validation["seed"]))
+    return summarise(res)[name]
+
+
+def _selection_callback(validation: dict, every: int, meta: dict, out, record: list, t0: float):
+    """A Stable-Baselines3 callback that scores the policy on the validation readers at step 0
+    and about every ``every`` steps (:func:`validation_score`), appends ``{"steps", "score",
+    "wall_s"}`` to ``record``, and writes a policy that scores above every earlier one into
+    ``out`` (``meta`` its ``policy.json`` so far).  Step 0 of a zero-started residual policy is
+    its design, so the policy written scores at least the design's on these readers."""
+    import tempfile
+    import time
+
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class _Select(BaseCallback):
+        def __init__(self):
+            super().__init__()
+            self.next_point = 0
+            self.best = None
+            self.tmp = tempfile.TemporaryDirectory(prefix="ebraille-validation-")
+
+        def _on_training_start(self) -> None:
+            self._score()
+
+        def _on_step(self) -> bool:
+            if self.num_timesteps >= self.next_point:
+                self._score()
+            return True
+
+        def _on_training_end(self) -> None:
+            if not record or record[-1]["steps"] != self.num_timesteps:
+                self._score()
+            self.tmp.cleanup()
+
+        def _score(self) -> None:
+            steps = int(self.num_timesteps)
+            folder = f"{self.tmp.name}/{steps}"
+            _write_policy(folder, self.model, meta)
+            summary = validation_score(folder, validation)
+            score = float(summary["score"])
+            record.append({"steps": steps, "score": round(score, 3), "wall_s": round(time.perf_counter() - t0, 1),
+                           "scenarios": {k: {m: (None if v is None else round(v, 4)) for m, v in st.items()
+                                             if m.endswith("_cvar10")}
+                                         for k, st in summary["scenarios"].items()}})
+            if self.best is None or score > self.best:
+                self.best = score
+                _write_policy(out, self.model, meta)
+                meta_best["steps"] = steps
+            while self.next_point <= self.num_timesteps:
+                self.next_point += every
+
+    meta_best = {}
+    cb = _Select()
+    cb.chosen = meta_best
+    return cb
+
+
 def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_rate_hz: float = 200.0,
           threads: int = 1, verbose: int = 0, progress=None, estimator=None, recipe=None, callback=None) -> dict:
     """Train and save a policy; returns the ``training`` record written to ``policy.json``.
@@ -314,6 +428,10 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
     venv = make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=env_kwargs)
     cls = sb3.PPO if algo == "ppo" else sb3.SAC
     model = cls("MlpPolicy", venv, seed=seed, device="cpu", verbose=verbose, **hyper)
+    if settings.get("zero_start"):
+        zero_action_head(model)
+    out = pathlib.Path(out)
+    out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     # PPO collects whole rollouts of n_steps per env, so it takes steps up to the next rollout
     rollout = hyper["n_steps"] * n_envs if algo == "ppo" else 1
@@ -322,16 +440,24 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
     callbacks = [_curve_callback(curve, max(1, planned // 50))]
     if progress is not None:
         callbacks.append(_progress_callback(progress, planned))
+    validation = settings.get("validation")
+    selected: list = []
+    select = None
+    if validation is not None:
+        base_meta = {"format": POLICY_FORMAT, "algo": algo, "env_id": env_id,
+                     "env": {**cfg.policy_metadata(), **extra_meta}, "training": {"recipe": settings["recipe"]}}
+        select = _selection_callback(validation, max(1, planned // int(validation["checkpoints"])), base_meta, out,
+                                     selected, t0)
+        callbacks.append(select)
     if callback is not None:
         callbacks.append(callback)
     model.learn(total_timesteps=int(steps), callback=CallbackList(callbacks))
     wall = time.perf_counter() - t0
     returns = [ep["r"] for ep in model.ep_info_buffer] if model.ep_info_buffer else []
-    out = pathlib.Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    model.save(out / "policy.zip")
-    from controllers.policy import actor_from_sb3, save_actor
-    save_actor(actor_from_sb3(model), out / "policy.npz")
+    if select is None:
+        from controllers.policy import actor_from_sb3, save_actor
+        model.save(out / "policy.zip")
+        save_actor(actor_from_sb3(model), out / "policy.npz")
     record = {
         "steps": int(model.num_timesteps), "seed": int(seed), "envs": int(n_envs), "wall_time_s": round(wall, 1),
         "steps_per_s": round(model.num_timesteps / wall, 1),
@@ -347,6 +473,10 @@ def train(algo: str, steps: int, out, seed: int = 0, n_envs: int = 4, control_ra
         record["curriculum"] = {"steps_per_env": env_kwargs["curriculum_steps"],
                                 "start": env_kwargs["curriculum_start"]}
         record["refresh_probability"] = env_kwargs["refresh_probability"]
+    if select is not None:
+        record["validation"] = {**validation, "chosen_steps": select.chosen["steps"],
+                                "chosen_score": max(p["score"] for p in selected), "design_score": selected[0]["score"],
+                                "checkpoints": selected}
     meta = {"format": POLICY_FORMAT, "algo": algo, "env_id": env_id, "env": {**cfg.policy_metadata(), **extra_meta},
             "training": record}
     (out / "policy.json").write_text(json.dumps(meta, indent=2) + "\n", encoding="utf-8")

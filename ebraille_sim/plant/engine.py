@@ -53,12 +53,16 @@ import math
 import numpy as np
 
 from controllers.compiled import KIND_EXTERNAL, controller_reset, controller_resume, controller_step, record
-from controllers.supervisor import supervise_begin, supervise_end
+from controllers.features import Z_PREV_ACTION, _clip
+from controllers.residual import (MODE_MLP, P_ACTION, P_FIRST, P_LIMIT, P_MODE, P_RESIDUAL, P_SUPPLY, advance_frame,
+                                  mlp_action, restart_frames)
+from controllers.supervisor import CF, supervise_begin, supervise_end
 from ebraille_sim.base.compiled import entry_point, njit
 from ebraille_sim.plant.kernel import advance
 from ebraille_sim.plant.layout import S, U
 
-__all__ = ["KEPT", "ROW", "OK", "BAD_CONTROLLER_INPUT", "BAD_COMMAND", "Rows", "command", "period", "run"]
+__all__ = ["KEPT", "ROW", "OK", "BAD_CONTROLLER_INPUT", "BAD_COMMAND", "INNER_SKIPPED", "INNER_RAN", "INNER_RESTARTED",
+           "Rows", "command", "inner_command", "period", "residual_period", "policy_period", "run", "run_residual"]
 
 KEPT = ("command_v", "fsr_voltage_v", "motor_current_a", "board_pos_m", "energy_j")
 """Rows of the ``kept`` array of :func:`run`, in order (trace column names)."""
@@ -69,6 +73,13 @@ ROW = record("KeptRows", KEPT)
 OK = 0
 BAD_CONTROLLER_INPUT = 1
 BAD_COMMAND = 2
+
+INNER_SKIPPED = 0
+"""The supervisor decided the period's command without calling the inner controller."""
+INNER_RAN = 1
+"""The inner controller proposed the period's command."""
+INNER_RESTARTED = 2
+"""The supervisor reset or resumed the inner controller in the period (after it ran, or not)."""
 
 
 @njit(cache=True, inline="always")
@@ -85,24 +96,51 @@ def command(kind, cstate, cparams, u_ext, supervised, sv, cfg, f, sp, dt, cur):
     Without the supervisor the command is the controller's (or ``u_ext``).  ``cur`` is the
     measured motor current (NaN: none).
     """
+    return inner_command(kind, cstate, cparams, u_ext, False, supervised, sv, cfg, f, sp, dt, cur)[0]
+
+
+@njit(cache=True, inline="always")
+def inner_command(kind, cstate, cparams, u_ext, residual, supervised, sv, cfg, f, sp, dt, cur):
+    """:func:`command`, with ``residual``: the inner controller's command is the built-in
+    controller's plus ``u_ext`` (a correction on a design, :class:`controllers.residual.ResidualPolicy`),
+    shaped by the supervisor as the sum.
+
+    Returns ``(u, inner, sp_inner)``: the command, what became of the inner controller
+    (:data:`INNER_SKIPPED`, :data:`INNER_RAN`, :data:`INNER_RESTARTED`: reset or resumed by
+    the supervisor, after running or not) and the setpoint it was handed (``sp`` without the
+    supervisor).
+    """
     if supervised:
         code, u, sp_inner = supervise_begin(sv, cfg, f, sp, dt, cur)
+        inner = INNER_SKIPPED
         if code == 1:
+            inner = INNER_RAN
             if kind == KIND_EXTERNAL:
                 u_inner = u_ext
             else:
                 u_inner = controller_step(kind, cstate, cparams, f, sp_inner, dt, cur)
+                if residual:
+                    u_inner = u_inner + u_ext
             code2, u, reset_cmd = supervise_end(sv, cfg, u_inner, f, sp, dt, cur)
-            if code2 == 1 and kind != KIND_EXTERNAL:
-                controller_reset(kind, cstate, cparams, f, sp_inner, reset_cmd)
-            elif code2 == 2 and kind != KIND_EXTERNAL:
-                controller_reset(kind, cstate, cparams, f, sp_inner, 0.0)
-        elif code == 2 and kind != KIND_EXTERNAL:
-            controller_resume(kind, cstate, cparams, f, sp_inner)
-        return u
+            if code2 == 1:
+                inner = INNER_RESTARTED
+                if kind != KIND_EXTERNAL:
+                    controller_reset(kind, cstate, cparams, f, sp_inner, reset_cmd)
+            elif code2 == 2:
+                inner = INNER_RESTARTED
+                if kind != KIND_EXTERNAL:
+                    controller_reset(kind, cstate, cparams, f, sp_inner, 0.0)
+        elif code == 2:
+            inner = INNER_RESTARTED
+            if kind != KIND_EXTERNAL:
+                controller_resume(kind, cstate, cparams, f, sp_inner)
+        return u, inner, sp_inner
     if kind == KIND_EXTERNAL:
-        return u_ext
-    return controller_step(kind, cstate, cparams, f, sp, dt, cur)
+        return u_ext, INNER_RAN, sp
+    u = controller_step(kind, cstate, cparams, f, sp, dt, cur)
+    if residual:
+        u = u + u_ext
+    return u, INNER_RAN, sp
 
 
 @njit(cache=True, inline="always")
@@ -118,6 +156,21 @@ def period(state, params, inputs, n_sub, kind, cstate, cparams, u_ext, u_max, su
     built-in controller handed a non-finite input, returns its status with the plant not
     advanced.
     """
+    out = residual_period(state, params, inputs, n_sub, kind, cstate, cparams, u_ext, u_max, False, supervised, sv,
+                          cfg, sp, dt, i_feedback, slots, table, k)
+    return out[0], out[1]
+
+
+@njit(cache=True, inline="always")
+def residual_period(state, params, inputs, n_sub, kind, cstate, cparams, u_ext, u_max, residual, supervised, sv,
+                    cfg, sp, dt, i_feedback, slots, table, k):
+    """:func:`period`, with ``residual`` the command of :func:`inner_command` (the built-in
+    controller's plus the correction ``u_ext``, inside the supervisor).
+
+    Returns ``(status, command_v, inner, sp_inner, f, cur)``: besides :func:`period`'s, what
+    became of the inner controller and the setpoint it was handed (:func:`inner_command`), and
+    the force and current the period read (``cur`` NaN when the reading is not finite).
+    """
     for j in range(slots.shape[0]):
         inputs[int(slots[j])] = table[j, k]
     f = state[i_feedback]
@@ -125,17 +178,105 @@ def period(state, params, inputs, n_sub, kind, cstate, cparams, u_ext, u_max, su
     if not math.isfinite(cur):
         cur = math.nan
     if not supervised and kind != KIND_EXTERNAL and not (math.isfinite(f) and math.isfinite(sp)):
-        return BAD_CONTROLLER_INPUT, 0.0
-    u = command(kind, cstate, cparams, u_ext, supervised, sv, cfg, f, sp, dt, cur)
+        return BAD_CONTROLLER_INPUT, 0.0, INNER_SKIPPED, sp, f, cur
+    u, inner, sp_inner = inner_command(kind, cstate, cparams, u_ext, residual, supervised, sv, cfg, f, sp, dt, cur)
     if not math.isfinite(u):
-        return BAD_COMMAND, u
+        return BAD_COMMAND, u, inner, sp_inner, f, cur
     if u > u_max:
         u = u_max
     elif u < -u_max:
         u = -u_max
     inputs[U.command_v] = u
     advance(state, params, inputs, n_sub)
-    return OK, u
+    return OK, u, inner, sp_inner, f, cur
+
+
+@njit(cache=True, inline="always")
+def policy_period(state, params, inputs, n_sub, kind, cstate, cparams, supervised, sv, cfg, sp, dt, i_feedback,
+                  slots, table, k, p, z, frames, obs, c, layers, weights, zc, fc, buf):
+    """One period of a residual policy (:class:`controllers.residual.ResidualPolicy`, its arrays
+    from :meth:`~controllers.residual.ResidualPolicy.compiled_policy`) on its design's compiled
+    controller, inside the supervisor when ``supervised``; returns ``(status, command_v)``.
+
+    The correction is the action handed in (``p[P_ACTION]``) or the MLP actor's on the frame the
+    period pushes (computed on copies first: the policy advances only when the supervisor calls
+    it); :func:`residual_period` runs the period; then the policy does what its ``update``,
+    ``reset``/``resume`` and ``applied`` do when the supervisor calls them: the frame pushed and
+    the action held when it ran, the history forgotten when it was restarted, the command that
+    left the supervisor kept as the previous one.
+    """
+    first = p[P_FIRST] != 0.0
+    if p[P_MODE] == MODE_MLP:
+        f0 = state[i_feedback]
+        cur0 = state[S.current_meas_a]
+        if not math.isfinite(cur0):
+            cur0 = math.nan
+        sp0 = sp
+        if supervised and cfg[CF.sp_max_n] < sp:
+            sp0 = cfg[CF.sp_max_n]
+        zc[:] = z
+        fc[:, :] = frames
+        advance_frame(zc, fc, c, f0, sp0, cur0, dt, first, p[P_RESIDUAL], obs)
+        a = mlp_action(layers, weights, obs, buf)
+    else:
+        a = p[P_ACTION]
+    status, u, inner, sp_inner, f, cur = residual_period(state, params, inputs, n_sub, kind, cstate, cparams,
+                                                         a * p[P_LIMIT], math.inf, True, supervised, sv, cfg, sp, dt,
+                                                         i_feedback, slots, table, k)
+    if status != OK:
+        return status, u
+    if inner == INNER_RAN:
+        advance_frame(z, frames, c, f, sp_inner, cur, dt, first, p[P_RESIDUAL], obs)
+        p[P_FIRST] = 0.0
+        p[P_RESIDUAL] = a
+    elif inner == INNER_RESTARTED:
+        restart_frames(z, frames, f, 0.0, p[P_SUPPLY])
+        p[P_FIRST] = 1.0
+        p[P_RESIDUAL] = 0.0
+    if supervised:
+        z[Z_PREV_ACTION] = _clip(u / p[P_SUPPLY], -1.0, 1.0)
+    return status, u
+
+
+@njit(cache=True, inline="always")
+def _record(st, u, k, every, f_true, f_est, kept):
+    """Record the end of period ``k`` of one row (:func:`run`)."""
+    f_true[k] = st[S.contact_force_n]
+    f_est[k] = st[S.force_est_n]
+    if every > 0 and (k + 1) % every == 0:
+        q = (k + 1) // every - 1
+        kept[ROW.command_v, q] = u
+        kept[ROW.fsr_voltage_v, q] = st[S.fsr_voltage_v]
+        kept[ROW.motor_current_a, q] = st[S.current_a]   # plant truth: the trace's record
+        kept[ROW.board_pos_m, q] = st[S.board_pos_m]
+        kept[ROW.energy_j, q] = st[S.energy_j]
+
+
+@njit(cache=True)
+def run_residual(states, params, inputs, n_sub, kinds, cstates, cparams, supervised, sv_states, sv_cfgs, setpoints,
+                 dt, i_feedback, slots, counts, tables, k0, n_periods, every, f_true, f_est, kept, status, periods,
+                 values, p, z, frames, obs, c, layers, weights, zc, fc, buf):
+    """:func:`run` of row 0 whose controller is a residual policy on the row's compiled design
+    (:func:`policy_period`, the policy's arrays after the rows')."""
+    if status[0] != OK:
+        return
+    st = states[0]
+    cnt = counts[0]
+    rs = slots[0, :cnt]
+    rt = tables[0, :cnt]
+    recording = f_true.shape[1] > 0
+    periods[0] = k0 + n_periods
+    for k in range(k0, k0 + n_periods):
+        code, u = policy_period(st, params[0], inputs[0], n_sub, kinds[0], cstates[0], cparams[0], supervised[0],
+                                sv_states[0], sv_cfgs[0], setpoints[0, k], dt, i_feedback, rs, rt, k, p, z, frames,
+                                obs, c, layers, weights, zc, fc, buf)
+        if code != OK:
+            status[0] = code
+            periods[0] = k
+            values[0] = u
+            return
+        if recording:
+            _record(st, u, k, every, f_true[0], f_est[0], kept[0])
 
 
 @njit(cache=True, _nrt=False)
@@ -182,15 +323,7 @@ def run(states, params, inputs, n_sub, kinds, cstates, cparams, u_ext, supervise
                 values[r] = u
                 break
             if recording:
-                f_true[r, k] = st[S.contact_force_n]
-                f_est[r, k] = st[S.force_est_n]
-                if every > 0 and (k + 1) % every == 0:
-                    q = (k + 1) // every - 1
-                    kept[r, ROW.command_v, q] = u
-                    kept[r, ROW.fsr_voltage_v, q] = st[S.fsr_voltage_v]
-                    kept[r, ROW.motor_current_a, q] = st[S.current_a]   # plant truth: the trace's record
-                    kept[r, ROW.board_pos_m, q] = st[S.board_pos_m]
-                    kept[r, ROW.energy_j, q] = st[S.energy_j]
+                _record(st, u, k, every, f_true[r], f_est[r], kept[r])
 
 
 def _padded(rows: list, dtype=float) -> np.ndarray:

@@ -12,9 +12,12 @@ three differences:
 * **Residual action.**  The design's controller (:func:`controllers.make` of the name, on its
   firmware preset: every drawn device carries the preset's estimator settings) runs in the
   loop, inside the safety supervisor, exactly as ``ebraille-sim run --controller DESIGN``
-  runs it (:func:`ebraille_sim.scenarios.runner.python_periods`, the runner's shim for
-  Python controllers); the action ``a`` in [-1, 1] adds ``a * residual_limit_v`` volts to
-  its command (:class:`controllers.residual.ResidualPolicy`).  Zero actions reproduce
+  runs it; the action ``a`` in [-1, 1] adds ``a * residual_limit_v`` volts to its command
+  (:class:`controllers.residual.ResidualPolicy`).  A design with a compiled form runs in the
+  loop engine, one compiled call per step (:func:`residual_step`); one without (a refresh
+  learner) is called from Python through the runner's per-period shim
+  (:func:`ebraille_sim.scenarios.runner.python_periods`).  Both give the same steps to the
+  last bit.  Zero actions reproduce
   ``run_scenario(env.episode.spec, controller=DESIGN)`` to the last bit
   (``tests/test_residual_env.py``).
 * **Observation.**  What the board has, per frame: the features of
@@ -75,10 +78,15 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from controllers.features import C_SAFE
+from controllers.residual import P_ACTION, P_FIRST, P_RESIDUAL, peek_frame
+from ebraille_sim.base.compiled import entry_point, njit
 from ebraille_sim.base.fields import sourced
 from ebraille_sim.base.seeds import SeedNode
 from ebraille_sim.base.validation import check_number, check_range
+from ebraille_sim.plant import engine
 from ebraille_sim.plant.layout import S
+from ebraille_sim.rl.env import reward_of
 from ebraille_sim.rl.episode import EnvConfig, episode_from_spec, estimator_model, validate_options
 from ebraille_sim.rl.registration import RESIDUAL_ENV_ID
 from ebraille_sim.rl.render import RenderedEnv
@@ -169,6 +177,31 @@ def _distribution_at(cfg: EnvConfig, level: int):
     return dataclasses.replace(dist, population=scaled_population(dist.population, level / CURRICULUM_LEVELS))
 
 
+@njit(cache=True)
+def residual_step(state, params, inputs, n_sub, kind, cstate, cparams, supervised, sv, cfg, setpoint, dt, slots,
+                  table, k, p, z, frames, obs_policy, c, layers, weights, zc, fc, buf, obs_next):
+    """One step of the residual env in one compiled call: period ``k`` of the residual policy
+    with the agent's action ``p[P_ACTION]`` on the design's compiled controller inside the
+    supervisor (:func:`ebraille_sim.plant.engine.policy_period`), then the reward (on the
+    residual action held) and the next observation (``obs_next``,
+    :meth:`~controllers.residual.ResidualPolicy.peek`).
+
+    Returns ``(status, command_v, force_true_n, force_est_n, reward, violation, terminated)``;
+    a status other than :data:`ebraille_sim.plant.engine.OK` leaves the plant at the period's start.
+    """
+    status, u = engine.policy_period(state, params, inputs, n_sub, kind, cstate, cparams, supervised, sv, cfg,
+                                     setpoint[k], dt, S.force_est_n, slots, table, k, p, z, frames, obs_policy, c,
+                                     layers, weights, zc, fc, buf)
+    if status != engine.OK:
+        return status, u, math.nan, math.nan, math.nan, 0.0, False
+    ft = state[S.contact_force_n]
+    fe = state[S.force_est_n]
+    r, v = reward_of(c, ft, setpoint[k], p[P_RESIDUAL])
+    peek_frame(z, frames, c, fe, setpoint[k + 1], state[S.current_meas_a], dt, p[P_FIRST] != 0.0, p[P_RESIDUAL],
+               obs_next)
+    return status, u, ft, fe, r, v, ft > c[C_SAFE]
+
+
 class ResidualEnv(RenderedEnv, gym.Env):
     __doc__ = __doc__
 
@@ -205,6 +238,7 @@ class ResidualEnv(RenderedEnv, gym.Env):
         self.steps_taken = 0
         self._k = 0
         self._n_steps = 0
+        self._fast = None
 
     # -- curriculum -------------------------------------------------------------------------
     def spread(self) -> float:
@@ -249,6 +283,7 @@ class ResidualEnv(RenderedEnv, gym.Env):
         self._sp = ep.run.setpoint_n[None, :ep.n_steps]
         fe = float(self._st[S.force_est_n])
         self._wrapped.reset(force_est_n=fe, setpoint_n=float(self._sp[0, 0]), command_v=0.0)
+        self._fast = self._fast_step(ep)
         self.episode = ep
         self._k = 0
         self._n_steps = ep.n_steps
@@ -256,13 +291,43 @@ class ResidualEnv(RenderedEnv, gym.Env):
         return obs, {"force_true_n": float(self._st[S.contact_force_n]), "force_est_n": fe,
                      "setpoint_n": float(ep.setpoint_n[0]), "spread": level / CURRICULUM_LEVELS}
 
+    def _fast_step(self, ep):
+        """The compiled step's arguments (:func:`residual_step`) when the design has a compiled
+        form and runs alone or inside the safety supervisor, else None (the design then runs
+        from Python, through the runner's per-period shim)."""
+        from ebraille_sim.scenarios.runner import _compiled_controller, _engine_rows
+        pol = self.controller
+        form = _compiled_controller(pol.base, self._wrapped, inner=pol)
+        if form is None:
+            return None
+        rows = _engine_rows(self.plant, [form], self._sp, [ep.run.profiles], self.plant.control_dt_s, S.force_est_n,
+                            None, 0)
+        c = int(rows.counts[0])
+        bundle = pol.compiled_policy(rows.dt, handed=True)
+        args = [rows.states[0], rows.params[0], rows.inputs[0], rows.n_sub, int(rows.kinds[0]), rows.cstates[0],
+                rows.cparams[0], bool(rows.supervised[0]), rows.sv_states[0], rows.sv_cfgs[0], ep.setpoint_n,
+                rows.dt, rows.slots[0, :c], rows.tables[0, :c], 0, *bundle[:4], self._c, *bundle[5:],
+                np.empty_like(pol._obs)]
+        return entry_point(residual_step, *args), args, bundle[0]
+
+    def _step_fast(self, a: float, k: int):
+        step, args, p = self._fast
+        args[14] = k
+        p[P_ACTION] = a
+        status, u, ft, fe, r, v, term = step(*args)
+        if status != engine.OK:
+            raise ValueError(f"command_v must be finite, got {u}" if status == engine.BAD_COMMAND else
+                             f"non-finite controller input at control period {k}")
+        self.controller.took(p)
+        return u, ft, fe, r, v, term, args[-1].copy()
+
     def _observe(self) -> np.ndarray:
         st = self._st
         return self.controller.peek(float(st[S.force_est_n]), float(self.episode.setpoint_n[self._k]),
                                     self.config.dt_s, float(st[S.current_meas_a]))
 
     def step(self, action):
-        from ebraille_sim.rl.env import check_action, reward_of
+        from ebraille_sim.rl.env import check_action
         from ebraille_sim.scenarios.runner import python_periods
         if self.episode is None:
             raise RuntimeError("call reset() before step()")
@@ -271,23 +336,29 @@ class ResidualEnv(RenderedEnv, gym.Env):
         if k >= self._n_steps:
             raise RuntimeError("the episode has ended (terminated or truncated); call reset() before step()")
         a = -1.0 if a < -1.0 else (1.0 if a > 1.0 else a)
-        self._slot.action = a
         ep = self.episode
-        rows, _ = python_periods(self.plant, [self._wrapped], self._sp, [ep.run.profiles], S.force_est_n, None, 1,
-                                 k0=k, n_record=0)
+        if self._fast is not None:
+            u, ft, fe, r, v, term, obs = self._step_fast(a, k)
+        else:
+            self._slot.action = a
+            rows, _ = python_periods(self.plant, [self._wrapped], self._sp, [ep.run.profiles], S.force_est_n, None,
+                                     1, k0=k, n_record=0)
+            u = float(rows.u_ext[0])
+            ft = float(self._st[S.contact_force_n])
+            fe = float(self._st[S.force_est_n])
+            r, v = reward_of(self._c, ft, float(ep.setpoint_n[k]), self.controller.residual)
+            term = ft > self.config.safe_force_n
+            obs = None
         self._k = k + 1
         self.steps_taken += 1
-        st = self._st
-        ft = float(st[S.contact_force_n])
         if not math.isfinite(ft):
             raise FloatingPointError("the simulation diverged (non-finite contact force)")
-        r, v = reward_of(self._c, ft, float(ep.setpoint_n[k]), self.controller.residual)
-        term = ft > self.config.safe_force_n
         truncated = self._k >= self._n_steps
         if term:
             self._n_steps = self._k
-        obs = self._observe()
-        info = {"force_true_n": ft, "force_est_n": float(st[S.force_est_n]),
-                "setpoint_n": float(ep.setpoint_n[self._k]), "command_v": float(rows.u_ext[0]),
+        if obs is None:
+            obs = self._observe()
+        info = {"force_true_n": ft, "force_est_n": fe,
+                "setpoint_n": float(ep.setpoint_n[self._k]), "command_v": u,
                 "residual_v": self.controller.residual_v, "violation": float(v), "time_s": self._k * self.config.dt_s}
         return obs, float(r), bool(term), bool(truncated), info

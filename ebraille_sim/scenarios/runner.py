@@ -257,7 +257,15 @@ def _closed_loop(spec, run, ctrl, backend: str, every: int | None, supervised: b
     st = plant.state[0]
     wrapped.reset(force_est_n=float(st[i_fb]), setpoint_n=float(sp[0]), command_v=0.0)
     form = _compiled_controller(ctrl, wrapped) if _is_lumped(plant) else None
-    if form is None:
+    policy = None if form is not None or not _is_lumped(plant) else _compiled_policy(ctrl, wrapped, plant.control_dt_s)
+    if policy is not None:
+        form, bundle = policy
+        rec = _engine_rows(plant, [form], sp[None, :], [run.profiles], run.dt_s, i_fb, every, n)
+        wall = _run_timed(rec, n, bundle)
+        rec.copy_back()
+        ctrl.took(bundle[0])
+        _raise_row(rec, 0, wrapped)
+    elif form is None:
         rec, wall = python_periods(plant, [wrapped], sp[None, :], [run.profiles], i_fb, every, n)
     else:
         rec = _engine_rows(plant, [form], sp[None, :], [run.profiles], run.dt_s, i_fb, every, n)
@@ -286,10 +294,14 @@ for all periods); False hands every controller's command in from Python, one per
 (:func:`python_periods`: for tests that compare the two)."""
 
 
-def _compiled_controller(ctrl, wrapped):
+def _compiled_controller(ctrl, wrapped, inner=None):
     """``(kind, state, params, sv_state, sv_cfg)`` of a controller ``ctrl`` with a compiled form
     (:func:`controllers.compiled.compiled_form`) that runs unwrapped (the supervisor's vectors
-    None) or wrapped only in an enabled safety supervisor; None for any other."""
+    None) or wrapped only in an enabled safety supervisor; None for any other.
+
+    ``inner`` (default ``ctrl``) is the object the supervisor wraps: a residual policy around
+    ``ctrl`` (:class:`controllers.residual.ResidualPolicy`), whose sum the loop engine composes
+    (:func:`ebraille_sim.plant.engine.inner_command`)."""
     if not _USE_COMPILED_LOOP:
         return None
     from controllers.compiled import compiled_form
@@ -297,14 +309,29 @@ def _compiled_controller(ctrl, wrapped):
     if form is None:
         return None
     kind, cstate, cparams = form
-    if wrapped is ctrl:
+    inner = ctrl if inner is None else inner
+    if wrapped is inner:
         return kind, cstate, cparams, None, None
     from controllers.supervisor import Supervisor
-    if type(wrapped) is Supervisor and wrapped.inner is ctrl:
+    if type(wrapped) is Supervisor and wrapped.inner is inner:
         sv = compiled_form(wrapped)
         if sv is not None:
             return kind, cstate, cparams, sv[0], sv[1]
     return None
+
+
+def _compiled_policy(ctrl, wrapped, dt_s: float):
+    """``(form, arrays)`` of a residual policy ``ctrl`` whose design has a compiled form and
+    whose model is a deterministic MLP actor evaluated every period
+    (:meth:`controllers.residual.ResidualPolicy.compiled_policy`), alone or inside an enabled safety
+    supervisor: the design's form (:func:`_compiled_controller`) and the policy's arrays for
+    :func:`ebraille_sim.plant.engine.run_residual`; None for any other controller."""
+    from controllers.residual import ResidualPolicy
+    if type(ctrl) is not ResidualPolicy:
+        return None
+    form = _compiled_controller(ctrl.base, wrapped, inner=ctrl)
+    bundle = None if form is None else ctrl.compiled_policy(dt_s)
+    return None if bundle is None else (form, bundle)
 
 
 _EXTERNAL_FORM = None
@@ -351,14 +378,23 @@ def _engine_rows(plant, forms: list, sp: np.ndarray, profiles: list, dt_s: float
     return rows
 
 
-def _run_timed(rows, n: int) -> float:
+def _run_timed(rows, n: int, policy=None) -> float:
     """All ``n`` periods of ``rows`` in one engine call (compiled, or loaded from the cache,
-    before the clock starts); the wall time of the call, s."""
-    from ebraille_sim.plant.engine import run
-    if not getattr(run, "signatures", True):
-        run(*rows.arguments(0, 0))                 # zero periods change nothing
+    before the clock starts); the wall time of the call, s.  With ``policy`` (a residual
+    policy's arrays, :func:`_compiled_policy`) row 0 runs it (:func:`ebraille_sim.plant.engine.run_residual`)."""
+    from ebraille_sim.plant.engine import run, run_residual
+
+    def call(periods):
+        args = rows.arguments(0, periods)
+        if policy is None:
+            run(*args)
+        else:                                      # no held command: the policy decides it
+            run_residual(*args[:7], *args[8:], *policy)
+
+    if not getattr(run if policy is None else run_residual, "signatures", True):
+        call(0)                                    # zero periods change nothing
     wall0 = time.perf_counter()
-    run(*rows.arguments(0, n))
+    call(n)
     return time.perf_counter() - wall0
 
 

@@ -207,14 +207,25 @@ def scenario_spec(sc: BenchScenario):
 
 
 @functools.lru_cache(maxsize=64)
-def scenario_devices(sc: BenchScenario, readers: int) -> list:
+def scenario_devices(sc: BenchScenario, readers: int, population_seed: int | None = None) -> list:
     """The readers of ``sc`` in a suite of ``readers``: the scenario's nominal device, then
     ``readers - 1`` drawn from it with :data:`POPULATION_SEED` (the same for every controller),
-    calibrated as the scenario's unit is."""
+    calibrated as the scenario's unit is.  With ``population_seed`` all ``readers`` are drawn
+    from that seed instead (no nominal reader: a set of readers apart from the benchmark's,
+    for choosing among candidates without touching them)."""
     from ebraille_sim.scenarios.population import PopulationSpec, sample_devices
     spec = scenario_spec(sc)
-    return [spec.device] + sample_devices(POPULATION_SEED, readers - 1, PopulationSpec(calibrate=spec.calibrated),
-                                          base=spec.device)
+    pop = PopulationSpec(calibrate=spec.calibrated)
+    if population_seed is not None:
+        return sample_devices(int(population_seed), readers, pop, base=spec.device)
+    return [spec.device] + sample_devices(POPULATION_SEED, readers - 1, pop, base=spec.device)
+
+
+def episode_seed(spec, reader: int, population_seed: int | None = None) -> int:
+    """The seed of reader ``reader``'s episode: ``seed + 101 * reader`` of the scenario, moved
+    by ``10**6 * (population_seed + 1)`` for readers drawn from their own ``population_seed``."""
+    extra = 0 if population_seed is None else 10 ** 6 * (int(population_seed) + 1)
+    return spec.seed + 101 * reader + extra
 
 
 def _sensor_bound_metrics(res) -> dict:
@@ -299,12 +310,13 @@ def run_episode(task) -> list[dict]:
     from ebraille_sim.scenarios.runner import run_scenario
     from ebraille_sim.tools.report import latched_fault
     from ebraille_sim.tools.sweep import READER_COLUMNS
-    ctrl, sc, reader, n, est = task
+    ctrl, sc, reader, n, est = task[:5]
+    pop = task[5] if len(task) > 5 else None
     spec = scenario_spec(sc)
-    device = scenario_devices(sc, n)[reader]
+    device = scenario_devices(sc, n, pop)[reader]
     if est:
         device = dataclasses.replace(device, estimator=replace_checked(device.estimator, **dict(est)))
-    seed = spec.seed + 101 * reader
+    seed = episode_seed(spec, reader, pop)
     base = {"scenario": sc.key, "reader": reader, "seed": seed,
             **{col: float(get(device)) for col, get in READER_COLUMNS.items()}}
     controller = ctrl
@@ -343,7 +355,8 @@ class BenchmarkResult:
 
 
 def run_benchmark(controllers, suite: str | Suite = "standard", readers: int | None = None, jobs: int = 1,
-                  bounds: bool = True, progress=None, estimator=None, scheduler=None) -> BenchmarkResult:
+                  bounds: bool = True, progress=None, estimator=None, scheduler=None,
+                  population_seed: int | None = None) -> BenchmarkResult:
     """Run ``controllers`` (and the bounds) on a suite.
 
     Parameters
@@ -365,6 +378,10 @@ def run_benchmark(controllers, suite: str | Suite = "standard", readers: int | N
     estimator : dict or list of str, optional
         Estimator settings of every device, the bounds' included (:func:`estimator_settings`):
         a firmware variant, such as ``{"hysteresis_compensation": True}``.
+    population_seed : int, optional
+        Draw every reader from this seed (:func:`scenario_devices`, no nominal reader; episode
+        seeds :func:`episode_seed`) instead of the benchmark's: validation readers, apart from
+        the benchmark's, for choosing among candidates.
     """
     import controllers as ctrl_mod
     est = estimator_settings(estimator)
@@ -379,7 +396,8 @@ def run_benchmark(controllers, suite: str | Suite = "standard", readers: int | N
     if bounds:
         names += ["actuator_bound", "hysteresis_bound"]
     n = reader_count(suite, readers)
-    tasks = [(c, suite.scenarios[i], r, n, tuple(est.items())) for c, i, r in plan_episodes(names, suite, n)]
+    tasks = [(c, suite.scenarios[i], r, n, tuple(est.items())) + (() if population_seed is None else (int(population_seed),))
+             for c, i, r in plan_episodes(names, suite, n)]
     if jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
     jobs = min(int(jobs), max(1, len(tasks)))          # no idle workers
