@@ -329,6 +329,19 @@ def test_hysteresis_compensation_removes_the_unloading_branch_error(comp):
         assert rel > 0.06
 
 
+def _press_and_read(s, p, u, force_n, settle_s, samples):
+    """A press from 0 to ``force_n`` in 50 ms, held ``settle_s``, then the estimate at each of
+    ``samples`` further milliseconds of the hold."""
+    for f in np.linspace(0.0, force_n, 50):
+        _hold(s, p, u, f, 0.001)
+    _hold(s, p, u, force_n, settle_s)
+    out = []
+    for _ in range(samples):
+        _hold(s, p, u, force_n, 0.001)
+        out.append(s[S["force_est_n"]])
+    return out
+
+
 def _fast_firmware(turn_lsb):
     return EstimatorParams(hysteresis_compensation=True, model="paper:wiener:5@1000", antialias_cutoff_hz=50.0,
                            hysteresis_turn_lsb=turn_lsb)
@@ -353,13 +366,7 @@ def test_turn_test_reads_a_relaxation_the_deadband_holds_and_keeps_a_standing_fo
             _hold(s, p, u, 1.0, 0.001)
             held.append(s[S["force_est_n"]])
         dev, s, p, u = _sensor(estimator=_fast_firmware(turn), seed=seed)
-        for f in np.linspace(0.0, 1.5, 50):
-            _hold(s, p, u, f, 0.001)
-        _hold(s, p, u, 1.5, 1.0)
-        steady = []
-        for _ in range(2000):
-            _hold(s, p, u, 1.5, 0.001)
-            steady.append(s[S["force_est_n"]])
+        steady = _press_and_read(s, p, u, 1.5, 1.0, 2000)
         reads[turn] = (np.mean(held[-50:]), np.mean(steady), np.ptp(steady))
     assert reads[0.0][0] > 1.04
     assert reads[1.75][0] < min(1.045, reads[0.0][0] - 0.01)
@@ -378,13 +385,7 @@ def test_centring_reads_a_standing_press_one_narrowest_width_from_the_edge(seed)
     for centre in (0.0, 0.05):
         est = dataclasses.replace(_fast_firmware(1.75), hysteresis_centre_time_s=centre)
         dev, s, p, u = _sensor(estimator=est, seed=seed)
-        for f in np.linspace(0.0, 1.0, 50):
-            _hold(s, p, u, f, 0.001)
-        _hold(s, p, u, 1.0, 0.5)
-        held = []
-        for _ in range(500):
-            _hold(s, p, u, 1.0, 0.001)
-            held.append(s[S["force_est_n"]])
+        held = _press_and_read(s, p, u, 1.0, 0.5, 500)
         reads[centre] = (np.mean(held), np.ptp(held))
         w1 = p[P["comp_play_w0"]]
     moved = abs(math.log(reads[0.05][0] / reads[0.0][0]))
