@@ -38,7 +38,9 @@ With ``--only-resets`` only the reset figures, each the median of ``--repeat`` (
 the same process: the scalar env's reset in ms and in env steps (steps and resets
 interleaved), and the vector env's env-steps/s with autoresets against the same env
 without any (the reference), on one thread; then the parts of one reset in env steps
-(:func:`reset_parts`).
+(:func:`reset_parts`), and the part of a reset spent in its numerical work alone (:func:`reset_floor`:
+the bench's load cycle, the averaged conversions, the R2 root and the noises' FFTs, compiled or
+NumPy's), the least a reset costs with the bench protocols as written.
 
 Run:  python benchmarks/bench_env.py [--seconds 3] [--envs 1024] [--json FILE] [--only-single | --only-resets] [--repeat 3]
 """
@@ -211,6 +213,65 @@ def reset_parts(n: int = 300, seed: int = 0) -> dict:
     return {"step_s": step, "parts_s": parts, "parts_in_steps": {k: v / step for k, v in parts.items()}}
 
 
+FLOOR_CALLS = (("ebraille_sim.physics.fsr", "_cycle_forces"),
+               ("ebraille_sim.physics.current_sense", "_mean_code_at_rest"),
+               ("ebraille_sim.estimation.calibration", "_r2_root"),
+               ("numpy.fft", "irfft"))
+"""The numerical work of a reset that no rewrite of its Python removes while the bench protocols
+stay as written: the unit's load cycle on the bench sampled at 1 kHz (the loop the hysteresis
+compensation keeps), the conversions the drive's end-of-line calibration and the board's zeroing
+average, the divider's R2 root, and the band-limited noises' inverse FFTs."""
+
+
+def reset_floor(n: int = 300, seed: int = 0) -> dict:
+    """Of ``n`` resets of the scalar env (fresh episodes), the share spent in the calls of
+    :data:`FLOOR_CALLS` (each wrapped by a timer while the resets run), in env steps: the
+    least a reset costs with every line of its Python compiled away and the same bench
+    protocols.  The step is timed after the resets (500 steps after each of 4 resets)."""
+    import importlib
+    from ebraille_sim.rl.env import ContactForceEnv
+
+    env = ContactForceEnv()
+    env.reset(seed=seed)
+    for _ in range(5):
+        env.reset()                                          # warm the compiled calls and caches
+    spent = dict.fromkeys((f"{m}.{f}" for m, f in FLOOR_CALLS), 0.0)
+    saved = []
+    for mod_name, fn_name in FLOOR_CALLS:
+        mod = importlib.import_module(mod_name)
+        fn = getattr(mod, fn_name)
+        key = f"{mod_name}.{fn_name}"
+
+        def timed(*args, _fn=fn, _key=key, **kwargs):
+            t0 = time.perf_counter()
+            out = _fn(*args, **kwargs)
+            spent[_key] += time.perf_counter() - t0
+            return out
+        saved.append((mod, fn_name, fn))
+        setattr(mod, fn_name, timed)
+    try:
+        t0 = time.perf_counter()
+        for _ in range(n):
+            env.reset()
+        reset_s = (time.perf_counter() - t0) / n
+    finally:
+        for mod, fn_name, fn in saved:
+            setattr(mod, fn_name, fn)
+    a = np.full(1, 0.1, np.float32)
+    total = 0.0
+    for _ in range(4):
+        env.reset()
+        t0 = time.perf_counter()
+        for _ in range(500):
+            env.step(a)
+        total += time.perf_counter() - t0
+    step = total / 2000
+    parts = {k: v / n for k, v in spent.items()}
+    floor = sum(parts.values())
+    return {"step_s": step, "reset_s": reset_s, "floor_s": floor, "parts_s": parts,
+            "floor_in_steps": floor / step, "reset_in_steps": reset_s / step}
+
+
 def thread_table(sizes=(1, 4, 16, 64, 256, 1024)) -> list[dict]:
     """Env-steps/s of the vector env's row loop on threads and on one thread, no resets
     (best of 3 timings).  Each variant steps a fresh vector env whose episodes (60 wpm, 1400
@@ -364,6 +425,14 @@ def only_resets(seconds: float, n_envs: int, repeat: int) -> dict:
     print(f"parts of a reset, env steps, median of {repeat}: "
           + ", ".join(f"{k} {v:.1f}" for k, v in out["parts_in_steps"].items())
           + " (the device draw is part of the episode draw, the drive calibration of the supervisor envelope)")
+    floors = [reset_floor(seed=10_000 + j) for j in range(repeat)]   # seeds no other part drew (fresh units)
+    out["floor_in_steps"] = statistics.median(f["floor_in_steps"] for f in floors)
+    out["floor_runs"] = floors
+    print(f"the reset's own numerical work (bench load cycle, averaged conversions, R2 root, noise FFTs), "
+          f"median of {repeat}: {out['floor_in_steps']:.1f} env steps of a reset of "
+          f"{statistics.median(f['reset_in_steps'] for f in floors):.1f} (timers on: "
+          + ", ".join(f"{k.rsplit('.', 1)[1]} {statistics.median(f['parts_s'][k] for f in floors) * 1e6:.1f} us"
+                      for k in floors[0]["parts_s"]) + ")")
     print(f"load average (1 min) at end {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     print(f"one reset = {ratio:.1f} env steps (target <= 20)")
     return out
