@@ -43,13 +43,15 @@ DEFAULT_FORCES_N = (0.5, 0.75, 1.0, 1.25, 1.5, 2.0)
 DEFAULT_HOLDS_S = (5.0, 20.0, 60.0)
 
 
+@functools.lru_cache(maxsize=64)
 def loading_branch_factor(fsr) -> float:
     """Force seen by the conduction law on the loading branch, as a fraction of the force.
 
     After a monotone press from zero every play operator of the hysteresis model
     (:func:`ebraille_sim.physics.fsr.hysteresis`) sits at its lower edge, so
     ``F_eff + F_eps = (F + F_eps) exp(-sum_j weight_j width_j)``; for ``F >> F_eps`` (1 mN)
-    that is ``F_eff = F exp(-sum_j weight_j width_j)``.
+    that is ``F_eff = F exp(-sum_j weight_j width_j)``.  Remembered per unit (a unit's bench
+    asks for it three times).
     """
     widths, weights = play_widths(fsr)
     return math.exp(-sum(w * r for w, r in zip(weights, widths)))
@@ -374,6 +376,7 @@ current, :data:`CALIBRATION_CONVERSIONS`): the divider's noise (0.4 LSB) dithers
 quantisation, so the mean is the voltage to ``noise / 16``."""
 
 
+@functools.lru_cache(maxsize=64)
 def _fsr_unit_seed(fsr, circuit) -> int:
     """The noise of a unit's table: a fixed function of its FSR unit and divider (the bench ran
     once; its press scatter and conversion noise are the unit's, not the session's)."""

@@ -24,6 +24,7 @@ Each function advances its own state slots (declared here, composed by
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 from ebraille_sim.base.compiled import njit
@@ -48,7 +49,14 @@ def firmware_fsr(estimator):
     nominal's)."""
     if estimator.creep_per_decade is None:
         return FIRMWARE_FSR
-    return dataclasses.replace(FIRMWARE_FSR, creep_per_decade=estimator.creep_per_decade)
+    return _firmware_fsr_with_creep(estimator.creep_per_decade)
+
+
+@functools.lru_cache(maxsize=64)
+def _firmware_fsr_with_creep(creep_per_decade: float):
+    """:data:`FIRMWARE_FSR` with the unit's creep per decade, made once per value (a plant's
+    packing asks for it once per compensation slot)."""
+    return dataclasses.replace(FIRMWARE_FSR, creep_per_decade=creep_per_decade)
 
 
 ANTIALIAS_SLOTS = ("aa_z1", "aa_z2")
