@@ -19,6 +19,10 @@ Sampling: the design runs at every ``update``; the policy is evaluated once per 
 period (``control_rate_hz`` of its metadata) of the ``dt_s`` it is handed and its correction
 held in between, as :class:`controllers.policy.PolicyController` holds its command.
 
+The compiled policy's functions (:func:`mlp_action`, :func:`advance_frame`,
+:func:`restart_frames`) keep Numba's reference counting (``_nrt=True`` set explicitly: the loop
+engine, compiled without it, calls them and would otherwise pass that on).
+
 Examples
 --------
 >>> import numpy as np
@@ -67,7 +71,7 @@ MODE_HANDED = 0.0
 MODE_MLP = 1.0
 """The action is the MLP actor's (:func:`mlp_action`) on the period's observation."""
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def mlp_action(layers, weights, obs, buf):
     """The deterministic action of the MLP actor ``(layers, weights)`` (:meth:`controllers.policy.MlpActor.vectors`) on
     ``obs`` (float32), in float32 as :class:`controllers.policy.MlpActor` computes it (the sums
@@ -111,7 +115,7 @@ def frame_bounds(history: int) -> tuple[np.ndarray, np.ndarray]:
     return lo, hi
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def advance_frame(z, frames, c, force_est_n, setpoint_n, current_a, since_s, first, residual, obs):
     """One evaluation's observation: the features ``z`` advanced by ``since_s`` on the
     readings (only written, not advanced, on the ``first`` frame after a reset), pushed as the
@@ -137,7 +141,7 @@ def peek_frame(z, frames, c, force_est_n, setpoint_n, current_a, since_s, first,
     advance_frame(z.copy(), frames.copy(), c, force_est_n, setpoint_n, current_a, since_s, first, residual, obs)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def restart_frames(z, frames, force_est_n, command_v, supply_v):
     """The features and frames of a (re)started policy (:meth:`ResidualPolicy.reset`): no
     rate, no integral, the command ``command_v`` as the previous one, no frames."""

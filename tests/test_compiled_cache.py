@@ -127,6 +127,11 @@ def test_entry_point_runs_the_compiled_code_and_falls_back_to_the_function():
     fn = compiled.entry_point(kernel.advance, s, p, u, 0)
     assert fn is not kernel.advance and callable(fn)
     assert fn(s, p, u, 0) is None and not s.any()        # zero substeps change nothing
+    assert compiled.entry_point(kernel.advance, s.copy(), p, u, 3) is fn     # kept per argument types
+    ro = s.copy()
+    ro.flags.writeable = False
+    keys = {compiled._type_key(a) for a in (s, ro, s[::2], s.astype(np.float32), s[None, :], 0, 0.0, (s, 0))}
+    assert len(keys) == 8                                # what changes Numba's type changes the key
 
     def plain(x):
         return x + 1

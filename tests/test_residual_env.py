@@ -266,3 +266,45 @@ def test_a_residual_mlp_policy_runs_in_the_loop_engine_as_from_python(monkeypatc
     assert fast.metrics["in_band_fraction"] == pytest.approx(slow.metrics["in_band_fraction"], abs=2e-3)
     assert not np.array_equal(fast.trace["force_true_n"], run_scenario(
         "strap_slip", controller="dob_100hz", duration_s=3.0).trace["force_true_n"])     # the policy acts
+
+
+def test_a_policy_row_runs_beside_other_rows_as_it_runs_alone():
+    """``engine.run`` steps the row given a residual policy (``Rows.give_policy``) with the policy
+    and every other row with its own controller: each row's trace is that of the row run alone,
+    to the last bit, and the policy acts.  Without a policy the argument is ``NO_POLICY``, of the
+    types of a policy's arrays (one compiled ``run`` for both)."""
+    import numba
+    from ebraille_sim.physics.params import DeviceParams
+    from ebraille_sim.plant import engine
+    from ebraille_sim.plant.backends import make_plant
+    actor = _random_actor()
+    n = 400
+    sp = np.full(n, 1.2)
+
+    def plant():
+        return make_plant([DeviceParams()], seeds=[1])
+
+    def policy():
+        pol = ResidualPolicy(controllers.make("dob_100hz"), actor, 1.0, 1000.0, 4)
+        return pol, pol.compiled_policy(plant().control_dt_s)
+
+    def single(with_policy):
+        pol, bundle = policy()
+        rows = engine.Rows.single(plant(), *pol.base.compiled(), setpoint_n=sp)
+        if with_policy:
+            rows.give_policy(0, bundle)
+        engine.run(*rows.arguments(0, n))
+        return rows.f_true[0]
+
+    alone_policy, alone_design = single(True), single(False)
+    pol, bundle = policy()
+    p0, p1 = plant(), plant()
+    rows = engine.Rows.pack([(p.state[0], p.params[0], p.inputs[0], p.substeps) for p in (p0, p1)],
+                            [controllers.make("dob_100hz").compiled(), pol.base.compiled()], [None, None],
+                            np.stack([sp, sp]), p0.control_dt_s, engine.S.force_est_n, [{}, {}], 0, n)
+    rows.give_policy(1, bundle)
+    engine.run(*rows.arguments(0, n))
+    assert list(rows.status) == [engine.OK, engine.OK]
+    assert np.array_equal(rows.f_true[0], alone_design) and np.array_equal(rows.f_true[1], alone_policy)
+    assert not np.array_equal(alone_policy, alone_design)
+    assert numba.typeof(engine.NO_POLICY) == numba.typeof(bundle)

@@ -20,6 +20,7 @@ import os
 import pathlib
 
 import numba
+import numpy as np
 from numba.core import caching, config
 
 __all__ = ["njit", "prange", "source_key", "compiled_sources", "entry_point"]
@@ -158,6 +159,20 @@ def njit(*args, **kwargs):
     return lambda func: _with_loading_cache(numba.njit(**kwargs)(func))
 
 
+_ENTRY_POINTS: dict = {}
+
+
+def _type_key(a):
+    """What Numba's type of the argument ``a`` depends on: an array's class, dtype, dimensions,
+    layout flags, writability and alignment, a tuple's items', any other value's class."""
+    if isinstance(a, np.ndarray):
+        fl = a.flags
+        return type(a), a.dtype, a.ndim, fl.c_contiguous, fl.f_contiguous, fl.writeable, fl.aligned
+    if type(a) is tuple:
+        return tuple([_type_key(x) for x in a])
+    return type(a)
+
+
 def entry_point(dispatcher, *args):
     """The machine code of ``dispatcher`` for the types of ``args`` (compiled or loaded from
     the cache if need be), callable from Python without the dispatcher's check of every
@@ -167,12 +182,20 @@ def entry_point(dispatcher, *args):
     ``args`` are examples and are not run.  The entry point converts its arguments to exactly
     these types without checking them: every call must pass arguments of the same types
     (arrays of the same dtype, dimensions and layout, Python ints and floats where the
-    examples have them).
+    examples have them).  Entry points are kept per dispatcher and argument types
+    (:func:`_type_key`, Python scalars by their class), so that asking again costs a few
+    microseconds instead of Numba's typing of every argument.
     """
+    key = (dispatcher, _type_key(args))
+    fn = _ENTRY_POINTS.get(key)
+    if fn is not None:
+        return fn
     try:
-        return dispatcher.compile(tuple(numba.typeof(a) for a in args))
+        fn = dispatcher.compile(tuple(numba.typeof(a) for a in args))
     except Exception:                                   # no such Numba API, or the JIT disabled
         return dispatcher
+    _ENTRY_POINTS[key] = fn
+    return fn
 
 
 def _knows_nrt() -> bool:

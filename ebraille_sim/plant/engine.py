@@ -17,13 +17,16 @@ Everything that closes the loop calls it:
   Python controllers and Python plants enter the loop).
 * The Gymnasium env (:mod:`ebraille_sim.rl.env`) and its vector form call :func:`period` with
   the agent's action as an external command (``k = 1``), inside their own compiled step that
-  then computes the reward and the observation.
+  then computes the reward and the observation; the residual env calls :func:`policy_period`
+  with the agent's action handed to the policy.
 
 The controller of a row is a kind of :mod:`controllers.compiled`: a built-in compiled
 controller (:data:`~controllers.compiled.KIND_PID`, :data:`~controllers.compiled.KIND_LQG`,
 :data:`~controllers.compiled.KIND_DOB`) stepped on its state and parameter vectors, or :data:`~controllers.compiled.KIND_EXTERNAL`, a
-command handed in per period.  The supervisor is optional per row (its state and
-configuration vectors, :meth:`controllers.supervisor.Supervisor.compiled`).
+command handed in per period; one row may run a residual policy on its compiled design
+(:func:`policy_period`, the policy's arrays handed to :func:`run` apart from the rows').  The
+supervisor is optional per row (its state and configuration vectors,
+:meth:`controllers.supervisor.Supervisor.compiled`).
 
 Status codes (:func:`period`, :func:`run`): :data:`OK`; :data:`BAD_CONTROLLER_INPUT` (an
 unsupervised built-in controller would have been handed a non-finite force or setpoint, which
@@ -62,7 +65,7 @@ from ebraille_sim.plant.kernel import advance
 from ebraille_sim.plant.layout import S, U
 
 __all__ = ["KEPT", "ROW", "OK", "BAD_CONTROLLER_INPUT", "BAD_COMMAND", "INNER_SKIPPED", "INNER_RAN", "INNER_RESTARTED",
-           "Rows", "command", "inner_command", "period", "residual_period", "policy_period", "run", "run_residual"]
+           "Rows", "command", "inner_command", "period", "residual_period", "policy_period", "run", "NO_POLICY"]
 
 KEPT = ("command_v", "fsr_voltage_v", "motor_current_a", "board_pos_m", "energy_j")
 """Rows of the ``kept`` array of :func:`run`, in order (trace column names)."""
@@ -73,6 +76,13 @@ ROW = record("KeptRows", KEPT)
 OK = 0
 BAD_CONTROLLER_INPUT = 1
 BAD_COMMAND = 2
+
+NO_POLICY = (np.zeros(0), np.zeros(0), np.zeros((0, 0), dtype=np.float32), np.zeros(0, dtype=np.float32),
+             np.zeros(0), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float32), np.zeros(0),
+             np.zeros((0, 0), dtype=np.float32), np.zeros(0, dtype=np.float32))
+"""The ``policy`` argument of :func:`run` when no row runs a residual policy: empty arrays of the
+types of :meth:`controllers.residual.ResidualPolicy.compiled_policy`'s (one compiled ``run``
+for both)."""
 
 INNER_SKIPPED = 0
 """The supervisor decided the period's command without calling the inner controller."""
@@ -214,8 +224,11 @@ def policy_period(state, params, inputs, n_sub, kind, cstate, cparams, supervise
         sp0 = sp
         if supervised and cfg[CF.sp_max_n] < sp:
             sp0 = cfg[CF.sp_max_n]
-        zc[:] = z
-        fc[:, :] = frames
+        for i in range(z.shape[0]):                # copies without a temporary: run allocates nothing
+            zc[i] = z[i]
+        for i in range(frames.shape[0]):
+            for j in range(frames.shape[1]):
+                fc[i, j] = frames[i, j]
         advance_frame(zc, fc, c, f0, sp0, cur0, dt, first, p[P_RESIDUAL], obs)
         a = mlp_action(layers, weights, obs, buf)
     else:
@@ -252,37 +265,10 @@ def _record(st, u, k, every, f_true, f_est, kept):
         kept[ROW.energy_j, q] = st[S.energy_j]
 
 
-@njit(cache=True)
-def run_residual(states, params, inputs, n_sub, kinds, cstates, cparams, supervised, sv_states, sv_cfgs, setpoints,
-                 dt, i_feedback, slots, counts, tables, k0, n_periods, every, f_true, f_est, kept, status, periods,
-                 values, p, z, frames, obs, c, layers, weights, zc, fc, buf):
-    """:func:`run` of row 0 whose controller is a residual policy on the row's compiled design
-    (:func:`policy_period`, the policy's arrays after the rows')."""
-    if status[0] != OK:
-        return
-    st = states[0]
-    cnt = counts[0]
-    rs = slots[0, :cnt]
-    rt = tables[0, :cnt]
-    recording = f_true.shape[1] > 0
-    periods[0] = k0 + n_periods
-    for k in range(k0, k0 + n_periods):
-        code, u = policy_period(st, params[0], inputs[0], n_sub, kinds[0], cstates[0], cparams[0], supervised[0],
-                                sv_states[0], sv_cfgs[0], setpoints[0, k], dt, i_feedback, rs, rt, k, p, z, frames,
-                                obs, c, layers, weights, zc, fc, buf)
-        if code != OK:
-            status[0] = code
-            periods[0] = k
-            values[0] = u
-            return
-        if recording:
-            _record(st, u, k, every, f_true[0], f_est[0], kept[0])
-
-
 @njit(cache=True, _nrt=False)
 def run(states, params, inputs, n_sub, kinds, cstates, cparams, u_ext, supervised, sv_states, sv_cfgs,
         setpoints, dt, i_feedback, slots, counts, tables, k0, n_periods, every, f_true, f_est, kept,
-        status, periods, values):
+        status, periods, values, policy_row, policy):
     """Periods ``k0 .. k0 + n_periods - 1`` of every row whose ``status`` is :data:`OK`.
 
     Row ``r`` is one device: its plant rows (``states[r]``, ``params[r]``, ``inputs[r]``,
@@ -294,6 +280,11 @@ def run(states, params, inputs, n_sub, kinds, cstates, cparams, u_ext, supervise
     state slot.  Each row is computed on its own, so a row's trace is that of a run of the row
     alone, to the last bit.
 
+    Row ``policy_row`` (-1: none) runs a residual policy on its compiled design instead
+    (:func:`policy_period`; its controller is the design, its ``u_ext`` unused): ``policy`` holds
+    the policy's arrays (:meth:`controllers.residual.ResidualPolicy.compiled_policy`), :data:`NO_POLICY`
+    when no row has one.
+
     Recording (skipped when ``f_true`` has no columns): ``f_true[r, k]`` and ``f_est[r, k]``
     are the true and estimated force at the end of period ``k``; with ``every`` > 0 the end of
     period ``k`` with ``(k + 1) % every == 0`` fills column ``(k + 1) // every - 1`` of
@@ -304,6 +295,7 @@ def run(states, params, inputs, n_sub, kinds, cstates, cparams, u_ext, supervise
     Compiled without Numba's reference counting (``_nrt=False``, like the kernel): the loop
     allocates nothing (the LQG step, which does, keeps its own runtime, ``_nrt=True``).
     """
+    p, z, frames, obs, fc_scales, layers, weights, zc, fc, buf = policy
     recording = f_true.shape[1] > 0
     for r in range(states.shape[0]):
         if status[r] != OK:
@@ -313,10 +305,16 @@ def run(states, params, inputs, n_sub, kinds, cstates, cparams, u_ext, supervise
         c = counts[r]
         rs = slots[r, :c]
         rt = tables[r, :c]
+        own = r == policy_row
         periods[r] = k0 + n_periods
         for k in range(k0, k0 + n_periods):
-            code, u = period(st, params[r], inp, n_sub, kinds[r], cstates[r], cparams[r], u_ext[r], math.inf,
-                             supervised[r], sv_states[r], sv_cfgs[r], setpoints[r, k], dt, i_feedback, rs, rt, k)
+            if own:
+                code, u = policy_period(st, params[r], inp, n_sub, kinds[r], cstates[r], cparams[r], supervised[r],
+                                        sv_states[r], sv_cfgs[r], setpoints[r, k], dt, i_feedback, rs, rt, k, p, z,
+                                        frames, obs, fc_scales, layers, weights, zc, fc, buf)
+            else:
+                code, u = period(st, params[r], inp, n_sub, kinds[r], cstates[r], cparams[r], u_ext[r], math.inf,
+                                 supervised[r], sv_states[r], sv_cfgs[r], setpoints[r, k], dt, i_feedback, rs, rt, k)
             if code != OK:
                 status[r] = code
                 periods[r] = k
@@ -359,6 +357,8 @@ class Rows:
         self.status = np.zeros(m, dtype=np.int64)
         self.periods = np.zeros(m, dtype=np.int64)
         self.values = np.zeros(m)
+        self.policy_row = -1
+        self.policy = NO_POLICY
         self._sources = list(sources)
 
     @classmethod
@@ -419,7 +419,12 @@ class Rows:
         return (self.states, self.params, self.inputs, self.n_sub, self.kinds, self.cstates, self.cparams,
                 self.u_ext, self.supervised, self.sv_states, self.sv_cfgs, self.setpoints, self.dt,
                 self.i_feedback, self.slots, self.counts, self.tables, k0, n_periods, self.every, self.f_true,
-                self.f_est, self.kept, self.status, self.periods, self.values)
+                self.f_est, self.kept, self.status, self.periods, self.values, self.policy_row, self.policy)
+
+    def give_policy(self, r: int, policy: tuple) -> None:
+        """Let row ``r`` run a residual policy on its compiled design: ``policy`` the policy's
+        arrays (:meth:`controllers.residual.ResidualPolicy.compiled_policy`, stepped in place)."""
+        self.policy_row, self.policy = int(r), policy
 
     def stepper(self):
         """:func:`run` for these rows' argument types without the dispatcher's check of every

@@ -227,7 +227,7 @@ def _electrode_distances_m(params: LegibilityParams) -> np.ndarray:
 
 # --- the laws, one sample at a time (every array function below loops over these) ---
 
-@njit
+@njit(error_model="numpy", inline="always")
 def _contact_area_m2(force_n, area_1n_m2, exponent):
     """Gross contact area (m2) of the pulp on the board at one force (N): ``A_1 F^n``, 0 without force."""
     if force_n <= 0.0:
@@ -235,19 +235,19 @@ def _contact_area_m2(force_n, area_1n_m2, exponent):
     return area_1n_m2 * force_n ** exponent
 
 
-@njit
+@njit(error_model="numpy")
 def _contact_radius(force_n, contact):
     """Radius (m) of the disc with the contact area at one force (N): ``(A(F) / pi)^(1/2)``."""
     return _radius_of_area(_contact_area_m2(force_n, contact.contact_area_1n_m2, contact.contact_area_exponent))
 
 
-@njit
+@njit(error_model="numpy", inline="always")
 def _radius_of_area(area_m2):
     """Radius (m) of the disc of area ``area_m2``."""
     return math.sqrt(area_m2 / np.pi)
 
 
-@njit
+@njit(error_model="numpy", inline="always")
 def _lens_area(d, r, a):
     """Area of the intersection of discs of radii ``r`` and ``a`` whose centres are ``d`` apart."""
     if d <= abs(a - r):
@@ -260,7 +260,7 @@ def _lens_area(d, r, a):
     return 0.0
 
 
-@njit
+@njit(error_model="numpy", inline="always")
 def _impedance(force_n, stim):
     """Impedance (ohm) of a fully covered electrode at one force (N): ``Z_inf + Z_sc (p_ref / p(F))^k``.
 
@@ -271,7 +271,7 @@ def _impedance(force_n, stim):
     return _impedance_at(f, _contact_area_m2(f, stim.contact_area_1n_m2, stim.contact_area_exponent), stim)
 
 
-@njit
+@njit(error_model="numpy", inline="always")
 def _impedance_at(force_n, area_m2, stim):
     """:func:`_impedance` at a force at or above the touch force whose contact area is ``area_m2``."""
     q = stim.reference_pressure_pa / (force_n / area_m2)
@@ -279,7 +279,7 @@ def _impedance_at(force_n, area_m2, stim):
     return stim.impedance_pressed_ohm + stim.impedance_interface_ohm * (q if k == 1.0 else q ** k)
 
 
-@njit
+@njit(error_model="numpy", inline="always")
 def _current_a(phi, z_ohm, z_setpoint_ohm, stim):
     """Stimulator current (A) into an electrode of coverage ``phi`` and full-coverage impedance ``z_ohm``."""
     if stim.constant_voltage:
@@ -287,20 +287,20 @@ def _current_a(phi, z_ohm, z_setpoint_ohm, stim):
     return min(stim.current_a, stim.compliance_v * phi / z_ohm)
 
 
-@njit
+@njit(error_model="numpy")
 def _sample_coverage(force_n, contact, distance_m, phi):
     """Covered fraction of each electrode at one force, into ``phi``."""
     _coverage_at_radius(_contact_radius(force_n, contact), contact, distance_m, phi)
 
 
-@njit
+@njit(error_model="numpy", inline="always")
 def _electrode_coverage(d, r, a):
     """Covered fraction of an electrode of radius ``r`` (m) whose centre is ``d`` (m) from the
     centre of a contact disc of radius ``a`` (m)."""
     return _lens_area(d, r, a) / (np.pi * r * r)
 
 
-@njit
+@njit(error_model="numpy")
 def _coverage_at_radius(a, contact, distance_m, phi):
     """:func:`_sample_coverage` for a contact disc of radius ``a`` (m)."""
     r = contact.electrode_radius_m
@@ -308,28 +308,28 @@ def _coverage_at_radius(a, contact, distance_m, phi):
         phi[e] = _electrode_coverage(distance_m[e], r, a)
 
 
-@njit
+@njit(error_model="numpy", inline="always")
 def _nominal(setpoint_n, stim):
     """Full-coverage impedance (ohm) and nominal current density (A/m2) at the setpoint (N)."""
     z_sp = _impedance(setpoint_n, stim)
     return z_sp, _current_a(1.0, z_sp, z_sp, stim) / stim.electrode_area_m2
 
 
-@njit
+@njit(error_model="numpy")
 def _sample_intensity(force_n, setpoint_n, phi, stim, ratio):
     """Relative intensity of each electrode at one sample, into ``ratio`` (0 where ``phi`` is 0)."""
     z_sp, j_nom = _nominal(setpoint_n, stim)
     _sample_intensity_z(_impedance(force_n, stim), z_sp, j_nom, phi, stim, ratio)
 
 
-@njit
+@njit(error_model="numpy")
 def _sample_intensity_z(z, z_sp, j_nom, phi, stim, ratio):
     """:func:`_sample_intensity` given the full-coverage impedance ``z`` (ohm) at the sample's force."""
     for e in range(phi.size):
         ratio[e] = _electrode_ratio(phi[e], z, z_sp, j_nom, stim)
 
 
-@njit
+@njit(error_model="numpy", inline="always")
 def _electrode_ratio(phi, z, z_sp, j_nom, stim):
     """Relative intensity of one electrode of coverage ``phi`` (0 where ``phi`` is 0)."""
     j = _current_a(phi, z, z_sp, stim) / (phi * stim.electrode_area_m2) if phi > 1e-12 else 0.0
@@ -338,7 +338,7 @@ def _electrode_ratio(phi, z, z_sp, j_nom, stim):
 
 # --- array loops behind the public functions ---
 
-@njit
+@njit(error_model="numpy")
 def _contact_areas(force_n, contact):
     out = np.empty(force_n.size)
     for k in range(force_n.size):
@@ -346,7 +346,7 @@ def _contact_areas(force_n, contact):
     return out
 
 
-@njit
+@njit(error_model="numpy")
 def _contact_radii(force_n, contact):
     out = np.empty(force_n.size)
     for k in range(force_n.size):
@@ -354,7 +354,7 @@ def _contact_radii(force_n, contact):
     return out
 
 
-@njit
+@njit(error_model="numpy")
 def _lens_areas(d, r, a):
     out = np.empty(d.size)
     for k in range(d.size):
@@ -362,7 +362,7 @@ def _lens_areas(d, r, a):
     return out
 
 
-@njit
+@njit(error_model="numpy")
 def _impedances(force_n, stim):
     out = np.empty(force_n.size)
     for k in range(force_n.size):
@@ -370,7 +370,7 @@ def _impedances(force_n, stim):
     return out
 
 
-@njit
+@njit(error_model="numpy")
 def _coverages(force_n, contact, distance_m):
     out = np.empty((force_n.size, distance_m.size))
     for k in range(force_n.size):
@@ -378,7 +378,7 @@ def _coverages(force_n, contact, distance_m):
     return out
 
 
-@njit
+@njit(error_model="numpy")
 def _intensities(force_n, setpoint_n, contact, distance_m, stim):
     out = np.empty((force_n.size, distance_m.size))
     phi = np.empty(distance_m.size)
@@ -501,7 +501,7 @@ def character_legibility(force_n, setpoint_n, char_index, cells, params: Legibil
     return out
 
 
-@njit
+@njit(error_model="numpy")
 def _legibility_counts(force_n, setpoint_n, char_index, masks, contact, distance_m, stims, z_first):
     """One pass over the samples: per cell, the samples in which each stimulator in
     ``stims`` kept all raised dots legible, the samples shown, and whether the cell has

@@ -59,10 +59,11 @@ def in_band(force_n, setpoint_n, band_fraction):
     return d <= band_fraction * sp
 
 
-def settling_time(t_s, force_n, setpoint_n, band_fraction, hold_s=SETTLE_HOLD_S):
+def settling_time(t_s, force_n, setpoint_n, band_fraction, hold_s=SETTLE_HOLD_S, ok=None):
     """Time from first contact to the start of the first ``hold_s`` stretch in band.
 
     Returns None when there is no contact or the force never stays in band for ``hold_s``.
+    ``ok``: :func:`in_band` of these arguments when the caller has it already.
     """
     t_s = np.asarray(t_s)
     touch = np.asarray(force_n) > CONTACT_THRESHOLD_N
@@ -70,7 +71,8 @@ def settling_time(t_s, force_n, setpoint_n, band_fraction, hold_s=SETTLE_HOLD_S)
         return None
     start = int(np.argmax(touch))                  # the first contact
     del touch
-    ok = in_band(force_n, setpoint_n, band_fraction)
+    if ok is None:
+        ok = in_band(force_n, setpoint_n, band_fraction)
     dt = t_s[1] - t_s[0] if len(t_s) > 1 else 0.0
     need = max(1, int(round(hold_s / dt))) if dt > 0 else 1
     # the first window of ``need`` samples entirely in band, from the first contact on:
@@ -125,7 +127,9 @@ def compute_metrics(trace: dict, reading_start_s: float, band_fraction: float, s
         m["force_mae_n"] = float(np.mean(np.abs(err, out=err)))
         m["force_rmse_n"] = float(np.sqrt(np.mean(np.square(err, out=err))))
         del err
-        m["in_band_fraction"] = float(np.mean(ok[read]))
+        in_read = ok[read]
+        m["in_band_fraction"] = np.count_nonzero(in_read) / in_read.size     # np.mean's bits: a whole sum / n
+        del in_read
         err = np.subtract(fe[read], f[read])
         m["estimate_rmse_n"] = float(np.sqrt(np.mean(np.square(err, out=err))))
         del err
@@ -134,14 +138,15 @@ def compute_metrics(trace: dict, reading_start_s: float, band_fraction: float, s
     else:
         m.update(force_rmse_n=None, force_mae_n=None, in_band_fraction=None, estimate_rmse_n=None,
                  contact_loss_count=0)
-    # per displayed character: in-band samples / samples, one pass over the trace
-    shown = ci >= 0
-    ci_shown = ci[shown]
-    n_all = np.bincount(ci_shown) if ci_shown.size else np.zeros(0, dtype=np.int64)
+    # per displayed character: in-band samples / samples, counted with the samples that show
+    # none (any negative index) in a first bin that is dropped
+    bins = np.maximum(ci, -1)
+    bins += 1
+    n_all = np.bincount(bins)[1:] if bins.size else np.zeros(0, dtype=np.int64)
     chars = np.nonzero(n_all)[0]
     if chars.size:
-        n_ok = np.bincount(ci_shown, weights=ok[shown], minlength=n_all.size)
-    del ci_shown
+        n_ok = np.bincount(bins, weights=ok, minlength=n_all.size + 1)[1:]
+    del bins
     if chars.size:
         good = int(np.count_nonzero(n_ok[chars] / n_all[chars] >= CHAR_IN_BAND_REQUIRED))
         m["char_in_band_fraction"] = good / chars.size
@@ -151,7 +156,7 @@ def compute_metrics(trace: dict, reading_start_s: float, band_fraction: float, s
     if onset.any():
         sp0 = sp[onset][-1]
         m["onset_overshoot_fraction"] = float(max(0.0, f[onset].max() / sp0 - 1.0))
-        m["settling_time_s"] = settling_time(t, f, sp, band_fraction)
+        m["settling_time_s"] = settling_time(t, f, sp, band_fraction, ok=ok)
     else:
         m["onset_overshoot_fraction"] = None
         m["settling_time_s"] = None

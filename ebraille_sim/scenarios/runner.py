@@ -261,7 +261,8 @@ def _closed_loop(spec, run, ctrl, backend: str, every: int | None, supervised: b
     if policy is not None:
         form, bundle = policy
         rec = _engine_rows(plant, [form], sp[None, :], [run.profiles], run.dt_s, i_fb, every, n)
-        wall = _run_timed(rec, n, bundle)
+        rec.give_policy(0, bundle)
+        wall = _run_timed(rec, n)
         rec.copy_back()
         ctrl.took(bundle[0])
         _raise_row(rec, 0, wrapped)
@@ -325,7 +326,7 @@ def _compiled_policy(ctrl, wrapped, dt_s: float):
     whose model is a deterministic MLP actor evaluated every period
     (:meth:`controllers.residual.ResidualPolicy.compiled_policy`), alone or inside an enabled safety
     supervisor: the design's form (:func:`_compiled_controller`) and the policy's arrays for
-    :func:`ebraille_sim.plant.engine.run_residual`; None for any other controller."""
+    :meth:`ebraille_sim.plant.engine.Rows.give_policy`; None for any other controller."""
     from controllers.residual import ResidualPolicy
     if type(ctrl) is not ResidualPolicy:
         return None
@@ -378,23 +379,14 @@ def _engine_rows(plant, forms: list, sp: np.ndarray, profiles: list, dt_s: float
     return rows
 
 
-def _run_timed(rows, n: int, policy=None) -> float:
+def _run_timed(rows, n: int) -> float:
     """All ``n`` periods of ``rows`` in one engine call (compiled, or loaded from the cache,
-    before the clock starts); the wall time of the call, s.  With ``policy`` (a residual
-    policy's arrays, :func:`_compiled_policy`) row 0 runs it (:func:`ebraille_sim.plant.engine.run_residual`)."""
-    from ebraille_sim.plant.engine import run, run_residual
-
-    def call(periods):
-        args = rows.arguments(0, periods)
-        if policy is None:
-            run(*args)
-        else:                                      # no held command: the policy decides it
-            run_residual(*args[:7], *args[8:], *policy)
-
-    if not getattr(run if policy is None else run_residual, "signatures", True):
-        call(0)                                    # zero periods change nothing
+    before the clock starts); the wall time of the call, s."""
+    from ebraille_sim.plant.engine import run
+    if not getattr(run, "signatures", True):
+        run(*rows.arguments(0, 0))                 # zero periods change nothing
     wall0 = time.perf_counter()
-    call(n)
+    run(*rows.arguments(0, n))
     return time.perf_counter() - wall0
 
 
@@ -473,6 +465,7 @@ def python_periods(plant, controllers: list, sp: np.ndarray, profiles: list, i_f
     fes = st[:, i_fb].tolist()
     ias = st[:, S.current_meas_a].tolist()                  # the firmware's reading of the current
     live = list(range(m))
+    failed = np.count_nonzero                               # cheaper per call than status.any()
     wall0 = time.perf_counter()
     for k in range(k0, k0 + n):
         for r in live:
@@ -489,7 +482,7 @@ def python_periods(plant, controllers: list, sp: np.ndarray, profiles: list, i_f
             run(*rows.arguments(k, 1))
         else:
             _python_plant_period(plant, varying, rows, k, float(u_ext[0]))
-        if status.any():
+        if failed(status):
             for r in live:
                 if status[r] != 0 and errs[r] is None:
                     try:

@@ -745,12 +745,15 @@ def parse_toml(raw: bytes, name: str) -> dict:
                             f"at most 3 levels)") from None
 
 
+@functools.lru_cache(maxsize=1)
 def library_dir() -> pathlib.Path | None:
     """The folder of the shipped scenario library, or None when it cannot be found.
 
     In an installed wheel it is the package data ``ebraille_sim/library`` (built from the
     project's ``scenarios/`` folder), found with :mod:`importlib.resources`; in a source
     checkout (also an editable install) it is that top-level ``scenarios/`` folder itself.
+    Where the package is installed does not change while it runs: the folder is looked for
+    once per process.
     """
     import importlib.resources
     shipped = importlib.resources.files("ebraille_sim") / "library"
@@ -775,7 +778,7 @@ def scenario_dirs() -> list[pathlib.Path]:
     """
     out = []
     for d in (pathlib.Path.cwd() / "scenarios", library_dir()):
-        if d is not None and d.is_dir() and d.resolve() not in [o.resolve() for o in out]:
+        if d is not None and d.is_dir() and not (out and d.resolve() in [o.resolve() for o in out]):
             out.append(d)
     return out
 
