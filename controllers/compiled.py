@@ -498,9 +498,11 @@ def _wide_error(s, p, e, r, stepped, h):
     its first-order low-pass (time constant ``wide_filter_s``; 0: the error itself) is more than
     ``wide_error_fraction`` of the reference ``r``, and the filtered error has been within that
     band at least once since the last reset or setpoint change (``stepped``: the setpoint
-    changed this sample), so an onset or a step runs on the hold's gains until it first arrives."""
+    changed this sample; the filter restarts from the step's error), so an onset or a step runs
+    on the hold's gains until it first arrives."""
     if stepped:
         s[DS.wide_armed] = 0.0
+        s[DS.wide_error_n] = e                              # the step's error seen at once
     tf = p[DP.wide_filter_s]
     if tf > 0.0:
         s[DS.wide_error_n] += -math.expm1(-h / tf) * (e - s[DS.wide_error_n])

@@ -274,6 +274,9 @@ def test_wide_error_gains_wait_for_the_band_after_a_reset_and_a_step():
     rs = [1.0] * 10 + [1.3] * 100                               # a step: 23 % off, disarmed
     assert np.array_equal(_run(controllers.make("pid_dob", **WIDE), ys, rs),
                           _run(controllers.make("pid_dob", ki_v_per_ns=5.1), ys, rs))
+    filtered = {**WIDE, "wide_filter_s": 0.1}                  # the filter restarts from the step's error
+    assert np.array_equal(_run(controllers.make("pid_dob", **filtered), ys, rs),
+                          _run(controllers.make("pid_dob", ki_v_per_ns=5.1), ys, rs))
 
 
 def test_wide_error_filter_ignores_a_fast_swing_and_switches_on_a_held_error_after_its_delay():
