@@ -124,14 +124,16 @@ operating point ``(u0, y0)``, ``Nu`` and ``kz``, then from slot ``matrices`` on,
 order: ``A`` (n x n, row-major), ``B``, ``C``, ``K``, ``L`` and ``Nx`` (n each)."""
 
 DS = record("DOBStateSlots", PS._fields + ("disturbance_v", "back_emf_v", "command_v", "setpoint_n",
-                                           "since_step_s"))
+                                           "since_step_s", "wide_armed", "wide_error_n"))
 """State of the PID with the disturbance observer (:class:`controllers.dob.DOBPID`): the PID's
 slots (:data:`PS`, at the same indices), the observer's estimate ``d_hat``, the filtered
 back-EMF, the last command, the last setpoint and the time since it changed."""
 
 DP = record("DOBParamSlots", PP._fields + ("motor_r_ohm", "q_time_constant_s", "compensation_fraction",
                                            "max_compensation_v", "speed_read", "hold_damping_v_per_v",
-                                           "hold_speed_filter_s", "hold_after_step_s", "hold_band_fraction"))
+                                           "hold_speed_filter_s", "hold_after_step_s", "hold_band_fraction",
+                                           "wide_error_fraction", "wide_kp_v_per_n", "wide_ki_v_per_ns",
+                                           "wide_filter_s"))
 """Parameters of the PID with the disturbance observer: the fixed-gain PID's slots (:data:`PP`,
 ``variant`` 0, gains scaled above ``schedule_above_n``), the nominal winding resistance, the
 observer's and the hold damping's settings of :class:`controllers.dob.DOBConfig`;
@@ -484,8 +486,31 @@ def dob_reset(s, p, y, r, command_v):
     s[DS.command_v] = u0
     s[DS.setpoint_n] = r
     s[DS.since_step_s] = math.inf
+    s[DS.wide_armed] = 0.0
+    s[DS.wide_error_n] = y - r
     core_reset(s, y, r, u0, p[PP.kp_v_per_n] * _pid_gain_scale(p, r), p[PP.setpoint_weight_p],
                p[PP.setpoint_weight_d], _dob_compensation_v(s, p))
+
+
+@njit(cache=True, inline="always")
+def _wide_error(s, p, e, r, stepped, h):
+    """Whether the PID runs on the wide-error gains this sample: the error ``e = y - r`` through
+    its first-order low-pass (time constant ``wide_filter_s``; 0: the error itself) is more than
+    ``wide_error_fraction`` of the reference ``r``, and the filtered error has been within that
+    band at least once since the last reset or setpoint change (``stepped``: the setpoint
+    changed this sample; the filter restarts from the step's error), so an onset or a step runs
+    on the hold's gains until it first arrives."""
+    if stepped:
+        s[DS.wide_armed] = 0.0
+        s[DS.wide_error_n] = e                              # the step's error seen at once
+    tf = p[DP.wide_filter_s]
+    if tf > 0.0:
+        s[DS.wide_error_n] += -math.expm1(-h / tf) * (e - s[DS.wide_error_n])
+        e = s[DS.wide_error_n]
+    if abs(e) <= p[DP.wide_error_fraction] * r:
+        s[DS.wide_armed] = 1.0
+        return False
+    return s[DS.wide_armed] != 0.0
 
 
 @njit(cache=True, _nrt=False)
@@ -493,8 +518,9 @@ def dob_step(s, p, y, r, r_loop, kv, h, cur):
     """One sample of the PID with the disturbance observer (:meth:`controllers.dob.DOBPID.update`,
     the law of :mod:`controllers.dob`): the observer on the measured current ``cur`` (A; NaN:
     none, the estimate held), the PID on the reference ``r_loop`` (the setpoint, or the setpoint
-    with a refresh learner's correction) with the compensation as its feedforward, then the
-    hold damping ``-kv e`` in a hold of the setpoint ``r``; returns the command, V."""
+    with a refresh learner's correction) with the compensation as its feedforward and, while
+    the filtered error is wide (:func:`_wide_error`), the wide-error gains, then the hold
+    damping ``-kv e`` in a hold of the setpoint ``r``; returns the command, V."""
     speed = p[DP.speed_read] != 0.0
     if cur == cur:
         r_ohm = p[DP.motor_r_ohm]
@@ -503,12 +529,16 @@ def dob_step(s, p, y, r, r_loop, kv, h, cur):
                 s[DS.command_v] - r_ohm * cur - s[DS.back_emf_v])
         s[DS.disturbance_v] += -math.expm1(-h / p[DP.q_time_constant_s]) * (r_ohm * cur - s[DS.disturbance_v])
     a = _pid_gain_scale(p, r_loop)
-    u = core_step(s, y, r_loop, h, p[PP.kp_v_per_n] * a, p[PP.ki_v_per_ns] * a, p[PP.kd_vs_per_n] * a,
+    kp, ki = p[PP.kp_v_per_n], p[PP.ki_v_per_ns]
+    stepped = r != s[DS.setpoint_n]
+    if p[DP.wide_error_fraction] > 0.0 and _wide_error(s, p, y - r_loop, r_loop, stepped, h):
+        kp, ki = p[DP.wide_kp_v_per_n], p[DP.wide_ki_v_per_ns]
+    u = core_step(s, y, r_loop, h, kp * a, ki * a, p[PP.kd_vs_per_n] * a,
                   p[PP.derivative_filter_s], p[PP.setpoint_weight_p], p[PP.setpoint_weight_d],
                   p[PP.tracking_gain_per_s], _dob_compensation_v(s, p), p[PP.u_min_v], p[PP.u_max_v])
+    s[DS.since_step_s] = 0.0 if stepped else s[DS.since_step_s] + h
+    s[DS.setpoint_n] = r
     if speed:
-        s[DS.since_step_s] = 0.0 if r != s[DS.setpoint_n] else s[DS.since_step_s] + h
-        s[DS.setpoint_n] = r
         if s[DS.since_step_s] >= p[DP.hold_after_step_s] and abs(y - r) < p[DP.hold_band_fraction] * r:
             u = py_min(py_max(u - kv * s[DS.back_emf_v], p[PP.u_min_v]), p[PP.u_max_v])
         s[DS.command_v] = u

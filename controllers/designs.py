@@ -26,7 +26,7 @@ Examples
 --------
 >>> from controllers.designs import designs, get_design
 >>> sorted(designs())
-['dob_100hz', 'dob_hold_1khz', 'dob_learn_1khz']
+['dob_100hz', 'dob_hold_1khz', 'dob_learn_1khz', 'dob_wide_1khz']
 >>> d = get_design("dob_learn_1khz")
 >>> d.controller, d.firmware
 ('pid_dob', 'fast_1khz')

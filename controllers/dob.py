@@ -93,6 +93,21 @@ has a finger moving the board, which strong damping would fight).  Without a rec
 pattern the controller is exactly the one without learning.  The shipped design
 ``dob_learn_1khz`` is ``dob_hold_1khz`` with gain 0.25 and ``kv`` 1.5 in refresh.
 
+**Wide-error gains (off by default).**  The in-band criterion asks only that the force stay
+within a tenth of the setpoint; inside that band a gentle integral keeps a loop that reads the
+film through its hysteresis compensation from chasing the compensation's moves at a reversal
+(with a faster integral the two keep each other going: a relay of 5-10 Hz on large-loop units),
+while a reader pressing into the board (0.1-1 Hz) wants a fast one.  With
+``wide_error_fraction`` > 0 the PID runs on ``wide_kp_v_per_n`` and ``wide_ki_v_per_ns`` while
+its error, through a first-order low-pass of ``wide_filter_s`` (which a relay's swings average
+out of and a press does not), exceeds that fraction of the setpoint, and on its own gains
+otherwise.  The switch is bumpless in the integral (the integrator sums ``ki e h``) and moves
+the proportional term by ``(wide_kp - kp) e``.  The onset and each setpoint step run on the
+hold's gains until the filtered error first enters the band.  The shipped design
+``dob_wide_1khz`` is ``dob_hold_1khz``'s gains with the integral at 25 V/(N s) beyond 5 % of the
+setpoint (0.1 s filter), on the 1 kHz firmware with the hysteresis compensation centred in the
+film's blind stretch (``fast_1khz_centred``).
+
 Examples
 --------
 >>> from controllers import make
@@ -160,6 +175,7 @@ class NominalPlant:
 
 
 _STUDY = "[E] tuned in the benchmark's refresh-learning study"
+_WIDE = "[E] chosen on drawn readers in the population study (studies/population/README.md)"
 
 
 @dataclass(frozen=True)
@@ -192,6 +208,13 @@ class DOBConfig(PIDConfig):
     refresh_hold_damping_v_per_v : float or None
         ``kv`` of the hold damping while the refresh pattern is recognised, V/V; in [0, 5];
         None keeps ``hold_damping_v_per_v``.
+    wide_error_fraction : float
+        The wide-error gains apply beyond this fraction of the setpoint; in [0, 1]; 0 is off.
+    wide_kp_v_per_n, wide_ki_v_per_ns : float or None
+        The PID's gains while the error is wide, V/N and V/(N s); >= 0; None keeps
+        ``kp_v_per_n`` / ``ki_v_per_ns``.
+    wide_filter_s : float
+        Time constant of the error's low-pass that decides, s; in [0, 1]; 0 is the error itself.
     compensation_fraction : float
         ``f``: share of the estimated disturbance added to the command; in [0, 1).
     max_compensation_v : float
@@ -220,6 +243,16 @@ class DOBConfig(PIDConfig):
                                                                     "hold damping applies.")
     hold_band_fraction: float = sourced(0.2, "-", GAIN_SOURCE, doc="The hold damping applies while the error is "
                                                                    "below this fraction of the setpoint.")
+    wide_error_fraction: float = sourced(0.0, "-", _WIDE, experimental=True,
+                                         doc="The PID runs on the wide-error gains while its low-passed error "
+                                             "exceeds this fraction of the setpoint (0: off).")
+    wide_kp_v_per_n: float | None = sourced(None, "V/N", _WIDE, experimental=True,
+                                            doc="Proportional gain while the error is wide (None: kp_v_per_n).")
+    wide_ki_v_per_ns: float | None = sourced(None, "V/(N s)", _WIDE, experimental=True,
+                                             doc="Integral gain while the error is wide (None: ki_v_per_ns).")
+    wide_filter_s: float = sourced(0.0, "s", _WIDE, experimental=True,
+                                   doc="Time constant of the error's low-pass that decides the wide-error gains "
+                                       "(0: the error itself).")
     refresh_learning_gain: float = sourced(0.0, "-", _STUDY, experimental=True,
                                            doc="Gain gamma of the refresh learning (0: off).")
     refresh_learning_lead_s: float = sourced(RefreshLearning.lead_s, "s", _STUDY, experimental=True,
@@ -250,6 +283,11 @@ class DOBConfig(PIDConfig):
                                check_number("refresh_hold_damping_v_per_v", self.refresh_hold_damping_v_per_v,
                                             0.0, 5.0))
         self.refresh_learning()   # checks the learning's own fields, one line each
+        for name, lo, hi in (("wide_error_fraction", 0.0, 1.0), ("wide_filter_s", 0.0, 1.0)):
+            object.__setattr__(self, name, check_number(name, getattr(self, name), lo, hi))
+        for name, hi in (("wide_kp_v_per_n", 100.0), ("wide_ki_v_per_ns", 1000.0)):
+            if getattr(self, name) is not None:
+                object.__setattr__(self, name, check_number(name, getattr(self, name), 0.0, hi))
         object.__setattr__(self, "q_time_constant_s",
                            check_number("q_time_constant_s", self.q_time_constant_s, 0.0, 1.0, lo_open=True))
         object.__setattr__(self, "compensation_fraction",
@@ -319,7 +357,10 @@ class DOBPID:
             max_compensation_v=config.max_compensation_v,
             speed_read=1.0 if max(kv, self._kv_refresh) > 0.0 else 0.0, hold_damping_v_per_v=kv,
             hold_speed_filter_s=config.hold_speed_filter_s, hold_after_step_s=config.hold_after_step_s,
-            hold_band_fraction=config.hold_band_fraction)
+            hold_band_fraction=config.hold_band_fraction, wide_error_fraction=config.wide_error_fraction,
+            wide_kp_v_per_n=config.kp_v_per_n if config.wide_kp_v_per_n is None else config.wide_kp_v_per_n,
+            wide_ki_v_per_ns=config.ki_v_per_ns if config.wide_ki_v_per_ns is None else config.wide_ki_v_per_ns,
+            wide_filter_s=config.wide_filter_s)
 
     @property
     def config(self) -> DOBConfig:

@@ -188,3 +188,27 @@ def test_a_bad_design_file_is_one_error_line_naming_the_file(tmp_path, content, 
                       (["--designs", "notes.txt"], "notes.txt: a design file is .toml or .json")):
         out = _list(args, tmp_path)
         assert out.returncode == 2 and out.stderr == f"error: {why}\n"
+
+
+def _drawn_reader(scenario: str, seed: int, k: int):
+    from ebraille_sim.scenarios.population import PopulationSpec, sample_devices
+    spec = load_scenario(scenario)
+    return spec, sample_devices(seed, k + 1, PopulationSpec(calibration_table=True), base=spec.device)[k]
+
+
+def test_dob_wide_1khz_holds_a_relay_reader_and_lifts_a_pressing_one():
+    """Two drawn readers of seed 11 (``studies/population/README.md``, wide-error gains): on the
+    large-loop unit (0.144) where ``dob_hold_1khz``'s loop and the hysteresis compensation keep each
+    other going, steady reading at 0.79 in band, ``dob_wide_1khz`` holds 0.99; on a pressing
+    reader the wide-error integral lifts the same firmware and gains from 0.70 to 0.81."""
+    spec, dev = _drawn_reader("steady_90wpm", 11, 28)
+    ib = {c: run_scenario(spec, controller=c, seed=spec.seed + 7 * 28, duration_s=12, device=dev,
+                          trace_every=None).metrics["in_band_fraction"] for c in ("dob_hold_1khz", "dob_wide_1khz")}
+    assert ib["dob_hold_1khz"] < 0.85 and ib["dob_wide_1khz"] > 0.99
+    spec, dev = _drawn_reader("pressing_90wpm", 11, 65)
+    design = get_design("dob_wide_1khz")
+    narrow = controllers.make("pid_dob", **{**design.gains, "wide_error_fraction": 0.0})
+    runs = {name: run_scenario(spec, controller=c, seed=spec.seed + 7 * 65, duration_s=12, device=dev,
+                               trace_every=None, **kw).metrics["in_band_fraction"]
+            for name, c, kw in (("wide", "dob_wide_1khz", {}), ("narrow", narrow, {"firmware": design.firmware}))}
+    assert runs["narrow"] < 0.75 and runs["wide"] > 0.78

@@ -234,3 +234,73 @@ def test_hold_damping_waits_after_a_setpoint_change_and_outside_the_band():
     for y in (1.25, 0.75, 1.3):                                  # 20 % or more off the setpoint
         assert damped.update(y, 1.0, 1e-3, motor_current_a=0.002) == plain.update(y, 1.0, 1e-3,
                                                                                   motor_current_a=0.002)
+
+
+WIDE = {"ki_v_per_ns": 5.1, "wide_error_fraction": 0.05, "wide_ki_v_per_ns": 25.0}
+
+
+def _run(ctrl, ys, rs=None, h=1e-3, y0=1.0, r0=1.0):
+    """Commands of ``ctrl`` reset at ``(y0, r0)`` and fed the estimates ``ys`` (setpoints ``rs``,
+    default 1 N) with a steady current."""
+    ctrl.reset(force_est_n=y0, setpoint_n=r0, command_v=0.4)
+    rs = [1.0] * len(ys) if rs is None else rs
+    return np.array([ctrl.update(y, r, h, motor_current_a=0.01) for y, r in zip(ys, rs)])
+
+
+def test_wide_error_gains_run_the_integral_at_the_wide_gain_beyond_the_band():
+    """Armed by a first sample in the band, an estimate 8 % off runs the PID on the wide integral
+    gain: the commands equal those of the same PID with ``ki`` 25 from the first sample off the band
+    on (the integrator sums ``ki e h``), and differ from the plain PID's; within the band the
+    command is the plain PID's, sample for sample."""
+    ys = [1.0] * 5 + [0.92] * 200
+    wide = _run(controllers.make("pid_dob", **WIDE), ys)
+    fast = _run(controllers.make("pid_dob", ki_v_per_ns=25.0), ys)
+    plain = _run(controllers.make("pid_dob", ki_v_per_ns=5.1), ys)
+    assert np.array_equal(wide[:6], plain[:6])
+    assert np.array_equal(wide, fast)
+    assert wide[-1] - plain[-1] == pytest.approx((25.0 - 5.1) * 1e-3 * 0.08 * 199, rel=1e-9)
+    inside = [1.0 + 0.04 * math.sin(0.3 * k) for k in range(300)]
+    assert np.array_equal(_run(controllers.make("pid_dob", **WIDE), inside),
+                          _run(controllers.make("pid_dob", ki_v_per_ns=5.1), inside))
+
+
+def test_wide_error_gains_wait_for_the_band_after_a_reset_and_a_step():
+    """An onset (reset far below the setpoint) and a setpoint step run on the plain gains until the
+    error first enters the band; then a wide error switches."""
+    onset = [0.2 + 0.004 * k for k in range(150)]               # rises from 0.2 N, never within 5 %
+    assert np.array_equal(_run(controllers.make("pid_dob", **WIDE), onset, y0=0.2),
+                          _run(controllers.make("pid_dob", ki_v_per_ns=5.1), onset, y0=0.2))
+    ys = [1.0] * 10 + [1.0] * 100
+    rs = [1.0] * 10 + [1.3] * 100                               # a step: 23 % off, disarmed
+    assert np.array_equal(_run(controllers.make("pid_dob", **WIDE), ys, rs),
+                          _run(controllers.make("pid_dob", ki_v_per_ns=5.1), ys, rs))
+    filtered = {**WIDE, "wide_filter_s": 0.1}                  # the filter restarts from the step's error
+    assert np.array_equal(_run(controllers.make("pid_dob", **filtered), ys, rs),
+                          _run(controllers.make("pid_dob", ki_v_per_ns=5.1), ys, rs))
+
+
+def test_wide_error_filter_ignores_a_fast_swing_and_switches_on_a_held_error_after_its_delay():
+    """With the 0.1 s low-pass a +/-8 % swing at 10 Hz around the setpoint never switches, while an
+    error held at +8 % switches once the filtered error passes 5 %: ``-0.1 ln(1 - 5/8)`` = 98 ms."""
+    gains = {**WIDE, "wide_filter_s": 0.1}
+    swing = [1.0] * 5 + [1.0 + 0.08 * math.copysign(1.0, math.sin(2 * math.pi * 10 * k * 1e-3 + 0.1))
+                         for k in range(1000)]
+    assert np.array_equal(_run(controllers.make("pid_dob", **gains), swing),
+                          _run(controllers.make("pid_dob", ki_v_per_ns=5.1), swing))
+    held = [1.0] * 5 + [1.08] * 300
+    wide = _run(controllers.make("pid_dob", **gains), held)
+    plain = _run(controllers.make("pid_dob", ki_v_per_ns=5.1), held)
+    first = int(np.flatnonzero(wide != plain)[0]) - 5            # samples into the held error
+    assert abs(first - 0.1 * math.log(1.0 / (1.0 - 5.0 / 8.0)) / 1e-3) <= 2
+
+
+@pytest.mark.parametrize("gains, match", [
+    ({"wide_error_fraction": 1.5}, "wide_error_fraction"),
+    ({"wide_error_fraction": -0.1}, "wide_error_fraction"),
+    ({"wide_ki_v_per_ns": -1.0}, "wide_ki_v_per_ns"),
+    ({"wide_filter_s": float("nan")}, "wide_filter_s"),
+])
+def test_bad_wide_error_gains_one_line(gains, match):
+    with pytest.raises(ValueError, match=match) as exc:
+        controllers.make("pid_dob", **gains)
+    assert "\n" not in str(exc.value)
