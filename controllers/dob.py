@@ -175,7 +175,7 @@ class NominalPlant:
 
 
 _STUDY = "[E] tuned in the benchmark's refresh-learning study"
-_WIDE = "[E] chosen on drawn readers in the population study (studies/population/README.md)"
+_WIDE = "[E] chosen on drawn readers of one seed, held out on two others (docs/choosing.md)"
 
 
 @dataclass(frozen=True)

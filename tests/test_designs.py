@@ -197,7 +197,7 @@ def _drawn_reader(scenario: str, seed: int, k: int):
 
 
 def test_dob_wide_1khz_holds_a_relay_reader_and_lifts_a_pressing_one():
-    """Two drawn readers of seed 11 (``studies/population/README.md``, wide-error gains): on the
+    """Two drawn readers of seed 11 (the readers the wide-error gains were chosen on): on the
     large-loop unit (0.144) where ``dob_hold_1khz``'s loop and the hysteresis compensation keep each
     other going, steady reading at 0.79 in band, ``dob_wide_1khz`` holds 0.99; on a pressing
     reader the wide-error integral lifts the same firmware and gains from 0.70 to 0.81."""
