@@ -151,7 +151,7 @@ def make(name_or_path: str | os.PathLike[str], **overrides: Any) -> Controller:
     >>> make("lqr")
     Traceback (most recent call last):
     ...
-    ValueError: unknown controller 'lqr'; available: actuator_bound, lqg, pid, pid_dob, pid_feedforward, pid_friction, pid_scheduled; designs: dob_100hz, dob_hold_1khz, dob_learn_1khz (or give a path to a .toml/.json config file)
+    ValueError: unknown controller 'lqr'; available: actuator_bound, lqg, pid, pid_dob, pid_feedforward, pid_friction, pid_scheduled; designs: dob_100hz, dob_hold_1khz, dob_learn_1khz, dob_wide_1khz (or give a path to a .toml/.json config file)
     """
     spec = os.fspath(name_or_path)
     if spec.startswith(_POLICY_PREFIX):

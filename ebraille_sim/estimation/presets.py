@@ -22,7 +22,7 @@ Examples
 --------
 >>> from ebraille_sim.estimation.presets import firmware_presets, get_firmware
 >>> sorted(firmware_presets())
-['fast_1khz', 'paper_100hz']
+['fast_1khz', 'fast_1khz_centred', 'paper_100hz']
 >>> get_firmware("fast_1khz").estimator["model"]
 'paper:wiener:5@1000'
 """
