@@ -104,7 +104,7 @@ out of and a press does not), exceeds that fraction of the setpoint, and on its 
 otherwise.  The switch is bumpless in the integral (the integrator sums ``ki e h``) and moves
 the proportional term by ``(wide_kp - kp) e``.  The onset and each setpoint step run on the
 hold's gains until the filtered error first enters the band.  The shipped design
-``dob_wide_1khz`` is ``dob_hold_1khz``'s gains with the integral at 25 V/(N s) beyond 5 % of the
+``dob_wide_1khz`` is ``dob_hold_1khz``'s gains with the integral at 50 V/(N s) beyond 4 % of the
 setpoint (0.1 s filter), on the 1 kHz firmware with the hysteresis compensation centred in the
 film's blind stretch (``fast_1khz_centred``).
 
