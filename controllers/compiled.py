@@ -127,7 +127,8 @@ DS = record("DOBStateSlots", PS._fields + ("disturbance_v", "back_emf_v", "comma
                                            "since_step_s", "wide_armed", "wide_error_n"))
 """State of the PID with the disturbance observer (:class:`controllers.dob.DOBPID`): the PID's
 slots (:data:`PS`, at the same indices), the observer's estimate ``d_hat``, the filtered
-back-EMF, the last command, the last setpoint and the time since it changed."""
+back-EMF, the last command, the last setpoint and the time since it changed, whether the
+wide-error gains are armed and the low-passed error that decides them (:func:`_wide_error`)."""
 
 DP = record("DOBParamSlots", PP._fields + ("motor_r_ohm", "q_time_constant_s", "compensation_fraction",
                                            "max_compensation_v", "speed_read", "hold_damping_v_per_v",
@@ -136,7 +137,7 @@ DP = record("DOBParamSlots", PP._fields + ("motor_r_ohm", "q_time_constant_s", "
                                            "wide_filter_s"))
 """Parameters of the PID with the disturbance observer: the fixed-gain PID's slots (:data:`PP`,
 ``variant`` 0, gains scaled above ``schedule_above_n``), the nominal winding resistance, the
-observer's and the hold damping's settings of :class:`controllers.dob.DOBConfig`;
+observer's, the hold damping's and the wide-error gains' settings of :class:`controllers.dob.DOBConfig`;
 ``speed_read`` is 1.0 when the back-EMF is filtered (a hold damping in some mode)."""
 
 @njit(cache=True, inline="always")
