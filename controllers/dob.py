@@ -285,9 +285,9 @@ class DOBConfig(PIDConfig):
         self.refresh_learning()   # checks the learning's own fields, one line each
         for name, lo, hi in (("wide_error_fraction", 0.0, 1.0), ("wide_filter_s", 0.0, 1.0)):
             object.__setattr__(self, name, check_number(name, getattr(self, name), lo, hi))
-        for name, hi in (("wide_kp_v_per_n", 100.0), ("wide_ki_v_per_ns", 1000.0)):
+        for name in ("wide_kp_v_per_n", "wide_ki_v_per_ns"):          # as the PID's own gains: finite, >= 0
             if getattr(self, name) is not None:
-                object.__setattr__(self, name, check_number(name, getattr(self, name), 0.0, hi))
+                object.__setattr__(self, name, check_number(name, getattr(self, name), lo=0.0))
         object.__setattr__(self, "q_time_constant_s",
                            check_number("q_time_constant_s", self.q_time_constant_s, 0.0, 1.0, lo_open=True))
         object.__setattr__(self, "compensation_fraction",
