@@ -20,7 +20,7 @@ from ebraille_sim.plant.backends import make_plant
 from ebraille_sim.plant.engine import KEPT
 from ebraille_sim.scenarios.inputs import build_run_inputs, refresh_phases
 from ebraille_sim.scenarios.metrics import compute_metrics
-from ebraille_sim.scenarios.spec import ScenarioError, ScenarioSpec, load_scenario, with_firmware
+from ebraille_sim.scenarios.spec import DEFAULT_DESIGN, ScenarioError, ScenarioSpec, load_scenario, with_firmware
 
 TRACE_COLUMNS = ["t_s", "setpoint_n", "force_true_n", "force_est_n", "fsr_voltage_v", "command_v",
                  "motor_current_a", "board_pos_m", "energy_j", "char_index", "character"]
@@ -141,7 +141,9 @@ def prepare_run(scenario, controller=None, seed: int | None = None, duration_s: 
     if device is not None:
         import dataclasses
         spec = dataclasses.replace(spec, device=device)
-    if firmware is None:                          # a design runs on its own firmware
+    if firmware is None and (controller is not None or spec.controller.name != DEFAULT_DESIGN):
+        # a design given to the run, or named by the scenario, runs on its own firmware; the
+        # default design runs on the scenario's estimator, which starts from that firmware
         firmware = design_firmware(spec.controller.name if controller is None else controller)
     if firmware is not None:
         spec = with_firmware(spec, firmware)
