@@ -51,7 +51,7 @@ def test_a_high_k_unit_holds_the_force_as_the_nominal_unit_does():
     assert true_hk == pytest.approx(true_nom, abs=0.02)          # the calibration tolerance of the nominal unit
     assert abs(true_hk - 1.0) < 0.1                                # in the 10 % band
     true_raw, est_raw = _held_force(_scenario("high_k", calibrate=False))
-    assert est_raw == pytest.approx(1.0, abs=0.01) and true_raw > 1.25   # the uncalibrated unit reads ~30 % low
+    assert true_raw / est_raw > 1.25 and abs(est_raw - 1.0) < 0.1    # the uncalibrated unit reads ~30 % low
 
 
 def test_a_given_r2_needs_calibrate_false():

@@ -606,6 +606,10 @@ class CurrentSenseParams(_Checked):
 CALIBRATION_TABLE_MAX_POINTS = 6
 """Most points of a unit's calibration table (:class:`EstimatorParams`)."""
 
+UNIT_ESTIMATOR_FIELDS = ("hysteresis_fraction", "creep_per_decade", "calibration_loads_n", "calibration_readings_n")
+"""The :class:`EstimatorParams` fields a unit's bench measures and stores: they belong to the
+unit, and a firmware preset loaded onto it keeps them."""
+
 
 @dataclass(frozen=True)
 class EstimatorParams(_Checked):

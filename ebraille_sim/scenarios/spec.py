@@ -593,13 +593,16 @@ def _check_rates(device: _params.DeviceParams) -> None:
 
 def with_firmware(spec: "ScenarioSpec", firmware) -> "ScenarioSpec":
     """``spec`` running on a firmware preset (a name or a preset file): the preset's estimator
-    settings replace the scenario's; a preset whose rates do not suit the scenario's device is
-    a one-line :class:`ScenarioError`."""
+    settings replace the scenario's (the rest at :class:`~ebraille_sim.physics.params.EstimatorParams`'
+    defaults), and the unit keeps what its bench measured
+    (:data:`~ebraille_sim.physics.params.UNIT_ESTIMATOR_FIELDS`); a preset whose rates do not
+    suit the scenario's device is a one-line :class:`ScenarioError`."""
     from ebraille_sim.estimation.presets import get_firmware
     fw = get_firmware(firmware)
+    unit = {k: getattr(spec.device.estimator, k) for k in _params.UNIT_ESTIMATOR_FIELDS}
     try:
-        device = dataclasses.replace(spec.device, estimator=_params.replace_checked(spec.device.estimator,
-                                                                                   **fw.estimator))
+        device = dataclasses.replace(spec.device, estimator=_params.replace_checked(_params.EstimatorParams(),
+                                                                                   **{**unit, **fw.estimator}))
         _check_rates(device)
     except ValueError as exc:
         raise ScenarioError(f"{spec.source}: firmware {fw.name!r}: {exc}") from None
