@@ -106,7 +106,18 @@ the proportional term by ``(wide_kp - kp) e``.  The onset and each setpoint step
 hold's gains until the filtered error first enters the band.  The shipped design
 ``dob_wide_1khz`` is ``dob_hold_1khz``'s gains with the integral at 50 V/(N s) beyond 4 % of the
 setpoint (0.1 s filter), on the 1 kHz firmware with the hysteresis compensation centred in the
-film's blind stretch (``fast_1khz_centred``).
+film's blind stretch (``fast_1khz_centred``): the scenarios' default.
+
+**Approach gain (off by default).**  At the start of a session the board is away from the
+finger: the estimate reads no force, the bumpless start cancels the proportional term, and
+the command is the integral's ramp, ``ki`` times the setpoint per second.  The faster the ramp,
+the further out the board stands when a finger that was lifted at the start comes back (the
+fault matrix's withdrawn finger: 4.15 mm and 3.82 N with ``ki`` 5.1, 2.95 mm with 2.5,
+docs/safety.md).  With ``approach_fraction`` > 0 the integral runs at ``approach_ki_v_per_ns``
+until the estimate first reaches that fraction of the setpoint after a reset, then at the
+PID's own gain for good (a later dip, a lift or a strap slip, keeps it).  ``dob_wide_1khz``
+approaches at 2.5 V/(N s), the ramp of ``pid_dob``'s default gains, up to 20 % of the
+setpoint.
 
 Examples
 --------

@@ -599,13 +599,21 @@ def with_firmware(spec: "ScenarioSpec", firmware) -> "ScenarioSpec":
     suit the scenario's device is a one-line :class:`ScenarioError`."""
     from ebraille_sim.estimation.presets import get_firmware
     fw = get_firmware(firmware)
+    return with_estimator(spec, fw.estimator, f"firmware {fw.name!r}")
+
+
+def with_estimator(spec: "ScenarioSpec", settings: dict, label: str) -> "ScenarioSpec":
+    """``spec`` with the estimator ``settings`` (:class:`~ebraille_sim.physics.params.EstimatorParams`
+    fields; the others at their defaults) and the unit's bench fields
+    (:data:`~ebraille_sim.physics.params.UNIT_ESTIMATOR_FIELDS`); settings that do not suit the
+    scenario's device are a one-line :class:`ScenarioError` that starts with ``label``."""
     unit = {k: getattr(spec.device.estimator, k) for k in _params.UNIT_ESTIMATOR_FIELDS}
     try:
         device = dataclasses.replace(spec.device, estimator=_params.replace_checked(_params.EstimatorParams(),
-                                                                                   **{**unit, **fw.estimator}))
+                                                                                   **{**settings, **unit}))
         _check_rates(device)
-    except ValueError as exc:
-        raise ScenarioError(f"{spec.source}: firmware {fw.name!r}: {exc}") from None
+    except (ValueError, TypeError) as exc:
+        raise ScenarioError(f"{spec.source}: {label}: {exc}") from None
     return dataclasses.replace(spec, device=device)
 
 
