@@ -527,7 +527,7 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
                                       driver_supply_v=dev.get("driver_supply_v", motor.nominal_voltage_v),
                                       gravity_m_per_s2=g)
         _check_rates(device)
-        return _calibrated(src, device, dev)
+        return _calibrated(src, device, dev, {k: est[k] for k in _params.UNIT_ESTIMATOR_FIELDS if k in est})
     except ScenarioError:
         raise
     except (ValueError, TypeError, KeyError, OSError) as exc:
@@ -535,7 +535,7 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
         raise ScenarioError(f"{src}: {msg}") from None
 
 
-def _calibrated(src, device: _params.DeviceParams, dev: dict) -> _params.DeviceParams:
+def _calibrated(src, device: _params.DeviceParams, dev: dict, given: dict) -> _params.DeviceParams:
     """``device`` with the divider calibrated on the bench for its FSR unit and estimator
     (:func:`ebraille_sim.estimation.calibration.bench_calibrate_device`: presses to known loads
     of 0.5-2 N held 5, 20 and 60 s, R2 set to 10 ohm; the nominal unit's is the shipped
@@ -544,7 +544,8 @@ def _calibrated(src, device: _params.DeviceParams, dev: dict) -> _params.DeviceP
     exact), unless ``[device]
     calibrate = false``.  A given ``[device.circuit_overrides] r2_ohm`` needs ``calibrate =
     false`` (the calibration would replace it); a unit whose best R2 lies at the end of the
-    500-50 000 ohm range gets it with a :class:`ScenarioWarning`."""
+    500-50 000 ohm range gets it with a :class:`ScenarioWarning`.  A bench field the scenario's
+    ``[estimator]`` gives (``given``, e.g. ``hysteresis_fraction``) stays as given."""
     if not dev.get("calibrate", DeviceSpec().calibrate):
         return device
     if "r2_ohm" in dev.get("circuit_overrides", {}):
@@ -557,7 +558,8 @@ def _calibrated(src, device: _params.DeviceParams, dev: dict) -> _params.DeviceP
         warnings.warn(f"{src}: no R2 in {lo:g}-{hi:g} ohm calibrates this FSR unit for its estimator; the divider "
                       f"gets R2 = {out.circuit.r2_ohm:.4g} ohm, the end of the range, and the unit reads off",
                       ScenarioWarning, stacklevel=4)
-    return with_calibration_table(out)
+    out = with_calibration_table(out)
+    return dataclasses.replace(out, estimator=_params.replace_checked(out.estimator, **given)) if given else out
 
 
 def _check_rates(device: _params.DeviceParams) -> None:
