@@ -124,20 +124,22 @@ operating point ``(u0, y0)``, ``Nu`` and ``kz``, then from slot ``matrices`` on,
 order: ``A`` (n x n, row-major), ``B``, ``C``, ``K``, ``L`` and ``Nx`` (n each)."""
 
 DS = record("DOBStateSlots", PS._fields + ("disturbance_v", "back_emf_v", "command_v", "setpoint_n",
-                                           "since_step_s", "wide_armed", "wide_error_n"))
+                                           "since_step_s", "wide_armed", "wide_error_n", "approached"))
 """State of the PID with the disturbance observer (:class:`controllers.dob.DOBPID`): the PID's
 slots (:data:`PS`, at the same indices), the observer's estimate ``d_hat``, the filtered
 back-EMF, the last command, the last setpoint and the time since it changed, whether the
-wide-error gains are armed and the low-passed error that decides them (:func:`_wide_error`)."""
+wide-error gains are armed and the low-passed error that decides them (:func:`_wide_error`),
+and whether the estimate has reached the approach's end since the last reset (:func:`_approach`)."""
 
 DP = record("DOBParamSlots", PP._fields + ("motor_r_ohm", "q_time_constant_s", "compensation_fraction",
                                            "max_compensation_v", "speed_read", "hold_damping_v_per_v",
                                            "hold_speed_filter_s", "hold_after_step_s", "hold_band_fraction",
                                            "wide_error_fraction", "wide_kp_v_per_n", "wide_ki_v_per_ns",
-                                           "wide_filter_s"))
+                                           "wide_filter_s", "approach_fraction", "approach_ki_v_per_ns"))
 """Parameters of the PID with the disturbance observer: the fixed-gain PID's slots (:data:`PP`,
 ``variant`` 0, gains scaled above ``schedule_above_n``), the nominal winding resistance, the
-observer's, the hold damping's and the wide-error gains' settings of :class:`controllers.dob.DOBConfig`;
+observer's, the hold damping's, the wide-error gains' and the approach's settings of
+:class:`controllers.dob.DOBConfig`;
 ``speed_read`` is 1.0 when the back-EMF is filtered (a hold damping in some mode)."""
 
 @njit(cache=True, inline="always")
@@ -489,8 +491,20 @@ def dob_reset(s, p, y, r, command_v):
     s[DS.since_step_s] = math.inf
     s[DS.wide_armed] = 0.0
     s[DS.wide_error_n] = y - r
+    s[DS.approached] = 0.0
+    _approach(s, p, y, r)
     core_reset(s, y, r, u0, p[PP.kp_v_per_n] * _pid_gain_scale(p, r), p[PP.setpoint_weight_p],
                p[PP.setpoint_weight_d], _dob_compensation_v(s, p))
+
+
+@njit(cache=True, inline="always")
+def _approach(s, p, y, r):
+    """Whether the PID's integral runs at ``approach_ki_v_per_ns`` this sample: the estimate ``y``
+    has not reached ``approach_fraction`` of the reference ``r`` since the last reset (the board
+    is still on its way to the finger; 0: off)."""
+    if s[DS.approached] == 0.0 and (p[DP.approach_fraction] <= 0.0 or y >= p[DP.approach_fraction] * r):
+        s[DS.approached] = 1.0
+    return s[DS.approached] == 0.0
 
 
 @njit(cache=True, inline="always")
@@ -520,7 +534,8 @@ def dob_step(s, p, y, r, r_loop, kv, h, cur):
     the law of :mod:`controllers.dob`): the observer on the measured current ``cur`` (A; NaN:
     none, the estimate held), the PID on the reference ``r_loop`` (the setpoint, or the setpoint
     with a refresh learner's correction) with the compensation as its feedforward and, while
-    the filtered error is wide (:func:`_wide_error`), the wide-error gains, then the hold
+    the filtered error is wide (:func:`_wide_error`), the wide-error gains, until the estimate
+    first reaches the approach's end (:func:`_approach`) the approach's integral, then the hold
     damping ``-kv e`` in a hold of the setpoint ``r``; returns the command, V."""
     speed = p[DP.speed_read] != 0.0
     if cur == cur:
@@ -534,6 +549,8 @@ def dob_step(s, p, y, r, r_loop, kv, h, cur):
     stepped = r != s[DS.setpoint_n]
     if p[DP.wide_error_fraction] > 0.0 and _wide_error(s, p, y - r_loop, r_loop, stepped, h):
         kp, ki = p[DP.wide_kp_v_per_n], p[DP.wide_ki_v_per_ns]
+    if _approach(s, p, y, r_loop):
+        ki = p[DP.approach_ki_v_per_ns]
     u = core_step(s, y, r_loop, h, kp * a, ki * a, p[PP.kd_vs_per_n] * a,
                   p[PP.derivative_filter_s], p[PP.setpoint_weight_p], p[PP.setpoint_weight_d],
                   p[PP.tracking_gain_per_s], _dob_compensation_v(s, p), p[PP.u_min_v], p[PP.u_max_v])

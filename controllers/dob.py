@@ -106,7 +106,18 @@ the proportional term by ``(wide_kp - kp) e``.  The onset and each setpoint step
 hold's gains until the filtered error first enters the band.  The shipped design
 ``dob_wide_1khz`` is ``dob_hold_1khz``'s gains with the integral at 50 V/(N s) beyond 4 % of the
 setpoint (0.1 s filter), on the 1 kHz firmware with the hysteresis compensation centred in the
-film's blind stretch (``fast_1khz_centred``).
+film's blind stretch (``fast_1khz_centred``): the scenarios' default.
+
+**Approach gain (off by default).**  At the start of a session the board is away from the
+finger: the estimate reads no force, the bumpless start cancels the proportional term, and
+the command is the integral's ramp, ``ki`` times the setpoint per second.  The faster the ramp,
+the further out the board stands when a finger that was lifted at the start comes back (the
+fault matrix's withdrawn finger: 4.15 mm and 3.82 N with ``ki`` 5.1, 2.95 mm with 2.5,
+docs/safety.md).  With ``approach_fraction`` > 0 the integral runs at ``approach_ki_v_per_ns``
+until the estimate first reaches that fraction of the setpoint after a reset, then at the
+PID's own gain for good (a later dip, a lift or a strap slip, keeps it).  ``dob_wide_1khz``
+approaches at 2.5 V/(N s), the ramp of ``pid_dob``'s default gains, up to 20 % of the
+setpoint.
 
 Examples
 --------
@@ -176,6 +187,7 @@ class NominalPlant:
 
 _STUDY = "[E] tuned in the benchmark's refresh-learning study"
 _WIDE = "[E] chosen on drawn readers of one seed, held out on two others (docs/choosing.md)"
+_APPROACH = "[D] the approach's ramp of the default gains, which keeps the fault matrix within 3.5 N (docs/safety.md)"
 
 
 @dataclass(frozen=True)
@@ -215,6 +227,11 @@ class DOBConfig(PIDConfig):
         ``kp_v_per_n`` / ``ki_v_per_ns``.
     wide_filter_s : float
         Time constant of the error's low-pass that decides, s; in [0, 1]; 0 is the error itself.
+    approach_fraction : float
+        The approach's integral applies until the estimate first reaches this fraction of the
+        setpoint after a reset; in [0, 1]; 0 is off.
+    approach_ki_v_per_ns : float or None
+        The PID's integral gain during the approach, V/(N s); >= 0; None keeps ``ki_v_per_ns``.
     compensation_fraction : float
         ``f``: share of the estimated disturbance added to the command; in [0, 1).
     max_compensation_v : float
@@ -253,6 +270,11 @@ class DOBConfig(PIDConfig):
     wide_filter_s: float = sourced(0.0, "s", _WIDE, experimental=True,
                                    doc="Time constant of the error's low-pass that decides the wide-error gains "
                                        "(0: the error itself).")
+    approach_fraction: float = sourced(0.0, "-", _APPROACH, experimental=True,
+                                       doc="The approach's integral gain applies until the estimate first reaches "
+                                           "this fraction of the setpoint after a reset (0: off).")
+    approach_ki_v_per_ns: float | None = sourced(None, "V/(N s)", _APPROACH, experimental=True,
+                                                 doc="Integral gain during the approach (None: ki_v_per_ns).")
     refresh_learning_gain: float = sourced(0.0, "-", _STUDY, experimental=True,
                                            doc="Gain gamma of the refresh learning (0: off).")
     refresh_learning_lead_s: float = sourced(RefreshLearning.lead_s, "s", _STUDY, experimental=True,
@@ -283,9 +305,10 @@ class DOBConfig(PIDConfig):
                                check_number("refresh_hold_damping_v_per_v", self.refresh_hold_damping_v_per_v,
                                             0.0, 5.0))
         self.refresh_learning()   # checks the learning's own fields, one line each
-        for name, lo, hi in (("wide_error_fraction", 0.0, 1.0), ("wide_filter_s", 0.0, 1.0)):
+        for name, lo, hi in (("wide_error_fraction", 0.0, 1.0), ("wide_filter_s", 0.0, 1.0),
+                             ("approach_fraction", 0.0, 1.0)):
             object.__setattr__(self, name, check_number(name, getattr(self, name), lo, hi))
-        for name in ("wide_kp_v_per_n", "wide_ki_v_per_ns"):          # as the PID's own gains: finite, >= 0
+        for name in ("wide_kp_v_per_n", "wide_ki_v_per_ns", "approach_ki_v_per_ns"):  # as the PID's gains: >= 0
             if getattr(self, name) is not None:
                 object.__setattr__(self, name, check_number(name, getattr(self, name), lo=0.0))
         object.__setattr__(self, "q_time_constant_s",
@@ -360,7 +383,9 @@ class DOBPID:
             hold_band_fraction=config.hold_band_fraction, wide_error_fraction=config.wide_error_fraction,
             wide_kp_v_per_n=config.kp_v_per_n if config.wide_kp_v_per_n is None else config.wide_kp_v_per_n,
             wide_ki_v_per_ns=config.ki_v_per_ns if config.wide_ki_v_per_ns is None else config.wide_ki_v_per_ns,
-            wide_filter_s=config.wide_filter_s)
+            wide_filter_s=config.wide_filter_s, approach_fraction=config.approach_fraction,
+            approach_ki_v_per_ns=(config.ki_v_per_ns if config.approach_ki_v_per_ns is None
+                                  else config.approach_ki_v_per_ns))
 
     @property
     def config(self) -> DOBConfig:

@@ -286,6 +286,27 @@ def residual_design(path) -> str | None:
     return env.get("residual")
 
 
+def trained_estimator(path) -> dict | None:
+    """The estimator settings a policy of the whole command at ``path`` was trained on
+    (``training.estimator`` of its metadata, without the training unit's bench fields,
+    :data:`~ebraille_sim.physics.params.UNIT_ESTIMATOR_FIELDS`; a policy whose metadata does
+    not record them met the env's default device, the paper's 100 Hz path), or None (a residual
+    policy, which runs on its design's firmware, or no readable policy there)."""
+    import dataclasses
+
+    from ebraille_sim.physics.params import UNIT_ESTIMATOR_FIELDS, EstimatorParams
+    try:
+        _, json_path = _paths(path)
+        meta = read_metadata(json_path)
+    except (ValueError, OSError):
+        return None
+    if meta["env"].get("residual") is not None:
+        return None
+    est = meta.get("training", {}).get("estimator")
+    est = dataclasses.asdict(EstimatorParams()) if not isinstance(est, dict) else est
+    return {k: v for k, v in est.items() if k not in UNIT_ESTIMATOR_FIELDS}
+
+
 def _load_sb3(algo: str, zip_path: str):
     try:
         import stable_baselines3 as sb3

@@ -15,7 +15,7 @@ from ebraille_sim.analysis.robust import evaluate, linearisation_points, populat
 from controllers.pid import stiffness_ratio
 from controllers.schedule import ScheduleConfig, ScheduledPID
 from ebraille_sim.physics.params import DeviceParams
-from ebraille_sim.scenarios.spec import load_scenario
+from ebraille_sim.scenarios.spec import load_scenario, with_firmware
 
 
 def test_registered_and_listed():
@@ -192,7 +192,7 @@ def test_lqg_acts_at_its_sample_period():
 
 
 def test_scheduled_pid_beats_default_on_setpoint_steps_presets():
-    spec = load_scenario("setpoint_steps")
+    spec = with_firmware(load_scenario("setpoint_steps"), "paper_100hz")     # the path both were tuned on
     pop = tuning_population(0, seed=0)[:3]
     d = summarise(evaluate(lambda: PID(DEFAULT_PID), pop, spec))
     s = summarise(evaluate(lambda: controllers.make("pid_scheduled"), pop, spec))

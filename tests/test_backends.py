@@ -43,7 +43,8 @@ import controllers
 from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.plant.layout import N_INPUT, N_PARAM, N_STATE, S, U
 from ebraille_sim.plant.backends import PLANT_BACKENDS, make_plant
-from make_golden import COLUMNS, CONTROLLER, DURATION_S, SCENARIO, SEED, TOLERANCES, golden_path, golden_run, read_golden
+from make_golden import (COLUMNS, CONTROLLER, DURATION_S, FIRMWARE, SCENARIO, SEED, TOLERANCES, golden_path, golden_run,
+                         read_golden)
 
 BACKENDS = list(PLANT_BACKENDS)
 GAP_M = 1e-3            # pulp surface 1 mm above the retracted board
@@ -92,7 +93,7 @@ def test_golden_comparison_sees_a_small_physics_change_and_not_round_off(backend
     stiffer = dataclasses.replace(dev, finger=dataclasses.replace(
         dev.finger, stiffness_b_n_per_m=(1.0 + relative) * dev.finger.stiffness_b_n_per_m))
     res = run_scenario(SCENARIO, controller=CONTROLLER, seed=SEED, duration_s=DURATION_S, device=stiffer,
-                       backend=backend)
+                       backend=backend, firmware=FIRMWARE)
     fresh = {c: np.asarray(res.trace[c], float) for c in COLUMNS}
     golden = read_golden(backend)
     if caught:

@@ -77,11 +77,11 @@ def test_quick_suite_ranks_the_bounds_beside_the_controller(quick):
     assert press["hysteresis_bound"]["in_band_fraction_cvar10"] > 0.95
     # under the supervisor's limits the drive holds every refresh character at 120 wpm when the
     # controller sees the true force (measured 1.00 on both readers), whatever the film
-    # withholds; the FSR-fed PID holds none
+    # withholds; the FSR-fed PID holds few (0.11 on the default firmware, none on the paper's path)
     refresh = {c: s[c]["scenarios"]["refresh_120wpm"] for c in s}
     assert refresh["actuator_bound"]["char_in_band_fraction_cvar10"] > 0.95
     assert refresh["hysteresis_bound"]["char_in_band_fraction_cvar10"] > 0.95
-    assert refresh["pid"]["char_in_band_fraction_cvar10"] < 0.1
+    assert refresh["pid"]["char_in_band_fraction_cvar10"] < 0.2
     # the derived bounds are not defined on a fault scenario (a broken lead is not an estimation error)
     assert s["sensor_bound"]["scenarios"]["fault_fsr_open"]["episodes"] == 0
     assert s["hysteresis_bound"]["scenarios"]["fault_fsr_open"]["episodes"] == 0
@@ -250,14 +250,15 @@ def test_friction_pid_jumps_across_the_friction_band_when_the_error_changes_sign
 
 
 def test_estimator_settings_apply_to_every_episode_and_are_recorded(quick):
-    """A firmware variant (here the hysteresis compensation) runs on every device, the bounds'
-    included; the results file records it; the default run is unchanged by the option."""
+    """A firmware variant (here without the default firmware's hysteresis compensation) runs on
+    every device, the bounds' included; the results file records it; the default run is unchanged
+    by the option."""
     assert B.estimator_settings(["hysteresis_compensation=true", "hysteresis_deadband_lsb=2"]) == {
         "hysteresis_compensation": True, "hysteresis_deadband_lsb": 2.0}
-    res = B.run_benchmark(["pid"], suite="quick", jobs=1, estimator={"hysteresis_compensation": True})
+    res = B.run_benchmark(["pid"], suite="quick", jobs=1, estimator={"hysteresis_compensation": False})
     doc = B.results_document(res)
-    assert doc["estimator"] == {"hysteresis_compensation": True}
-    assert "estimator hysteresis_compensation=true" in B.format_leaderboard(res)
+    assert doc["estimator"] == {"hysteresis_compensation": False}
+    assert "estimator hysteresis_compensation=false" in B.format_leaderboard(res)
     base, _ = quick
     assert B.results_document(base)["estimator"] == {}
     old = {(r["controller"], r["scenario"], r["reader"]): r for r in base.rows}

@@ -13,7 +13,8 @@ from controllers.designs import DESIGN_KEYS, designs, get_design
 from ebraille_sim.estimation.presets import firmware_presets, get_firmware
 from ebraille_sim.physics.params import EstimatorParams
 from ebraille_sim.scenarios.runner import design_firmware, run_scenario
-from ebraille_sim.scenarios.spec import SCHEMA, ScenarioError, load_scenario, parse_scenario, with_firmware
+from ebraille_sim.scenarios.spec import (DEFAULT_DESIGN, DEFAULT_FIRMWARE, SCHEMA, ScenarioError, load_scenario,
+                                        parse_scenario, with_firmware)
 
 
 def test_every_shipped_design_names_a_controller_a_firmware_and_a_measured_score():
@@ -42,8 +43,9 @@ def test_a_design_runs_on_its_own_firmware_and_reproduces_its_check():
     d = get_design("dob_learn_1khz")
     res = run_scenario(d.check["scenario"], controller=d.name, trace_every=None)
     assert res.metrics["char_in_band_fraction"] == pytest.approx(d.check["char_in_band_fraction"], abs=0.006)
-    plain = run_scenario(d.check["scenario"], controller=controllers.make(d.name), trace_every=None)
-    # the same gains on the scenario's own (100 Hz) firmware are a different device
+    plain = run_scenario(d.check["scenario"], controller=controllers.make(d.name), trace_every=None,
+                         firmware="paper_100hz")
+    # the same gains on the paper's 100 Hz firmware are a different device
     assert plain.metrics["char_in_band_fraction"] != res.metrics["char_in_band_fraction"]
 
 
@@ -56,8 +58,13 @@ def test_a_firmware_preset_sets_the_estimator_as_its_keys_do():
     named = parse_scenario({"name": "x", "estimator": {"firmware": "fast_1khz"}})
     trial = {k: want.pop(k) for k in list(want) if k in SCHEMA["estimator.experimental"]}
     assert trial == {"hysteresis_turn_lsb": 1.75}        # the preset's study knob: [estimator.experimental]
-    keys = parse_scenario({"name": "x", "estimator": {**want, "experimental": trial}})
+    # over the paper's path, which sets no study knob, the preset's keys give the preset
+    keys = parse_scenario({"name": "x", "estimator": {"firmware": "paper_100hz", **want, "experimental": trial}})
     assert named.device.estimator == keys.device.estimator
+    # a scenario without the key starts from the default design's firmware, the centred one
+    assert parse_scenario({"name": "x"}).device.estimator == parse_scenario(
+        {"name": "x", "estimator": {"firmware": "fast_1khz_centred"}}).device.estimator
+    assert parse_scenario({"name": "x"}).device.estimator.hysteresis_centre_time_s == 0.05
     # a key of the section replaces the preset's
     own = parse_scenario({"name": "x", "estimator": {"firmware": "fast_1khz",
                                                      "experimental": {"hysteresis_turn_lsb": 3.0}}})
@@ -65,10 +72,12 @@ def test_a_firmware_preset_sets_the_estimator_as_its_keys_do():
     assert own.device.estimator.model == want["model"]
 
 
-def test_the_default_firmware_preset_is_the_default_estimator():
+def test_the_paper_path_is_the_estimator_layer_default_and_scenarios_run_the_default_design_firmware():
     e = EstimatorParams()
     for k, v in get_firmware("paper_100hz").estimator.items():
         assert getattr(e, k) == v
+    assert DEFAULT_FIRMWARE == get_design(DEFAULT_DESIGN).firmware
+    assert parse_scenario({"name": "x"}).controller.name == DEFAULT_DESIGN
 
 
 def test_a_user_design_file_runs_as_the_shipped_design(tmp_path):
@@ -112,7 +121,8 @@ def test_an_unknown_firmware_in_a_scenario_is_one_line():
 
 
 def test_a_firmware_whose_rates_do_not_suit_the_scenario_is_refused():
-    spec = parse_scenario({"name": "x", "rates": {"control_hz": 200.0, "sensor_hz": 200.0}})
+    spec = parse_scenario({"name": "x", "rates": {"control_hz": 200.0, "sensor_hz": 200.0},
+                           "estimator": {"firmware": "paper_100hz"}})
     with pytest.raises(ScenarioError, match="fast_1khz"):
         with_firmware(spec, "fast_1khz")
 
@@ -200,11 +210,13 @@ def test_dob_wide_1khz_holds_a_relay_reader_and_lifts_a_pressing_one():
     """Two drawn readers of seed 11 (the readers the wide-error gains were chosen on): on the
     large-loop unit (0.144) where ``dob_hold_1khz``'s loop and the hysteresis compensation keep each
     other going, steady reading at 0.79 in band, ``dob_wide_1khz`` holds 0.99; on a pressing
-    reader the wide-error integral lifts the same firmware and gains from 0.70 to 0.81."""
+    reader the wide-error integral lifts the same firmware and gains from 0.70 to 0.81.  (Its
+    approach at 2.5 V/(N s) settles on the relay reader 0.24 s later than the hold's own integral
+    would, 0.80 s against 0.56 s: 0.985 of the 12 s in band against 0.996.)"""
     spec, dev = _drawn_reader("steady_90wpm", 11, 28)
     ib = {c: run_scenario(spec, controller=c, seed=spec.seed + 7 * 28, duration_s=12, device=dev,
                           trace_every=None).metrics["in_band_fraction"] for c in ("dob_hold_1khz", "dob_wide_1khz")}
-    assert ib["dob_hold_1khz"] < 0.85 and ib["dob_wide_1khz"] > 0.99
+    assert ib["dob_hold_1khz"] < 0.85 and ib["dob_wide_1khz"] > 0.98
     spec, dev = _drawn_reader("pressing_90wpm", 11, 65)
     design = get_design("dob_wide_1khz")
     narrow = controllers.make("pid_dob", **{**design.gains, "wide_error_fraction": 0.0})

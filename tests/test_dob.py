@@ -304,3 +304,36 @@ def test_bad_wide_error_gains_one_line(gains, match):
     with pytest.raises(ValueError, match=match) as exc:
         controllers.make("pid_dob", **gains)
     assert "\n" not in str(exc.value)
+
+
+APPROACH = {"ki_v_per_ns": 5.1, "approach_fraction": 0.2, "approach_ki_v_per_ns": 2.5}
+
+
+def test_the_approach_runs_the_integral_at_its_own_gain_until_the_estimate_first_reaches_its_end():
+    """From a reset with no contact (0 N on a 1 N setpoint) the integral sums ``2.5 e h`` until the
+    estimate first reaches 20 % of the setpoint, then ``5.1 e h`` for good: a later dip below 20 %
+    (a lift) keeps the hold's gain; the bumpless start cancels the proportional term, so once
+    the observer has settled on the steady current the command is the integral's ramp."""
+    away = [0.0] * 100
+    ramp = _run(controllers.make("pid_dob", **APPROACH), away, y0=0.0)
+    slow = _run(controllers.make("pid_dob", ki_v_per_ns=2.5), away, y0=0.0)
+    assert np.array_equal(ramp, slow)
+    assert np.diff(ramp)[80:] == pytest.approx(2.5e-3 * 1.0, rel=1e-6)   # the observer settled (tau 3 ms)
+    found = [0.0] * 100 + [0.25] * 50 + [0.1] * 50              # contact, then a dip below the end
+    with_end = _run(controllers.make("pid_dob", **APPROACH), found, y0=0.0)
+    d = np.diff(with_end)
+    assert d[110] == pytest.approx(5.1e-3 * 0.75, rel=1e-9)      # the hold's integral after contact
+    assert d[170] == pytest.approx(5.1e-3 * 0.9, rel=1e-9)       # and after the dip
+    assert np.array_equal(_run(controllers.make("pid_dob", **APPROACH), found[100:], y0=0.25),
+                          _run(controllers.make("pid_dob", ki_v_per_ns=5.1), found[100:], y0=0.25))
+
+
+@pytest.mark.parametrize("gains, match", [
+    ({"approach_fraction": 1.5}, "approach_fraction"),
+    ({"approach_ki_v_per_ns": -1.0}, "approach_ki_v_per_ns"),
+    ({"approach_ki_v_per_ns": float("inf")}, "approach_ki_v_per_ns"),
+])
+def test_bad_approach_gains_one_line(gains, match):
+    with pytest.raises(ValueError, match=match) as exc:
+        controllers.make("pid_dob", **gains)
+    assert "\n" not in str(exc.value)

@@ -158,11 +158,11 @@ def test_closed_loop_estimate_tracks_the_true_force_and_is_deterministic():
     """refresh_60wpm, 6 s, default pid: estimate RMSE 0.058 N at 1 kHz with a 50 Hz
     anti-alias cutoff against 0.22 N for the 100 Hz estimator (20 s runs, docs/estimators.md)."""
     from ebraille_sim.scenarios.runner import run_scenario
-    fast_spec = _refresh_spec(model=FAST, antialias_cutoff_hz=50.0)
+    fast_spec = _refresh_spec(firmware="paper_100hz", model=FAST, antialias_cutoff_hz=50.0)
     assert fast_spec.device.estimator.model == FAST
     a = run_scenario(fast_spec, controller="pid")
     b = run_scenario(fast_spec, controller="pid")
-    slow = run_scenario(_refresh_spec(), controller="pid", trace_every=None)
+    slow = run_scenario(_refresh_spec(firmware="paper_100hz"), controller="pid", trace_every=None)
     assert np.array_equal(a.trace["force_est_n"], b.trace["force_est_n"])
     assert np.array_equal(a.trace["force_true_n"], b.trace["force_true_n"])
     assert a.metrics["estimate_rmse_n"] < 0.08

@@ -248,3 +248,20 @@ def test_numpy_actor_equals_sb3_predict_and_bad_files_are_one_line(tmp_path):
         ref = model.predict(obs_all, deterministic=True)[0].reshape(-1)
         got = np.array([a.predict(o)[0][0] for o in obs_all])
         assert np.max(np.abs(ref - got)) <= 1e-5
+
+
+def test_a_learned_policy_runs_on_the_estimator_it_was_trained_on():
+    """A policy of the whole command met the env's estimator in training; a scenario runs it on
+    that estimator (the unit keeping its bench's table), not on the scenario's default firmware:
+    ``ppo`` on the paper's 100 Hz path, ``ppo_hc`` on it with the hysteresis compensation (its
+    metadata records it)."""
+    from ebraille_sim.physics.params import EstimatorParams
+    from ebraille_sim.scenarios.runner import prepare_run
+    from ebraille_sim.scenarios.spec import load_scenario
+    base = load_scenario("steady_90wpm").device.estimator
+    assert base.model == "paper:wiener:5@1000"                       # the scenario's default firmware
+    for name, comp in (("ppo", False), ("ppo_hc", True)):
+        est = prepare_run("steady_90wpm", controller=f"policy:{name}")[0].device.estimator
+        assert est.model == EstimatorParams().model == "paper:wiener:5" and est.antialias_cutoff_hz == 20.0
+        assert est.hysteresis_compensation is comp and est.hysteresis_centre_time_s == 0.0
+        assert est.calibration_loads_n == base.calibration_loads_n != ()   # the unit's own table

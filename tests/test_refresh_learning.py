@@ -165,7 +165,7 @@ def test_learning_holds_refresh_characters_a_plain_loop_loses():
     dev = device_from_variates(u, z, PopulationSpec(calibration_table=False), spec.device)
     dev = dataclasses.replace(dev, estimator=replace_checked(
         dev.estimator, hysteresis_compensation=True, model="paper:wiener:5@1000", antialias_cutoff_hz=50.0,
-        hysteresis_turn_lsb=1.75))
+        hysteresis_turn_lsb=1.75, hysteresis_centre_time_s=0.0))     # fast_1khz
     gains = {"kp_v_per_n": 2.9, "ki_v_per_ns": 5.1, "compensation_fraction": 0.67, "q_time_constant_s": 0.002,
              "hold_damping_v_per_v": 0.5}
     seed = spec.seed + 101 * 57

@@ -84,9 +84,9 @@ def test_degraded_gains_fail(suite, tmp_path, capsys):
 
 def test_criteria_fail_whatever_the_baseline(suite, capsys):
     p = suite / "contact_onset.toml"
-    p.write_text(p.read_text().replace("onset_overshoot_max = 0.15", "in_band_min = 0.99"))
+    p.write_text(p.read_text().replace("onset_overshoot_max = 0.15", "peak_force_max_n = 1.55"))  # peaks 1.60 N
     assert cli(["regress", "--scenarios", str(suite), "--only", "contact_onset", "--update"]) == 1
-    assert "criterion ([criteria] in_band_min)" in capsys.readouterr().out
+    assert "criterion ([criteria] peak_force_max_n)" in capsys.readouterr().out
 
 
 def test_missing_baseline_and_bad_names(suite, capsys):

@@ -276,7 +276,8 @@ def test_experimental_tables_are_marked_and_hold_the_study_knobs(rendered, js):
     assert {k.name for k in secs["controller.experimental"].keys} == {
         "refresh_learning_gain", "refresh_learning_lead_s", "refresh_learning_smoothing_s",
         "refresh_learning_after_s", "refresh_learning_limit_fraction", "refresh_hold_damping_v_per_v",
-        "wide_error_fraction", "wide_kp_v_per_n", "wide_ki_v_per_ns", "wide_filter_s"}
+        "wide_error_fraction", "wide_kp_v_per_n", "wide_ki_v_per_ns", "wide_filter_s",
+        "approach_fraction", "approach_ki_v_per_ns"}
     assert "hysteresis_turn_lsb" not in {k.name for k in secs["estimator"].keys}
     md = rendered[gen.REFERENCE_PATH]
     for path in experimental:

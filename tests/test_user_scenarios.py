@@ -9,6 +9,7 @@ import tomllib
 import pytest
 
 from ebraille_sim.physics.params import FINGERS, FSRS
+from ebraille_sim.scenarios.spec import DEFAULT_DESIGN
 from ebraille_sim.scenarios.runner import run_scenario
 from ebraille_sim.scenarios.spec import load_scenario, parse_scenario
 
@@ -26,7 +27,7 @@ def _variant(**changes) -> dict:
 
 def test_the_mixed_scenario_mixes_what_it_says():
     spec = load_scenario(str(MIXED))
-    assert spec.controller.name == "pid_dob" and spec.calibrated
+    assert spec.controller.name == DEFAULT_DESIGN and spec.calibrated
     assert spec.device.finger == FINGERS["soft"]
     assert spec.device.fsr == FSRS["high_k"]
     assert spec.reading.wpm == 100 and spec.reading.jitter_fraction > 0 and spec.reading.word_pause_s > 0

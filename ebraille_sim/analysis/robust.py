@@ -85,7 +85,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ebraille_sim.physics.params import FINGERS, FSRS, TACTILE_FORCE_MAX_N, DeviceParams
+from ebraille_sim.physics.params import FINGERS, FSRS, TACTILE_FORCE_MAX_N, DeviceParams, unit_estimator
 
 from controllers.pid import DEFAULT_PID, PID, PIDConfig
 
@@ -251,7 +251,8 @@ def evaluate(make_controller, population, spec, seed: int | None = None, duratio
     from ebraille_sim.scenarios.runner import run_scenario
     rows = []
     for label, dev in population:
-        d = dataclasses.replace(dev, rates=spec.device.rates, estimator=spec.device.estimator,
+        d = dataclasses.replace(dev, rates=spec.device.rates, estimator=unit_estimator(spec.device.estimator,
+                                                                                      dev.estimator),
                                 driver_supply_v=spec.device.driver_supply_v,
                                 gravity_m_per_s2=spec.device.gravity_m_per_s2)
         s = dataclasses.replace(spec, device=d)

@@ -606,6 +606,18 @@ class CurrentSenseParams(_Checked):
 CALIBRATION_TABLE_MAX_POINTS = 6
 """Most points of a unit's calibration table (:class:`EstimatorParams`)."""
 
+UNIT_ESTIMATOR_FIELDS = ("hysteresis_fraction", "creep_per_decade", "calibration_loads_n", "calibration_readings_n")
+"""The :class:`EstimatorParams` fields a unit's bench measures and stores: they belong to the
+unit, and a firmware preset loaded onto it keeps them."""
+
+
+def unit_estimator(firmware: "EstimatorParams", unit: "EstimatorParams | None" = None) -> "EstimatorParams":
+    """The estimator settings of ``firmware`` with the bench fields (:data:`UNIT_ESTIMATOR_FIELDS`)
+    of ``unit``: another unit's estimator, or None for a unit its bench has not measured (the
+    fields at their defaults)."""
+    src = EstimatorParams() if unit is None else unit
+    return replace_checked(firmware, **{k: getattr(src, k) for k in UNIT_ESTIMATOR_FIELDS})
+
 
 @dataclass(frozen=True)
 class EstimatorParams(_Checked):

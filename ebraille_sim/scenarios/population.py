@@ -57,7 +57,7 @@ from numpy.random.bit_generator import ISpawnableSeedSequence
 from ebraille_sim.base.seeds import SeedNode
 from ebraille_sim.base.validation import check_bool, check_number, check_pair, replace_fields
 from ebraille_sim.estimation.calibration import TABLE_LOADS_N, calibrate_device, with_calibration_table
-from ebraille_sim.physics.params import DeviceParams, replace_checked
+from ebraille_sim.physics.params import DeviceParams, replace_checked, unit_estimator
 from ebraille_sim.scenarios.draws import device_numbers
 
 
@@ -175,7 +175,8 @@ def device_from_variates(u, z, spec: PopulationSpec = PopulationSpec(),
     e_shunt, e_gain, e_offset, e_load, e_t0, e_t2, e_t3 = (2.0 * v - 1.0 for v in u[len(DEVICE_UNIFORMS):])
     board = replace_checked(cs, shunt_error=cs.shunt_tolerance * e_shunt, gain_error=cs.gain_error_max * e_gain,
                             offset_v=cs.offset_max_v * e_offset)
-    dev = replace_fields(base, finger=finger, fsr=fsr, motor=motor, drivetrain=drivetrain, current_sense=board)
+    dev = replace_fields(base, finger=finger, fsr=fsr, motor=motor, drivetrain=drivetrain, current_sense=board,
+                         estimator=unit_estimator(base.estimator))     # a new unit: nothing of the base's bench
     if not spec.calibrate:
         return dev
     dev = calibrate_device(dev, load_error=CALIBRATION_LOAD_TOLERANCE * e_load)

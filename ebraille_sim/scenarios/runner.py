@@ -20,7 +20,8 @@ from ebraille_sim.plant.backends import make_plant
 from ebraille_sim.plant.engine import KEPT
 from ebraille_sim.scenarios.inputs import build_run_inputs, refresh_phases
 from ebraille_sim.scenarios.metrics import compute_metrics
-from ebraille_sim.scenarios.spec import ScenarioError, ScenarioSpec, load_scenario, with_firmware
+from ebraille_sim.scenarios.spec import (DEFAULT_DESIGN, ScenarioError, ScenarioSpec, load_scenario, with_estimator,
+                                        with_firmware)
 
 TRACE_COLUMNS = ["t_s", "setpoint_n", "force_true_n", "force_est_n", "fsr_voltage_v", "command_v",
                  "motor_current_a", "board_pos_m", "energy_j", "char_index", "character"]
@@ -134,6 +135,16 @@ def design_firmware(controller) -> str | None:
         return None
 
 
+def policy_estimator(controller) -> dict | None:
+    """The estimator settings a learned policy of the whole command (``policy:PATH``) was
+    trained on (:func:`controllers.policy.trained_estimator`), or None for anything else."""
+    import os
+    if not isinstance(controller, (str, os.PathLike)) or not os.fspath(controller).startswith("policy:"):
+        return None
+    from controllers.policy import trained_estimator
+    return trained_estimator(os.fspath(controller)[len("policy:"):])
+
+
 def prepare_run(scenario, controller=None, seed: int | None = None, duration_s: float | None = None,
                 device=None, firmware=None) -> tuple:
     """The spec, seed, run inputs and (unwrapped) controller of one run of :func:`run_scenario`."""
@@ -141,8 +152,14 @@ def prepare_run(scenario, controller=None, seed: int | None = None, duration_s: 
     if device is not None:
         import dataclasses
         spec = dataclasses.replace(spec, device=device)
-    if firmware is None:                          # a design runs on its own firmware
-        firmware = design_firmware(spec.controller.name if controller is None else controller)
+    if firmware is None and (controller is not None or spec.controller.name != DEFAULT_DESIGN):
+        # a design given to the run, or named by the scenario, runs on its own firmware; the
+        # default design runs on the scenario's estimator, which starts from that firmware
+        named = spec.controller.name if controller is None else controller
+        firmware = design_firmware(named)
+        trained = policy_estimator(named) if firmware is None else None
+        if trained is not None:                   # a learned policy runs on the estimator it met
+            spec = with_estimator(spec, trained, f"the estimator policy {named} was trained on")
     if firmware is not None:
         spec = with_firmware(spec, firmware)
     if duration_s is not None:

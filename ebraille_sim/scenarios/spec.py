@@ -84,6 +84,14 @@ def check_section_table(source: str, section: str, value, allowed) -> None:
 
 _SETTING = "scenario setting"
 
+DEFAULT_DESIGN = "dob_wide_1khz"
+"""The controller a scenario without ``[controller]`` runs: the shipped design that serves the
+drawn population best (docs/choosing.md), on the scenario's estimator."""
+
+DEFAULT_FIRMWARE = "fast_1khz_centred"
+"""The firmware preset a scenario's estimator starts from unless ``[estimator] firmware`` names
+another: the default design's."""
+
 
 def _key(default: Any, unit: str, kind: str, source: str = _SETTING, *, doc: str, **rule) -> Any:
     """A scenario key: a :func:`~ebraille_sim.base.fields.sourced` field whose metadata is its rule.
@@ -183,8 +191,8 @@ class SetpointSpec:
 @dataclass(frozen=True)
 class ControllerSpec:
     """``[controller]``: a registered name (or design, or gains file) and its keyword gains."""
-    name: str = _key("pid_dob", "-", "str", doc="A registered controller, a shipped design, a design or gains "
-                                                "file, or policy:PATH.")
+    name: str = _key(DEFAULT_DESIGN, "-", "str", doc="A registered controller, a shipped design, a design or gains "
+                                                     "file, or policy:PATH.")
     gains: dict = field(default_factory=dict, metadata={"unit": "-", "source": _SETTING, "kind": "free",
                                                         "doc": "Keyword gains of the controller (see the gains "
                                                                "tables below)."})
@@ -227,9 +235,9 @@ class DeviceSpec:
     current_sense_overrides: dict | None = _key(None, "-", "overrides", target=_params.CurrentSenseParams,
                                                 doc="Field overrides of the motor current chain.")
     calibrate: bool = _key(True, "-", "bool", "true: R2 set on the bench for this FSR unit and estimator (presses "
-                           "to 0.5-2 N held 5-60 s, least squares; drawn units are trimmed at 1 N held 20 s and "
-                           "their bench stores a calibration table at 0.5-2 N, their creep and their loop, "
-                           "estimation.calibration.with_calibration_table); "
+                           "to 0.5-2 N held 5-60 s, least squares; drawn units are trimmed at 1 N held 20 s), "
+                           "then the bench stores the unit's calibration table at 0.5-2 N, its creep and its "
+                           "loop (estimation.calibration.with_calibration_table); "
                            "false: a miscalibrated unit on purpose, with the circuit's R2",
                            doc="Calibrate the divider's R2 for this FSR unit and estimator.")
 
@@ -271,8 +279,8 @@ class EstimatorSpec:
 
     ``firmware`` names a firmware preset (:mod:`ebraille_sim.estimation.presets`): its settings
     come first, and the section's other keys replace them."""
-    firmware: str | None = _key(None, "-", "choice", choices=tuple(sorted(_firmware_presets())),
-                                doc="A firmware preset (`ebraille-sim list`): its settings come first.")
+    firmware: str = _key(DEFAULT_FIRMWARE, "-", "choice", choices=tuple(sorted(_firmware_presets())),
+                         doc="A firmware preset (`ebraille-sim list`): its settings come first.")
     model: str | None = _key(None, "-", "str", _PARAM,
                              doc="Estimator model: paper:NAME[@RATE] or a model file relative to the scenario.")
     antialias_cutoff_hz: float | None = _key(None, "Hz", "float", _PARAM, lo=0, hi=1e5, lo_open=True,
@@ -502,22 +510,9 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
             physics_rate_hz=rates.get("physics_hz", r0.physics_hz))
         if "experimental" in est:               # the study knobs are EstimatorParams fields like the rest
             est = {**{k: v for k, v in est.items() if k != "experimental"}, **est["experimental"]}
-        if "firmware" in est:
-            est = {**_firmware_presets()[est["firmware"]].estimator,
-                   **{k: v for k, v in est.items() if k != "firmware"}}
-        e = _params.replace_checked(_params.EstimatorParams(), **{
-            k2: est[k1] for k1, k2 in (("model", "model"), ("antialias_cutoff_hz", "antialias_cutoff_hz"),
-                                       ("tare_at_start", "tare_at_start"),
-                                       ("clamp_nonnegative", "clamp_nonnegative"),
-                                       ("nyquist_average", "nyquist_average"),
-                                       ("creep_compensation", "creep_compensation"),
-                                       ("creep_reference_hold_s", "creep_reference_hold_s"),
-                                       ("hysteresis_compensation", "hysteresis_compensation"),
-                                       ("hysteresis_fraction", "hysteresis_fraction"),
-                                       ("hysteresis_deadband_lsb", "hysteresis_deadband_lsb"),
-                                       ("hysteresis_turn_lsb", "hysteresis_turn_lsb"),
-                                       ("hysteresis_follow_lsb", "hysteresis_follow_lsb"),
-                                       ("hysteresis_turn_time_s", "hysteresis_turn_time_s")) if k1 in est})
+        est = {**_firmware_presets()[est.get("firmware", EstimatorSpec().firmware)].estimator,
+               **{k: v for k, v in est.items() if k != "firmware"}}
+        e = _params.replace_checked(_params.EstimatorParams(), **est)    # the section's keys are its fields
         if "model" in est and not est["model"].startswith("paper:"):
             mp = pathlib.Path(est["model"])
             if not mp.is_absolute():
@@ -532,7 +527,7 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
                                       driver_supply_v=dev.get("driver_supply_v", motor.nominal_voltage_v),
                                       gravity_m_per_s2=g)
         _check_rates(device)
-        return _calibrated(src, device, dev)
+        return _calibrated(src, device, dev, {k: est[k] for k in _params.UNIT_ESTIMATOR_FIELDS if k in est})
     except ScenarioError:
         raise
     except (ValueError, TypeError, KeyError, OSError) as exc:
@@ -540,27 +535,31 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
         raise ScenarioError(f"{src}: {msg}") from None
 
 
-def _calibrated(src, device: _params.DeviceParams, dev: dict) -> _params.DeviceParams:
+def _calibrated(src, device: _params.DeviceParams, dev: dict, given: dict) -> _params.DeviceParams:
     """``device`` with the divider calibrated on the bench for its FSR unit and estimator
     (:func:`ebraille_sim.estimation.calibration.bench_calibrate_device`: presses to known loads
     of 0.5-2 N held 5, 20 and 60 s, R2 set to 10 ohm; the nominal unit's is the shipped
-    1 150 ohm), unless ``[device]
+    1 150 ohm) and the unit's calibration table, creep and loop stored as the bench measures
+    them (:func:`ebraille_sim.estimation.calibration.with_calibration_table`, the fixture's loads
+    exact), unless ``[device]
     calibrate = false``.  A given ``[device.circuit_overrides] r2_ohm`` needs ``calibrate =
     false`` (the calibration would replace it); a unit whose best R2 lies at the end of the
-    500-50 000 ohm range gets it with a :class:`ScenarioWarning`."""
+    500-50 000 ohm range gets it with a :class:`ScenarioWarning`.  A bench field the scenario's
+    ``[estimator]`` gives (``given``, e.g. ``hysteresis_fraction``) stays as given."""
     if not dev.get("calibrate", DeviceSpec().calibrate):
         return device
     if "r2_ohm" in dev.get("circuit_overrides", {}):
         raise ScenarioError(f"{src}: [device.circuit_overrides] r2_ohm is set by the bench calibration; "
                             f"set [device] calibrate = false to run a unit with a given R2")
-    from ebraille_sim.estimation.calibration import BENCH_R2_RANGE_OHM, bench_calibrate_device
+    from ebraille_sim.estimation.calibration import BENCH_R2_RANGE_OHM, bench_calibrate_device, with_calibration_table
     out, inside = bench_calibrate_device(device)
     if not inside:
         lo, hi = BENCH_R2_RANGE_OHM
         warnings.warn(f"{src}: no R2 in {lo:g}-{hi:g} ohm calibrates this FSR unit for its estimator; the divider "
                       f"gets R2 = {out.circuit.r2_ohm:.4g} ohm, the end of the range, and the unit reads off",
                       ScenarioWarning, stacklevel=4)
-    return out
+    out = with_calibration_table(out)
+    return dataclasses.replace(out, estimator=_params.replace_checked(out.estimator, **given)) if given else out
 
 
 def _check_rates(device: _params.DeviceParams) -> None:
@@ -596,16 +595,27 @@ def _check_rates(device: _params.DeviceParams) -> None:
 
 def with_firmware(spec: "ScenarioSpec", firmware) -> "ScenarioSpec":
     """``spec`` running on a firmware preset (a name or a preset file): the preset's estimator
-    settings replace the scenario's; a preset whose rates do not suit the scenario's device is
-    a one-line :class:`ScenarioError`."""
+    settings replace the scenario's (the rest at :class:`~ebraille_sim.physics.params.EstimatorParams`'
+    defaults), and the unit keeps what its bench measured
+    (:data:`~ebraille_sim.physics.params.UNIT_ESTIMATOR_FIELDS`); a preset whose rates do not
+    suit the scenario's device is a one-line :class:`ScenarioError`."""
     from ebraille_sim.estimation.presets import get_firmware
     fw = get_firmware(firmware)
+    return with_estimator(spec, fw.estimator, f"firmware {fw.name!r}")
+
+
+def with_estimator(spec: "ScenarioSpec", settings: dict, label: str) -> "ScenarioSpec":
+    """``spec`` with the estimator ``settings`` (:class:`~ebraille_sim.physics.params.EstimatorParams`
+    fields; the others at their defaults) and the unit's bench fields
+    (:data:`~ebraille_sim.physics.params.UNIT_ESTIMATOR_FIELDS`); settings that do not suit the
+    scenario's device are a one-line :class:`ScenarioError` that starts with ``label``."""
+    unit = {k: getattr(spec.device.estimator, k) for k in _params.UNIT_ESTIMATOR_FIELDS}
     try:
-        device = dataclasses.replace(spec.device, estimator=_params.replace_checked(spec.device.estimator,
-                                                                                   **fw.estimator))
+        device = dataclasses.replace(spec.device, estimator=_params.replace_checked(_params.EstimatorParams(),
+                                                                                   **{**settings, **unit}))
         _check_rates(device)
-    except ValueError as exc:
-        raise ScenarioError(f"{spec.source}: firmware {fw.name!r}: {exc}") from None
+    except (ValueError, TypeError) as exc:
+        raise ScenarioError(f"{spec.source}: {label}: {exc}") from None
     return dataclasses.replace(spec, device=device)
 
 

@@ -477,9 +477,13 @@ def _object(keys, required=(), tables: dict | None = None, description: str = ""
 
 
 def _gains_rules(configs) -> list[dict]:
-    """``if name is N (or omitted and N is the default) then gains are N's config keys`` (its
-    experimental gains excepted: a scenario gives them in ``[controller.experimental]``)."""
+    """``if name is N (or omitted and N is the default, or the default design's family) then gains
+    are N's config keys`` (its experimental gains excepted: a scenario gives them in
+    ``[controller.experimental]``)."""
+    from controllers.designs import designs
     default_name = _spec.ControllerSpec().name
+    if default_name in designs():                   # the default design's gains are its family's keys
+        default_name = designs()[default_name].controller
     experimental = set(_spec.experimental_gains())
     rules = []
     for name, (path, keys) in configs.items():
