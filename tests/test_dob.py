@@ -299,8 +299,11 @@ def test_wide_error_filter_ignores_a_fast_swing_and_switches_on_a_held_error_aft
     ({"wide_error_fraction": -0.1}, "wide_error_fraction"),
     ({"wide_ki_v_per_ns": -1.0}, "wide_ki_v_per_ns"),
     ({"wide_filter_s": float("nan")}, "wide_filter_s"),
+    ({"approach_fraction": 1.5}, "approach_fraction"),
+    ({"approach_ki_v_per_ns": -1.0}, "approach_ki_v_per_ns"),
+    ({"approach_ki_v_per_ns": float("inf")}, "approach_ki_v_per_ns"),
 ])
-def test_bad_wide_error_gains_one_line(gains, match):
+def test_bad_wide_error_and_approach_gains_one_line(gains, match):
     with pytest.raises(ValueError, match=match) as exc:
         controllers.make("pid_dob", **gains)
     assert "\n" not in str(exc.value)
@@ -327,13 +330,3 @@ def test_the_approach_runs_the_integral_at_its_own_gain_until_the_estimate_first
     assert np.array_equal(_run(controllers.make("pid_dob", **APPROACH), found[100:], y0=0.25),
                           _run(controllers.make("pid_dob", ki_v_per_ns=5.1), found[100:], y0=0.25))
 
-
-@pytest.mark.parametrize("gains, match", [
-    ({"approach_fraction": 1.5}, "approach_fraction"),
-    ({"approach_ki_v_per_ns": -1.0}, "approach_ki_v_per_ns"),
-    ({"approach_ki_v_per_ns": float("inf")}, "approach_ki_v_per_ns"),
-])
-def test_bad_approach_gains_one_line(gains, match):
-    with pytest.raises(ValueError, match=match) as exc:
-        controllers.make("pid_dob", **gains)
-    assert "\n" not in str(exc.value)
