@@ -77,8 +77,8 @@ def test_sweep_records_latches_and_prints_the_population_report(tmp_path, capsys
                 "--out", str(out), "--no-progress"])
     assert code == 0
     text = capsys.readouterr().out
-    assert "population report" in text and "worst readers of steady_90wpm pid_dob 90.0" in text
-    assert "fault_motor_stall pid_dob 90.0" in text and "(fault scenario)" in text
+    assert "population report" in text and "worst readers of steady_90wpm dob_wide_1khz 90.0" in text
+    assert "fault_motor_stall dob_wide_1khz 90.0" in text and "(fault scenario)" in text
     with open(out / "results.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     stall = [r for r in rows if r["scenario"] == "fault_motor_stall"]

@@ -24,8 +24,8 @@ def add_arguments(p):
     p.add_argument("--readers", type=whole(0, MAX_READERS), default=10, metavar="N",
                    help="readers/FSR units drawn from the population per scenario (0: the scenario's device; "
                         f"default 10, at most {MAX_READERS})")
-    p.add_argument("--controllers", nargs="+", default=["pid_dob"], metavar="CTRL",
-                   help="controller names, designs or gains files (default: pid_dob, the scenarios' default)")
+    p.add_argument("--controllers", nargs="+", default=None, metavar="CTRL",
+                   help="controller names, designs or gains files (default: the scenarios' default design)")
     p.add_argument("--replicates", type=whole(1, MAX_READERS), default=1, metavar="R",
                    help="seeds per combination (default 1)")
     p.add_argument("--seed", type=seed, default=0, help="master seed, in [0, 2**63) (default 0)")
@@ -48,10 +48,13 @@ def main(args) -> int:
     import controllers
 
     from ebraille_sim.commands import UserError, check_duration, check_out_dir, claim_out_dir, console
+    from ebraille_sim.scenarios.spec import DEFAULT_DESIGN
     from ebraille_sim.tools.sweep import (format_population, format_summary, plan_sweep, population, run_sweep,
                                          summarise, write_results)
 
     con = console(args)
+    if args.controllers is None:
+        args.controllers = [DEFAULT_DESIGN]
     if args.jobs is not None and args.jobs < 1:
         raise ValueError(f"--jobs must be >= 1, got {args.jobs}")
     if not 0 < args.alpha <= 1:

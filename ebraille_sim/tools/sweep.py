@@ -63,6 +63,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ebraille_sim.scenarios.spec import DEFAULT_DESIGN
 from ebraille_sim.tools.parallel import process_context
 
 __all__ = ["Episode", "SweepPlan", "SweepResult", "plan_sweep", "run_sweep", "run_episode", "cvar", "loss_values",
@@ -124,7 +125,7 @@ def _episode_seed(seed: int, key: tuple) -> int:
     return int(ss.generate_state(1, dtype=np.uint64)[0] >> np.uint64(12))
 
 
-def plan_sweep(scenarios, rates=(), readers: int = 0, controllers=("pid",), seed: int = 0, replicates: int = 1,
+def plan_sweep(scenarios, rates=(), readers: int = 0, controllers=(DEFAULT_DESIGN,), seed: int = 0, replicates: int = 1,
                duration_s: float | None = None, population=None) -> SweepPlan:
     """Plan a sweep (see the module docstring).
 
@@ -136,7 +137,8 @@ def plan_sweep(scenarios, rates=(), readers: int = 0, controllers=("pid",), seed
     readers : int
         Devices drawn per scenario (0: the scenario's own device).
     controllers : list of str
-        Registered controller names or gains files.
+        Registered controller names, designs or gains files (default: the scenarios' default
+        design, :data:`~ebraille_sim.scenarios.spec.DEFAULT_DESIGN`).
     seed : int
         Master seed (population and episodes).
     replicates : int
