@@ -577,9 +577,9 @@ def _check_rates(device: _params.DeviceParams) -> None:
     The plant repeats the first and last check when it is built; here they reject a file
     before anything runs.
     """
-    from ebraille_sim.estimation.registry import load_estimator
+    from ebraille_sim.estimation.registry import cached_model
     from ebraille_sim.plant.lumped import check_sensor_rates, check_step
-    model = load_estimator(device.estimator.model)
+    model = cached_model(device.estimator.model)   # read only: its rate
     check_sensor_rates(device, model)
     est_hz = 1.0 / model.dt_s
     r = device.rates
