@@ -250,15 +250,16 @@ def test_same_seed_same_trace_with_random_disturbances():
     assert not np.array_equal(a.trace["force_true_n"], c.trace["force_true_n"])
 
 
-def _held_estimates(section, creep_compensation=True, preload=True, seconds=20.0):
+def _held_estimates(section, creep_compensation=True, preload=True, seconds=20.0, device=None):
     """The sensor chain's estimate of a film pressed to 1 N at 0.3 s and held, at 2, 5, 10 and 19 s,
-    with the inputs of ``section`` (the ``est_creep_preload`` input zeroed unless ``preload``)."""
+    with the inputs of ``section`` (the ``est_creep_preload`` input zeroed unless ``preload``), on
+    ``device`` (default the nominal)."""
     from ebraille_sim.base.validation import replace_checked
     from ebraille_sim.plant import kernel
     from ebraille_sim.plant.layout import N_INPUT, S, U
     from ebraille_sim.plant.lumped import initial_state, pack_params
-    dev = dataclasses.replace(NOMINAL, estimator=replace_checked(NOMINAL.estimator,
-                                                                 creep_compensation=creep_compensation))
+    base = NOMINAL if device is None else device
+    dev = dataclasses.replace(base, estimator=replace_checked(base.estimator, creep_compensation=creep_compensation))
     t = np.arange(0, int(round(seconds / DT))) * DT
     prof = profiles(section, t=t, device=dev) if section else {}
     if not preload:
@@ -290,6 +291,19 @@ def test_a_session_preload_reads_like_a_fresh_film_when_the_firmware_followed_th
     # without any creep compensation the crept film reads high too
     raw = _held_estimates(two_hours, creep_compensation=False) / _held_estimates({}, creep_compensation=False)
     assert np.all(raw > 1.015)
+
+
+def test_a_low_creep_unit_s_session_preload_follows_the_creep_its_bench_measured():
+    """The firmware compensates a unit's creep with the creep per decade its bench measured; the
+    session it followed is advanced by the same law.  A unit creeping 1.2 % per decade (the
+    nominal film 2.75 %), bench-measured as such, 2 h into a session reads like a fresh film; the
+    nominal film's law for the session alone read it 2.8-4.2 % low."""
+    from ebraille_sim.base.validation import replace_checked
+    slow = dataclasses.replace(NOMINAL, fsr=replace_checked(NOMINAL.fsr, creep_per_decade=0.012),
+                               estimator=replace_checked(NOMINAL.estimator, creep_per_decade=0.012))
+    two_hours = {"fsr_drift": {"session_offset_s": 7200.0}}
+    fresh = _held_estimates({}, device=slow)
+    np.testing.assert_allclose(_held_estimates(two_hours, device=slow), fresh, rtol=5e-3)
 
 
 def test_tremor_raises_the_tracking_error():

@@ -81,7 +81,7 @@ import numpy as np
 from ebraille_sim.base.fields import sourced
 from ebraille_sim.scenarios.draws import child_generator
 from ebraille_sim.base.validation import check_keys, check_number, check_pair
-from ebraille_sim.estimation.firmware import FIRMWARE_FSR
+from ebraille_sim.estimation.firmware import firmware_fsr
 from ebraille_sim.physics.fsr import held_resistance_factor, temperature_offset_k, temperature_scale
 from ebraille_sim.physics.params import STANDARD_GRAVITY_M_PER_S2
 from ebraille_sim.scenarios.spec import ScenarioError, check_section_table
@@ -521,8 +521,9 @@ class FSRDrift:
     2.1-2.4 % per decade for days, datasheet < 5 % per decade), is advanced by the offset: the run sees
     ``c(t_off + t)`` instead of ``c(t)``.  Folded into the temperature input (module
     docstring).  The firmware has followed the same session: its creep compensation predicts
-    with its own law (:data:`ebraille_sim.estimation.firmware.FIRMWARE_FSR`) advanced by
-    the same offset, the ``est_creep_preload`` input (``factor - 1`` of that law,
+    with its own law (:func:`ebraille_sim.estimation.firmware.firmware_fsr`: the nominal film
+    with the creep per decade the unit's bench measured) advanced by the same offset, the
+    ``est_creep_preload`` input (``factor - 1`` of that law,
     :func:`ebraille_sim.estimation.firmware.creep_compensated_v`).  A reading session of
     30 min to 2 h [E] gives offsets of 1800-7200 s; standard FSR ink drifts about 12 % in
     conductance over 48 h ([R] Sensitronics).
@@ -736,7 +737,7 @@ def build_inputs(section: dict, t_s: np.ndarray, rng: np.random.Generator, devic
             else:
                 scale = temperature_scale(dtemp, device.fsr) * drift.factor(tc, device.fsr)
                 offset[a:a + PROFILE_CHUNK] = temperature_offset_k(scale, alpha, device.fsr.temperature_coeff_cold_per_k)
-                preload[a:a + PROFILE_CHUNK] = drift.factor(tc, FIRMWARE_FSR) - 1.0
+                preload[a:a + PROFILE_CHUNK] = drift.factor(tc, firmware_fsr(device.estimator)) - 1.0
         built["fsr_temp_offset_k"] = ("set", offset)
         if preload is not None:
             built["est_creep_preload"] = ("set", preload)
