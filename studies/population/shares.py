@@ -63,7 +63,8 @@ def shares(scenario: str, readers: int, seed: int, duration_s: float, controller
                  if not isinstance(a, Exception) and not isinstance(b, Exception)]
         d = np.array([b - a for a, b in pairs])
         gap = {"bound_median_in_band": float(np.median([b for _, b in pairs])),
-               "share_within_0.05_of_bound": float(np.mean(d <= 0.05)), "bound_gap_p90": float(np.percentile(d, 90))}
+               "share_within_0.05_of_bound": float(np.mean(d <= 0.05)), "bound_gap_p90": float(np.percentile(d, 90)),
+               "bound_in_band": [round(float(b), 4) for _, b in pairs]}
     faults = collections.Counter((r.supervisor or {}).get("fault") for r in ok if (r.supervisor or {}).get("fault"))
     worst = sorted(range(len(ok)), key=lambda i: ib[i])[:3]
     return {"scenario": scenario, "controller": controller or spec.controller.name, "readers": readers,
