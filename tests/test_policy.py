@@ -265,3 +265,10 @@ def test_a_learned_policy_runs_on_the_estimator_it_was_trained_on():
         assert est.model == EstimatorParams().model == "paper:wiener:5" and est.antialias_cutoff_hz == 20.0
         assert est.hysteresis_compensation is comp and est.hysteresis_centre_time_s == 0.0
         assert est.calibration_loads_n == base.calibration_loads_n != ()   # the unit's own table
+
+
+def test_run_says_on_which_estimator_a_policy_runs(tmp_path, capsys):
+    from ebraille_sim.cli import main as cli
+    cli(["run", "steady_90wpm", "--controller", "policy:ppo", "--duration", "2", "--no-plot",
+         "--out", str(tmp_path / "r")])
+    assert "estimator paper:wiener:5 as the policy was trained on" in capsys.readouterr().out

@@ -199,11 +199,8 @@ def _run(args, plotter) -> int:
     every = trace_every(spec, args)
     out, anim = _targets(args, spec)
     try:
-        from ebraille_sim.scenarios.runner import design_firmware
-        from ebraille_sim.scenarios.spec import with_firmware
-        firmware = design_firmware(spec.controller.name if args.controller is None else args.controller)
-        if firmware is not None:
-            spec = with_firmware(spec, firmware)        # a design runs on its own firmware
+        from ebraille_sim.scenarios.runner import on_controller_firmware
+        spec, firmware, applied = on_controller_firmware(spec, args.controller)   # a design on its own firmware
         ctrl = make_controller(spec, args.controller)
     except (ValueError, FileNotFoundError, TypeError) as exc:
         if args.controller is None:
@@ -252,8 +249,8 @@ def _run(args, plotter) -> int:
     doc["files"] = [str(p) for p in written]
     con.result(doc)
     con.say(summary_table(result, gains_file))
-    if firmware is not None:
-        con.say(f"firmware {firmware} (the design's)")
+    if applied is not None:
+        con.say(applied)
     con.say("\nwrote " + ", ".join(str(p) for p in written)
             + (f" ({len(frames)} frames)" if frames is not None else ""))
     failures = failed_criteria(result)

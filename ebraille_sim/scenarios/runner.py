@@ -145,6 +145,28 @@ def policy_estimator(controller) -> dict | None:
     return trained_estimator(os.fspath(controller)[len("policy:"):])
 
 
+def on_controller_firmware(spec: ScenarioSpec, controller=None) -> tuple[ScenarioSpec, str | None, str | None]:
+    """``spec`` on the estimator its controller brings, the firmware preset's name (a design's),
+    and a one-line note of what was applied (None, None: the scenario's own estimator).
+
+    A design given to the run (``controller``), or named by the scenario's ``[controller]``, runs
+    on its firmware preset (:func:`design_firmware`); a learned policy of the whole command on the
+    estimator it was trained on (:func:`policy_estimator`).  The default design, which the scenario
+    does not name, runs on the scenario's estimator: that starts from the design's firmware and
+    keeps the scenario's own ``[estimator]`` keys."""
+    if controller is None and spec.controller.name == DEFAULT_DESIGN:
+        return spec, None, None
+    named = spec.controller.name if controller is None else controller
+    firmware = design_firmware(named)
+    if firmware is not None:
+        return with_firmware(spec, firmware), firmware, f"firmware {firmware} (the design's)"
+    trained = policy_estimator(named)
+    if trained is not None:
+        return (with_estimator(spec, trained, f"the estimator policy {named} was trained on"), None,
+                f"estimator {trained['model']} as the policy was trained on")
+    return spec, None, None
+
+
 def prepare_run(scenario, controller=None, seed: int | None = None, duration_s: float | None = None,
                 device=None, firmware=None) -> tuple:
     """The spec, seed, run inputs and (unwrapped) controller of one run of :func:`run_scenario`."""
@@ -152,15 +174,9 @@ def prepare_run(scenario, controller=None, seed: int | None = None, duration_s: 
     if device is not None:
         import dataclasses
         spec = dataclasses.replace(spec, device=device)
-    if firmware is None and (controller is not None or spec.controller.name != DEFAULT_DESIGN):
-        # a design given to the run, or named by the scenario, runs on its own firmware; the
-        # default design runs on the scenario's estimator, which starts from that firmware
-        named = spec.controller.name if controller is None else controller
-        firmware = design_firmware(named)
-        trained = policy_estimator(named) if firmware is None else None
-        if trained is not None:                   # a learned policy runs on the estimator it met
-            spec = with_estimator(spec, trained, f"the estimator policy {named} was trained on")
-    if firmware is not None:
+    if firmware is None:
+        spec, _, _ = on_controller_firmware(spec, controller)
+    else:
         spec = with_firmware(spec, firmware)
     if duration_s is not None:
         if not (math.isfinite(duration_s) and duration_s > 0):
