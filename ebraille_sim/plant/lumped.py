@@ -40,6 +40,7 @@ from ebraille_sim.physics.fsr import (N_CREEP, adc_code, adc_voltage, creep_deca
                                       creep_term_weight, lag_alpha, log_force, play_loop_fraction, play_loop_widths,
                                       play_widths, static_voltage)
 from ebraille_sim.physics.motor import current_decay
+from ebraille_sim.base.validation import replace_fields
 from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import (MAX_BREAKPOINTS, MAX_TF_LEN, N_INPUT, N_PARAM, N_PLAYS, N_STATE, P, S, U)
@@ -228,19 +229,6 @@ def _creep_decays(dt_sensor_s: float, tau_min_s: float, tau_max_s: float) -> np.
     return row
 
 
-def _cached_slots(fill, *key) -> tuple[np.ndarray, np.ndarray]:
-    """``(slots, values)`` that ``fill(p, *key)`` writes into a zero parameter row: every slot
-    it sets, with the value it sets (a written zero included)."""
-    row = np.zeros(N_PARAM)
-    fill(row, *key)
-    probe = np.full(N_PARAM, np.nan)
-    fill(probe, *key)
-    slots = np.flatnonzero(~np.isnan(probe) | np.isnan(row))
-    values = row[slots]
-    slots.flags.writeable = values.flags.writeable = False
-    return slots, values
-
-
 def _pack_calibration_table(p: np.ndarray, e) -> None:
     """The unit's calibration table (:func:`ebraille_sim.estimation.firmware.table_calibrated_n`):
     its size, the readings and the loads (unused slots 0)."""
@@ -252,32 +240,49 @@ def _pack_calibration_table(p: np.ndarray, e) -> None:
     p[P.est_cal_y0:P.est_cal_y0 + n] = e.calibration_loads_n
 
 
+def _slots(*names) -> np.ndarray:
+    """The parameter slots of ``names`` (read-only; each slot once)."""
+    slots = np.array([P[name] for name in names], dtype=np.intp)
+    if np.unique(slots).size != slots.size:
+        raise ImportError(f"parameter slots written twice: {names}")
+    slots.flags.writeable = False
+    return slots
+
+
+CREEP_COMPENSATION_SLOTS = _slots("est_creep_comp", "comp_creep_weight", *(f"comp_creep_a{j}" for j in range(N_CREEP)),
+                                  "comp_fsr_n", "comp_g_standoff_s", "comp_load_threshold_n", "comp_reference_gain")
+"""The parameter slots of the creep compensation, in the order of :func:`creep_compensation_values`."""
+
+
 def _pack_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
     """The estimator's creep compensation: on/off, and the creep law of the nominal FSR
     (:data:`~ebraille_sim.estimation.firmware.FIRMWARE_FSR`, the nominal unit: the firmware does not know the individual sensor's parameters)
     with the creep per decade the bench measured when the estimator carries one
     (:func:`~ebraille_sim.estimation.firmware.firmware_fsr`), at the sensor rate, with the creep gain of the calibration hold as its reference.
-    Depends only on the estimator and the sensor period: the slots are computed once per pair."""
-    slots, values = _creep_compensation_slots(e, float(dt_sensor_s))
-    p[slots] = values
+    Depends only on the estimator and the sensor period: the values are computed once per pair."""
+    p[CREEP_COMPENSATION_SLOTS] = creep_compensation_values(e, float(dt_sensor_s))
 
 
 @functools.lru_cache(maxsize=64)
-def _creep_compensation_slots(e, dt_sensor_s: float) -> tuple[np.ndarray, np.ndarray]:
-    return _cached_slots(_fill_creep_compensation, e, dt_sensor_s)
-
-
-def _fill_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
+def creep_compensation_values(e, dt_sensor_s: float) -> np.ndarray:
+    """The values of :data:`CREEP_COMPENSATION_SLOTS` for the estimator ``e`` at the sensor period
+    ``dt_sensor_s`` (read-only)."""
     nominal = firmware_fsr(e)
-    p[P.est_creep_comp] = 1.0 if e.creep_compensation else 0.0
-    p[P.comp_creep_weight] = creep_term_weight(nominal.creep_per_decade, nominal.creep_tau_min_s,
-                                               nominal.creep_tau_max_s)
-    for j, tau in enumerate(creep_taus_s(nominal.creep_tau_min_s, nominal.creep_tau_max_s)):
-        p[P[f"comp_creep_a{j}"]] = creep_decay(dt_sensor_s, tau)
-    p[P.comp_fsr_n] = nominal.exponent
-    p[P.comp_g_standoff_s] = 1.0 / nominal.standoff_resistance_ohm
-    p[P.comp_load_threshold_n] = nominal.load_threshold_n
-    p[P.comp_reference_gain] = creep_gain(e.creep_reference_hold_s, nominal)
+    values = np.array([1.0 if e.creep_compensation else 0.0,
+                       creep_term_weight(nominal.creep_per_decade, nominal.creep_tau_min_s, nominal.creep_tau_max_s)]
+                      + [creep_decay(dt_sensor_s, tau) for tau in creep_taus_s(nominal.creep_tau_min_s,
+                                                                              nominal.creep_tau_max_s)]
+                      + [nominal.exponent, 1.0 / nominal.standoff_resistance_ohm, nominal.load_threshold_n,
+                         creep_gain(e.creep_reference_hold_s, nominal)], dtype=float)
+    values.flags.writeable = False
+    return values
+
+
+HYSTERESIS_COMPENSATION_SLOTS = _slots(
+    "est_hyst_comp", *(f"comp_play_w{j}" for j in range(N_PLAYS)), *(f"comp_play_weight{j}" for j in range(N_PLAYS)),
+    "comp_hyst_halfwidth", "comp_fsr_k_ohm", "comp_hyst_deadband_v", "comp_hyst_turn_v", "comp_hyst_follow_v",
+    "comp_centre_alpha", "comp_turn_alpha")
+"""The parameter slots of the hysteresis compensation, in the order of :func:`hysteresis_compensation_values`."""
 
 
 def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr, sensor_rate_hz: float) -> None:
@@ -290,36 +295,30 @@ def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr, sensor_rate_hz
     unit's rate-independent loop as measured at assembly
     (:func:`ebraille_sim.estimation.calibration.measured_hysteresis_fraction`); the noise
     deadband, the turn test's threshold and following deadband in volts and its average's weight
-    per sensor sample.  Given the loop, the slots depend only on the estimator, the ADC's LSB and
+    per sensor sample.  Given the loop, the values depend only on the estimator, the ADC's LSB and
     the sensor rate: they are computed once per combination."""
     if e.hysteresis_fraction is not None:
-        h = play_loop_fraction(dataclasses.replace(firmware_fsr(e), hysteresis_fraction=e.hysteresis_fraction))
+        h = play_loop_fraction(replace_fields(firmware_fsr(e), hysteresis_fraction=e.hysteresis_fraction))
     else:
         h = measured_hysteresis_fraction(fsr) if e.hysteresis_compensation else play_loop_fraction(FIRMWARE_FSR)
-    slots, values = _hysteresis_compensation_slots(e, float(circuit.adc_lsb_v), h, sensor_rate_hz)
-    p[slots] = values
+    p[HYSTERESIS_COMPENSATION_SLOTS] = hysteresis_compensation_values(e, float(circuit.adc_lsb_v), h, sensor_rate_hz)
 
 
 @functools.lru_cache(maxsize=256)
-def _hysteresis_compensation_slots(e, adc_lsb_v: float, h, sensor_rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    return _cached_slots(_fill_hysteresis_compensation, e, adc_lsb_v, h, sensor_rate_hz)
-
-
-def _fill_hysteresis_compensation(p: np.ndarray, e, adc_lsb_v: float, h, sensor_rate_hz: float) -> None:
+def hysteresis_compensation_values(e, adc_lsb_v: float, h, sensor_rate_hz: float) -> np.ndarray:
+    """The values of :data:`HYSTERESIS_COMPENSATION_SLOTS` for the estimator ``e``, the ADC's LSB,
+    the play part ``h`` of the loop and the sensor rate (read-only)."""
     nominal = firmware_fsr(e)
-    p[P.est_hyst_comp] = 1.0 if e.hysteresis_compensation else 0.0
     widths, weights = play_loop_widths(h, nominal.exponent)
-    for j in range(N_PLAYS):
-        p[P[f"comp_play_w{j}"]] = widths[j]
-        p[P[f"comp_play_weight{j}"]] = weights[j]
-    p[P.comp_hyst_halfwidth] = sum(w * x for w, x in zip(weights, widths))
-    p[P.comp_fsr_k_ohm] = nominal.resistance_at_1n_ohm
-    p[P.comp_hyst_deadband_v] = e.hysteresis_deadband_lsb * adc_lsb_v
-    p[P.comp_hyst_turn_v] = e.hysteresis_turn_lsb * adc_lsb_v
-    p[P.comp_hyst_follow_v] = e.hysteresis_follow_lsb * adc_lsb_v
-    p[P.comp_centre_alpha] = -math.expm1(-1.0 / (e.hysteresis_centre_time_s * sensor_rate_hz)) \
-        if e.hysteresis_centre_time_s > 0.0 else 0.0
-    p[P.comp_turn_alpha] = -math.expm1(-1.0 / (e.hysteresis_turn_time_s * sensor_rate_hz))
+    centre = (-math.expm1(-1.0 / (e.hysteresis_centre_time_s * sensor_rate_hz))
+              if e.hysteresis_centre_time_s > 0.0 else 0.0)
+    values = np.array([1.0 if e.hysteresis_compensation else 0.0] + list(widths) + list(weights)
+                      + [sum(w * x for w, x in zip(weights, widths)), nominal.resistance_at_1n_ohm,
+                         e.hysteresis_deadband_lsb * adc_lsb_v, e.hysteresis_turn_lsb * adc_lsb_v,
+                         e.hysteresis_follow_lsb * adc_lsb_v, centre,
+                         -math.expm1(-1.0 / (e.hysteresis_turn_time_s * sensor_rate_hz))], dtype=float)
+    values.flags.writeable = False
+    return values
 
 
 @functools.lru_cache(maxsize=64)
