@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ebraille_sim.base.compiled import njit
+from ebraille_sim.base.seeds import default_rng
 from ebraille_sim.base.validation import check_number, replace_fields
 from ebraille_sim.estimation.registry import cached_model
 from ebraille_sim.physics.fsr import adc_code, adc_voltage, divider_voltage, play_widths, static_conductance
@@ -431,7 +432,7 @@ def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=N
         raise ValueError(f"calibration_table: {len(errors)} load errors for {len(loads_n)} loads")
     model = cached_model(device.estimator.model)
     fsr, circuit = device.fsr, device.circuit
-    rng = np.random.default_rng(_fsr_unit_seed(fsr, circuit))
+    rng = default_rng(_fsr_unit_seed(fsr, circuit))
     sd_v = fsr.noise_v_rms / math.sqrt(TABLE_CONVERSIONS)
     draws = rng.standard_normal((len(loads_n), TABLE_PRESSES, 2))   # each press: its scatter, then its noise
     carried = np.array([[load * (1.0 + err)] for load, err in zip(loads_n, errors)])
@@ -466,7 +467,7 @@ def bench_creep_per_decade(device: DeviceParams, load_n: float = 1.0, load_error
     from ebraille_sim.physics.fsr import N_CREEP, divider_conductance_s, held_creep_gain
     fsr, circuit = device.fsr, device.circuit
     nom = FIRMWARE_FSR
-    rng = np.random.default_rng(_fsr_unit_seed(fsr, circuit) + 1)
+    rng = default_rng(_fsr_unit_seed(fsr, circuit) + 1)
     sd_v = fsr.noise_v_rms / math.sqrt(TABLE_CONVERSIONS)
     f_eff = load_n * (1.0 + load_error) * loading_branch_factor(fsr)
     g_off = 1.0 / nom.standoff_resistance_ohm
@@ -647,7 +648,7 @@ def calibrate_drive(device: DeviceParams) -> DriveCalibration:
     m, dt = device.motor, device.drivetrain                        # plant truth: what the line's hardware meets
     i_rest = -RESISTANCE_TEST_V / m.resistance_ohm                 # plant truth
     r_ohm = -RESISTANCE_TEST_V / mean_reading_a(cs, i_rest, seed, n, zero)
-    rng = np.random.default_rng(seed)
+    rng = default_rng(seed)
     gauge = 1.0 + FORCE_GAUGE_TOLERANCE * (2.0 * rng.random() - 1.0)
     g = shaft_to_rack_per_m(dt.gear_ratio, dt.pinion_radius_m)
     forces, reads = [], []
