@@ -386,8 +386,16 @@ def play_loop_widths(play_fraction: float, exponent: float) -> tuple[list[float]
 
 def play_widths(fsr) -> tuple[list[float], list[float]]:
     """Play widths (in ln N) and weights of an FSR: its rate-independent loop
-    (:func:`play_loop_fraction`)."""
-    return play_loop_widths(play_loop_fraction(fsr), fsr.exponent)
+    (:func:`play_loop_fraction`; computed once per unit, new lists each call)."""
+    widths, weights = _play_widths_of(fsr)
+    return list(widths), list(weights)
+
+
+@functools.lru_cache(maxsize=16)
+def _play_widths_of(fsr) -> tuple[tuple, tuple]:
+    """:func:`play_widths` of ``fsr`` as tuples (a drawn unit's bench and its plant's packing ask once each)."""
+    widths, weights = play_loop_widths(play_loop_fraction(fsr), fsr.exponent)
+    return tuple(widths), tuple(weights)
 
 
 def _ramp_creep_terms(fsr) -> tuple[np.ndarray, np.ndarray]:
@@ -463,6 +471,16 @@ def _resistance_at(force_n: float, lagged: np.ndarray, seen: np.ndarray, fsr) ->
     return float(np.interp(force_n, lagged[idx], res))
 
 
+@functools.lru_cache(maxsize=8)
+def _load_cycle(ramp_s: float, dt_s: float, peak_n: float) -> np.ndarray:
+    """The applied force of :func:`datasheet_hysteresis`'s load cycle at each sample: 0 to ``peak_n``
+    in ``ramp_s`` and back, every ``dt_s`` (made once per cycle, read-only)."""
+    n = int(round(ramp_s / dt_s))
+    force = np.concatenate([np.linspace(0.0, peak_n, n + 1), np.linspace(peak_n, 0.0, n + 1)[1:]])
+    force.flags.writeable = False
+    return force
+
+
 def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: float = 1e-3,
                          force_n: float = HYSTERESIS_TEST_FORCE_N, peak_n: float = HYSTERESIS_TEST_PEAK_N) -> float:
     """``(R_F+ - R_F-)/R_F+`` at ``force_n`` (default :data:`HYSTERESIS_TEST_FORCE_N`), measured the
@@ -478,9 +496,8 @@ def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: floa
     s[:N_PLAYS] = log_force(0.0)
     w = creep_term_weight(fsr.creep_per_decade, fsr.creep_tau_min_s, fsr.creep_tau_max_s)
     a_lag = lag_alpha(dt_s, fsr.mechanical_lag_s)
-    n = int(round(ramp_s / dt_s))
-    force = np.concatenate([np.linspace(0.0, peak_n, n + 1), np.linspace(peak_n, 0.0, n + 1)[1:]])
-    seen, lagged = _cycle_forces(force, a_lag, s, p, w, fsr.load_threshold_n)
+    seen, lagged = _cycle_forces(_load_cycle(float(ramp_s), float(dt_s), float(peak_n)), a_lag, s, p, w,
+                                 fsr.load_threshold_n)
     peak = int(np.argmax(lagged))
     r_up = _resistance_at(force_n, lagged[:peak + 1], seen[:peak + 1], fsr)
     r_dn = _resistance_at(force_n, lagged[peak:][::-1], seen[peak:][::-1], fsr)
