@@ -422,3 +422,63 @@ def test_drawn_disturbance_sections_equal_validate_section_and_share_only_their_
     shared = episodes._validated_kind("tremor", (("band_hz", (8.0, 12.0)),))
     with pytest.raises(dataclasses.FrozenInstanceError):
         shared.rms_m = 1.0
+
+
+def _compensations_written_one_slot_at_a_time(p, e, dt_sensor_s, adc_lsb_v, h, sensor_rate_hz):
+    """The creep and hysteresis compensations of ``e`` written slot by slot from the firmware's laws."""
+    from ebraille_sim.estimation.firmware import firmware_fsr
+    from ebraille_sim.physics.fsr import creep_decay, creep_gain, creep_taus_s, creep_term_weight, play_loop_widths
+    from ebraille_sim.plant.layout import N_PLAYS, P
+    nominal = firmware_fsr(e)
+    p[P.est_creep_comp] = 1.0 if e.creep_compensation else 0.0
+    p[P.comp_creep_weight] = creep_term_weight(nominal.creep_per_decade, nominal.creep_tau_min_s,
+                                               nominal.creep_tau_max_s)
+    for j, tau in enumerate(creep_taus_s(nominal.creep_tau_min_s, nominal.creep_tau_max_s)):
+        p[P[f"comp_creep_a{j}"]] = creep_decay(dt_sensor_s, tau)
+    p[P.comp_fsr_n] = nominal.exponent
+    p[P.comp_g_standoff_s] = 1.0 / nominal.standoff_resistance_ohm
+    p[P.comp_load_threshold_n] = nominal.load_threshold_n
+    p[P.comp_reference_gain] = creep_gain(e.creep_reference_hold_s, nominal)
+    p[P.est_hyst_comp] = 1.0 if e.hysteresis_compensation else 0.0
+    widths, weights = play_loop_widths(h, nominal.exponent)
+    for j in range(N_PLAYS):
+        p[P[f"comp_play_w{j}"]] = widths[j]
+        p[P[f"comp_play_weight{j}"]] = weights[j]
+    p[P.comp_hyst_halfwidth] = sum(w * x for w, x in zip(weights, widths))
+    p[P.comp_fsr_k_ohm] = nominal.resistance_at_1n_ohm
+    p[P.comp_hyst_deadband_v] = e.hysteresis_deadband_lsb * adc_lsb_v
+    p[P.comp_hyst_turn_v] = e.hysteresis_turn_lsb * adc_lsb_v
+    p[P.comp_hyst_follow_v] = e.hysteresis_follow_lsb * adc_lsb_v
+    p[P.comp_centre_alpha] = -math.expm1(-1.0 / (e.hysteresis_centre_time_s * sensor_rate_hz)) \
+        if e.hysteresis_centre_time_s > 0.0 else 0.0
+    p[P.comp_turn_alpha] = -math.expm1(-1.0 / (e.hysteresis_turn_time_s * sensor_rate_hz))
+
+
+def test_compensation_values_fill_exactly_their_slots_as_slot_by_slot_writes_do():
+    """The creep and hysteresis compensations packed as one values row into fixed slots write the
+    same slots with the same numbers as the firmware's laws written one slot at a time, on drawn
+    units (each with its bench's creep and loop), the nominal device and the 1 kHz presets."""
+    from ebraille_sim.estimation.presets import get_firmware
+    from ebraille_sim.physics.fsr import play_loop_fraction
+    from ebraille_sim.plant import lumped
+    from ebraille_sim.plant.layout import N_PARAM
+    from ebraille_sim.estimation.firmware import firmware_fsr
+    from ebraille_sim.physics.params import EstimatorParams
+    devices = sample_devices(17, 6) + [DeviceParams()] + [
+        DeviceParams(estimator=dataclasses.replace(EstimatorParams(), **get_firmware(name).estimator))
+        for name in ("fast_1khz", "fast_1khz_centred", "paper_100hz")]
+    for dev in devices:
+        e, c, s = dev.estimator, dev.circuit, dev.fsr
+        for rate in (dev.rates.sensor_rate_hz, 1000.0):
+            h = (play_loop_fraction(dataclasses.replace(firmware_fsr(e), hysteresis_fraction=e.hysteresis_fraction))
+                 if e.hysteresis_fraction is not None else lumped.measured_hysteresis_fraction(s)
+                 if e.hysteresis_compensation else play_loop_fraction(lumped.FIRMWARE_FSR))
+            fast, plain = np.full(N_PARAM, np.nan), np.full(N_PARAM, np.nan)
+            lumped._pack_creep_compensation(fast, e, 1.0 / rate)
+            lumped._pack_hysteresis_compensation(fast, e, c, s, rate)
+            _compensations_written_one_slot_at_a_time(plain, e, 1.0 / rate, float(c.adc_lsb_v), h, rate)
+            np.testing.assert_array_equal(fast, plain)
+            written = np.flatnonzero(~np.isnan(fast))
+            assert sorted(written) == sorted(np.concatenate([lumped.CREEP_COMPENSATION_SLOTS,
+                                                             lumped.HYSTERESIS_COMPENSATION_SLOTS]))
+    assert not lumped.creep_compensation_values(devices[0].estimator, 1e-3).flags.writeable

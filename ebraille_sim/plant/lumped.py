@@ -100,6 +100,13 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     The estimator runs at its model's own rate, ``1/model.dt_s`` (the rate it was
     identified at); the sensor rate must be a whole multiple of it.
     """
+    p = _unseeded_params(device, model)
+    reseed(p, device, seed)
+    return p
+
+
+def _unseeded_params(device: DeviceParams, model=None) -> np.ndarray:
+    """:func:`pack_params` but the seed and what was measured with the device's noise (:func:`reseed`)."""
     m, d, f, s, c, e, r = (device.motor, device.drivetrain, device.finger, device.fsr, device.circuit,
                            device.estimator, device.rates)
     check_step(device)
@@ -171,7 +178,6 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     _pack_creep_compensation(p, e, dt_sensor)
     _pack_hysteresis_compensation(p, e, c, s, float(r.sensor_rate_hz))
     _pack_current_sense(p, device.current_sense, h)
-    reseed(p, device, seed)
     return p
 
 
@@ -491,7 +497,7 @@ def _fill_estimator_steady_state(s: np.ndarray, p: np.ndarray, u0: float) -> Non
 
 _LAST_ROWS: list = []
 """The parts (objects), estimator model and board position of the device packed last, its
-parameter row (seed 0; :func:`reseed` gives it each device's seed) and its initial state
+parameter row (its seed slots 0; :func:`reseed` gives it each device's seed) and its initial state
 (:func:`_device_rows`)."""
 
 
@@ -508,7 +514,7 @@ def _device_rows(device: DeviceParams, seed: float, model, board_pos_m) -> tuple
     if last and all(a is b for a, b in zip(last[0], key)):
         p, st = last[1].copy(), last[2].copy()
     else:
-        p = pack_params(device, 0.0, model)
+        p = _unseeded_params(device, model)
         st = initial_state(device, p, board_pos_m)
         last[:] = [key, p.copy(), st.copy()]
     reseed(p, device, seed)
