@@ -482,3 +482,27 @@ def test_compensation_values_fill_exactly_their_slots_as_slot_by_slot_writes_do(
             assert sorted(written) == sorted(np.concatenate([lumped.CREEP_COMPENSATION_SLOTS,
                                                              lumped.HYSTERESIS_COMPENSATION_SLOTS]))
     assert not lumped.creep_compensation_values(devices[0].estimator, 1e-3).flags.writeable
+
+
+def test_calibration_table_through_the_compiled_steady_map_equals_the_models_own_map():
+    """The bench's table read through the compiled steady map and one mean per load equals the
+    readings of :func:`table_reading_n` (the model's ``steady_state``) averaged row by row with
+    ``np.mean``, to the last bit, on drawn units with their load errors and on the presets."""
+    from ebraille_sim.estimation import calibration as cal
+    from ebraille_sim.estimation.presets import get_firmware
+    from ebraille_sim.physics.params import EstimatorParams
+    from ebraille_sim.base.seeds import default_rng
+    devices = sample_devices(29, 40) + [cal.calibrate_device(DeviceParams(estimator=dataclasses.replace(
+        EstimatorParams(), **get_firmware(name).estimator))) for name in ("fast_1khz", "fast_1khz_centred", "paper_100hz")]
+    for k, dev in enumerate(devices):
+        errors = tuple(0.02 * math.sin(k + j) for j in range(4))
+        fsr, circuit = dev.fsr, dev.circuit
+        draws = default_rng(cal._fsr_unit_seed(fsr, circuit)).standard_normal((4, cal.TABLE_PRESSES, 2))
+        carried = np.array([[load * (1.0 + e)] for load, e in zip(cal.TABLE_LOADS_N, errors)])
+        presses = cal.table_reading_n(cal.cached_model(dev.estimator.model), carried, fsr, circuit, cal.TABLE_HOLD_S,
+                                      press_z=draws[..., 0], noise_v=fsr.noise_v_rms / math.sqrt(256) * draws[..., 1])
+        plain = [float(np.mean(row)) for row in presses]
+        level = 1.0 / plain[1]
+        table = cal.calibration_table(dev, cal.TABLE_LOADS_N, errors)
+        assert table is not None and table[1] == tuple(r * level for r in plain), dev
+        assert cal.calibration_table(dev, cal.TABLE_LOADS_N, errors, anchor_n=None)[1] == tuple(plain)

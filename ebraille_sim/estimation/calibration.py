@@ -393,15 +393,29 @@ def table_reading_n(model, force_n: float, fsr, circuit, hold_s: float, press_z=
     no-load reading (:func:`steady_estimate` with the press and the noise).  ``force_n``,
     ``press_z`` and ``noise_v`` may be arrays that broadcast together (one reading each, an
     array back; e.g. a column of loads against a table of their presses)."""
+    y = model.steady_state(_table_input_v(force_n, fsr, circuit, hold_s, press_z, noise_v))
+    return float(y) if np.ndim(y) == 0 else np.asarray(y, dtype=float)
+
+
+def _table_input_v(force_n, fsr, circuit, hold_s: float, press_z, noise_v):
+    """The estimator's input (V, tared) of each reading of :func:`table_reading_n`."""
     branch = loading_branch_factor(fsr)
     forces = np.asarray(force_n, dtype=float)
     g = np.array([static_conductance(f * branch, fsr, load_time_s=hold_s) for f in forces.ravel()]).reshape(forces.shape)
     g_standoff = 1.0 / fsr.standoff_resistance_ohm
     z, e = np.asarray(press_z, dtype=float), np.asarray(noise_v, dtype=float)
     g = g_standoff + (g - g_standoff) / np.exp(fsr.press_repeatability * z)
-    u = divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + e - _tare(fsr, circuit)
-    y = model.steady_state(u)
-    return float(y) if np.ndim(y) == 0 else np.asarray(y, dtype=float)
+    return divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + e - _tare(fsr, circuit)
+
+
+@njit(cache=True)
+def _steady_many(u, g, in_x, in_y, in_s0, in_sn, out_x, out_y, out_s0, out_sn):
+    """:func:`_steady_at` of every entry of the C-contiguous array ``u`` (an array of its shape)."""
+    flat = u.ravel()
+    out = np.empty(flat.size)
+    for i in range(flat.size):
+        out[i] = _steady_at(flat[i], g, in_x, in_y, in_s0, in_sn, out_x, out_y, out_s0, out_sn)
+    return out.reshape(u.shape)
 
 
 def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=None,
@@ -430,15 +444,19 @@ def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=N
     errors = (0.0,) * len(loads_n) if load_errors is None else tuple(load_errors)
     if len(errors) != len(loads_n):
         raise ValueError(f"calibration_table: {len(errors)} load errors for {len(loads_n)} loads")
-    model = cached_model(device.estimator.model)
     fsr, circuit = device.fsr, device.circuit
     rng = default_rng(_fsr_unit_seed(fsr, circuit))
     sd_v = fsr.noise_v_rms / math.sqrt(TABLE_CONVERSIONS)
     draws = rng.standard_normal((len(loads_n), TABLE_PRESSES, 2))   # each press: its scatter, then its noise
     carried = np.array([[load * (1.0 + err)] for load, err in zip(loads_n, errors)])
-    presses = table_reading_n(model, carried, fsr, circuit, TABLE_HOLD_S, press_z=draws[..., 0],
-                              noise_v=sd_v * draws[..., 1])
-    readings = [float(np.mean(row)) for row in presses]
+    # table_reading_n of the presses, the model's steady map compiled (_steady_map: the same numbers)
+    u = _table_input_v(carried, fsr, circuit, TABLE_HOLD_S, draws[..., 0], sd_v * draws[..., 1])
+    steady = _steady_map_of(device.estimator.model)
+    if steady is None:
+        presses = np.asarray(cached_model(device.estimator.model).steady_state(u), dtype=float)
+    else:
+        presses = _steady_many(np.ascontiguousarray(u, dtype=float), *steady)
+    readings = presses.mean(axis=1).tolist()      # each load's presses averaged, as np.mean of its row
     if not (readings[0] > 0.0 and all(a < b for a, b in zip(readings, readings[1:]))):
         return None
     if anchor_n is not None:
