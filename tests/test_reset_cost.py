@@ -506,3 +506,19 @@ def test_calibration_table_through_the_compiled_steady_map_equals_the_models_own
         table = cal.calibration_table(dev, cal.TABLE_LOADS_N, errors)
         assert table is not None and table[1] == tuple(r * level for r in plain), dev
         assert cal.calibration_table(dev, cal.TABLE_LOADS_N, errors, anchor_n=None)[1] == tuple(plain)
+
+
+def test_zero_and_mean_readings_in_one_call_equal_the_zero_and_each_mean_reading():
+    """The drive calibration's zeroing and four mean readings in one compiled call give what
+    :func:`zero_code` and :func:`mean_reading_a` give one by one, on drawn current chains."""
+    from ebraille_sim.physics.current_sense import mean_reading_a, zero_and_mean_readings_a, zero_code
+    for k, dev in enumerate(sample_devices(31, 40)):
+        cs = dev.current_sense
+        seed = 1000003 * k + 17
+        currents = (-1.0 / dev.motor.resistance_ohm, 0.01, 0.05, 0.004 + 1e-4 * k)
+        seeds = (float(seed), seed + 2.0, seed + 4.0, seed + 7.0)
+        zero, reads = zero_and_mean_readings_a(cs, seed, currents, seeds, 256)
+        plain_zero = zero_code(cs, seed, cs.adc_lsb_v, cs.adc_max_code)
+        assert zero == plain_zero
+        assert reads == [mean_reading_a(cs, i, s, 256, plain_zero) for i, s in zip(currents, seeds)]
+        assert reads[1] != reads[2]

@@ -658,28 +658,30 @@ def calibrate_drive(device: DeviceParams) -> DriveCalibration:
     >>> round(cal.resistance_ohm, 1), round(cal.push_force_per_a_n, 1), round(cal.push_offset_n, 2)
     (21.2, 63.1, -0.62)
     """
-    from ebraille_sim.physics.current_sense import mean_reading_a, zero_code
+    from ebraille_sim.physics.current_sense import zero_and_mean_readings_a
     from ebraille_sim.physics.limits import push_force_bound_n, rack_speed_from_emf_m_per_s, shaft_to_rack_per_m
     cs, n = device.current_sense, CALIBRATION_CONVERSIONS
     seed = _unit_seed(device)
-    zero = zero_code(cs, seed, cs.adc_lsb_v, cs.adc_max_code)     # one zeroing at rest before the tests
     m, dt = device.motor, device.drivetrain                        # plant truth: what the line's hardware meets
     i_rest = -RESISTANCE_TEST_V / m.resistance_ohm                 # plant truth
-    r_ohm = -RESISTANCE_TEST_V / mean_reading_a(cs, i_rest, seed, n, zero)
+    g = shaft_to_rack_per_m(dt.gear_ratio, dt.pinion_radius_m)
+    i_free = (dt.guide_coulomb_n / (dt.gear_efficiency * g) + m.friction_torque_nm) / m.torque_constant_nm_per_a  # plant truth
+    # one zeroing at rest before the tests, then the means of the resistance test, the two push
+    # tests and the free run, each with its own noise (mean_reading_a of each, in one call)
+    _, (i_read_rest, *reads, i_read) = zero_and_mean_readings_a(
+        cs, seed, (i_rest,) + PUSH_TEST_CURRENTS_A + (i_free,),
+        (float(seed),) + tuple(seed + 2.0 * (k + 1) for k in range(len(PUSH_TEST_CURRENTS_A))) + (seed + 7.0,), n)
+    r_ohm = -RESISTANCE_TEST_V / i_read_rest
     rng = default_rng(seed)
     gauge = 1.0 + FORCE_GAUGE_TOLERANCE * (2.0 * rng.random() - 1.0)
-    g = shaft_to_rack_per_m(dt.gear_ratio, dt.pinion_radius_m)
-    forces, reads = [], []
-    for k, i in enumerate(PUSH_TEST_CURRENTS_A):
+    forces = []
+    for i in PUSH_TEST_CURRENTS_A:
         push = push_force_bound_n(i, m.torque_constant_nm_per_a, g, dt.gear_efficiency,  # plant truth
                                   m.friction_torque_nm, 0.0) - dt.guide_coulomb_n      # plant truth
         forces.append(gauge * push)
-        reads.append(mean_reading_a(cs, i, seed + 2.0 * (k + 1), n, zero))
     slope = (forces[1] - forces[0]) / (reads[1] - reads[0])
-    i_free = (dt.guide_coulomb_n / (dt.gear_efficiency * g) + m.friction_torque_nm) / m.torque_constant_nm_per_a  # plant truth
     v_free = rack_speed_from_emf_m_per_s(FREE_RUN_V, i_free, m.resistance_ohm, m.back_emf_v_s_per_rad, g)  # plant truth
     v_ref = v_free * (1.0 + SPEED_REFERENCE_TOLERANCE * (2.0 * rng.random() - 1.0))
-    i_read = mean_reading_a(cs, i_free, seed + 7.0, n, zero)
     return DriveCalibration(resistance_ohm=float(r_ohm), push_force_per_a_n=float(slope),
                             push_offset_n=float(forces[0] - slope * reads[0]), test_currents_a=tuple(reads),
                             back_emf_v_s_per_m=float((FREE_RUN_V - r_ohm * i_read) / v_ref),
