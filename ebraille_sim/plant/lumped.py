@@ -116,61 +116,31 @@ def _unseeded_params(device: DeviceParams, model=None) -> np.ndarray:
     p = np.zeros(N_PARAM)
     h = 1.0 / r.physics_rate_hz
     g = shaft_to_rack_per_m(d.gear_ratio, d.pinion_radius_m)
-    p[P.h_s] = h
-    p[P.substeps_per_sensor] = r.substeps_per_sensor
-    p[P.sensors_per_estimate] = ratio
-    p[P.motor_r_ohm] = m.resistance_ohm
-    p[P.motor_current_decay] = current_decay(h, m.resistance_ohm, m.inductance_h)
-    p[P.motor_kt] = m.torque_constant_nm_per_a
-    p[P.motor_ke] = m.back_emf_v_s_per_rad
-    p[P.n_over_r_per_m] = g
-    p[P.pinion_mass_kg] = reflected_inertia_kg(m.rotor_inertia_kg_m2, g)
-    p[P.pinion_coulomb_n] = reflected_force_n(m.friction_torque_nm, g)
-    p[P.pinion_static_n] = reflected_force_n(m.friction_torque_nm, g) * m.breakaway_ratio
-    p[P.pinion_viscous_n_s_per_m] = reflected_inertia_kg(m.viscous_friction_nm_s_per_rad, g)
-    p[P.gear_mu] = d.gear_loss_coefficient
-    p[P.half_backlash_m] = 0.5 * d.backlash_m
-    p[P.mesh_k_n_per_m] = d.mesh_stiffness_n_per_m
-    p[P.mesh_c_n_s_per_m] = mesh_damping_n_s_per_m(d.mesh_damping_ratio, d.mesh_stiffness_n_per_m,
-                                                       d.moving_mass_kg)
-    p[P.board_mass_kg] = d.moving_mass_kg
-    p[P.guide_coulomb_n] = d.guide_coulomb_n
-    p[P.guide_static_n] = d.guide_coulomb_n * d.guide_breakaway_ratio
-    p[P.guide_viscous_n_s_per_m] = d.guide_viscous_n_s_per_m
-    p[P.stribeck_v_m_per_s] = d.stribeck_velocity_m_per_s
-    p[P.travel_min_m] = d.travel_min_m
-    p[P.travel_max_m] = d.travel_max_m
-    p[P.finger_b_n_per_m] = f.stiffness_b_n_per_m
-    p[P.finger_m_per_m] = f.exponent_m_per_m
-    p[P.relax_c0] = f.relax_weight_inf
-    p[P.relax_c1] = f.relax_weight_1
-    p[P.relax_c2] = f.relax_weight_2
-    p[P.relax_c3] = f.relax_weight_3
-    p[_RELAX_SLOTS] = _prony_row(h, f.relax_tau_1_s, f.relax_tau_2_s, f.relax_tau_3_s)
-    p[P.fsr_lag_alpha] = lag_alpha(h, s.mechanical_lag_s)
-    p[P.fsr_k_ohm] = s.resistance_at_1n_ohm
-    p[P.fsr_n] = s.exponent
-    p[P.fsr_g_standoff_s] = 1.0 / s.standoff_resistance_ohm
     dt_sensor = 1.0 / r.sensor_rate_hz
-    p[P.fsr_creep_weight] = creep_term_weight(s.creep_per_decade, s.creep_tau_min_s, s.creep_tau_max_s)
+    bb, aa = _antialias_filter(float(e.antialias_cutoff_hz), float(r.sensor_rate_hz))
+    p[_DEVICE_SLOTS] = (
+        h, r.substeps_per_sensor, ratio,
+        m.resistance_ohm, current_decay(h, m.resistance_ohm, m.inductance_h), m.torque_constant_nm_per_a,
+        m.back_emf_v_s_per_rad, g, reflected_inertia_kg(m.rotor_inertia_kg_m2, g),
+        reflected_force_n(m.friction_torque_nm, g), reflected_force_n(m.friction_torque_nm, g) * m.breakaway_ratio,
+        reflected_inertia_kg(m.viscous_friction_nm_s_per_rad, g),
+        d.gear_loss_coefficient, 0.5 * d.backlash_m, d.mesh_stiffness_n_per_m,
+        mesh_damping_n_s_per_m(d.mesh_damping_ratio, d.mesh_stiffness_n_per_m, d.moving_mass_kg),
+        d.moving_mass_kg, d.guide_coulomb_n, d.guide_coulomb_n * d.guide_breakaway_ratio, d.guide_viscous_n_s_per_m,
+        d.stribeck_velocity_m_per_s, d.travel_min_m, d.travel_max_m,
+        f.stiffness_b_n_per_m, f.exponent_m_per_m, f.relax_weight_inf, f.relax_weight_1, f.relax_weight_2,
+        f.relax_weight_3,
+        lag_alpha(h, s.mechanical_lag_s), s.resistance_at_1n_ohm, s.exponent, 1.0 / s.standoff_resistance_ohm,
+        creep_term_weight(s.creep_per_decade, s.creep_tau_min_s, s.creep_tau_max_s), s.load_threshold_n,
+        s.temperature_coeff_per_k, s.temperature_coeff_cold_per_k, s.actuation_force_n, s.turn_on_steepness,
+        s.press_repeatability, s.noise_v_rms,
+        c.r2_ohm, c.supply_v, c.adc_lsb_v, c.adc_max_code,
+        bb[0], bb[1], bb[2], aa[1], aa[2])
+    p[_RELAX_SLOTS] = _prony_row(h, f.relax_tau_1_s, f.relax_tau_2_s, f.relax_tau_3_s)
     p[_CREEP_SLOTS] = _creep_decays(dt_sensor, s.creep_tau_min_s, s.creep_tau_max_s)
-    p[P.fsr_load_threshold_n] = s.load_threshold_n
-    p[P.fsr_tempco_per_k] = s.temperature_coeff_per_k
-    p[P.fsr_tempco_cold_per_k] = s.temperature_coeff_cold_per_k
-    p[P.fsr_actuation_n] = s.actuation_force_n
-    p[P.fsr_turn_on_m] = s.turn_on_steepness
-    p[P.fsr_press_sigma] = s.press_repeatability
-    p[P.fsr_noise_v] = s.noise_v_rms
-    p[P.r2_ohm] = c.r2_ohm
-    p[P.divider_supply_v] = c.supply_v
-    p[P.adc_lsb_v] = c.adc_lsb_v
-    p[P.adc_max_code] = c.adc_max_code
     widths, weights = play_widths(s)
     p[_PLAY_W_SLOTS] = widths
     p[_PLAY_WEIGHT_SLOTS] = weights
-    bb, aa = _antialias_filter(float(e.antialias_cutoff_hz), float(r.sensor_rate_hz))
-    p[P.aa_b0], p[P.aa_b1], p[P.aa_b2] = bb
-    p[P.aa_a1], p[P.aa_a2] = aa[1], aa[2]
     _pack_model(p, model)
     p[P.est_clamp] = 1.0 if e.clamp_nonnegative else 0.0
     p[P.est_nyquist_average] = 1.0 if e.nyquist_average else 0.0
@@ -207,6 +177,28 @@ def _pack_current_sense(p: np.ndarray, cs, h_s: float) -> None:
     p[P.isense_nominal_v_per_a] = cs.nominal_v_per_a
 
 
+def _slots(*names) -> np.ndarray:
+    """The parameter slots of ``names`` (read-only; each slot once)."""
+    slots = np.array([P[name] for name in names], dtype=np.intp)
+    if np.unique(slots).size != slots.size:
+        raise ImportError(f"parameter slots written twice: {names}")
+    slots.flags.writeable = False
+    return slots
+
+
+_DEVICE_SLOTS = _slots(
+    "h_s", "substeps_per_sensor", "sensors_per_estimate",
+    "motor_r_ohm", "motor_current_decay", "motor_kt", "motor_ke", "n_over_r_per_m", "pinion_mass_kg",
+    "pinion_coulomb_n", "pinion_static_n", "pinion_viscous_n_s_per_m",
+    "gear_mu", "half_backlash_m", "mesh_k_n_per_m", "mesh_c_n_s_per_m",
+    "board_mass_kg", "guide_coulomb_n", "guide_static_n", "guide_viscous_n_s_per_m",
+    "stribeck_v_m_per_s", "travel_min_m", "travel_max_m",
+    "finger_b_n_per_m", "finger_m_per_m", "relax_c0", "relax_c1", "relax_c2", "relax_c3",
+    "fsr_lag_alpha", "fsr_k_ohm", "fsr_n", "fsr_g_standoff_s", "fsr_creep_weight", "fsr_load_threshold_n",
+    "fsr_tempco_per_k", "fsr_tempco_cold_per_k", "fsr_actuation_n", "fsr_turn_on_m", "fsr_press_sigma", "fsr_noise_v",
+    "r2_ohm", "divider_supply_v", "adc_lsb_v", "adc_max_code",
+    "aa_b0", "aa_b1", "aa_b2", "aa_a1", "aa_a2")
+"""The parameter slots :func:`pack_params` fills with one number each of the device's parts (in its order)."""
 _PLAY_STATE_SLOTS = np.array([S[f"play_{j}"] for j in range(N_PLAYS)], dtype=np.intp)
 _COMP_PLAY_STATE_SLOTS = np.array([S[f"comp_play_{j}"] for j in range(N_PLAYS)], dtype=np.intp)
 _COMP_MEDIAN_SLOTS = np.array([S[f"comp_med_{j}"] for j in range(HYSTERESIS_MEDIAN - 1)], dtype=np.intp)
@@ -244,15 +236,6 @@ def _pack_calibration_table(p: np.ndarray, e) -> None:
     p[P.est_cal_y0:P.est_cal_y0 + CALIBRATION_TABLE_POINTS] = 0.0
     p[P.est_cal_x0:P.est_cal_x0 + n] = e.calibration_readings_n
     p[P.est_cal_y0:P.est_cal_y0 + n] = e.calibration_loads_n
-
-
-def _slots(*names) -> np.ndarray:
-    """The parameter slots of ``names`` (read-only; each slot once)."""
-    slots = np.array([P[name] for name in names], dtype=np.intp)
-    if np.unique(slots).size != slots.size:
-        raise ImportError(f"parameter slots written twice: {names}")
-    slots.flags.writeable = False
-    return slots
 
 
 CREEP_COMPENSATION_SLOTS = _slots("est_creep_comp", "comp_creep_weight", *(f"comp_creep_a{j}" for j in range(N_CREEP)),
