@@ -522,3 +522,35 @@ def test_zero_and_mean_readings_in_one_call_equal_the_zero_and_each_mean_reading
         assert zero == plain_zero
         assert reads == [mean_reading_a(cs, i, s, 256, plain_zero) for i, s in zip(currents, seeds)]
         assert reads[1] != reads[2]
+
+
+@pytest.mark.parametrize("force_n, peak_n, ramp_s", [(1.0, 2.0, 1.0), (0.5, 2.0, 1.0), (1.9, 2.0, 0.3),
+                                                     (2.5, 2.0, 1.0), (1e-4, 2.0, 1.0)])
+def test_compiled_loop_of_a_cycle_equals_numpys_argmax_searchsorted_and_interp(force_n, peak_n, ramp_s):
+    """The datasheet cycle's loop read by the compiled peak search and two-sample interpolations
+    equals NumPy's ``argmax``, ``searchsorted`` and ``interp`` of the same samples to the last bit,
+    on drawn units and the presets; a force the branches do not pass between two samples (above
+    the peak, below the first sample) falls back to NumPy's reading."""
+    from ebraille_sim.physics import fsr as F
+    from ebraille_sim.physics.params import FSRS
+    units = [d.fsr for d in sample_devices(37, 30)] + list(FSRS.values())
+    seen_fallback = False
+    for unit in units:
+        widths, weights = F.play_widths(unit)
+        p = np.array(list(widths) + list(weights) + [F.creep_decay(1e-3, tau) for tau in
+                                                     F.creep_taus_s(unit.creep_tau_min_s, unit.creep_tau_max_s)])
+        s = np.zeros(F.N_PLAYS + F.N_CREEP)
+        s[:F.N_PLAYS] = F.log_force(0.0)
+        w = F.creep_term_weight(unit.creep_per_decade, unit.creep_tau_min_s, unit.creep_tau_max_s)
+        seen, lagged = F._cycle_forces(F._load_cycle(ramp_s, 1e-3, peak_n), F.lag_alpha(1e-3, unit.mechanical_lag_s),
+                                       s, p, w, unit.load_threshold_n)
+        plain = F._loop_of_samples(seen, lagged, force_n, unit)
+        fast = F._loop_fraction(seen, lagged, force_n, unit.resistance_at_1n_ohm, unit.exponent,
+                                unit.actuation_force_n, unit.turn_on_steepness)
+        if fast == fast:
+            assert fast == plain, unit.name
+        else:
+            seen_fallback = True
+        got = F.datasheet_hysteresis(unit, ramp_s=ramp_s, force_n=force_n, peak_n=peak_n)
+        assert got == plain or (got != got and plain != plain)
+    assert seen_fallback == (force_n > peak_n or force_n < 1e-3)

@@ -35,7 +35,8 @@ from ebraille_sim.base.compiled import njit
 from ebraille_sim.base.seeds import default_rng
 from ebraille_sim.base.validation import check_number, replace_fields
 from ebraille_sim.estimation.registry import cached_model
-from ebraille_sim.physics.fsr import adc_code, adc_voltage, divider_voltage, play_widths, static_conductance
+from ebraille_sim.physics.fsr import (adc_code, adc_voltage, divider_voltage, interp_point, play_widths,
+                                      static_conductance)
 
 if TYPE_CHECKING:
     from ebraille_sim.physics.params import DeviceParams
@@ -140,33 +141,6 @@ def static_error_table(model, fsr, circuit, forces_n=(0.2, 0.3, 0.5, 0.75, 1.0, 
 
 
 @njit(cache=True)
-def _interp(x, xs, ys):
-    """``numpy.interp(x, xs, ys)`` of one float inside ``[xs[0], xs[-1]]`` (or NaN): the segment
-    and the operations of NumPy's ``arr_interp`` for one point (the last breakpoint not above
-    ``x``, the slope of its segment, ``slope (x - x_j) + y_j``, the other end when that is NaN),
-    so the same number without the call into NumPy."""
-    if x != x:
-        return x
-    lo, hi = 0, xs.shape[0]
-    while lo < hi:                              # bisect_right
-        mid = (lo + hi) // 2
-        if x < xs[mid]:
-            hi = mid
-        else:
-            lo = mid + 1
-    j = lo - 1
-    if j == xs.shape[0] - 1 or xs[j] == x:
-        return ys[j]
-    slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
-    y = slope * (x - xs[j]) + ys[j]
-    if y != y:
-        y = slope * (x - xs[j + 1]) + ys[j + 1]
-        if y != y and ys[j] == ys[j + 1]:
-            y = ys[j]
-    return y
-
-
-@njit(cache=True)
 def _pwl_at(x, xs, ys, s0, sn):
     """A nonlinearity of :func:`_steady_map` at ``x``: the breakpoints ``xs``, ``ys`` (none: the
     identity), extended beyond them with the end slopes ``s0`` and ``sn``."""
@@ -177,7 +151,7 @@ def _pwl_at(x, xs, ys, s0, sn):
         return ys[0] + s0 * (x - xs[0])
     if x > xs[n - 1]:
         return ys[n - 1] + sn * (x - xs[n - 1])
-    return _interp(x, xs, ys)
+    return interp_point(x, xs, ys)
 
 
 @njit(cache=True)

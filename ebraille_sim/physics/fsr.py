@@ -460,6 +460,73 @@ def _cycle_forces(force, a_lag, s, p, weight, threshold_n):
     return seen, lagged
 
 
+@njit(cache=True)
+def interp_point(x, xs, ys):
+    """``numpy.interp(x, xs, ys)`` of one float inside ``[xs[0], xs[-1]]`` (or NaN): the segment
+    and the operations of NumPy's ``arr_interp`` for one point (the last breakpoint not above
+    ``x``, the slope of its segment, ``slope (x - x_j) + y_j``, the other end when that is NaN),
+    so the same number without the call into NumPy."""
+    if x != x:
+        return x
+    lo, hi = 0, xs.shape[0]
+    while lo < hi:                              # bisect_right
+        mid = (lo + hi) // 2
+        if x < xs[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    j = lo - 1
+    if j == xs.shape[0] - 1 or xs[j] == x:
+        return ys[j]
+    slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
+    y = slope * (x - xs[j]) + ys[j]
+    if y != y:
+        y = slope * (x - xs[j + 1]) + ys[j + 1]
+        if y != y and ys[j] == ys[j + 1]:
+            y = ys[j]
+    return y
+
+
+@njit(cache=True)
+def _branch_resistance(force_n, lagged, seen, k_ohm, n, actuation_n, steepness):
+    """:func:`_resistance_at` of a branch whose lagged force passes ``force_n`` between two of its
+    samples (NumPy's ``searchsorted`` and ``interp`` of those two, the same numbers); NaN
+    otherwise (an end of the branch, or a NaN met), for the caller to fall back."""
+    lo, hi = 0, lagged.size
+    while lo < hi:                              # searchsorted(side="right")
+        mid = lo + ((hi - lo) >> 1)
+        if lagged[mid] != lagged[mid]:
+            return math.nan
+        if force_n < lagged[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    if lo < 1 or lo > lagged.size - 1:
+        return math.nan
+    xs = np.empty(2)
+    ys = np.empty(2)
+    for m in range(2):
+        xs[m] = lagged[lo - 1 + m]
+        ys[m] = 1.0 / conductance_s(seen[lo - 1 + m], k_ohm, n, 0.0, 1.0, actuation_n, steepness)
+    return interp_point(force_n, xs, ys)
+
+
+@njit(cache=True)
+def _loop_fraction(seen, lagged, force_n, k_ohm, n, actuation_n, steepness):
+    """``1 - R_down/R_up`` of :func:`datasheet_hysteresis` from its cycle's samples: the peak of the
+    lagged force (``np.argmax``), each branch's resistance at ``force_n``
+    (:func:`_branch_resistance`, the falling one reversed); NaN where the caller must fall back."""
+    peak = 0
+    for i in range(lagged.size):
+        if lagged[i] != lagged[i]:
+            return math.nan
+        if lagged[i] > lagged[peak]:
+            peak = i
+    r_up = _branch_resistance(force_n, lagged[:peak + 1], seen[:peak + 1], k_ohm, n, actuation_n, steepness)
+    r_dn = _branch_resistance(force_n, lagged[peak:][::-1], seen[peak:][::-1], k_ohm, n, actuation_n, steepness)
+    return 1.0 - r_dn / r_up
+
+
 def _resistance_at(force_n: float, lagged: np.ndarray, seen: np.ndarray, fsr) -> float:
     """The film's resistance (stand-off path left out) where the lagged force of one monotone
     branch (``lagged`` increasing) passes ``force_n``: interpolated between the two samples around
@@ -498,6 +565,16 @@ def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: floa
     a_lag = lag_alpha(dt_s, fsr.mechanical_lag_s)
     seen, lagged = _cycle_forces(_load_cycle(float(ramp_s), float(dt_s), float(peak_n)), a_lag, s, p, w,
                                  fsr.load_threshold_n)
+    loop = _loop_fraction(seen, lagged, float(force_n), fsr.resistance_at_1n_ohm, fsr.exponent, fsr.actuation_force_n,
+                          fsr.turn_on_steepness)
+    if loop == loop:
+        return float(loop)
+    return _loop_of_samples(seen, lagged, force_n, fsr)
+
+
+def _loop_of_samples(seen: np.ndarray, lagged: np.ndarray, force_n: float, fsr) -> float:
+    """:func:`_loop_fraction` through NumPy (``argmax``, ``searchsorted``, ``interp``): every cycle,
+    a branch that does not pass ``force_n`` between two samples included."""
     peak = int(np.argmax(lagged))
     r_up = _resistance_at(force_n, lagged[:peak + 1], seen[:peak + 1], fsr)
     r_dn = _resistance_at(force_n, lagged[peak:][::-1], seen[peak:][::-1], fsr)
