@@ -398,7 +398,8 @@ def _play_widths_of(fsr) -> tuple[tuple, tuple]:
     return tuple(widths), tuple(weights)
 
 
-def _ramp_creep_terms(fsr) -> tuple[np.ndarray, np.ndarray]:
+@functools.lru_cache(maxsize=64)
+def _ramp_creep_terms_of(tau_min_s: float, tau_max_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Creep states ``z_i / F_peak`` of a recovered film at the two passes through
     :data:`HYSTERESIS_TEST_FORCE_N` of the datasheet's load cycle (a triangle 0 ->
     :data:`HYSTERESIS_TEST_PEAK_N` -> 0, each leg :data:`HYSTERESIS_TEST_RAMP_S`), from the exact
@@ -407,11 +408,6 @@ def _ramp_creep_terms(fsr) -> tuple[np.ndarray, np.ndarray]:
     ``z = F_p - r t' + r tau - (F_p + r tau - z_p) e^(-t'/tau)``.  They depend on the creep's
     time constants only, which a drawn unit shares with its part: computed once per pair
     (read-only arrays; 28 us a call, three calls a drawn device)."""
-    return _ramp_creep_terms_of(fsr.creep_tau_min_s, fsr.creep_tau_max_s)
-
-
-@functools.lru_cache(maxsize=64)
-def _ramp_creep_terms_of(tau_min_s: float, tau_max_s: float) -> tuple[np.ndarray, np.ndarray]:
     taus = np.array(creep_taus_s(tau_min_s, tau_max_s))
     t_r = HYSTERESIS_TEST_RAMP_S
     r = 1.0 / t_r                                          # per unit peak force
@@ -428,11 +424,18 @@ def _ramp_creep_terms_of(tau_min_s: float, tau_max_s: float) -> tuple[np.ndarray
 def creep_loop_fraction(fsr) -> float:
     """``(R_F+ - R_F-)/R_F+`` at 1 kg that the creep alone gives in the datasheet's load cycle:
     the film creeps between the rising and the falling pass, so the falling pass reads the lower
-    resistance (conduction ``~F_c^n``, ``F_c = F + w sum z_i``; see :func:`_ramp_creep_terms`)."""
+    resistance (conduction ``~F_c^n``, ``F_c = F + w sum z_i``; see :func:`_ramp_creep_terms_of`)."""
     w = creep_term_weight(fsr.creep_per_decade, fsr.creep_tau_min_s, fsr.creep_tau_max_s)
-    z_up, z_dn = _ramp_creep_terms(fsr)
+    up, dn = _ramp_creep_sums_of(fsr.creep_tau_min_s, fsr.creep_tau_max_s)
     x = HYSTERESIS_TEST_FORCE_N / HYSTERESIS_TEST_PEAK_N
-    return 1.0 - ((x + w * z_up.sum()) / (x + w * z_dn.sum())) ** fsr.exponent
+    return 1.0 - ((x + w * up) / (x + w * dn)) ** fsr.exponent
+
+
+@functools.lru_cache(maxsize=64)
+def _ramp_creep_sums_of(tau_min_s: float, tau_max_s: float) -> tuple:
+    """The sums of :func:`_ramp_creep_terms` (NumPy's ``sum`` of each, as NumPy floats), once per pair."""
+    z_up, z_dn = _ramp_creep_terms_of(tau_min_s, tau_max_s)
+    return z_up.sum(), z_dn.sum()
 
 
 def play_loop_fraction(fsr) -> float:

@@ -259,8 +259,7 @@ def creep_compensation_values(e, dt_sensor_s: float) -> np.ndarray:
     nominal = firmware_fsr(e)
     values = np.array([1.0 if e.creep_compensation else 0.0,
                        creep_term_weight(nominal.creep_per_decade, nominal.creep_tau_min_s, nominal.creep_tau_max_s)]
-                      + [creep_decay(dt_sensor_s, tau) for tau in creep_taus_s(nominal.creep_tau_min_s,
-                                                                              nominal.creep_tau_max_s)]
+                      + _creep_decays(dt_sensor_s, nominal.creep_tau_min_s, nominal.creep_tau_max_s).tolist()
                       + [nominal.exponent, 1.0 / nominal.standoff_resistance_ohm, nominal.load_threshold_n,
                          creep_gain(e.creep_reference_hold_s, nominal)], dtype=float)
     values.flags.writeable = False
