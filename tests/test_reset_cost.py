@@ -554,3 +554,22 @@ def test_compiled_loop_of_a_cycle_equals_numpys_argmax_searchsorted_and_interp(f
         got = F.datasheet_hysteresis(unit, ramp_s=ramp_s, force_n=force_n, peak_n=peak_n)
         assert got == plain or (got != got and plain != plain)
     assert seen_fallback == (force_n > peak_n or force_n < 1e-3)
+
+
+def test_static_conductance_in_one_call_equals_its_laws_called_one_by_one():
+    """The film's static conductance in one compiled call equals :func:`conductance_s` of the force
+    grown by :func:`creep_gain` above the load threshold and scaled by :func:`temperature_factor`,
+    each called on its own, on drawn units and the presets, at and below the threshold, warm and cold."""
+    from ebraille_sim.physics import fsr as F
+    from ebraille_sim.physics.params import FSRS
+    units = [d.fsr for d in sample_devices(41, 25)] + list(FSRS.values())
+    for unit in units:
+        for force in (0.0, 0.5 * unit.load_threshold_n, unit.load_threshold_n, 0.3, 1.0, 2.7):
+            for hold in (0.0, 2.0, 20.0):
+                for temp in (-12.0, 0.0, 7.5):
+                    f = force * F.creep_gain(hold, unit) if force > unit.load_threshold_n else force
+                    scale = F.temperature_factor(temp, unit.temperature_coeff_per_k, unit.temperature_coeff_cold_per_k)
+                    plain = F.conductance_s(f, unit.resistance_at_1n_ohm, unit.exponent,
+                                            1.0 / unit.standoff_resistance_ohm, scale, unit.actuation_force_n,
+                                            unit.turn_on_steepness)
+                    assert F.static_conductance(force, unit, load_time_s=hold, temp_offset_k=temp) == plain

@@ -619,11 +619,23 @@ def static_conductance(force_n: float, fsr, load_time_s: float = 0.0, temp_offse
     :func:`held_creep_gain` (when above the load threshold), scaled by :func:`temperature_factor`.
     """
     f = float(force_n)
-    if f > fsr.load_threshold_n:
-        f *= creep_gain(float(load_time_s), fsr)
-    scale = temperature_factor(float(temp_offset_k), fsr.temperature_coeff_per_k, fsr.temperature_coeff_cold_per_k)
-    return conductance_s(f, fsr.resistance_at_1n_ohm, fsr.exponent, 1.0 / fsr.standoff_resistance_ohm, scale,
-                         fsr.actuation_force_n, fsr.turn_on_steepness)
+    w = (creep_term_weight(fsr.creep_per_decade, fsr.creep_tau_min_s, fsr.creep_tau_max_s)
+         if f > fsr.load_threshold_n else 0.0)
+    return _static_conductance(f, float(load_time_s), float(temp_offset_k), fsr.load_threshold_n, w,
+                               fsr.creep_tau_min_s, fsr.creep_tau_max_s, fsr.temperature_coeff_per_k,
+                               fsr.temperature_coeff_cold_per_k, fsr.resistance_at_1n_ohm, fsr.exponent,
+                               1.0 / fsr.standoff_resistance_ohm, fsr.actuation_force_n, fsr.turn_on_steepness)
+
+
+@njit(cache=True)
+def _static_conductance(f, load_time_s, temp_offset_k, threshold_n, weight, tau_min_s, tau_max_s, tempco_hot_per_k,
+                        tempco_cold_per_k, k_ohm, n, g_standoff_s, actuation_n, steepness):
+    """:func:`static_conductance`'s laws in one compiled call (``weight``: the creep terms' weight,
+    :func:`creep_term_weight`)."""
+    if f > threshold_n:
+        f *= held_creep_gain(load_time_s, weight, tau_min_s, tau_max_s, N_CREEP)
+    return conductance_s(f, k_ohm, n, g_standoff_s, temperature_factor(temp_offset_k, tempco_hot_per_k,
+                                                                      tempco_cold_per_k), actuation_n, steepness)
 
 
 def static_resistance(force_n: float, fsr, load_time_s: float = 0.0, temp_offset_k: float = 0.0) -> float:
