@@ -573,3 +573,44 @@ def test_static_conductance_in_one_call_equals_its_laws_called_one_by_one():
                                             1.0 / unit.standoff_resistance_ohm, scale, unit.actuation_force_n,
                                             unit.turn_on_steepness)
                     assert F.static_conductance(force, unit, load_time_s=hold, temp_offset_k=temp) == plain
+
+
+def _bench_creep_through_numpy(device, load_n, load_error):
+    """The bench's creep per decade with every step a NumPy broadcast (the protocol as written)."""
+    from ebraille_sim.base.seeds import default_rng
+    from ebraille_sim.estimation import calibration as cal
+    from ebraille_sim.estimation.firmware import FIRMWARE_FSR as nom
+    from ebraille_sim.physics.fsr import (N_CREEP, divider_conductance_s, divider_voltage, held_creep_gain,
+                                          static_conductance)
+    fsr, circuit = device.fsr, device.circuit
+    rng = default_rng(cal._fsr_unit_seed(fsr, circuit) + 1)
+    sd_v = fsr.noise_v_rms / math.sqrt(cal.TABLE_CONVERSIONS)
+    f_eff = load_n * (1.0 + load_error) * cal.loading_branch_factor(fsr)
+    held = np.array([static_conductance(f_eff, fsr, load_time_s=t) for t in cal.CREEP_READ_S])
+    draws = rng.standard_normal((cal.TABLE_PRESSES, 3))
+    scale = np.exp(fsr.press_repeatability * draws[:, :1])
+    g = 1.0 / fsr.standoff_resistance_ohm + (held - 1.0 / fsr.standoff_resistance_ohm) / scale
+    v = divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + sd_v * draws[:, 1:]
+    g_path = divider_conductance_s(v, circuit.r2_ohm, circuit.supply_v) - 1.0 / nom.standoff_resistance_ohm
+    ratio = float(np.mean((g_path[:, 1] / g_path[:, 0]) ** (1.0 / nom.exponent)))
+    a = [held_creep_gain(t, 1.0, nom.creep_tau_min_s, nom.creep_tau_max_s, N_CREEP) - 1.0 for t in cal.CREEP_READ_S]
+    w = (ratio - 1.0) / (a[1] - ratio * a[0])
+    return float(min(max(w * (N_CREEP - 1) / math.log10(nom.creep_tau_max_s / nom.creep_tau_min_s), 0.0), 0.2))
+
+
+def test_bench_creep_reads_in_one_call_equal_numpys_broadcasts():
+    """The bench's creep reads turned into conductance ratios in one compiled call give the creep
+    per decade of the same protocol written as NumPy broadcasts, to the last bit, on drawn units
+    (their own load errors) and the presets' films."""
+    from ebraille_sim.estimation import calibration as cal
+    from ebraille_sim.physics.params import FSRS
+    from ebraille_sim.base.validation import replace_fields
+    devices = sample_devices(43, 40) + [cal.calibrate_device(replace_fields(DeviceParams(), fsr=f))
+                                        for f in FSRS.values()]
+    values = set()
+    for k, dev in enumerate(devices):
+        for load_error in (0.0, 0.015 * math.cos(k)):
+            got = cal.bench_creep_per_decade(dev, 1.0, load_error)
+            assert got == _bench_creep_through_numpy(dev, 1.0, load_error), dev.fsr
+            values.add(got)
+    assert len(values) > 40                                    # the units read differently

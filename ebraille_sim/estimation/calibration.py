@@ -35,8 +35,8 @@ from ebraille_sim.base.compiled import njit
 from ebraille_sim.base.seeds import default_rng
 from ebraille_sim.base.validation import check_number, replace_fields
 from ebraille_sim.estimation.registry import cached_model
-from ebraille_sim.physics.fsr import (adc_code, adc_voltage, divider_voltage, interp_point, play_widths,
-                                      static_conductance)
+from ebraille_sim.physics.fsr import (adc_code, adc_voltage, divider_conductance_s, divider_voltage, interp_point,
+                                      play_widths, static_conductance)
 
 if TYPE_CHECKING:
     from ebraille_sim.physics.params import DeviceParams
@@ -367,29 +367,32 @@ def table_reading_n(model, force_n: float, fsr, circuit, hold_s: float, press_z=
     no-load reading (:func:`steady_estimate` with the press and the noise).  ``force_n``,
     ``press_z`` and ``noise_v`` may be arrays that broadcast together (one reading each, an
     array back; e.g. a column of loads against a table of their presses)."""
-    y = model.steady_state(_table_input_v(force_n, fsr, circuit, hold_s, press_z, noise_v))
-    return float(y) if np.ndim(y) == 0 else np.asarray(y, dtype=float)
-
-
-def _table_input_v(force_n, fsr, circuit, hold_s: float, press_z, noise_v):
-    """The estimator's input (V, tared) of each reading of :func:`table_reading_n`."""
     branch = loading_branch_factor(fsr)
     forces = np.asarray(force_n, dtype=float)
     g = np.array([static_conductance(f * branch, fsr, load_time_s=hold_s) for f in forces.ravel()]).reshape(forces.shape)
     g_standoff = 1.0 / fsr.standoff_resistance_ohm
     z, e = np.asarray(press_z, dtype=float), np.asarray(noise_v, dtype=float)
     g = g_standoff + (g - g_standoff) / np.exp(fsr.press_repeatability * z)
-    return divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + e - _tare(fsr, circuit)
+    u = divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + e - _tare(fsr, circuit)
+    y = model.steady_state(u)
+    return float(y) if np.ndim(y) == 0 else np.asarray(y, dtype=float)
 
 
 @njit(cache=True)
-def _steady_many(u, g, in_x, in_y, in_s0, in_sn, out_x, out_y, out_s0, out_sn):
-    """:func:`_steady_at` of every entry of the C-contiguous array ``u`` (an array of its shape)."""
-    flat = u.ravel()
-    out = np.empty(flat.size)
-    for i in range(flat.size):
-        out[i] = _steady_at(flat[i], g, in_x, in_y, in_s0, in_sn, out_x, out_y, out_s0, out_sn)
-    return out.reshape(u.shape)
+def _table_presses(g_load, scatter, draws, sd_v, g_standoff_s, r2_ohm, supply_v, tare_v, g, in_x, in_y, in_s0, in_sn,
+                   out_x, out_y, out_s0, out_sn):
+    """The readings of :func:`calibration_table`'s presses (one row a load): :func:`table_reading_n`
+    of the film's conductance ``g_load`` of each load, each press's resistance scaled by its
+    ``scatter`` (the stand-off path kept), the divider's voltage with the conversions' noise
+    ``sd_v * draws[..., 1]``, tared, through :func:`_steady_map`'s table (the operations of
+    NumPy's broadcasts and of the model's map, element by element: the same numbers)."""
+    out = np.empty(scatter.shape)
+    for i in range(scatter.shape[0]):
+        for k in range(scatter.shape[1]):
+            gk = g_standoff_s + (g_load[i] - g_standoff_s) / scatter[i, k]                    # plant truth
+            u = divider_voltage(gk, r2_ohm, supply_v) + sd_v * draws[i, k, 1] - tare_v
+            out[i, k] = _steady_at(u, g, in_x, in_y, in_s0, in_sn, out_x, out_y, out_s0, out_sn)
+    return out
 
 
 def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=None,
@@ -422,14 +425,17 @@ def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=N
     rng = default_rng(_fsr_unit_seed(fsr, circuit))
     sd_v = fsr.noise_v_rms / math.sqrt(TABLE_CONVERSIONS)
     draws = rng.standard_normal((len(loads_n), TABLE_PRESSES, 2))   # each press: its scatter, then its noise
-    carried = np.array([[load * (1.0 + err)] for load, err in zip(loads_n, errors)])
-    # table_reading_n of the presses, the model's steady map compiled (_steady_map: the same numbers)
-    u = _table_input_v(carried, fsr, circuit, TABLE_HOLD_S, draws[..., 0], sd_v * draws[..., 1])
+    carried = [load * (1.0 + err) for load, err in zip(loads_n, errors)]
     steady = _steady_map_of(device.estimator.model)
-    if steady is None:
-        presses = np.asarray(cached_model(device.estimator.model).steady_state(u), dtype=float)
-    else:
-        presses = _steady_many(np.ascontiguousarray(u, dtype=float), *steady)
+    if steady is None:                            # the model's own map (it raises)
+        presses = table_reading_n(cached_model(device.estimator.model), np.array([[c] for c in carried]), fsr, circuit,
+                                  TABLE_HOLD_S, press_z=draws[..., 0], noise_v=sd_v * draws[..., 1])
+    else:                                         # table_reading_n of every press in one compiled call
+        branch = loading_branch_factor(fsr)
+        g_load = np.array([static_conductance(c * branch, fsr, load_time_s=TABLE_HOLD_S) for c in carried])
+        presses = _table_presses(g_load, np.exp(fsr.press_repeatability * draws[..., 0]), draws, sd_v,
+                                 1.0 / fsr.standoff_resistance_ohm, circuit.r2_ohm, circuit.supply_v,
+                                 _tare(fsr, circuit), *steady)
     readings = presses.mean(axis=1).tolist()      # each load's presses averaged, as np.mean of its row
     if not (readings[0] > 0.0 and all(a < b for a, b in zip(readings, readings[1:]))):
         return None
@@ -456,7 +462,7 @@ def bench_creep_per_decade(device: DeviceParams, load_n: float = 1.0, load_error
     The press's scatter cancels in the ratio; the unit's exponent, unknown to the bench, scales
     the result by ``n_nominal / n_unit`` (about +/- 12 %).  Clipped to [0, 0.2]."""
     from ebraille_sim.estimation.firmware import FIRMWARE_FSR
-    from ebraille_sim.physics.fsr import N_CREEP, divider_conductance_s, held_creep_gain
+    from ebraille_sim.physics.fsr import N_CREEP
     fsr, circuit = device.fsr, device.circuit
     nom = FIRMWARE_FSR
     rng = default_rng(_fsr_unit_seed(fsr, circuit) + 1)
@@ -466,14 +472,40 @@ def bench_creep_per_decade(device: DeviceParams, load_n: float = 1.0, load_error
     held = np.array([static_conductance(f_eff, fsr, load_time_s=t) for t in CREEP_READ_S])   # plant truth (bench)
     draws = rng.standard_normal((TABLE_PRESSES, 1 + len(CREEP_READ_S)))   # each press: its scatter, its reads' noise
     scale = np.exp(fsr.press_repeatability * draws[:, :1])
-    g = 1.0 / fsr.standoff_resistance_ohm + (held - 1.0 / fsr.standoff_resistance_ohm) / scale   # plant truth
-    v = divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + sd_v * draws[:, 1:]
-    g_path = divider_conductance_s(v, circuit.r2_ohm, circuit.supply_v) - g_off
-    ratio = float(np.mean((g_path[:, 1] / g_path[:, 0]) ** (1.0 / nom.exponent)))
-    a = [held_creep_gain(t, 1.0, nom.creep_tau_min_s, nom.creep_tau_max_s, N_CREEP) - 1.0 for t in CREEP_READ_S]
-    w = (ratio - 1.0) / (a[1] - ratio * a[0])
-    per_decade = w * (N_CREEP - 1) / math.log10(nom.creep_tau_max_s / nom.creep_tau_min_s)
+    ratios = _creep_read_ratios(held, scale, draws, 1.0 / fsr.standoff_resistance_ohm, circuit.r2_ohm,
+                                circuit.supply_v, sd_v, g_off)
+    ratio = float(np.mean(ratios ** (1.0 / nom.exponent)))
+    a0, a1, decade = _nominal_creep_rise(nom.creep_tau_min_s, nom.creep_tau_max_s)
+    w = (ratio - 1.0) / (a1 - ratio * a0)
+    per_decade = w * (N_CREEP - 1) / decade
     return float(min(max(per_decade, 0.0), 0.2))
+
+
+@njit(cache=True)
+def _creep_read_ratios(held, scale, draws, g_standoff_s, r2_ohm, supply_v, sd_v, g_off_s):
+    """Per press of :func:`bench_creep_per_decade`, the path conductance the bench reads at its
+    second creep read over that at its first: the film's conductances ``held`` with the press's
+    scatter ``scale`` (the stand-off path kept), through the divider, plus each read's noise
+    ``sd_v * draws[:, 1:]``, back through the divider's inverse less the nominal stand-off
+    ``g_off_s`` (the operations of NumPy's broadcasts, element by element: the same numbers)."""
+    out = np.empty(scale.shape[0])
+    for i in range(scale.shape[0]):
+        g_path = np.empty(2)
+        for j in range(2):
+            g = g_standoff_s + (held[j] - g_standoff_s) / scale[i, 0]                 # plant truth
+            v = divider_voltage(g, r2_ohm, supply_v) + sd_v * draws[i, 1 + j]
+            g_path[j] = divider_conductance_s(v, r2_ohm, supply_v) - g_off_s
+        out[i] = g_path[1] / g_path[0]
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def _nominal_creep_rise(tau_min_s: float, tau_max_s: float) -> tuple[float, float, float]:
+    """The nominal film's creep rise ``F_c/F - 1`` of unit weight at the two creep reads, and the
+    decades its retardation times span (:func:`bench_creep_per_decade`'s constants)."""
+    from ebraille_sim.physics.fsr import N_CREEP, held_creep_gain
+    a = [held_creep_gain(t, 1.0, tau_min_s, tau_max_s, N_CREEP) - 1.0 for t in CREEP_READ_S]
+    return a[0], a[1], math.log10(tau_max_s / tau_min_s)
 
 
 LOOP_FORCE_N, LOOP_PEAK_N, LOOP_RAMP_S = 1.0, 2.0, 1.0
