@@ -422,3 +422,195 @@ def test_drawn_disturbance_sections_equal_validate_section_and_share_only_their_
     shared = episodes._validated_kind("tremor", (("band_hz", (8.0, 12.0)),))
     with pytest.raises(dataclasses.FrozenInstanceError):
         shared.rms_m = 1.0
+
+
+def _compensations_written_one_slot_at_a_time(p, e, dt_sensor_s, adc_lsb_v, h, sensor_rate_hz):
+    """The creep and hysteresis compensations of ``e`` written slot by slot from the firmware's laws."""
+    from ebraille_sim.estimation.firmware import firmware_fsr
+    from ebraille_sim.physics.fsr import creep_decay, creep_gain, creep_taus_s, creep_term_weight, play_loop_widths
+    from ebraille_sim.plant.layout import N_PLAYS, P
+    nominal = firmware_fsr(e)
+    p[P.est_creep_comp] = 1.0 if e.creep_compensation else 0.0
+    p[P.comp_creep_weight] = creep_term_weight(nominal.creep_per_decade, nominal.creep_tau_min_s,
+                                               nominal.creep_tau_max_s)
+    for j, tau in enumerate(creep_taus_s(nominal.creep_tau_min_s, nominal.creep_tau_max_s)):
+        p[P[f"comp_creep_a{j}"]] = creep_decay(dt_sensor_s, tau)
+    p[P.comp_fsr_n] = nominal.exponent
+    p[P.comp_g_standoff_s] = 1.0 / nominal.standoff_resistance_ohm
+    p[P.comp_load_threshold_n] = nominal.load_threshold_n
+    p[P.comp_reference_gain] = creep_gain(e.creep_reference_hold_s, nominal)
+    p[P.est_hyst_comp] = 1.0 if e.hysteresis_compensation else 0.0
+    widths, weights = play_loop_widths(h, nominal.exponent)
+    for j in range(N_PLAYS):
+        p[P[f"comp_play_w{j}"]] = widths[j]
+        p[P[f"comp_play_weight{j}"]] = weights[j]
+    p[P.comp_hyst_halfwidth] = sum(w * x for w, x in zip(weights, widths))
+    p[P.comp_fsr_k_ohm] = nominal.resistance_at_1n_ohm
+    p[P.comp_hyst_deadband_v] = e.hysteresis_deadband_lsb * adc_lsb_v
+    p[P.comp_hyst_turn_v] = e.hysteresis_turn_lsb * adc_lsb_v
+    p[P.comp_hyst_follow_v] = e.hysteresis_follow_lsb * adc_lsb_v
+    p[P.comp_centre_alpha] = -math.expm1(-1.0 / (e.hysteresis_centre_time_s * sensor_rate_hz)) \
+        if e.hysteresis_centre_time_s > 0.0 else 0.0
+    p[P.comp_turn_alpha] = -math.expm1(-1.0 / (e.hysteresis_turn_time_s * sensor_rate_hz))
+
+
+def test_compensation_values_fill_exactly_their_slots_as_slot_by_slot_writes_do():
+    """The creep and hysteresis compensations packed as one values row into fixed slots write the
+    same slots with the same numbers as the firmware's laws written one slot at a time, on drawn
+    units (each with its bench's creep and loop), the nominal device and the 1 kHz presets."""
+    from ebraille_sim.estimation.presets import get_firmware
+    from ebraille_sim.physics.fsr import play_loop_fraction
+    from ebraille_sim.plant import lumped
+    from ebraille_sim.plant.layout import N_PARAM
+    from ebraille_sim.estimation.firmware import firmware_fsr
+    from ebraille_sim.physics.params import EstimatorParams
+    devices = sample_devices(17, 6) + [DeviceParams()] + [
+        DeviceParams(estimator=dataclasses.replace(EstimatorParams(), **get_firmware(name).estimator))
+        for name in ("fast_1khz", "fast_1khz_centred", "paper_100hz")]
+    for dev in devices:
+        e, c, s = dev.estimator, dev.circuit, dev.fsr
+        for rate in (dev.rates.sensor_rate_hz, 1000.0):
+            h = (play_loop_fraction(dataclasses.replace(firmware_fsr(e), hysteresis_fraction=e.hysteresis_fraction))
+                 if e.hysteresis_fraction is not None else lumped.measured_hysteresis_fraction(s)
+                 if e.hysteresis_compensation else play_loop_fraction(lumped.FIRMWARE_FSR))
+            fast, plain = np.full(N_PARAM, np.nan), np.full(N_PARAM, np.nan)
+            lumped._pack_creep_compensation(fast, e, 1.0 / rate)
+            lumped._pack_hysteresis_compensation(fast, e, c, s, rate)
+            _compensations_written_one_slot_at_a_time(plain, e, 1.0 / rate, float(c.adc_lsb_v), h, rate)
+            np.testing.assert_array_equal(fast, plain)
+            written = np.flatnonzero(~np.isnan(fast))
+            assert sorted(written) == sorted(np.concatenate([lumped.CREEP_COMPENSATION_SLOTS,
+                                                             lumped.HYSTERESIS_COMPENSATION_SLOTS]))
+    assert not lumped.creep_compensation_values(devices[0].estimator, 1e-3).flags.writeable
+
+
+def test_calibration_table_through_the_compiled_steady_map_equals_the_models_own_map():
+    """The bench's table read through the compiled steady map and one mean per load equals the
+    readings of :func:`table_reading_n` (the model's ``steady_state``) averaged row by row with
+    ``np.mean``, to the last bit, on drawn units with their load errors and on the presets."""
+    from ebraille_sim.estimation import calibration as cal
+    from ebraille_sim.estimation.presets import get_firmware
+    from ebraille_sim.physics.params import EstimatorParams
+    from ebraille_sim.base.seeds import default_rng
+    devices = sample_devices(29, 40) + [cal.calibrate_device(DeviceParams(estimator=dataclasses.replace(
+        EstimatorParams(), **get_firmware(name).estimator))) for name in ("fast_1khz", "fast_1khz_centred", "paper_100hz")]
+    for k, dev in enumerate(devices):
+        errors = tuple(0.02 * math.sin(k + j) for j in range(4))
+        fsr, circuit = dev.fsr, dev.circuit
+        draws = default_rng(cal._fsr_unit_seed(fsr, circuit)).standard_normal((4, cal.TABLE_PRESSES, 2))
+        carried = np.array([[load * (1.0 + e)] for load, e in zip(cal.TABLE_LOADS_N, errors)])
+        presses = cal.table_reading_n(cal.cached_model(dev.estimator.model), carried, fsr, circuit, cal.TABLE_HOLD_S,
+                                      press_z=draws[..., 0], noise_v=fsr.noise_v_rms / math.sqrt(256) * draws[..., 1])
+        plain = [float(np.mean(row)) for row in presses]
+        level = 1.0 / plain[1]
+        table = cal.calibration_table(dev, cal.TABLE_LOADS_N, errors)
+        assert table is not None and table[1] == tuple(r * level for r in plain), dev
+        assert cal.calibration_table(dev, cal.TABLE_LOADS_N, errors, anchor_n=None)[1] == tuple(plain)
+
+
+def test_zero_and_mean_readings_in_one_call_equal_the_zero_and_each_mean_reading():
+    """The drive calibration's zeroing and four mean readings in one compiled call give what
+    :func:`zero_code` and :func:`mean_reading_a` give one by one, on drawn current chains."""
+    from ebraille_sim.physics.current_sense import mean_reading_a, zero_and_mean_readings_a, zero_code
+    for k, dev in enumerate(sample_devices(31, 40)):
+        cs = dev.current_sense
+        seed = 1000003 * k + 17
+        currents = (-1.0 / dev.motor.resistance_ohm, 0.01, 0.05, 0.004 + 1e-4 * k)
+        seeds = (float(seed), seed + 2.0, seed + 4.0, seed + 7.0)
+        zero, reads = zero_and_mean_readings_a(cs, seed, currents, seeds, 256)
+        plain_zero = zero_code(cs, seed, cs.adc_lsb_v, cs.adc_max_code)
+        assert zero == plain_zero
+        assert reads == [mean_reading_a(cs, i, s, 256, plain_zero) for i, s in zip(currents, seeds)]
+        assert reads[1] != reads[2]
+
+
+@pytest.mark.parametrize("force_n, peak_n, ramp_s", [(1.0, 2.0, 1.0), (0.5, 2.0, 1.0), (1.9, 2.0, 0.3),
+                                                     (2.5, 2.0, 1.0), (1e-4, 2.0, 1.0)])
+def test_compiled_loop_of_a_cycle_equals_numpys_argmax_searchsorted_and_interp(force_n, peak_n, ramp_s):
+    """The datasheet cycle's loop read by the compiled peak search and two-sample interpolations
+    equals NumPy's ``argmax``, ``searchsorted`` and ``interp`` of the same samples to the last bit,
+    on drawn units and the presets; a force the branches do not pass between two samples (above
+    the peak, below the first sample) falls back to NumPy's reading."""
+    from ebraille_sim.physics import fsr as F
+    from ebraille_sim.physics.params import FSRS
+    units = [d.fsr for d in sample_devices(37, 30)] + list(FSRS.values())
+    seen_fallback = False
+    for unit in units:
+        widths, weights = F.play_widths(unit)
+        p = np.array(list(widths) + list(weights) + [F.creep_decay(1e-3, tau) for tau in
+                                                     F.creep_taus_s(unit.creep_tau_min_s, unit.creep_tau_max_s)])
+        s = np.zeros(F.N_PLAYS + F.N_CREEP)
+        s[:F.N_PLAYS] = F.log_force(0.0)
+        w = F.creep_term_weight(unit.creep_per_decade, unit.creep_tau_min_s, unit.creep_tau_max_s)
+        seen, lagged = F._cycle_forces(F._load_cycle(ramp_s, 1e-3, peak_n), F.lag_alpha(1e-3, unit.mechanical_lag_s),
+                                       s, p, w, unit.load_threshold_n)
+        plain = F._loop_of_samples(seen, lagged, force_n, unit)
+        fast = F._loop_fraction(seen, lagged, force_n, unit.resistance_at_1n_ohm, unit.exponent,
+                                unit.actuation_force_n, unit.turn_on_steepness)
+        if fast == fast:
+            assert fast == plain, unit.name
+        else:
+            seen_fallback = True
+        got = F.datasheet_hysteresis(unit, ramp_s=ramp_s, force_n=force_n, peak_n=peak_n)
+        assert got == plain or (got != got and plain != plain)
+    assert seen_fallback == (force_n > peak_n or force_n < 1e-3)
+
+
+def test_static_conductance_in_one_call_equals_its_laws_called_one_by_one():
+    """The film's static conductance in one compiled call equals :func:`conductance_s` of the force
+    grown by :func:`creep_gain` above the load threshold and scaled by :func:`temperature_factor`,
+    each called on its own, on drawn units and the presets, at and below the threshold, warm and cold."""
+    from ebraille_sim.physics import fsr as F
+    from ebraille_sim.physics.params import FSRS
+    units = [d.fsr for d in sample_devices(41, 25)] + list(FSRS.values())
+    for unit in units:
+        for force in (0.0, 0.5 * unit.load_threshold_n, unit.load_threshold_n, 0.3, 1.0, 2.7):
+            for hold in (0.0, 2.0, 20.0):
+                for temp in (-12.0, 0.0, 7.5):
+                    f = force * F.creep_gain(hold, unit) if force > unit.load_threshold_n else force
+                    scale = F.temperature_factor(temp, unit.temperature_coeff_per_k, unit.temperature_coeff_cold_per_k)
+                    plain = F.conductance_s(f, unit.resistance_at_1n_ohm, unit.exponent,
+                                            1.0 / unit.standoff_resistance_ohm, scale, unit.actuation_force_n,
+                                            unit.turn_on_steepness)
+                    assert F.static_conductance(force, unit, load_time_s=hold, temp_offset_k=temp) == plain
+
+
+def _bench_creep_through_numpy(device, load_n, load_error):
+    """The bench's creep per decade with every step a NumPy broadcast (the protocol as written)."""
+    from ebraille_sim.base.seeds import default_rng
+    from ebraille_sim.estimation import calibration as cal
+    from ebraille_sim.estimation.firmware import FIRMWARE_FSR as nom
+    from ebraille_sim.physics.fsr import (N_CREEP, divider_conductance_s, divider_voltage, held_creep_gain,
+                                          static_conductance)
+    fsr, circuit = device.fsr, device.circuit
+    rng = default_rng(cal._fsr_unit_seed(fsr, circuit) + 1)
+    sd_v = fsr.noise_v_rms / math.sqrt(cal.TABLE_CONVERSIONS)
+    f_eff = load_n * (1.0 + load_error) * cal.loading_branch_factor(fsr)
+    held = np.array([static_conductance(f_eff, fsr, load_time_s=t) for t in cal.CREEP_READ_S])
+    draws = rng.standard_normal((cal.TABLE_PRESSES, 3))
+    scale = np.exp(fsr.press_repeatability * draws[:, :1])
+    g = 1.0 / fsr.standoff_resistance_ohm + (held - 1.0 / fsr.standoff_resistance_ohm) / scale
+    v = divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + sd_v * draws[:, 1:]
+    g_path = divider_conductance_s(v, circuit.r2_ohm, circuit.supply_v) - 1.0 / nom.standoff_resistance_ohm
+    ratio = float(np.mean((g_path[:, 1] / g_path[:, 0]) ** (1.0 / nom.exponent)))
+    a = [held_creep_gain(t, 1.0, nom.creep_tau_min_s, nom.creep_tau_max_s, N_CREEP) - 1.0 for t in cal.CREEP_READ_S]
+    w = (ratio - 1.0) / (a[1] - ratio * a[0])
+    return float(min(max(w * (N_CREEP - 1) / math.log10(nom.creep_tau_max_s / nom.creep_tau_min_s), 0.0), 0.2))
+
+
+def test_bench_creep_reads_in_one_call_equal_numpys_broadcasts():
+    """The bench's creep reads turned into conductance ratios in one compiled call give the creep
+    per decade of the same protocol written as NumPy broadcasts, to the last bit, on drawn units
+    (their own load errors) and the presets' films."""
+    from ebraille_sim.estimation import calibration as cal
+    from ebraille_sim.physics.params import FSRS
+    from ebraille_sim.base.validation import replace_fields
+    devices = sample_devices(43, 40) + [cal.calibrate_device(replace_fields(DeviceParams(), fsr=f))
+                                        for f in FSRS.values()]
+    values = set()
+    for k, dev in enumerate(devices):
+        for load_error in (0.0, 0.015 * math.cos(k)):
+            got = cal.bench_creep_per_decade(dev, 1.0, load_error)
+            assert got == _bench_creep_through_numpy(dev, 1.0, load_error), dev.fsr
+            values.add(got)
+    assert len(values) > 40                                    # the units read differently

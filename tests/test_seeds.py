@@ -4,7 +4,7 @@ import random
 import numpy as np
 import pytest
 
-from ebraille_sim.base.seeds import SeedNode, child_seed
+from ebraille_sim.base.seeds import SeedNode, child_seed, default_rng
 
 
 def _cases(n=600):
@@ -38,6 +38,15 @@ def test_children_and_generators_equal_numpy_ones():
             assert gb.bit_generator.state == ga.bit_generator.state
             assert gb.standard_normal(4).tolist() == ga.standard_normal(4).tolist()
             assert gb.spawn(1)[0].random() == ga.spawn(1)[0].random()
+
+
+def test_default_rng_of_an_int_is_numpys():
+    rnd = random.Random(11)
+    for seed in [0, 1, 2**31 - 1, 2**31, 2**63 - 1] + [rnd.getrandbits(31) for _ in range(100)]:
+        ours, numpys = default_rng(seed), np.random.default_rng(seed)
+        assert ours.bit_generator.state == numpys.bit_generator.state
+        assert ours.standard_normal((3, 2)).tolist() == numpys.standard_normal((3, 2)).tolist()
+        assert ours.random() == numpys.random()
 
 
 def test_child_seed_leaves_the_parent_unspawned_and_falls_back_for_other_entropy():

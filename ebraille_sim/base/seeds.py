@@ -37,7 +37,7 @@ from numpy.random.bit_generator import ISpawnableSeedSequence
 
 from ebraille_sim.base.compiled import entry_point, njit
 
-__all__ = ["SeedNode", "child_seed"]
+__all__ = ["SeedNode", "child_seed", "default_rng"]
 
 _INIT_A = 0x43b0d7e5
 _MULT_A = 0x931e8875
@@ -275,3 +275,9 @@ def child_seed(parent, k: int):
     if type(parent.entropy) is int and all(type(i) is int for i in parent.spawn_key):
         return SeedNode(parent.entropy, spawn_key=parent.spawn_key + (k,), pool_size=parent.pool_size)
     return np.random.SeedSequence(parent.entropy, spawn_key=parent.spawn_key + (k,), pool_size=parent.pool_size)
+
+
+def default_rng(seed: int) -> np.random.Generator:
+    """``numpy.random.default_rng(seed)`` of a non-negative int ``seed``: the same PCG64 generator
+    (the same numbers), its seed sequence a :class:`SeedNode` (2 us against NumPy's 5.5 us)."""
+    return np.random.Generator(np.random.PCG64(SeedNode(seed)))

@@ -32,9 +32,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ebraille_sim.base.compiled import njit
+from ebraille_sim.base.seeds import default_rng
 from ebraille_sim.base.validation import check_number, replace_fields
 from ebraille_sim.estimation.registry import cached_model
-from ebraille_sim.physics.fsr import adc_code, adc_voltage, divider_voltage, play_widths, static_conductance
+from ebraille_sim.physics.fsr import (adc_code, adc_voltage, divider_conductance_s, divider_voltage, interp_point,
+                                      play_widths, static_conductance)
 
 if TYPE_CHECKING:
     from ebraille_sim.physics.params import DeviceParams
@@ -139,33 +141,6 @@ def static_error_table(model, fsr, circuit, forces_n=(0.2, 0.3, 0.5, 0.75, 1.0, 
 
 
 @njit(cache=True)
-def _interp(x, xs, ys):
-    """``numpy.interp(x, xs, ys)`` of one float inside ``[xs[0], xs[-1]]`` (or NaN): the segment
-    and the operations of NumPy's ``arr_interp`` for one point (the last breakpoint not above
-    ``x``, the slope of its segment, ``slope (x - x_j) + y_j``, the other end when that is NaN),
-    so the same number without the call into NumPy."""
-    if x != x:
-        return x
-    lo, hi = 0, xs.shape[0]
-    while lo < hi:                              # bisect_right
-        mid = (lo + hi) // 2
-        if x < xs[mid]:
-            hi = mid
-        else:
-            lo = mid + 1
-    j = lo - 1
-    if j == xs.shape[0] - 1 or xs[j] == x:
-        return ys[j]
-    slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
-    y = slope * (x - xs[j]) + ys[j]
-    if y != y:
-        y = slope * (x - xs[j + 1]) + ys[j + 1]
-        if y != y and ys[j] == ys[j + 1]:
-            y = ys[j]
-    return y
-
-
-@njit(cache=True)
 def _pwl_at(x, xs, ys, s0, sn):
     """A nonlinearity of :func:`_steady_map` at ``x``: the breakpoints ``xs``, ``ys`` (none: the
     identity), extended beyond them with the end slopes ``s0`` and ``sn``."""
@@ -176,7 +151,7 @@ def _pwl_at(x, xs, ys, s0, sn):
         return ys[0] + s0 * (x - xs[0])
     if x > xs[n - 1]:
         return ys[n - 1] + sn * (x - xs[n - 1])
-    return _interp(x, xs, ys)
+    return interp_point(x, xs, ys)
 
 
 @njit(cache=True)
@@ -403,6 +378,23 @@ def table_reading_n(model, force_n: float, fsr, circuit, hold_s: float, press_z=
     return float(y) if np.ndim(y) == 0 else np.asarray(y, dtype=float)
 
 
+@njit(cache=True)
+def _table_presses(g_load, scatter, draws, sd_v, g_standoff_s, r2_ohm, supply_v, tare_v, g, in_x, in_y, in_s0, in_sn,
+                   out_x, out_y, out_s0, out_sn):
+    """The readings of :func:`calibration_table`'s presses (one row a load): :func:`table_reading_n`
+    of the film's conductance ``g_load`` of each load, each press's resistance scaled by its
+    ``scatter`` (the stand-off path kept), the divider's voltage with the conversions' noise
+    ``sd_v * draws[..., 1]``, tared, through :func:`_steady_map`'s table (the operations of
+    NumPy's broadcasts and of the model's map, element by element: the same numbers)."""
+    out = np.empty(scatter.shape)
+    for i in range(scatter.shape[0]):
+        for k in range(scatter.shape[1]):
+            gk = g_standoff_s + (g_load[i] - g_standoff_s) / scatter[i, k]                    # plant truth
+            u = divider_voltage(gk, r2_ohm, supply_v) + sd_v * draws[i, k, 1] - tare_v
+            out[i, k] = _steady_at(u, g, in_x, in_y, in_s0, in_sn, out_x, out_y, out_s0, out_sn)
+    return out
+
+
 def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=None,
                       anchor_n: float | None = 1.0) -> tuple | None:
     """The bench's calibration table of ``device`` (its divider already set): ``(loads, readings)``,
@@ -429,15 +421,22 @@ def calibration_table(device: DeviceParams, loads_n=TABLE_LOADS_N, load_errors=N
     errors = (0.0,) * len(loads_n) if load_errors is None else tuple(load_errors)
     if len(errors) != len(loads_n):
         raise ValueError(f"calibration_table: {len(errors)} load errors for {len(loads_n)} loads")
-    model = cached_model(device.estimator.model)
     fsr, circuit = device.fsr, device.circuit
-    rng = np.random.default_rng(_fsr_unit_seed(fsr, circuit))
+    rng = default_rng(_fsr_unit_seed(fsr, circuit))
     sd_v = fsr.noise_v_rms / math.sqrt(TABLE_CONVERSIONS)
     draws = rng.standard_normal((len(loads_n), TABLE_PRESSES, 2))   # each press: its scatter, then its noise
-    carried = np.array([[load * (1.0 + err)] for load, err in zip(loads_n, errors)])
-    presses = table_reading_n(model, carried, fsr, circuit, TABLE_HOLD_S, press_z=draws[..., 0],
-                              noise_v=sd_v * draws[..., 1])
-    readings = [float(np.mean(row)) for row in presses]
+    carried = [load * (1.0 + err) for load, err in zip(loads_n, errors)]
+    steady = _steady_map_of(device.estimator.model)
+    if steady is None:                            # the model's own map (it raises)
+        presses = table_reading_n(cached_model(device.estimator.model), np.array([[c] for c in carried]), fsr, circuit,
+                                  TABLE_HOLD_S, press_z=draws[..., 0], noise_v=sd_v * draws[..., 1])
+    else:                                         # table_reading_n of every press in one compiled call
+        branch = loading_branch_factor(fsr)
+        g_load = np.array([static_conductance(c * branch, fsr, load_time_s=TABLE_HOLD_S) for c in carried])
+        presses = _table_presses(g_load, np.exp(fsr.press_repeatability * draws[..., 0]), draws, sd_v,
+                                 1.0 / fsr.standoff_resistance_ohm, circuit.r2_ohm, circuit.supply_v,
+                                 _tare(fsr, circuit), *steady)
+    readings = presses.mean(axis=1).tolist()      # each load's presses averaged, as np.mean of its row
     if not (readings[0] > 0.0 and all(a < b for a, b in zip(readings, readings[1:]))):
         return None
     if anchor_n is not None:
@@ -463,24 +462,50 @@ def bench_creep_per_decade(device: DeviceParams, load_n: float = 1.0, load_error
     The press's scatter cancels in the ratio; the unit's exponent, unknown to the bench, scales
     the result by ``n_nominal / n_unit`` (about +/- 12 %).  Clipped to [0, 0.2]."""
     from ebraille_sim.estimation.firmware import FIRMWARE_FSR
-    from ebraille_sim.physics.fsr import N_CREEP, divider_conductance_s, held_creep_gain
+    from ebraille_sim.physics.fsr import N_CREEP
     fsr, circuit = device.fsr, device.circuit
     nom = FIRMWARE_FSR
-    rng = np.random.default_rng(_fsr_unit_seed(fsr, circuit) + 1)
+    rng = default_rng(_fsr_unit_seed(fsr, circuit) + 1)
     sd_v = fsr.noise_v_rms / math.sqrt(TABLE_CONVERSIONS)
     f_eff = load_n * (1.0 + load_error) * loading_branch_factor(fsr)
     g_off = 1.0 / nom.standoff_resistance_ohm
     held = np.array([static_conductance(f_eff, fsr, load_time_s=t) for t in CREEP_READ_S])   # plant truth (bench)
     draws = rng.standard_normal((TABLE_PRESSES, 1 + len(CREEP_READ_S)))   # each press: its scatter, its reads' noise
     scale = np.exp(fsr.press_repeatability * draws[:, :1])
-    g = 1.0 / fsr.standoff_resistance_ohm + (held - 1.0 / fsr.standoff_resistance_ohm) / scale   # plant truth
-    v = divider_voltage(g, circuit.r2_ohm, circuit.supply_v) + sd_v * draws[:, 1:]
-    g_path = divider_conductance_s(v, circuit.r2_ohm, circuit.supply_v) - g_off
-    ratio = float(np.mean((g_path[:, 1] / g_path[:, 0]) ** (1.0 / nom.exponent)))
-    a = [held_creep_gain(t, 1.0, nom.creep_tau_min_s, nom.creep_tau_max_s, N_CREEP) - 1.0 for t in CREEP_READ_S]
-    w = (ratio - 1.0) / (a[1] - ratio * a[0])
-    per_decade = w * (N_CREEP - 1) / math.log10(nom.creep_tau_max_s / nom.creep_tau_min_s)
+    ratios = _creep_read_ratios(held, scale, draws, 1.0 / fsr.standoff_resistance_ohm, circuit.r2_ohm,
+                                circuit.supply_v, sd_v, g_off)
+    ratio = float(np.mean(ratios ** (1.0 / nom.exponent)))
+    a0, a1, decade = _nominal_creep_rise(nom.creep_tau_min_s, nom.creep_tau_max_s)
+    w = (ratio - 1.0) / (a1 - ratio * a0)
+    per_decade = w * (N_CREEP - 1) / decade
     return float(min(max(per_decade, 0.0), 0.2))
+
+
+@njit(cache=True)
+def _creep_read_ratios(held, scale, draws, g_standoff_s, r2_ohm, supply_v, sd_v, g_off_s):
+    """Per press of :func:`bench_creep_per_decade`, the path conductance the bench reads at its
+    second creep read over that at its first: the film's conductances ``held`` with the press's
+    scatter ``scale`` (the stand-off path kept), through the divider, plus each read's noise
+    ``sd_v * draws[:, 1:]``, back through the divider's inverse less the nominal stand-off
+    ``g_off_s`` (the operations of NumPy's broadcasts, element by element: the same numbers)."""
+    out = np.empty(scale.shape[0])
+    for i in range(scale.shape[0]):
+        g_path = np.empty(2)
+        for j in range(2):
+            g = g_standoff_s + (held[j] - g_standoff_s) / scale[i, 0]                 # plant truth
+            v = divider_voltage(g, r2_ohm, supply_v) + sd_v * draws[i, 1 + j]
+            g_path[j] = divider_conductance_s(v, r2_ohm, supply_v) - g_off_s
+        out[i] = g_path[1] / g_path[0]
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def _nominal_creep_rise(tau_min_s: float, tau_max_s: float) -> tuple[float, float, float]:
+    """The nominal film's creep rise ``F_c/F - 1`` of unit weight at the two creep reads, and the
+    decades its retardation times span (:func:`bench_creep_per_decade`'s constants)."""
+    from ebraille_sim.physics.fsr import N_CREEP, held_creep_gain
+    a = [held_creep_gain(t, 1.0, tau_min_s, tau_max_s, N_CREEP) - 1.0 for t in CREEP_READ_S]
+    return a[0], a[1], math.log10(tau_max_s / tau_min_s)
 
 
 LOOP_FORCE_N, LOOP_PEAK_N, LOOP_RAMP_S = 1.0, 2.0, 1.0
@@ -639,28 +664,30 @@ def calibrate_drive(device: DeviceParams) -> DriveCalibration:
     >>> round(cal.resistance_ohm, 1), round(cal.push_force_per_a_n, 1), round(cal.push_offset_n, 2)
     (21.2, 63.1, -0.62)
     """
-    from ebraille_sim.physics.current_sense import mean_reading_a, zero_code
+    from ebraille_sim.physics.current_sense import zero_and_mean_readings_a
     from ebraille_sim.physics.limits import push_force_bound_n, rack_speed_from_emf_m_per_s, shaft_to_rack_per_m
     cs, n = device.current_sense, CALIBRATION_CONVERSIONS
     seed = _unit_seed(device)
-    zero = zero_code(cs, seed, cs.adc_lsb_v, cs.adc_max_code)     # one zeroing at rest before the tests
     m, dt = device.motor, device.drivetrain                        # plant truth: what the line's hardware meets
     i_rest = -RESISTANCE_TEST_V / m.resistance_ohm                 # plant truth
-    r_ohm = -RESISTANCE_TEST_V / mean_reading_a(cs, i_rest, seed, n, zero)
-    rng = np.random.default_rng(seed)
-    gauge = 1.0 + FORCE_GAUGE_TOLERANCE * (2.0 * rng.random() - 1.0)
     g = shaft_to_rack_per_m(dt.gear_ratio, dt.pinion_radius_m)
-    forces, reads = [], []
-    for k, i in enumerate(PUSH_TEST_CURRENTS_A):
+    i_free = (dt.guide_coulomb_n / (dt.gear_efficiency * g) + m.friction_torque_nm) / m.torque_constant_nm_per_a  # plant truth
+    # one zeroing at rest before the tests, then the means of the resistance test, the two push
+    # tests and the free run, each with its own noise (mean_reading_a of each, in one call)
+    _, (i_read_rest, *reads, i_read) = zero_and_mean_readings_a(
+        cs, seed, (i_rest,) + PUSH_TEST_CURRENTS_A + (i_free,),
+        (float(seed),) + tuple(seed + 2.0 * (k + 1) for k in range(len(PUSH_TEST_CURRENTS_A))) + (seed + 7.0,), n)
+    r_ohm = -RESISTANCE_TEST_V / i_read_rest
+    rng = default_rng(seed)
+    gauge = 1.0 + FORCE_GAUGE_TOLERANCE * (2.0 * rng.random() - 1.0)
+    forces = []
+    for i in PUSH_TEST_CURRENTS_A:
         push = push_force_bound_n(i, m.torque_constant_nm_per_a, g, dt.gear_efficiency,  # plant truth
                                   m.friction_torque_nm, 0.0) - dt.guide_coulomb_n      # plant truth
         forces.append(gauge * push)
-        reads.append(mean_reading_a(cs, i, seed + 2.0 * (k + 1), n, zero))
     slope = (forces[1] - forces[0]) / (reads[1] - reads[0])
-    i_free = (dt.guide_coulomb_n / (dt.gear_efficiency * g) + m.friction_torque_nm) / m.torque_constant_nm_per_a  # plant truth
     v_free = rack_speed_from_emf_m_per_s(FREE_RUN_V, i_free, m.resistance_ohm, m.back_emf_v_s_per_rad, g)  # plant truth
     v_ref = v_free * (1.0 + SPEED_REFERENCE_TOLERANCE * (2.0 * rng.random() - 1.0))
-    i_read = mean_reading_a(cs, i_free, seed + 7.0, n, zero)
     return DriveCalibration(resistance_ohm=float(r_ohm), push_force_per_a_n=float(slope),
                             push_offset_n=float(forces[0] - slope * reads[0]), test_currents_a=tuple(reads),
                             back_emf_v_s_per_m=float((FREE_RUN_V - r_ohm * i_read) / v_ref),

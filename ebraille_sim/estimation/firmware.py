@@ -23,11 +23,11 @@ Each function advances its own state slots (declared here, composed by
 """
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 
 from ebraille_sim.base.compiled import njit
+from ebraille_sim.base.validation import replace_fields
 from ebraille_sim.physics.fsr import (F_EPS_N, N_CREEP, N_PLAYS, creep_force, divider_conductance_s, divider_voltage,
                                       inverse_hysteresis, log_force, play)
 from ebraille_sim.physics.params import CALIBRATION_TABLE_MAX_POINTS, FSRS
@@ -56,7 +56,7 @@ def firmware_fsr(estimator):
 def _firmware_fsr_with_creep(creep_per_decade: float):
     """:data:`FIRMWARE_FSR` with the unit's creep per decade, made once per value (a plant's
     packing asks for it once per compensation slot)."""
-    return dataclasses.replace(FIRMWARE_FSR, creep_per_decade=creep_per_decade)
+    return replace_fields(FIRMWARE_FSR, creep_per_decade=creep_per_decade)
 
 
 ANTIALIAS_SLOTS = ("aa_z1", "aa_z2")

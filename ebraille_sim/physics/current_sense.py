@@ -44,6 +44,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from ebraille_sim.base.compiled import njit
 from ebraille_sim.physics.fsr import adc_code
 from ebraille_sim.physics.noise import normal_at
@@ -129,6 +131,35 @@ def mean_reading_a(cs, current_a: float, seed: float, n: int, zero: float | None
                     cs.reference_v)
     code = _mean_code_at_rest(v, cs.adc_noise_lsb * lsb, float(seed) + 1.0, int(n), lsb, top)
     return firmware_current_a(code, zero_code(cs, seed, lsb, top) if zero is None else zero, lsb, cs.nominal_v_per_a)
+
+
+
+def zero_and_mean_readings_a(cs, zero_seed: float, currents_a, seeds, n: int) -> tuple[float, list]:
+    """:func:`zero_code` of ``zero_seed`` and, against that zero, :func:`mean_reading_a` of each
+    steady current of ``currents_a`` with its seed of ``seeds`` (``n`` conversions each), in one
+    compiled call: ``(zero, readings)``, the same numbers (a drive's calibration reads four)."""
+    lsb, top = cs.adc_lsb_v, cs.adc_max_code
+    out = _zero_and_means(np.asarray(currents_a, dtype=np.float64), np.asarray(seeds, dtype=np.float64),
+                          float(zero_seed), int(cs.zero_samples), int(n), cs.shunt_ohm, cs.shunt_error, cs.gain_v_per_v,
+                          cs.gain_error, cs.offset_v, cs.reference_v, cs.adc_noise_lsb * lsb, lsb, top,
+                          cs.nominal_v_per_a)
+    return out[0], out[1:].tolist()
+
+
+@njit(cache=True)
+def _zero_and_means(currents_a, seeds, zero_seed, zero_n, n, shunt_ohm, shunt_error, gain, gain_error, offset_v, ref_v,
+                    noise_rms_v, lsb_v, max_code, nominal_v_per_a):
+    """The zero code, then the mean readings (A), of :func:`zero_and_mean_readings_a`."""
+    out = np.empty(currents_a.size + 1)
+    v0 = amplifier_v(0.0, shunt_ohm, gain, gain_error, offset_v, ref_v)
+    zero = _mean_code_at_rest(v0, noise_rms_v, zero_seed, zero_n, lsb_v, max_code)
+    out[0] = zero
+    shunt = shunt_ohm * (1.0 + shunt_error)
+    for k in range(currents_a.size):
+        v = amplifier_v(currents_a[k], shunt, gain, gain_error, offset_v, ref_v)
+        code = _mean_code_at_rest(v, noise_rms_v, seeds[k] + 1.0, n, lsb_v, max_code)
+        out[k + 1] = firmware_current_a(code, zero, lsb_v, nominal_v_per_a)
+    return out
 
 
 MEAN_QUANTISATION_LSB = 0.01

@@ -386,11 +386,20 @@ def play_loop_widths(play_fraction: float, exponent: float) -> tuple[list[float]
 
 def play_widths(fsr) -> tuple[list[float], list[float]]:
     """Play widths (in ln N) and weights of an FSR: its rate-independent loop
-    (:func:`play_loop_fraction`)."""
-    return play_loop_widths(play_loop_fraction(fsr), fsr.exponent)
+    (:func:`play_loop_fraction`; computed once per unit, new lists each call)."""
+    widths, weights = _play_widths_of(fsr)
+    return list(widths), list(weights)
 
 
-def _ramp_creep_terms(fsr) -> tuple[np.ndarray, np.ndarray]:
+@functools.lru_cache(maxsize=16)
+def _play_widths_of(fsr) -> tuple[tuple, tuple]:
+    """:func:`play_widths` of ``fsr`` as tuples (a drawn unit's bench and its plant's packing ask once each)."""
+    widths, weights = play_loop_widths(play_loop_fraction(fsr), fsr.exponent)
+    return tuple(widths), tuple(weights)
+
+
+@functools.lru_cache(maxsize=64)
+def _ramp_creep_terms_of(tau_min_s: float, tau_max_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Creep states ``z_i / F_peak`` of a recovered film at the two passes through
     :data:`HYSTERESIS_TEST_FORCE_N` of the datasheet's load cycle (a triangle 0 ->
     :data:`HYSTERESIS_TEST_PEAK_N` -> 0, each leg :data:`HYSTERESIS_TEST_RAMP_S`), from the exact
@@ -399,11 +408,6 @@ def _ramp_creep_terms(fsr) -> tuple[np.ndarray, np.ndarray]:
     ``z = F_p - r t' + r tau - (F_p + r tau - z_p) e^(-t'/tau)``.  They depend on the creep's
     time constants only, which a drawn unit shares with its part: computed once per pair
     (read-only arrays; 28 us a call, three calls a drawn device)."""
-    return _ramp_creep_terms_of(fsr.creep_tau_min_s, fsr.creep_tau_max_s)
-
-
-@functools.lru_cache(maxsize=64)
-def _ramp_creep_terms_of(tau_min_s: float, tau_max_s: float) -> tuple[np.ndarray, np.ndarray]:
     taus = np.array(creep_taus_s(tau_min_s, tau_max_s))
     t_r = HYSTERESIS_TEST_RAMP_S
     r = 1.0 / t_r                                          # per unit peak force
@@ -420,11 +424,18 @@ def _ramp_creep_terms_of(tau_min_s: float, tau_max_s: float) -> tuple[np.ndarray
 def creep_loop_fraction(fsr) -> float:
     """``(R_F+ - R_F-)/R_F+`` at 1 kg that the creep alone gives in the datasheet's load cycle:
     the film creeps between the rising and the falling pass, so the falling pass reads the lower
-    resistance (conduction ``~F_c^n``, ``F_c = F + w sum z_i``; see :func:`_ramp_creep_terms`)."""
+    resistance (conduction ``~F_c^n``, ``F_c = F + w sum z_i``; see :func:`_ramp_creep_terms_of`)."""
     w = creep_term_weight(fsr.creep_per_decade, fsr.creep_tau_min_s, fsr.creep_tau_max_s)
-    z_up, z_dn = _ramp_creep_terms(fsr)
+    up, dn = _ramp_creep_sums_of(fsr.creep_tau_min_s, fsr.creep_tau_max_s)
     x = HYSTERESIS_TEST_FORCE_N / HYSTERESIS_TEST_PEAK_N
-    return 1.0 - ((x + w * z_up.sum()) / (x + w * z_dn.sum())) ** fsr.exponent
+    return 1.0 - ((x + w * up) / (x + w * dn)) ** fsr.exponent
+
+
+@functools.lru_cache(maxsize=64)
+def _ramp_creep_sums_of(tau_min_s: float, tau_max_s: float) -> tuple:
+    """The sums of :func:`_ramp_creep_terms` (NumPy's ``sum`` of each, as NumPy floats), once per pair."""
+    z_up, z_dn = _ramp_creep_terms_of(tau_min_s, tau_max_s)
+    return z_up.sum(), z_dn.sum()
 
 
 def play_loop_fraction(fsr) -> float:
@@ -452,6 +463,73 @@ def _cycle_forces(force, a_lag, s, p, weight, threshold_n):
     return seen, lagged
 
 
+@njit(cache=True)
+def interp_point(x, xs, ys):
+    """``numpy.interp(x, xs, ys)`` of one float inside ``[xs[0], xs[-1]]`` (or NaN): the segment
+    and the operations of NumPy's ``arr_interp`` for one point (the last breakpoint not above
+    ``x``, the slope of its segment, ``slope (x - x_j) + y_j``, the other end when that is NaN),
+    so the same number without the call into NumPy."""
+    if x != x:
+        return x
+    lo, hi = 0, xs.shape[0]
+    while lo < hi:                              # bisect_right
+        mid = (lo + hi) // 2
+        if x < xs[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    j = lo - 1
+    if j == xs.shape[0] - 1 or xs[j] == x:
+        return ys[j]
+    slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
+    y = slope * (x - xs[j]) + ys[j]
+    if y != y:
+        y = slope * (x - xs[j + 1]) + ys[j + 1]
+        if y != y and ys[j] == ys[j + 1]:
+            y = ys[j]
+    return y
+
+
+@njit(cache=True)
+def _branch_resistance(force_n, lagged, seen, k_ohm, n, actuation_n, steepness):
+    """:func:`_resistance_at` of a branch whose lagged force passes ``force_n`` between two of its
+    samples (NumPy's ``searchsorted`` and ``interp`` of those two, the same numbers); NaN
+    otherwise (an end of the branch, or a NaN met), for the caller to fall back."""
+    lo, hi = 0, lagged.size
+    while lo < hi:                              # searchsorted(side="right")
+        mid = lo + ((hi - lo) >> 1)
+        if lagged[mid] != lagged[mid]:
+            return math.nan
+        if force_n < lagged[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    if lo < 1 or lo > lagged.size - 1:
+        return math.nan
+    xs = np.empty(2)
+    ys = np.empty(2)
+    for m in range(2):
+        xs[m] = lagged[lo - 1 + m]
+        ys[m] = 1.0 / conductance_s(seen[lo - 1 + m], k_ohm, n, 0.0, 1.0, actuation_n, steepness)
+    return interp_point(force_n, xs, ys)
+
+
+@njit(cache=True)
+def _loop_fraction(seen, lagged, force_n, k_ohm, n, actuation_n, steepness):
+    """``1 - R_down/R_up`` of :func:`datasheet_hysteresis` from its cycle's samples: the peak of the
+    lagged force (``np.argmax``), each branch's resistance at ``force_n``
+    (:func:`_branch_resistance`, the falling one reversed); NaN where the caller must fall back."""
+    peak = 0
+    for i in range(lagged.size):
+        if lagged[i] != lagged[i]:
+            return math.nan
+        if lagged[i] > lagged[peak]:
+            peak = i
+    r_up = _branch_resistance(force_n, lagged[:peak + 1], seen[:peak + 1], k_ohm, n, actuation_n, steepness)
+    r_dn = _branch_resistance(force_n, lagged[peak:][::-1], seen[peak:][::-1], k_ohm, n, actuation_n, steepness)
+    return 1.0 - r_dn / r_up
+
+
 def _resistance_at(force_n: float, lagged: np.ndarray, seen: np.ndarray, fsr) -> float:
     """The film's resistance (stand-off path left out) where the lagged force of one monotone
     branch (``lagged`` increasing) passes ``force_n``: interpolated between the two samples around
@@ -461,6 +539,16 @@ def _resistance_at(force_n: float, lagged: np.ndarray, seen: np.ndarray, fsr) ->
     res = np.array([1.0 / conductance_s(seen[j], fsr.resistance_at_1n_ohm, fsr.exponent, 0.0, 1.0,
                                         fsr.actuation_force_n, fsr.turn_on_steepness) for j in idx])
     return float(np.interp(force_n, lagged[idx], res))
+
+
+@functools.lru_cache(maxsize=8)
+def _load_cycle(ramp_s: float, dt_s: float, peak_n: float) -> np.ndarray:
+    """The applied force of :func:`datasheet_hysteresis`'s load cycle at each sample: 0 to ``peak_n``
+    in ``ramp_s`` and back, every ``dt_s`` (made once per cycle, read-only)."""
+    n = int(round(ramp_s / dt_s))
+    force = np.concatenate([np.linspace(0.0, peak_n, n + 1), np.linspace(peak_n, 0.0, n + 1)[1:]])
+    force.flags.writeable = False
+    return force
 
 
 def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: float = 1e-3,
@@ -478,9 +566,18 @@ def datasheet_hysteresis(fsr, ramp_s: float = HYSTERESIS_TEST_RAMP_S, dt_s: floa
     s[:N_PLAYS] = log_force(0.0)
     w = creep_term_weight(fsr.creep_per_decade, fsr.creep_tau_min_s, fsr.creep_tau_max_s)
     a_lag = lag_alpha(dt_s, fsr.mechanical_lag_s)
-    n = int(round(ramp_s / dt_s))
-    force = np.concatenate([np.linspace(0.0, peak_n, n + 1), np.linspace(peak_n, 0.0, n + 1)[1:]])
-    seen, lagged = _cycle_forces(force, a_lag, s, p, w, fsr.load_threshold_n)
+    seen, lagged = _cycle_forces(_load_cycle(float(ramp_s), float(dt_s), float(peak_n)), a_lag, s, p, w,
+                                 fsr.load_threshold_n)
+    loop = _loop_fraction(seen, lagged, float(force_n), fsr.resistance_at_1n_ohm, fsr.exponent, fsr.actuation_force_n,
+                          fsr.turn_on_steepness)
+    if loop == loop:
+        return float(loop)
+    return _loop_of_samples(seen, lagged, force_n, fsr)
+
+
+def _loop_of_samples(seen: np.ndarray, lagged: np.ndarray, force_n: float, fsr) -> float:
+    """:func:`_loop_fraction` through NumPy (``argmax``, ``searchsorted``, ``interp``): every cycle,
+    a branch that does not pass ``force_n`` between two samples included."""
     peak = int(np.argmax(lagged))
     r_up = _resistance_at(force_n, lagged[:peak + 1], seen[:peak + 1], fsr)
     r_dn = _resistance_at(force_n, lagged[peak:][::-1], seen[peak:][::-1], fsr)
@@ -522,11 +619,23 @@ def static_conductance(force_n: float, fsr, load_time_s: float = 0.0, temp_offse
     :func:`held_creep_gain` (when above the load threshold), scaled by :func:`temperature_factor`.
     """
     f = float(force_n)
-    if f > fsr.load_threshold_n:
-        f *= creep_gain(float(load_time_s), fsr)
-    scale = temperature_factor(float(temp_offset_k), fsr.temperature_coeff_per_k, fsr.temperature_coeff_cold_per_k)
-    return conductance_s(f, fsr.resistance_at_1n_ohm, fsr.exponent, 1.0 / fsr.standoff_resistance_ohm, scale,
-                         fsr.actuation_force_n, fsr.turn_on_steepness)
+    w = (creep_term_weight(fsr.creep_per_decade, fsr.creep_tau_min_s, fsr.creep_tau_max_s)
+         if f > fsr.load_threshold_n else 0.0)
+    return _static_conductance(f, float(load_time_s), float(temp_offset_k), fsr.load_threshold_n, w,
+                               fsr.creep_tau_min_s, fsr.creep_tau_max_s, fsr.temperature_coeff_per_k,
+                               fsr.temperature_coeff_cold_per_k, fsr.resistance_at_1n_ohm, fsr.exponent,
+                               1.0 / fsr.standoff_resistance_ohm, fsr.actuation_force_n, fsr.turn_on_steepness)
+
+
+@njit(cache=True)
+def _static_conductance(f, load_time_s, temp_offset_k, threshold_n, weight, tau_min_s, tau_max_s, tempco_hot_per_k,
+                        tempco_cold_per_k, k_ohm, n, g_standoff_s, actuation_n, steepness):
+    """:func:`static_conductance`'s laws in one compiled call (``weight``: the creep terms' weight,
+    :func:`creep_term_weight`)."""
+    if f > threshold_n:
+        f *= held_creep_gain(load_time_s, weight, tau_min_s, tau_max_s, N_CREEP)
+    return conductance_s(f, k_ohm, n, g_standoff_s, temperature_factor(temp_offset_k, tempco_hot_per_k,
+                                                                      tempco_cold_per_k), actuation_n, steepness)
 
 
 def static_resistance(force_n: float, fsr, load_time_s: float = 0.0, temp_offset_k: float = 0.0) -> float:

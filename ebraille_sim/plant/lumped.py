@@ -40,6 +40,7 @@ from ebraille_sim.physics.fsr import (N_CREEP, adc_code, adc_voltage, creep_deca
                                       creep_term_weight, lag_alpha, log_force, play_loop_fraction, play_loop_widths,
                                       play_widths, static_voltage)
 from ebraille_sim.physics.motor import current_decay
+from ebraille_sim.base.validation import replace_fields
 from ebraille_sim.physics.params import DeviceParams
 from ebraille_sim.plant import kernel
 from ebraille_sim.plant.layout import (MAX_BREAKPOINTS, MAX_TF_LEN, N_INPUT, N_PARAM, N_PLAYS, N_STATE, P, S, U)
@@ -99,6 +100,13 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     The estimator runs at its model's own rate, ``1/model.dt_s`` (the rate it was
     identified at); the sensor rate must be a whole multiple of it.
     """
+    p = _unseeded_params(device, model)
+    reseed(p, device, seed)
+    return p
+
+
+def _unseeded_params(device: DeviceParams, model=None) -> np.ndarray:
+    """:func:`pack_params` but the seed and what was measured with the device's noise (:func:`reseed`)."""
     m, d, f, s, c, e, r = (device.motor, device.drivetrain, device.finger, device.fsr, device.circuit,
                            device.estimator, device.rates)
     check_step(device)
@@ -108,61 +116,31 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     p = np.zeros(N_PARAM)
     h = 1.0 / r.physics_rate_hz
     g = shaft_to_rack_per_m(d.gear_ratio, d.pinion_radius_m)
-    p[P.h_s] = h
-    p[P.substeps_per_sensor] = r.substeps_per_sensor
-    p[P.sensors_per_estimate] = ratio
-    p[P.motor_r_ohm] = m.resistance_ohm
-    p[P.motor_current_decay] = current_decay(h, m.resistance_ohm, m.inductance_h)
-    p[P.motor_kt] = m.torque_constant_nm_per_a
-    p[P.motor_ke] = m.back_emf_v_s_per_rad
-    p[P.n_over_r_per_m] = g
-    p[P.pinion_mass_kg] = reflected_inertia_kg(m.rotor_inertia_kg_m2, g)
-    p[P.pinion_coulomb_n] = reflected_force_n(m.friction_torque_nm, g)
-    p[P.pinion_static_n] = reflected_force_n(m.friction_torque_nm, g) * m.breakaway_ratio
-    p[P.pinion_viscous_n_s_per_m] = reflected_inertia_kg(m.viscous_friction_nm_s_per_rad, g)
-    p[P.gear_mu] = d.gear_loss_coefficient
-    p[P.half_backlash_m] = 0.5 * d.backlash_m
-    p[P.mesh_k_n_per_m] = d.mesh_stiffness_n_per_m
-    p[P.mesh_c_n_s_per_m] = mesh_damping_n_s_per_m(d.mesh_damping_ratio, d.mesh_stiffness_n_per_m,
-                                                       d.moving_mass_kg)
-    p[P.board_mass_kg] = d.moving_mass_kg
-    p[P.guide_coulomb_n] = d.guide_coulomb_n
-    p[P.guide_static_n] = d.guide_coulomb_n * d.guide_breakaway_ratio
-    p[P.guide_viscous_n_s_per_m] = d.guide_viscous_n_s_per_m
-    p[P.stribeck_v_m_per_s] = d.stribeck_velocity_m_per_s
-    p[P.travel_min_m] = d.travel_min_m
-    p[P.travel_max_m] = d.travel_max_m
-    p[P.finger_b_n_per_m] = f.stiffness_b_n_per_m
-    p[P.finger_m_per_m] = f.exponent_m_per_m
-    p[P.relax_c0] = f.relax_weight_inf
-    p[P.relax_c1] = f.relax_weight_1
-    p[P.relax_c2] = f.relax_weight_2
-    p[P.relax_c3] = f.relax_weight_3
-    p[_RELAX_SLOTS] = _prony_row(h, f.relax_tau_1_s, f.relax_tau_2_s, f.relax_tau_3_s)
-    p[P.fsr_lag_alpha] = lag_alpha(h, s.mechanical_lag_s)
-    p[P.fsr_k_ohm] = s.resistance_at_1n_ohm
-    p[P.fsr_n] = s.exponent
-    p[P.fsr_g_standoff_s] = 1.0 / s.standoff_resistance_ohm
     dt_sensor = 1.0 / r.sensor_rate_hz
-    p[P.fsr_creep_weight] = creep_term_weight(s.creep_per_decade, s.creep_tau_min_s, s.creep_tau_max_s)
+    bb, aa = _antialias_filter(float(e.antialias_cutoff_hz), float(r.sensor_rate_hz))
+    p[_DEVICE_SLOTS] = (
+        h, r.substeps_per_sensor, ratio,
+        m.resistance_ohm, current_decay(h, m.resistance_ohm, m.inductance_h), m.torque_constant_nm_per_a,
+        m.back_emf_v_s_per_rad, g, reflected_inertia_kg(m.rotor_inertia_kg_m2, g),
+        reflected_force_n(m.friction_torque_nm, g), reflected_force_n(m.friction_torque_nm, g) * m.breakaway_ratio,
+        reflected_inertia_kg(m.viscous_friction_nm_s_per_rad, g),
+        d.gear_loss_coefficient, 0.5 * d.backlash_m, d.mesh_stiffness_n_per_m,
+        mesh_damping_n_s_per_m(d.mesh_damping_ratio, d.mesh_stiffness_n_per_m, d.moving_mass_kg),
+        d.moving_mass_kg, d.guide_coulomb_n, d.guide_coulomb_n * d.guide_breakaway_ratio, d.guide_viscous_n_s_per_m,
+        d.stribeck_velocity_m_per_s, d.travel_min_m, d.travel_max_m,
+        f.stiffness_b_n_per_m, f.exponent_m_per_m, f.relax_weight_inf, f.relax_weight_1, f.relax_weight_2,
+        f.relax_weight_3,
+        lag_alpha(h, s.mechanical_lag_s), s.resistance_at_1n_ohm, s.exponent, 1.0 / s.standoff_resistance_ohm,
+        creep_term_weight(s.creep_per_decade, s.creep_tau_min_s, s.creep_tau_max_s), s.load_threshold_n,
+        s.temperature_coeff_per_k, s.temperature_coeff_cold_per_k, s.actuation_force_n, s.turn_on_steepness,
+        s.press_repeatability, s.noise_v_rms,
+        c.r2_ohm, c.supply_v, c.adc_lsb_v, c.adc_max_code,
+        bb[0], bb[1], bb[2], aa[1], aa[2])
+    p[_RELAX_SLOTS] = _prony_row(h, f.relax_tau_1_s, f.relax_tau_2_s, f.relax_tau_3_s)
     p[_CREEP_SLOTS] = _creep_decays(dt_sensor, s.creep_tau_min_s, s.creep_tau_max_s)
-    p[P.fsr_load_threshold_n] = s.load_threshold_n
-    p[P.fsr_tempco_per_k] = s.temperature_coeff_per_k
-    p[P.fsr_tempco_cold_per_k] = s.temperature_coeff_cold_per_k
-    p[P.fsr_actuation_n] = s.actuation_force_n
-    p[P.fsr_turn_on_m] = s.turn_on_steepness
-    p[P.fsr_press_sigma] = s.press_repeatability
-    p[P.fsr_noise_v] = s.noise_v_rms
-    p[P.r2_ohm] = c.r2_ohm
-    p[P.divider_supply_v] = c.supply_v
-    p[P.adc_lsb_v] = c.adc_lsb_v
-    p[P.adc_max_code] = c.adc_max_code
     widths, weights = play_widths(s)
     p[_PLAY_W_SLOTS] = widths
     p[_PLAY_WEIGHT_SLOTS] = weights
-    bb, aa = _antialias_filter(float(e.antialias_cutoff_hz), float(r.sensor_rate_hz))
-    p[P.aa_b0], p[P.aa_b1], p[P.aa_b2] = bb
-    p[P.aa_a1], p[P.aa_a2] = aa[1], aa[2]
     _pack_model(p, model)
     p[P.est_clamp] = 1.0 if e.clamp_nonnegative else 0.0
     p[P.est_nyquist_average] = 1.0 if e.nyquist_average else 0.0
@@ -170,7 +148,6 @@ def pack_params(device: DeviceParams, seed: float, model=None) -> np.ndarray:
     _pack_creep_compensation(p, e, dt_sensor)
     _pack_hysteresis_compensation(p, e, c, s, float(r.sensor_rate_hz))
     _pack_current_sense(p, device.current_sense, h)
-    reseed(p, device, seed)
     return p
 
 
@@ -200,6 +177,28 @@ def _pack_current_sense(p: np.ndarray, cs, h_s: float) -> None:
     p[P.isense_nominal_v_per_a] = cs.nominal_v_per_a
 
 
+def _slots(*names) -> np.ndarray:
+    """The parameter slots of ``names`` (read-only; each slot once)."""
+    slots = np.array([P[name] for name in names], dtype=np.intp)
+    if np.unique(slots).size != slots.size:
+        raise ImportError(f"parameter slots written twice: {names}")
+    slots.flags.writeable = False
+    return slots
+
+
+_DEVICE_SLOTS = _slots(
+    "h_s", "substeps_per_sensor", "sensors_per_estimate",
+    "motor_r_ohm", "motor_current_decay", "motor_kt", "motor_ke", "n_over_r_per_m", "pinion_mass_kg",
+    "pinion_coulomb_n", "pinion_static_n", "pinion_viscous_n_s_per_m",
+    "gear_mu", "half_backlash_m", "mesh_k_n_per_m", "mesh_c_n_s_per_m",
+    "board_mass_kg", "guide_coulomb_n", "guide_static_n", "guide_viscous_n_s_per_m",
+    "stribeck_v_m_per_s", "travel_min_m", "travel_max_m",
+    "finger_b_n_per_m", "finger_m_per_m", "relax_c0", "relax_c1", "relax_c2", "relax_c3",
+    "fsr_lag_alpha", "fsr_k_ohm", "fsr_n", "fsr_g_standoff_s", "fsr_creep_weight", "fsr_load_threshold_n",
+    "fsr_tempco_per_k", "fsr_tempco_cold_per_k", "fsr_actuation_n", "fsr_turn_on_m", "fsr_press_sigma", "fsr_noise_v",
+    "r2_ohm", "divider_supply_v", "adc_lsb_v", "adc_max_code",
+    "aa_b0", "aa_b1", "aa_b2", "aa_a1", "aa_a2")
+"""The parameter slots :func:`pack_params` fills with one number each of the device's parts (in its order)."""
 _PLAY_STATE_SLOTS = np.array([S[f"play_{j}"] for j in range(N_PLAYS)], dtype=np.intp)
 _COMP_PLAY_STATE_SLOTS = np.array([S[f"comp_play_{j}"] for j in range(N_PLAYS)], dtype=np.intp)
 _COMP_MEDIAN_SLOTS = np.array([S[f"comp_med_{j}"] for j in range(HYSTERESIS_MEDIAN - 1)], dtype=np.intp)
@@ -228,19 +227,6 @@ def _creep_decays(dt_sensor_s: float, tau_min_s: float, tau_max_s: float) -> np.
     return row
 
 
-def _cached_slots(fill, *key) -> tuple[np.ndarray, np.ndarray]:
-    """``(slots, values)`` that ``fill(p, *key)`` writes into a zero parameter row: every slot
-    it sets, with the value it sets (a written zero included)."""
-    row = np.zeros(N_PARAM)
-    fill(row, *key)
-    probe = np.full(N_PARAM, np.nan)
-    fill(probe, *key)
-    slots = np.flatnonzero(~np.isnan(probe) | np.isnan(row))
-    values = row[slots]
-    slots.flags.writeable = values.flags.writeable = False
-    return slots, values
-
-
 def _pack_calibration_table(p: np.ndarray, e) -> None:
     """The unit's calibration table (:func:`ebraille_sim.estimation.firmware.table_calibrated_n`):
     its size, the readings and the loads (unused slots 0)."""
@@ -252,32 +238,39 @@ def _pack_calibration_table(p: np.ndarray, e) -> None:
     p[P.est_cal_y0:P.est_cal_y0 + n] = e.calibration_loads_n
 
 
+CREEP_COMPENSATION_SLOTS = _slots("est_creep_comp", "comp_creep_weight", *(f"comp_creep_a{j}" for j in range(N_CREEP)),
+                                  "comp_fsr_n", "comp_g_standoff_s", "comp_load_threshold_n", "comp_reference_gain")
+"""The parameter slots of the creep compensation, in the order of :func:`creep_compensation_values`."""
+
+
 def _pack_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
     """The estimator's creep compensation: on/off, and the creep law of the nominal FSR
     (:data:`~ebraille_sim.estimation.firmware.FIRMWARE_FSR`, the nominal unit: the firmware does not know the individual sensor's parameters)
     with the creep per decade the bench measured when the estimator carries one
     (:func:`~ebraille_sim.estimation.firmware.firmware_fsr`), at the sensor rate, with the creep gain of the calibration hold as its reference.
-    Depends only on the estimator and the sensor period: the slots are computed once per pair."""
-    slots, values = _creep_compensation_slots(e, float(dt_sensor_s))
-    p[slots] = values
+    Depends only on the estimator and the sensor period: the values are computed once per pair."""
+    p[CREEP_COMPENSATION_SLOTS] = creep_compensation_values(e, float(dt_sensor_s))
 
 
 @functools.lru_cache(maxsize=64)
-def _creep_compensation_slots(e, dt_sensor_s: float) -> tuple[np.ndarray, np.ndarray]:
-    return _cached_slots(_fill_creep_compensation, e, dt_sensor_s)
-
-
-def _fill_creep_compensation(p: np.ndarray, e, dt_sensor_s: float) -> None:
+def creep_compensation_values(e, dt_sensor_s: float) -> np.ndarray:
+    """The values of :data:`CREEP_COMPENSATION_SLOTS` for the estimator ``e`` at the sensor period
+    ``dt_sensor_s`` (read-only)."""
     nominal = firmware_fsr(e)
-    p[P.est_creep_comp] = 1.0 if e.creep_compensation else 0.0
-    p[P.comp_creep_weight] = creep_term_weight(nominal.creep_per_decade, nominal.creep_tau_min_s,
-                                               nominal.creep_tau_max_s)
-    for j, tau in enumerate(creep_taus_s(nominal.creep_tau_min_s, nominal.creep_tau_max_s)):
-        p[P[f"comp_creep_a{j}"]] = creep_decay(dt_sensor_s, tau)
-    p[P.comp_fsr_n] = nominal.exponent
-    p[P.comp_g_standoff_s] = 1.0 / nominal.standoff_resistance_ohm
-    p[P.comp_load_threshold_n] = nominal.load_threshold_n
-    p[P.comp_reference_gain] = creep_gain(e.creep_reference_hold_s, nominal)
+    values = np.array([1.0 if e.creep_compensation else 0.0,
+                       creep_term_weight(nominal.creep_per_decade, nominal.creep_tau_min_s, nominal.creep_tau_max_s)]
+                      + _creep_decays(dt_sensor_s, nominal.creep_tau_min_s, nominal.creep_tau_max_s).tolist()
+                      + [nominal.exponent, 1.0 / nominal.standoff_resistance_ohm, nominal.load_threshold_n,
+                         creep_gain(e.creep_reference_hold_s, nominal)], dtype=float)
+    values.flags.writeable = False
+    return values
+
+
+HYSTERESIS_COMPENSATION_SLOTS = _slots(
+    "est_hyst_comp", *(f"comp_play_w{j}" for j in range(N_PLAYS)), *(f"comp_play_weight{j}" for j in range(N_PLAYS)),
+    "comp_hyst_halfwidth", "comp_fsr_k_ohm", "comp_hyst_deadband_v", "comp_hyst_turn_v", "comp_hyst_follow_v",
+    "comp_centre_alpha", "comp_turn_alpha")
+"""The parameter slots of the hysteresis compensation, in the order of :func:`hysteresis_compensation_values`."""
 
 
 def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr, sensor_rate_hz: float) -> None:
@@ -290,36 +283,30 @@ def _pack_hysteresis_compensation(p: np.ndarray, e, circuit, fsr, sensor_rate_hz
     unit's rate-independent loop as measured at assembly
     (:func:`ebraille_sim.estimation.calibration.measured_hysteresis_fraction`); the noise
     deadband, the turn test's threshold and following deadband in volts and its average's weight
-    per sensor sample.  Given the loop, the slots depend only on the estimator, the ADC's LSB and
+    per sensor sample.  Given the loop, the values depend only on the estimator, the ADC's LSB and
     the sensor rate: they are computed once per combination."""
     if e.hysteresis_fraction is not None:
-        h = play_loop_fraction(dataclasses.replace(firmware_fsr(e), hysteresis_fraction=e.hysteresis_fraction))
+        h = play_loop_fraction(replace_fields(firmware_fsr(e), hysteresis_fraction=e.hysteresis_fraction))
     else:
         h = measured_hysteresis_fraction(fsr) if e.hysteresis_compensation else play_loop_fraction(FIRMWARE_FSR)
-    slots, values = _hysteresis_compensation_slots(e, float(circuit.adc_lsb_v), h, sensor_rate_hz)
-    p[slots] = values
+    p[HYSTERESIS_COMPENSATION_SLOTS] = hysteresis_compensation_values(e, float(circuit.adc_lsb_v), h, sensor_rate_hz)
 
 
 @functools.lru_cache(maxsize=256)
-def _hysteresis_compensation_slots(e, adc_lsb_v: float, h, sensor_rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    return _cached_slots(_fill_hysteresis_compensation, e, adc_lsb_v, h, sensor_rate_hz)
-
-
-def _fill_hysteresis_compensation(p: np.ndarray, e, adc_lsb_v: float, h, sensor_rate_hz: float) -> None:
+def hysteresis_compensation_values(e, adc_lsb_v: float, h, sensor_rate_hz: float) -> np.ndarray:
+    """The values of :data:`HYSTERESIS_COMPENSATION_SLOTS` for the estimator ``e``, the ADC's LSB,
+    the play part ``h`` of the loop and the sensor rate (read-only)."""
     nominal = firmware_fsr(e)
-    p[P.est_hyst_comp] = 1.0 if e.hysteresis_compensation else 0.0
     widths, weights = play_loop_widths(h, nominal.exponent)
-    for j in range(N_PLAYS):
-        p[P[f"comp_play_w{j}"]] = widths[j]
-        p[P[f"comp_play_weight{j}"]] = weights[j]
-    p[P.comp_hyst_halfwidth] = sum(w * x for w, x in zip(weights, widths))
-    p[P.comp_fsr_k_ohm] = nominal.resistance_at_1n_ohm
-    p[P.comp_hyst_deadband_v] = e.hysteresis_deadband_lsb * adc_lsb_v
-    p[P.comp_hyst_turn_v] = e.hysteresis_turn_lsb * adc_lsb_v
-    p[P.comp_hyst_follow_v] = e.hysteresis_follow_lsb * adc_lsb_v
-    p[P.comp_centre_alpha] = -math.expm1(-1.0 / (e.hysteresis_centre_time_s * sensor_rate_hz)) \
-        if e.hysteresis_centre_time_s > 0.0 else 0.0
-    p[P.comp_turn_alpha] = -math.expm1(-1.0 / (e.hysteresis_turn_time_s * sensor_rate_hz))
+    centre = (-math.expm1(-1.0 / (e.hysteresis_centre_time_s * sensor_rate_hz))
+              if e.hysteresis_centre_time_s > 0.0 else 0.0)
+    values = np.array([1.0 if e.hysteresis_compensation else 0.0] + list(widths) + list(weights)
+                      + [sum(w * x for w, x in zip(weights, widths)), nominal.resistance_at_1n_ohm,
+                         e.hysteresis_deadband_lsb * adc_lsb_v, e.hysteresis_turn_lsb * adc_lsb_v,
+                         e.hysteresis_follow_lsb * adc_lsb_v, centre,
+                         -math.expm1(-1.0 / (e.hysteresis_turn_time_s * sensor_rate_hz))], dtype=float)
+    values.flags.writeable = False
+    return values
 
 
 @functools.lru_cache(maxsize=64)
@@ -492,7 +479,7 @@ def _fill_estimator_steady_state(s: np.ndarray, p: np.ndarray, u0: float) -> Non
 
 _LAST_ROWS: list = []
 """The parts (objects), estimator model and board position of the device packed last, its
-parameter row (seed 0; :func:`reseed` gives it each device's seed) and its initial state
+parameter row (its seed slots 0; :func:`reseed` gives it each device's seed) and its initial state
 (:func:`_device_rows`)."""
 
 
@@ -509,7 +496,7 @@ def _device_rows(device: DeviceParams, seed: float, model, board_pos_m) -> tuple
     if last and all(a is b for a, b in zip(last[0], key)):
         p, st = last[1].copy(), last[2].copy()
     else:
-        p = pack_params(device, 0.0, model)
+        p = _unseeded_params(device, model)
         st = initial_state(device, p, board_pos_m)
         last[:] = [key, p.copy(), st.copy()]
     reseed(p, device, seed)
