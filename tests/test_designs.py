@@ -224,3 +224,12 @@ def test_dob_wide_1khz_holds_a_relay_reader_and_lifts_a_pressing_one():
                                trace_every=None, **kw).metrics["in_band_fraction"]
             for name, c, kw in (("wide", "dob_wide_1khz", {}), ("narrow", narrow, {"firmware": design.firmware}))}
     assert runs["narrow"] < 0.75 and runs["wide"] > 0.78
+
+
+def test_run_names_the_default_design_in_its_report(tmp_path, capsys):
+    """A scenario without ``[controller]`` runs the default design, and the report says so."""
+    from ebraille_sim.cli import main as cli
+    assert cli(["run", "steady_90wpm", "--duration", "2", "--no-plot", "--out", str(tmp_path / "r")]) in (0, 1)
+    assert f"controller pid_dob (design {DEFAULT_DESIGN})" in capsys.readouterr().out
+    doc = json.loads((tmp_path / "r" / "metrics.json").read_text())
+    assert doc["design"] == DEFAULT_DESIGN and "controller_file" not in doc

@@ -206,8 +206,12 @@ def _run(args, plotter) -> int:
         if args.controller is None:
             raise
         raise UserError(f"--controller {str(args.controller)!r}: {exc}") from None
+    from controllers.designs import designs
+    named = spec.controller.name if args.controller is None else str(args.controller)
     gains_file = args.controller if (args.controller is not None
                                      and str(args.controller).lower().endswith((".toml", ".json"))) else None
+    if named in designs():                              # named in the report as the design it is
+        gains_file = named
     from ebraille_sim.scenarios.runner import supervisor_choice
     sup_on, sup_source = supervisor_choice(spec, not args.no_supervisor)
     if not sup_on:

@@ -27,9 +27,18 @@ _FMT = {"force_rmse_n": "{:.4f}", "force_mae_n": "{:.4f}", "in_band_fraction": "
         "legible_char_fraction": "{:.3f}", "legible_char_fraction_cv": "{:.3f}"}
 
 
+def _is_design_name(controller_file) -> bool:
+    """Whether ``controller_file`` names a shipped design rather than a gains or design file."""
+    return controller_file is not None and not str(controller_file).lower().endswith((".toml", ".json"))
+
+
 def controller_label(result: RunResult, controller_file=None) -> str:
-    """The run's controller name, with the gains file it came from when there is one."""
-    return result.controller_name + (f" (gains {controller_file})" if controller_file else "")
+    """The run's controller name, with the gains file or the shipped design it came from when
+    there is one (``controller_file``: a path, or a design's name)."""
+    if not controller_file:
+        return result.controller_name
+    return result.controller_name + (f" (design {controller_file})" if _is_design_name(controller_file)
+                                     else f" (gains {controller_file})")
 
 
 def controller_gains(controller) -> dict | None:
@@ -86,7 +95,7 @@ def metrics_document(result: RunResult, controller=None, controller_file=None) -
            "metrics": result.metrics, "criteria": evaluate_criteria(result.spec.criteria, result.metrics),
            "supervisor": result.supervisor}
     if controller_file is not None:
-        doc["controller_file"] = str(controller_file)
+        doc["design" if _is_design_name(controller_file) else "controller_file"] = str(controller_file)
     if controller is not None:
         doc["controller_gains"] = controller_gains(controller)
     return doc
