@@ -615,8 +615,11 @@ def unit_estimator(firmware: "EstimatorParams", unit: "EstimatorParams | None" =
     """The estimator settings of ``firmware`` with the bench fields (:data:`UNIT_ESTIMATOR_FIELDS`)
     of ``unit``: another unit's estimator, or None for a unit its bench has not measured (the
     fields at their defaults)."""
-    src = EstimatorParams() if unit is None else unit
-    return replace_checked(firmware, **{k: getattr(src, k) for k in UNIT_ESTIMATOR_FIELDS})
+    src = _NO_BENCH if unit is None else unit
+    fields = {k: getattr(src, k) for k in UNIT_ESTIMATOR_FIELDS}
+    if all(getattr(firmware, k) == v for k, v in fields.items()):
+        return firmware                                   # already so (an env's every reset)
+    return replace_checked(firmware, **fields)
 
 
 @dataclass(frozen=True)
@@ -753,6 +756,10 @@ class DeviceParams:
                 raise ValueError(f"DeviceParams.{name} must be finite, got {v}")
         if not self.driver_supply_v > 0:
             raise ValueError(f"DeviceParams.driver_supply_v must be > 0, got {self.driver_supply_v}")
+
+
+_NO_BENCH = EstimatorParams()
+"""An estimator whose unit's bench measured nothing (:func:`unit_estimator`)."""
 
 
 def source_of(obj, name: str) -> str:
