@@ -65,7 +65,8 @@ import numpy as np
 from ebraille_sim.physics.params import TACTILE_FORCE_MAX_N
 
 __all__ = ["BenchScenario", "Suite", "SUITES", "SUITE_VERSION", "POPULATION_SEED", "BOUNDS", "cvar_low",
-           "scenario_spec", "scenario_devices", "plan_episodes", "estimator_settings", "run_episode", "run_benchmark", "summarise", "score_formula", "format_leaderboard",
+           "scenario_spec", "scenario_devices", "plan_episodes", "estimator_settings", "run_episode", "run_benchmark",
+           "sensor_bound_metrics", "summarise", "score_formula", "format_leaderboard",
            "format_markdown", "results_document", "write_results", "load_results", "compare", "format_compare"]
 
 SUITE_VERSION = 2
@@ -228,8 +229,11 @@ def episode_seed(spec, reader: int, population_seed: int | None = None) -> int:
     return spec.seed + 101 * reader + extra
 
 
-def _sensor_bound_metrics(res) -> dict:
-    """Metrics of the actuator-bound run's force shifted by the estimator error (module docstring)."""
+def sensor_bound_metrics(res) -> dict:
+    """Metrics of an ``actuator_bound`` run (a :class:`~ebraille_sim.scenarios.runner.RunResult`
+    with its trace) with its force shifted by the estimator's error along it, ``F - (F_est - F)``:
+    what a controller holding the estimate as well as the bound holds the true force would give
+    (module docstring)."""
     from ebraille_sim.scenarios.inputs import refresh_phases
     from ebraille_sim.scenarios.legibility import legibility_metrics
     from ebraille_sim.scenarios.metrics import compute_metrics
@@ -332,7 +336,7 @@ def run_episode(task) -> list[dict]:
     latch = latched_fault(res)
     rows = [dict(base, controller=ctrl, **{k: _num(res.metrics.get(k)) for k in KEPT}, **latch)]
     if ctrl == "actuator_bound" and not sc.fault:
-        m = _sensor_bound_metrics(res)
+        m = sensor_bound_metrics(res)
         rows.append(dict(base, controller="sensor_bound", **{k: _num(m.get(k)) for k in KEPT},
                          **dict(latch, supervisor_fault=None, supervisor_fault_s=None)))
     return rows
