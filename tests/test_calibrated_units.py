@@ -35,13 +35,16 @@ def _bench_errors(dev, circuit):
 def test_every_preset_reads_the_bench_loads_as_the_nominal_unit_does(fsr):
     dev = _scenario(fsr).device
     err = _bench_errors(dev, dev.circuit)
-    # the film's creep and the units' curves leave a spread over the loads and holds (the
-    # nominal unit's, with the shipped 1150 ohm: 5.7 % RMS, 13 % at most)
-    assert np.sqrt(np.mean(err ** 2)) < 0.08 and np.max(np.abs(err)) < 0.17
+    # the film's creep and the units' curves leave a spread over the loads and holds that the
+    # one-point trim at 1 N does not fit (nominal 6.0 % RMS, 14.7 % at most; low_k 7.3 %, 17.3 %;
+    # the calibration table corrects the loads, test_drawn_units_read_the_reading_range_through_their_calibration_table)
+    assert np.sqrt(np.mean(err ** 2)) < 0.08 and np.max(np.abs(err)) < 0.18
     if fsr != "nominal":                                           # the nominal unit's divider is wrong for it
         assert np.mean(np.abs(_bench_errors(dev, CircuitParams()))) > 0.15
-    else:
-        assert dev.circuit.r2_ohm == pytest.approx(CircuitParams().r2_ohm, rel=0.005)
+    else:                                   # trimmed to read 1 N at 1 N held 20 s; the shipped R2 is the
+        model = cached_model(dev.estimator.model)        # least-squares fit over the grid, 2.2 % lower
+        assert steady_estimate(model, 1.0, dev.fsr, dev.circuit, 20.0) == pytest.approx(1.0, abs=1e-6)
+        assert dev.circuit.r2_ohm == pytest.approx(CircuitParams().r2_ohm, rel=0.03)
 
 
 def test_a_high_k_unit_holds_the_force_as_the_nominal_unit_does():

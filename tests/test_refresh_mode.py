@@ -80,13 +80,15 @@ def test_continuous_metrics_use_the_whole_dwell():
 
 
 def test_refresh_meets_its_band_at_60_wpm_but_not_at_120_wpm():
-    """8 s of refresh reading with seed 300: every character in band at 60 wpm (so in 80 runs of
-    seeds 300-379; 0.879 with the scenario's own seed, the lowest of 96 seeds), almost none at
-    120 wpm."""
+    """8 s of refresh reading with seed 300: at 60 wpm every character in band (0.909-1.000 of
+    them over seeds 300-311); at 120 wpm the
+    band is not met (0.17-0.88 of the characters over seeds 300-315, 0.37 with seed 300: each
+    character's press draws its own film scatter, and the shorter hold leaves less time to
+    settle it)."""
     slow = run_scenario("refresh_60wpm", duration_s=8.0, seed=300).metrics["char_in_band_fraction"]
     fast = run_scenario("refresh_120wpm", duration_s=8.0, seed=300).metrics["char_in_band_fraction"]
     assert slow >= 0.9
-    assert fast < 0.2
+    assert fast < 0.5
 
 
 # ---------------------------------------------------------------- reading inputs

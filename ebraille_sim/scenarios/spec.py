@@ -234,8 +234,8 @@ class DeviceSpec:
                                           doc="Field overrides of the FSR's divider and ADC.")
     current_sense_overrides: dict | None = _key(None, "-", "overrides", target=_params.CurrentSenseParams,
                                                 doc="Field overrides of the motor current chain.")
-    calibrate: bool = _key(True, "-", "bool", "true: R2 set on the bench for this FSR unit and estimator (presses "
-                           "to 0.5-2 N held 5-60 s, least squares; drawn units are trimmed at 1 N held 20 s), "
+    calibrate: bool = _key(True, "-", "bool", "true: R2 trimmed for this FSR unit and estimator until a press to "
+                           "1 N held 20 s reads 1 N (estimation.calibration.calibrate_device, as drawn units are), "
                            "then the bench stores the unit's calibration table at 0.5-2 N, its creep and its "
                            "loop (estimation.calibration.with_calibration_table); "
                            "false: a miscalibrated unit on purpose, with the circuit's R2",
@@ -536,27 +536,31 @@ def _build_device(src, dev: dict, rates: dict, est: dict, base_dir: str = ".") -
 
 
 def _calibrated(src, device: _params.DeviceParams, dev: dict, given: dict) -> _params.DeviceParams:
-    """``device`` with the divider calibrated on the bench for its FSR unit and estimator
-    (:func:`ebraille_sim.estimation.calibration.bench_calibrate_device`: presses to known loads
-    of 0.5-2 N held 5, 20 and 60 s, R2 set to 10 ohm; the nominal unit's is the shipped
-    1 150 ohm) and the unit's calibration table, creep and loop stored as the bench measures
-    them (:func:`ebraille_sim.estimation.calibration.with_calibration_table`, the fixture's loads
-    exact), unless ``[device]
+    """``device`` with the divider calibrated for its FSR unit and estimator as every drawn unit's
+    is (:func:`ebraille_sim.estimation.calibration.calibrate_device`: one press to the 1 N load held
+    20 s, R2 turned until the estimate reads 1 N) and the unit's calibration table, creep and loop
+    stored as the bench measures them (:func:`ebraille_sim.estimation.calibration.with_calibration_table`,
+    the fixture's loads exact; the table keeps the divider's level at 1 N), unless ``[device]
     calibrate = false``.  A given ``[device.circuit_overrides] r2_ohm`` needs ``calibrate =
-    false`` (the calibration would replace it); a unit whose best R2 lies at the end of the
-    500-50 000 ohm range gets it with a :class:`ScenarioWarning`.  A bench field the scenario's
-    ``[estimator]`` gives (``given``, e.g. ``hysteresis_fraction``) stays as given."""
+    false`` (the calibration would replace it).  A unit that no R2 in 500-50 000 ohm makes read
+    1 N gets the bench's best fit over its loads and holds
+    (:func:`ebraille_sim.estimation.calibration.bench_calibrate_device`) with a
+    :class:`ScenarioWarning`.  A bench field the scenario's ``[estimator]`` gives (``given``, e.g.
+    ``hysteresis_fraction``) stays as given."""
     if not dev.get("calibrate", DeviceSpec().calibrate):
         return device
     if "r2_ohm" in dev.get("circuit_overrides", {}):
         raise ScenarioError(f"{src}: [device.circuit_overrides] r2_ohm is set by the bench calibration; "
                             f"set [device] calibrate = false to run a unit with a given R2")
-    from ebraille_sim.estimation.calibration import BENCH_R2_RANGE_OHM, bench_calibrate_device, with_calibration_table
-    out, inside = bench_calibrate_device(device)
-    if not inside:
+    from ebraille_sim.estimation.calibration import (BENCH_R2_RANGE_OHM, bench_calibrate_device, calibrate_device,
+                                                     with_calibration_table)
+    out = calibrate_device(device)
+    if out is device:                                 # no R2 of the range reads 1 N on this unit
+        out, inside = bench_calibrate_device(device)
         lo, hi = BENCH_R2_RANGE_OHM
-        warnings.warn(f"{src}: no R2 in {lo:g}-{hi:g} ohm calibrates this FSR unit for its estimator; the divider "
-                      f"gets R2 = {out.circuit.r2_ohm:.4g} ohm, the end of the range, and the unit reads off",
+        where = "the end of the range" if not inside else "the bench's best fit"
+        warnings.warn(f"{src}: no R2 in {lo:g}-{hi:g} ohm makes this FSR unit read 1 N on its estimator; the divider "
+                      f"gets R2 = {out.circuit.r2_ohm:.4g} ohm, {where}, and the unit reads off",
                       ScenarioWarning, stacklevel=4)
     out = with_calibration_table(out)
     return dataclasses.replace(out, estimator=_params.replace_checked(out.estimator, **given)) if given else out
