@@ -122,7 +122,7 @@ def test_assert_scenario_one_liner():
     with pytest.raises(AssertionError, match=r"scenario contact_onset: peak_force_n = 1\.\d+, expected <= 1"):
         assert_scenario("contact_onset", peak_force_n__le=1.0)
     fails = check_scenario_metrics("contact_onset", contact_loss_count__eq=0, settling_time_s__lt=1.0)
-    assert len(fails) == 1 and fails[0].startswith("settling_time_s = 1.3")
+    assert len(fails) == 1 and fails[0].startswith("settling_time_s = 1.4")
     assert fails[0].endswith("expected < 1")
 
 
