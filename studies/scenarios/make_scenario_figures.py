@@ -388,10 +388,23 @@ def page_numbers(summary):
     est = tr["force_est_n"]
     est_before = float(np.mean(est[(t >= t0 - 0.2) & (t < t0)]))
     est_min = float(est[win].min())
+    # the supervisor's drop rule on the estimate: the fall within drop_window_s, and what it keeps
+    from controllers.supervisor.config import SupervisorPolicy
+    policy = SupervisorPolicy()
+    lag = int(round(policy.drop_window_s / float(t[1] - t[0])))
+    drop_rule = []
+    for ts in slips:
+        k = np.arange(int(np.searchsorted(t, float(ts))), int(np.searchsorted(t, float(ts) + 0.3)))
+        fall, kept = est[k - lag] - est[k], est[k] / est[k - lag]
+        drop_rule.append({"largest_fall_in_window_n": float(fall.max()),
+                          "least_kept_fraction_when_fall_above_drop_n":
+                              float(kept[fall > policy.drop_n].min()) if (fall > policy.drop_n).any() else None})
     unsupervised = run_scenario("strap_slip", supervised=False)
     out["strap_slip"] = {"force_before_n": before, "drop_within_slip_n": before - during,
                          "estimate_before_n": est_before, "estimate_min_after_slip_n": est_min,
                          "estimate_drop_n": est_before - est_min,
+                         "drop_rule_per_slip": drop_rule, "drop_n": policy.drop_n,
+                         "drop_keep_fraction": policy.drop_keep_fraction,
                          "char_in_band_fraction_supervisor_off": unsupervised.metrics["char_in_band_fraction"],
                          "contact_loss_count_supervisor_off": unsupervised.metrics["contact_loss_count"],
                          "overshoot_peak_n": peak, "overshoot_peak_after_s": float(tw[k_pk] - t0),
