@@ -16,17 +16,19 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from scipy.signal import butter, sosfiltfilt  # noqa: E402
 
 from ebraille_sim.scenarios import disturbances as D  # noqa: E402
 from ebraille_sim.scenarios import legibility as L  # noqa: E402
 from ebraille_sim.tools import sweep as S  # noqa: E402
 from ebraille_sim.scenarios.reading import mean_dwell_s  # noqa: E402
 from ebraille_sim.scenarios.runner import refresh_phases, run_scenario  # noqa: E402
-from ebraille_sim.scenarios.spec import list_scenarios, load_scenario, parse_scenario  # noqa: E402
+from ebraille_sim.scenarios.spec import DEFAULT_DESIGN, list_scenarios, load_scenario, parse_scenario  # noqa: E402
 
 HERE = pathlib.Path(__file__).resolve().parent
 OUT = HERE
 FIG = HERE.parents[1] / "docs" / "figures" / "scenarios"
+PAPER_FIRMWARE = "paper_100hz"     # the paper's 100 Hz estimator path, for the PID comparisons of the prose
 TABLE_METRICS = ["force_rmse_n", "in_band_fraction", "char_in_band_fraction", "peak_force_n", "contact_loss_count",
                  "estimate_rmse_n", "legible_char_fraction", "legible_char_fraction_cv", "wpm"]
 
@@ -114,6 +116,7 @@ def fig_refresh(summary):
     plt.close(fig)
 
     grid = {}
+    misses = {f"lift_{lift:g}N": {} for lift in (0.1, 0.4, 0.7)}
     rates = [60, 75, 90, 105, 120]
     fig, ax = plt.subplots(figsize=(7, 4))
     for lift in (0.1, 0.4, 0.7):
@@ -122,12 +125,15 @@ def fig_refresh(summary):
             spec = parse_scenario({"name": "refresh_grid", "seed": 18, "duration_s": 12.0,
                                    "reading": {"wpm": wpm, "mode": "refresh", "refresh_lift_force_n": lift},
                                    "setpoint": {"force_n": 1.0}, "finger": {"gap_m": 1e-3}})
-            vals.append(run_scenario(spec).metrics["char_in_band_fraction"])
+            res = run_scenario(spec)
+            vals.append(res.metrics["char_in_band_fraction"])
+            misses[f"lift_{lift:g}N"][str(wpm)] = _refresh_misses(res)
         grid[f"lift_{lift:g}N"] = dict(zip(map(str, rates), vals))
         ax.plot(rates, vals, "o-", label=f"lift/release to {lift:g} N")
     ax.set_xlabel("reading rate (wpm)")
     ax.set_ylabel("char_in_band_fraction (hold windows)")
-    ax.set_title("per-character refresh with the default PID (press within 30 % of the dwell)", fontsize=9)
+    ax.set_title(f"per-character refresh with the default design {DEFAULT_DESIGN} (press within 30 % of the dwell)",
+                 fontsize=9)
     ax.set_ylim(-0.03, 1.03)
     ax.grid(lw=0.3)
     ax.legend(fontsize=8)
@@ -135,6 +141,7 @@ def fig_refresh(summary):
     fig.savefig(FIG / "refresh_grid.png", dpi=100)
     plt.close(fig)
     summary["refresh_grid"] = grid
+    summary["refresh_grid_misses"] = misses
 
 
 def fig_legibility(summary):
@@ -234,7 +241,7 @@ def fig_library(summary):
 
 def fig_sweep(summary):
     plan = S.plan_sweep(["steady_90wpm", "tremor_90wpm", "strap_slip"], rates=[60, 90, 120], readers=16,
-                        controllers=["pid"], seed=7, duration_s=10.0)
+                        controllers=[DEFAULT_DESIGN], seed=7, duration_s=10.0)
     res = S.run_sweep(plan, jobs=1, progress=False)
     with tempfile.TemporaryDirectory() as tmp:
         for p in S.plot_results(res, tmp, loss="char_in_band_fraction", alpha=0.1):
@@ -269,6 +276,41 @@ def _dwell_extremes(res):
     return np.array(hi), np.array(lo)
 
 
+def _refresh_climbs(res):
+    """Per press, the time from the start of the press phase until the true force first reaches
+    the band's lower edge within the dwell, s (presses that never reach it are left out)."""
+    spec, tr, sch = res.spec, res.trace, res.schedule
+    edge = spec.setpoint.force_n * (1.0 - spec.setpoint.band_fraction)
+    t, f = tr["t_s"], tr["force_true_n"]
+    climb = []
+    for s, d in zip(sch.start_s, sch.dwell_s):
+        tp = s + spec.reading.refresh_lift_fraction * d
+        sel = (t >= tp) & (t < s + d) & (f >= edge)
+        if sel.any():
+            climb.append(float(t[sel][0] - tp))
+    return climb
+
+
+def _refresh_misses(res):
+    """Characters out of band for more than a tenth of their hold, split by where the force was
+    outside the band longer: above its upper edge or below its lower edge."""
+    spec, tr, sch = res.spec, res.trace, res.schedule
+    t, f = tr["t_s"], tr["force_true_n"]
+    _, hold = refresh_phases(spec, sch, t)
+    sp, band = tr["setpoint_n"], spec.setpoint.band_fraction
+    above_n = below_n = 0
+    for s, d in zip(sch.start_s, sch.dwell_s):
+        sel = hold & (t >= s) & (t < s + d)
+        if not sel.any():
+            continue
+        above = float(np.mean(f[sel] > sp[sel] * (1 + band)))
+        below = float(np.mean(f[sel] < sp[sel] * (1 - band)))
+        if above + below > 0.1:
+            above_n += above >= below
+            below_n += above < below
+    return {"missed_above_band": int(above_n), "missed_below_band": int(below_n)}
+
+
 def page_numbers(summary):
     """The numbers the prose of docs/scenarios.md quotes beyond the metrics (summary["numbers"])."""
     import controllers
@@ -276,28 +318,59 @@ def page_numbers(summary):
     refresh = {}
     for name in ("refresh_60wpm", "refresh_120wpm", "refresh_160wpm", "refresh_200wpm"):
         res = run_scenario(name)
-        spec, tr, sch = res.spec, res.trace, res.schedule
         hi, lo = _dwell_extremes(res)
-        r = spec.reading
-        edge = spec.setpoint.force_n * (1.0 - spec.setpoint.band_fraction)
-        t, f = tr["t_s"], tr["force_true_n"]
-        climb = []
-        for s, d in zip(sch.start_s, sch.dwell_s):
-            tp = s + r.refresh_lift_fraction * d
-            sel = (t >= tp) & (t < s + d) & (f >= edge)
-            if sel.any():
-                climb.append(float(t[sel][0] - tp))
+        climb = _refresh_climbs(res)
         refresh[name] = {"median_dwell_max_n": float(np.median(hi)), "median_dwell_min_n": float(np.median(lo)),
                          "fraction_reaching_0.9N": float(np.mean(hi >= 0.9)),
                          "median_climb_to_band_s": float(np.median(climb)) if climb else None,
-                         "climbs_reached": len(climb), "dwells": len(hi)}
+                         "climbs_reached": len(climb), "dwells": len(hi), **_refresh_misses(res)}
     out["refresh"] = refresh
-    high_gain = {}
+    # The PID (its default gains, then kp raised) on the paper's 100 Hz path, the configuration
+    # the refresh prose compares the default design with.
+    paper = {}
+    for name in ("refresh_60wpm", "refresh_120wpm"):
+        res = run_scenario(name, controller="pid", firmware=PAPER_FIRMWARE)
+        climb = _refresh_climbs(res)
+        paper[name] = {"char_in_band_fraction": res.metrics["char_in_band_fraction"],
+                       "median_climb_to_band_s": float(np.median(climb)) if climb else None,
+                       "climbs_reached": len(climb), **_refresh_misses(res)}
+    out["refresh_pid_paper_100hz"] = paper
+    high_gain = {"controller": "pid", "firmware": PAPER_FIRMWARE}
     for kp in (4.0, 6.0):
-        res = run_scenario("refresh_120wpm", controller=controllers.make("pid", kp_v_per_n=kp))
+        res = run_scenario("refresh_120wpm", controller=controllers.make("pid", kp_v_per_n=kp),
+                           firmware=PAPER_FIRMWARE)
         high_gain[f"kp_{kp:g}"] = {k: res.metrics[k] for k in ("peak_force_n", "contact_loss_count",
                                                                "char_in_band_fraction", "force_rmse_n")}
     out["refresh_120wpm_high_kp"] = high_gain
+    # Tremor and pressing under the default design, the PID on the paper's path, the default
+    # design on the paper's path, and (pressing) the default's gains without the wide-error integral.
+    band = butter(4, [7.0, 13.0], btype="band", fs=1000.0, output="sos")
+    configurations = {"default": {}, "pid/paper_100hz": {"controller": "pid", "firmware": PAPER_FIRMWARE},
+                      f"{DEFAULT_DESIGN}/paper_100hz": {"controller": DEFAULT_DESIGN, "firmware": PAPER_FIRMWARE}}
+    tremor = {}
+    for label, kw in configurations.items():
+        res = run_scenario("tremor_90wpm", **kw)
+        tr = res.trace
+        sel = tr["t_s"] >= res.spec.reading.start_s + 1.0
+        tremor[label] = {"in_band_fraction": res.metrics["in_band_fraction"],
+                         "char_in_band_fraction": res.metrics["char_in_band_fraction"],
+                         **{f"{k}_7_13hz_rms": float(np.sqrt(np.mean(sosfiltfilt(band, tr[k][sel]) ** 2)))
+                            for k in ("force_true_n", "force_est_n", "command_v")}}
+    out["tremor_90wpm"] = tremor
+    pressing = {}
+    for label, kw in {**configurations, "dob_hold_1khz/fast_1khz_centred":
+                      {"controller": "dob_hold_1khz", "firmware": "fast_1khz_centred"}}.items():
+        m = run_scenario("pressing_90wpm", **kw).metrics
+        pressing[label] = {k: m[k] for k in ("in_band_fraction", "char_in_band_fraction", "force_rmse_n")}
+    out["pressing_90wpm"] = pressing
+    # Other shipped designs on the scenarios the prose compares them on (each on its own firmware).
+    out["other_designs"] = {
+        "mixed_reader/dob_100hz/in_band_fraction":
+            run_scenario("mixed_reader", controller="dob_100hz").metrics["in_band_fraction"],
+        "refresh_120wpm/dob_100hz/char_in_band_fraction":
+            run_scenario("refresh_120wpm", controller="dob_100hz").metrics["char_in_band_fraction"],
+        "refresh_120wpm_1khz/dob_hold_1khz/char_in_band_fraction":
+            run_scenario("refresh_120wpm_1khz", controller="dob_hold_1khz").metrics["char_in_band_fraction"]}
     res = run_scenario("strap_slip")
     tr, t = res.trace, res.trace["t_s"]
     f = tr["force_true_n"]
@@ -312,7 +385,28 @@ def page_numbers(summary):
     peak = float(fw[k_pk])
     later = np.nonzero(np.abs(fw[k_pk:] - 1.0) <= 0.05)[0]
     back = [float(tw[k_pk + later[0]] - t0)] if len(later) else []
+    est = tr["force_est_n"]
+    est_before = float(np.mean(est[(t >= t0 - 0.2) & (t < t0)]))
+    est_min = float(est[win].min())
+    # the supervisor's drop rule on the estimate: the fall within drop_window_s, and what it keeps
+    from controllers.supervisor.config import SupervisorPolicy
+    policy = SupervisorPolicy()
+    lag = int(round(policy.drop_window_s / float(t[1] - t[0])))
+    drop_rule = []
+    for ts in slips:
+        k = np.arange(int(np.searchsorted(t, float(ts))), int(np.searchsorted(t, float(ts) + 0.3)))
+        fall, kept = est[k - lag] - est[k], est[k] / est[k - lag]
+        drop_rule.append({"largest_fall_in_window_n": float(fall.max()),
+                          "least_kept_fraction_when_fall_above_drop_n":
+                              float(kept[fall > policy.drop_n].min()) if (fall > policy.drop_n).any() else None})
+    unsupervised = run_scenario("strap_slip", supervised=False)
     out["strap_slip"] = {"force_before_n": before, "drop_within_slip_n": before - during,
+                         "estimate_before_n": est_before, "estimate_min_after_slip_n": est_min,
+                         "estimate_drop_n": est_before - est_min,
+                         "drop_rule_per_slip": drop_rule, "drop_n": policy.drop_n,
+                         "drop_keep_fraction": policy.drop_keep_fraction,
+                         "char_in_band_fraction_supervisor_off": unsupervised.metrics["char_in_band_fraction"],
+                         "contact_loss_count_supervisor_off": unsupervised.metrics["contact_loss_count"],
                          "overshoot_peak_n": peak, "overshoot_peak_after_s": float(tw[k_pk] - t0),
                          "back_within_5pct_after_s": back[0] if back else None,
                          "mean_true_between_slips_n": float(np.mean(f[(t >= float(slips[1]) - 3.0) &
@@ -322,7 +416,10 @@ def page_numbers(summary):
         tr, t = res.trace, res.trace["t_s"]
         read = t >= res.spec.reading.start_s + 1.0
         ft, fe = tr["force_true_n"][read], tr["force_est_n"][read]
+        tr_read = t[read]
         out[name] = {"mean_true_n": float(np.mean(ft)), "mean_estimate_n": float(np.mean(fe)),
+                     "mean_true_first_10s_n": float(np.mean(ft[tr_read < tr_read[0] + 10.0])),
+                     "mean_true_last_10s_n": float(np.mean(ft[tr_read > tr_read[-1] - 10.0])),
                      "estimate_over_true": float(np.mean(fe) / np.mean(ft)),
                      "min_true_n": float(ft.min()), "max_true_n": float(ft.max()),
                      "force_rmse_n": res.metrics["force_rmse_n"]}
@@ -333,12 +430,17 @@ def page_numbers(summary):
         tr, t = res.trace, res.trace["t_s"]
         read = t >= res.spec.reading.start_s
         if "battery" in res.spec.sections.get("disturbances", {}):   # before the protection cut-off
-            read &= disturbance_inputs(res.spec, t - 1e-3)["driver_supply_v"][1] > 0.5
+            supplied = disturbance_inputs(res.spec, t - 1e-3)["driver_supply_v"][1] > 0.5
+            out["battery_cutoff_s"] = None if supplied.all() else float(t[np.argmin(supplied)])
+            read &= supplied
         cmd[name] = float(tr["command_v"][read].max())
     res = run_scenario("contact_onset")
     tr, t = res.trace, res.trace["t_s"]
     cmd["contact_onset_approach"] = float(tr["command_v"][t < res.spec.reading.start_s].max())
     out["max_command_v"] = cmd
+    read = t >= res.spec.reading.start_s
+    out["contact_onset"] = {"mean_true_reading_n": float(np.mean(tr["force_true_n"][read])),
+                            "mean_estimate_reading_n": float(np.mean(tr["force_est_n"][read]))}
     summary["numbers"] = out
 
 
