@@ -614,3 +614,27 @@ def test_bench_creep_reads_in_one_call_equal_numpys_broadcasts():
             assert got == _bench_creep_through_numpy(dev, 1.0, load_error), dev.fsr
             values.add(got)
     assert len(values) > 40                                    # the units read differently
+
+
+def test_drive_calibration_is_remembered_per_drive_and_chain_and_reads_nothing_else():
+    """The drive's calibration is keyed on the parts it reads (motor, drive train, current chain,
+    driver supply): a device that differs in its reader, FSR unit or divider shares the stored
+    calibration, one that differs in any of the four parts gets its own, and each equals a
+    calibration computed afresh (its seed is the CRC of those parts' ``repr``, as it was)."""
+    import zlib
+    from ebraille_sim.base.validation import replace_fields
+    from ebraille_sim.estimation import calibration as cal
+    from ebraille_sim.physics.params import FINGERS, FSRS
+    a, b = sample_devices(57, 2)
+    twin = replace_fields(a, finger=FINGERS["stiff"], fsr=FSRS["nominal"],
+                          circuit=replace_fields(a.circuit, r2_ohm=a.circuit.r2_ohm * 1.1))
+    assert cal.calibrate_drive(twin) is cal.calibrate_drive(a)
+    for other in (replace_fields(a, motor=b.motor), replace_fields(a, drivetrain=b.drivetrain),
+                  replace_fields(a, current_sense=b.current_sense), replace_fields(a, driver_supply_v=5.5)):
+        assert cal.calibrate_drive(other) != cal.calibrate_drive(a)
+        fresh = cal._calibrate_drive.__wrapped__(other.motor, other.drivetrain, other.current_sense,
+                                                 other.driver_supply_v)
+        assert fresh == cal.calibrate_drive(other)
+    key = repr((a.motor, a.drivetrain, a.current_sense, a.driver_supply_v))
+    assert cal._unit_seed(a.motor, a.drivetrain, a.current_sense, a.driver_supply_v) == \
+        zlib.crc32(key.encode()) % (1 << 31)
