@@ -638,3 +638,32 @@ def test_drive_calibration_is_remembered_per_drive_and_chain_and_reads_nothing_e
     key = repr((a.motor, a.drivetrain, a.current_sense, a.driver_supply_v))
     assert cal._unit_seed(a.motor, a.drivetrain, a.current_sense, a.driver_supply_v) == \
         zlib.crc32(key.encode()) % (1 << 31)
+
+
+def test_datasheet_chain_and_constants_are_reused_only_for_the_same_parts():
+    """The supervisor's datasheet current chain is shared by boards that differ only in their unit
+    errors, and the firmware limits' datasheet constants by datasheet devices of the same parts
+    and gravity; what either reuse gives equals what is made afresh (the caches emptied), keys in
+    their order, and a device with another chain, drive train or gravity gets its own."""
+    from controllers.supervisor import config as C
+    from ebraille_sim.base.validation import replace_fields
+    from ebraille_sim.physics.params import DRIVETRAINS
+
+    def fresh(d):
+        C._LAST_CHAIN.clear()
+        C._LAST_CONSTANTS.clear()
+        return C.datasheet_device(d), C.device_limits(d)
+
+    a, b, c = sample_devices(61, 3)
+    variants = [a, b, c, replace_fields(a, current_sense=replace_fields(a.current_sense, adc_bits=12)),
+                replace_fields(b, drivetrain=DRIVETRAINS["planetary_16"]), replace_fields(c, gravity_m_per_s2=0.0),
+                b]
+    for d in variants:
+        sheet, lim = C.datasheet_device(d), C.device_limits(d)
+        sheet0, lim0 = fresh(d)
+        C.device_limits(variants[0])                            # the caches hold another device now
+        assert sheet == sheet0 and lim == lim0 and list(lim) == list(lim0)
+        assert sheet.current_sense.shunt_error == sheet.current_sense.gain_error == sheet.current_sense.offset_v == 0.0
+    assert C.datasheet_device(a).current_sense is C.datasheet_device(b).current_sense
+    assert C.device_limits(variants[3])["sense_error_a"] != C.device_limits(a)["sense_error_a"]
+    assert C.device_limits(variants[5])["weight_n"] != C.device_limits(c)["weight_n"]
