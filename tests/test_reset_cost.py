@@ -42,8 +42,11 @@ def clear_caches() -> None:
             for obj in list(vars(module).values()):
                 if isinstance(obj, functools._lru_cache_wrapper):
                     obj.cache_clear()
+    from controllers.supervisor import config
     from ebraille_sim.plant import lumped
     lumped._LAST_ROWS.clear()                                # the rows of the device packed last
+    config._LAST_CHAIN.clear()                               # the datasheet chain made last
+    config._LAST_CONSTANTS.clear()                           # the firmware limits' datasheet constants
 
 
 def episodes(kw: dict, options, seeds, steps: int = 600) -> dict:
