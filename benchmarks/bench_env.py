@@ -164,7 +164,7 @@ def reset_parts(n: int = 300, seed: int = 0) -> dict:
     """
     from controllers.supervisor import SupervisorConfig
     from ebraille_sim.base.seeds import SeedNode
-    from ebraille_sim.estimation.calibration import calibrate_drive
+    from ebraille_sim.estimation.calibration import _calibrate_drive
     from ebraille_sim.plant.backends import make_plant
     from ebraille_sim.rl.env import ContactForceEnv
     from ebraille_sim.rl.episode import episode_from_spec, estimator_model
@@ -207,7 +207,9 @@ def reset_parts(n: int = 300, seed: int = 0) -> dict:
     parts["inputs"] = timed(episode_from_spec, specs)
     parts["plant rows"] = timed(lambda s: make_plant([s.device], [float(s.seed)],
                                                      models=[estimator_model(s.device.estimator.model)]), specs)
-    parts["drive calibration"] = timed(lambda s: calibrate_drive.__wrapped__(s.device), specs)
+    parts["drive calibration"] = timed(lambda s: _calibrate_drive.__wrapped__(s.device.motor, s.device.drivetrain,
+                                                                            s.device.current_sense,
+                                                                            s.device.driver_supply_v), specs)
     parts["supervisor envelope"] = timed(lambda s: SupervisorConfig.for_device(s.device), specs)
     step = 0.5 * (before + step_s())
     return {"step_s": step, "parts_s": parts, "parts_in_steps": {k: v / step for k, v in parts.items()}}

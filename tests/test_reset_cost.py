@@ -42,8 +42,11 @@ def clear_caches() -> None:
             for obj in list(vars(module).values()):
                 if isinstance(obj, functools._lru_cache_wrapper):
                     obj.cache_clear()
+    from controllers.supervisor import config
     from ebraille_sim.plant import lumped
     lumped._LAST_ROWS.clear()                                # the rows of the device packed last
+    config._LAST_CHAIN.clear()                               # the datasheet chain made last
+    config._LAST_CONSTANTS.clear()                           # the firmware limits' datasheet constants
 
 
 def episodes(kw: dict, options, seeds, steps: int = 600) -> dict:
@@ -614,3 +617,56 @@ def test_bench_creep_reads_in_one_call_equal_numpys_broadcasts():
             assert got == _bench_creep_through_numpy(dev, 1.0, load_error), dev.fsr
             values.add(got)
     assert len(values) > 40                                    # the units read differently
+
+
+def test_drive_calibration_is_remembered_per_drive_and_chain_and_reads_nothing_else():
+    """The drive's calibration is keyed on the parts it reads (motor, drive train, current chain,
+    driver supply): a device that differs in its reader, FSR unit or divider shares the stored
+    calibration, one that differs in any of the four parts gets its own, and each equals a
+    calibration computed afresh (its seed is the CRC of those parts' ``repr``, as it was)."""
+    import zlib
+    from ebraille_sim.base.validation import replace_fields
+    from ebraille_sim.estimation import calibration as cal
+    from ebraille_sim.physics.params import FINGERS, FSRS
+    a, b = sample_devices(57, 2)
+    twin = replace_fields(a, finger=FINGERS["stiff"], fsr=FSRS["nominal"],
+                          circuit=replace_fields(a.circuit, r2_ohm=a.circuit.r2_ohm * 1.1))
+    assert cal.calibrate_drive(twin) is cal.calibrate_drive(a)
+    for other in (replace_fields(a, motor=b.motor), replace_fields(a, drivetrain=b.drivetrain),
+                  replace_fields(a, current_sense=b.current_sense), replace_fields(a, driver_supply_v=5.5)):
+        assert cal.calibrate_drive(other) != cal.calibrate_drive(a)
+        fresh = cal._calibrate_drive.__wrapped__(other.motor, other.drivetrain, other.current_sense,
+                                                 other.driver_supply_v)
+        assert fresh == cal.calibrate_drive(other)
+    key = repr((a.motor, a.drivetrain, a.current_sense, a.driver_supply_v))
+    assert cal._unit_seed(a.motor, a.drivetrain, a.current_sense, a.driver_supply_v) == \
+        zlib.crc32(key.encode()) % (1 << 31)
+
+
+def test_datasheet_chain_and_constants_are_reused_only_for_the_same_parts():
+    """The supervisor's datasheet current chain is shared by boards that differ only in their unit
+    errors, and the firmware limits' datasheet constants by datasheet devices of the same parts
+    and gravity; what either reuse gives equals what is made afresh (the caches emptied), keys in
+    their order, and a device with another chain, drive train or gravity gets its own."""
+    from controllers.supervisor import config as C
+    from ebraille_sim.base.validation import replace_fields
+    from ebraille_sim.physics.params import DRIVETRAINS
+
+    def fresh(d):
+        C._LAST_CHAIN.clear()
+        C._LAST_CONSTANTS.clear()
+        return C.datasheet_device(d), C.device_limits(d)
+
+    a, b, c = sample_devices(61, 3)
+    variants = [a, b, c, replace_fields(a, current_sense=replace_fields(a.current_sense, adc_bits=12)),
+                replace_fields(b, drivetrain=DRIVETRAINS["planetary_16"]), replace_fields(c, gravity_m_per_s2=0.0),
+                b]
+    for d in variants:
+        sheet, lim = C.datasheet_device(d), C.device_limits(d)
+        sheet0, lim0 = fresh(d)
+        C.device_limits(variants[0])                            # the caches hold another device now
+        assert sheet == sheet0 and lim == lim0 and list(lim) == list(lim0)
+        assert sheet.current_sense.shunt_error == sheet.current_sense.gain_error == sheet.current_sense.offset_v == 0.0
+    assert C.datasheet_device(a).current_sense is C.datasheet_device(b).current_sense
+    assert C.device_limits(variants[3])["sense_error_a"] != C.device_limits(a)["sense_error_a"]
+    assert C.device_limits(variants[5])["weight_n"] != C.device_limits(c)["weight_n"]

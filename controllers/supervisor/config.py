@@ -89,9 +89,11 @@ BACKLASH_MAX_M = 0.2e-3
 table 3)."""
 
 UNIT_FIELDS = {"motor": ("resistance_ohm", "torque_constant_nm_per_a", "back_emf_v_s_per_rad"),
-               "drivetrain": ("gear_efficiency", "guide_coulomb_n", "backlash_m")}
+               "drivetrain": ("gear_efficiency", "guide_coulomb_n", "backlash_m"),
+               "current_sense": ("shunt_error", "gain_error", "offset_v")}
 """The constants that differ from unit to unit of one part (the population draws them): the
-firmware knows their datasheet values only (:func:`datasheet_device`)."""
+firmware knows their datasheet values only (:func:`datasheet_device`; a current chain's
+datasheet has none of its unit's errors)."""
 
 
 @functools.lru_cache(maxsize=None)
@@ -122,8 +124,23 @@ def datasheet_device(device: DeviceParams) -> DeviceParams:
             parts[part] = sheet                 # the unit with the datasheet's values is the datasheet
         else:
             parts[part] = replace_fields(unit, **{f: getattr(sheet, f) for f in UNIT_FIELDS[part]})
-    cs = replace_fields(device.current_sense, shunt_error=0.0, gain_error=0.0, offset_v=0.0)
-    return replace_fields(device, current_sense=cs, **parts)
+    return replace_fields(device, current_sense=_datasheet_chain(device.current_sense), **parts)
+
+
+_LAST_CHAIN: list = []
+"""The current chain :func:`_datasheet_chain` was last given, and its datasheet."""
+
+
+def _datasheet_chain(cs):
+    """The current chain ``cs`` without its unit's errors; the one made last when ``cs`` differs
+    from the chain given last only in those errors (the boards a population draws around one
+    chain), so that their datasheet devices share one chain object (:func:`_datasheet_constants`)."""
+    last = _LAST_CHAIN
+    if last and _differs_in_unit_fields_only(cs, last[0], "current_sense"):
+        return last[1]
+    sheet = replace_fields(cs, shunt_error=0.0, gain_error=0.0, offset_v=0.0)
+    last[:] = [cs, sheet]
+    return sheet
 
 
 def firmware_limits(sheet: DeviceParams, cal: DriveCalibration) -> dict:
@@ -141,13 +158,12 @@ def firmware_limits(sheet: DeviceParams, cal: DriveCalibration) -> dict:
     ``R i`` (the speed read high); the gear efficiency of the impact is the largest the
     calibrated push allows with that constant (``kM = kE`` in SI units).  Every constant is on
     the side that lowers the current and speed limits."""
-    b = limits.drive_bounds(sheet)
-    rb, rm = _design_reader()
-    soft = FINGERS["soft"]
-    dt, cs = sheet.drivetrain, sheet.current_sense
-    e_avg = averaged_error_a(cs, CALIBRATION_CONVERSIONS)
+    k = _datasheet_constants(sheet)
+    b, rb, rm = k["bounds"], k["reader_b_n_per_m"], k["reader_m_per_m"]
+    cs = sheet.current_sense
+    e_avg = k["averaged_error_a"]
     i1, i2 = cal.test_currents_a
-    slope_tol = 2.0 * mean_error_a(cs, CALIBRATION_CONVERSIONS) / (i2 - i1) if i2 > i1 else math.inf   # zero cancels
+    slope_tol = 2.0 * k["mean_error_a"] / (i2 - i1) if i2 > i1 else math.inf   # zero cancels
     if not slope_tol < MAX_SLOPE_ERROR:
         raise ValueError(f"CurrentSenseParams: a reading of the chain (shunt_ohm {cs.shunt_ohm:g} ohm, gain_v_per_v "
                          f"{cs.gain_v_per_v:g}, adc_bits {cs.adc_bits}, adc_noise_lsb {cs.adc_noise_lsb:g}) is too "
@@ -166,7 +182,6 @@ def firmware_limits(sheet: DeviceParams, cal: DriveCalibration) -> dict:
     drive = {"push_force_per_a_n": push_per_a, "friction_current_a": max(friction_n, 0.0) / push_per_a,
              "weight_n": b["weight_n"], "back_emf_v_s_per_m": back_emf,
              "pinion_mass_kg": b["pinion_mass_kg"], "board_mass_kg": b["board_mass_kg"], "gear_efficiency": eta}
-    k_contact = tangent_stiffness_n_per_m(CONTACT_ON_N, rb, rm)
     impact_mass = eta * b["pinion_mass_kg"] + b["board_mass_kg"]
     return {
         "motor_resistance_ohm": cal.resistance_ohm,
@@ -174,22 +189,52 @@ def firmware_limits(sheet: DeviceParams, cal: DriveCalibration) -> dict:
         "rated_current_a": rated_current_a(sheet),
         "driver_supply_v": sheet.driver_supply_v,
         **drive,
-        "friction_breakaway_ratio": sheet.motor.breakaway_ratio,
-        "guide_static_n": GUIDE_COULOMB_MAX_N * dt.guide_breakaway_ratio,
-        "soft_b_n_per_m": soft.stiffness_b_n_per_m,
-        "soft_m_per_m": soft.exponent_m_per_m,
-        "reader_b_n_per_m": rb,
-        "reader_m_per_m": rm,
-        "speed_hold_s": 0.5 * math.pi * math.sqrt(impact_mass / k_contact),
+        **k["readers"],
+        "speed_hold_s": 0.5 * math.pi * math.sqrt(impact_mass / k["contact_stiffness_n_per_m"]),
         "stuck_travel_m": BACKLASH_MAX_M + ESTIMATOR_PERIOD_S * _speed_limit(drive, rb, rm),
-        "first_contact_travel_m": DESIGN_GAP_M + compression_at_force_m(
-            SAFE_FORCE_N, soft.stiffness_b_n_per_m, soft.exponent_m_per_m),
-        "end_stop_travel_m": (dt.travel_max_m - dt.travel_min_m) * (1.0 - MAX_SLOPE_ERROR) - BACKLASH_MAX_M,
-        "sense_gain_error_max": cs.gain_error_max + cs.shunt_tolerance,
-        "sense_error_a": worst_case_error_a(cs, 0.0),
-        "powered_current_a": worst_case_error_a(cs, 0.0) + 0.5e-3,
-        "mesh_stiffness_n_per_m": dt.mesh_stiffness_n_per_m,
+        **k["travels_and_chain"],
     }
+
+
+_LAST_CONSTANTS: list = []
+"""The parts and gravity of the datasheet device :func:`_datasheet_constants` was last given, and
+its constants."""
+
+
+def _datasheet_constants(sheet: DeviceParams) -> dict:
+    """What :func:`firmware_limits` takes from the datasheet device ``sheet`` alone, neither its
+    supply nor the unit's calibration: the drive's bounds, the design readers, the current
+    chain's errors and the limits that follow from these.  The dict made last is returned again
+    for a datasheet device with the same motor, drive train and current chain objects and the
+    same gravity (every unit a population draws around one device, :func:`datasheet_device`)."""
+    last = _LAST_CONSTANTS
+    key = (sheet.motor, sheet.drivetrain, sheet.current_sense)
+    if last and all(a is b for a, b in zip(last[0], key)) and last[1] == sheet.gravity_m_per_s2:
+        return last[2]
+    rb, rm = _design_reader()
+    soft = FINGERS["soft"]
+    dt, cs = sheet.drivetrain, sheet.current_sense
+    k = {"bounds": limits.drive_bounds(sheet), "reader_b_n_per_m": rb, "reader_m_per_m": rm,
+         "averaged_error_a": averaged_error_a(cs, CALIBRATION_CONVERSIONS),
+         "mean_error_a": mean_error_a(cs, CALIBRATION_CONVERSIONS),
+         "contact_stiffness_n_per_m": tangent_stiffness_n_per_m(CONTACT_ON_N, rb, rm),
+         "readers": {
+             "friction_breakaway_ratio": sheet.motor.breakaway_ratio,
+             "guide_static_n": GUIDE_COULOMB_MAX_N * dt.guide_breakaway_ratio,
+             "soft_b_n_per_m": soft.stiffness_b_n_per_m,
+             "soft_m_per_m": soft.exponent_m_per_m,
+             "reader_b_n_per_m": rb,
+             "reader_m_per_m": rm},
+         "travels_and_chain": {
+             "first_contact_travel_m": DESIGN_GAP_M + compression_at_force_m(
+                 SAFE_FORCE_N, soft.stiffness_b_n_per_m, soft.exponent_m_per_m),
+             "end_stop_travel_m": (dt.travel_max_m - dt.travel_min_m) * (1.0 - MAX_SLOPE_ERROR) - BACKLASH_MAX_M,
+             "sense_gain_error_max": cs.gain_error_max + cs.shunt_tolerance,
+             "sense_error_a": worst_case_error_a(cs, 0.0),
+             "powered_current_a": worst_case_error_a(cs, 0.0) + 0.5e-3,
+             "mesh_stiffness_n_per_m": dt.mesh_stiffness_n_per_m}}
+    last[:] = [key, sheet.gravity_m_per_s2, k]
+    return k
 
 
 MAX_SLOPE_ERROR = 0.05

@@ -624,15 +624,14 @@ class DriveCalibration:
     """The two currents of the push test as the firmware read them, A."""
 
 
-def _unit_seed(device) -> int:
+def _unit_seed(motor, drivetrain, current_sense, driver_supply_v) -> int:
     """The noise of a unit's calibration: a fixed function of the unit's drive and current chain
     (the calibration ran once, at the line; its noise is the unit's, not the session's)."""
     import zlib
-    key = repr((device.motor, device.drivetrain, device.current_sense, device.driver_supply_v))
+    key = repr((motor, drivetrain, current_sense, driver_supply_v))
     return zlib.crc32(key.encode()) % (1 << 31)
 
 
-@functools.lru_cache(maxsize=1024)
 def calibrate_drive(device: DeviceParams) -> DriveCalibration:
     """The end-of-line calibration of ``device``'s drive, through the board's own current chain.
 
@@ -664,11 +663,18 @@ def calibrate_drive(device: DeviceParams) -> DriveCalibration:
     >>> round(cal.resistance_ohm, 1), round(cal.push_force_per_a_n, 1), round(cal.push_offset_n, 2)
     (21.2, 63.1, -0.62)
     """
+    return _calibrate_drive(device.motor, device.drivetrain, device.current_sense, device.driver_supply_v)
+
+
+@functools.lru_cache(maxsize=1024)
+def _calibrate_drive(m, dt, cs, driver_supply_v: float) -> DriveCalibration:
+    """:func:`calibrate_drive` of a device with the motor ``m``, drive train ``dt``, current chain
+    ``cs`` and driver supply (all of the device it reads), remembered per four: the key hashes
+    these parts, not the whole device (a drawn device is new at every reset)."""
     from ebraille_sim.physics.current_sense import zero_and_mean_readings_a
     from ebraille_sim.physics.limits import push_force_bound_n, rack_speed_from_emf_m_per_s, shaft_to_rack_per_m
-    cs, n = device.current_sense, CALIBRATION_CONVERSIONS
-    seed = _unit_seed(device)
-    m, dt = device.motor, device.drivetrain                        # plant truth: what the line's hardware meets
+    n = CALIBRATION_CONVERSIONS
+    seed = _unit_seed(m, dt, cs, driver_supply_v)                  # plant truth: what the line's hardware meets
     i_rest = -RESISTANCE_TEST_V / m.resistance_ohm                 # plant truth
     g = shaft_to_rack_per_m(dt.gear_ratio, dt.pinion_radius_m)
     i_free = (dt.guide_coulomb_n / (dt.gear_efficiency * g) + m.friction_torque_nm) / m.torque_constant_nm_per_a  # plant truth
