@@ -1,4 +1,5 @@
 """Every scenario unit is calibrated at assembly unless the file asks for a miscalibrated one."""
+import dataclasses
 import warnings
 
 import numpy as np
@@ -126,3 +127,14 @@ def test_a_scenario_unit_carries_its_bench_table_and_a_given_loop_stays_as_given
     assert given.estimator.calibration_loads_n == dev.estimator.calibration_loads_n
     raw = _scenario("nominal", calibrate=False).device
     assert raw.estimator.calibration_loads_n == () and raw.estimator.hysteresis_fraction is None
+
+
+def test_a_scenario_units_bench_is_made_once_and_equals_a_fresh_bench():
+    from ebraille_sim.estimation.calibration import calibrate_device, with_calibration_table
+    from ebraille_sim.physics.params import unit_estimator
+    from ebraille_sim.scenarios.spec import load_scenario
+    a, b = load_scenario("steady_90wpm").device, load_scenario("steady_90wpm").device
+    assert a.estimator is b.estimator                               # the stored bench, not a new one
+    raw = load_scenario("steady_90wpm").device
+    fresh = with_calibration_table(calibrate_device(dataclasses.replace(raw, estimator=unit_estimator(raw.estimator))))
+    assert fresh == a

@@ -199,3 +199,18 @@ def test_loop_analysis_handles_the_1khz_estimator_and_matches_the_nonlinear_plan
     t = np.arange(n + 1) * 1e-3
     y_lin = np.asarray(control.forced_response(plant, T=t, U=np.full(n + 1, dv)).outputs).ravel()[1:]
     assert np.max(np.abs(fe - e0 - y_lin)) <= 0.10 * abs(y_lin[-1])
+
+
+def test_a_plant_packs_a_paper_model_from_the_cache_and_a_model_file_afresh(tmp_path):
+    """A paper model is a pure function of its name: the plant takes it from the process's cache
+    (the 1 kHz resampling is not redone at every run).  A model file is read again at every
+    packing, so a refitted file is what the next run packs."""
+    from ebraille_sim.estimation.registry import cached_model, plant_model
+    assert plant_model(FAST) is cached_model(FAST) is plant_model(FAST)
+    path = tmp_path / "model.json"
+    paper_model("wiener", 5).save(path)
+    first = plant_model(str(path))
+    assert plant_model(str(path)) is not first
+    refit = dataclasses.replace(paper_model("wiener", 5), dt_s=0.002)
+    refit.save(path)
+    assert plant_model(str(path)).dt_s == 0.002 and first.dt_s == 0.01

@@ -12,7 +12,7 @@ import pathlib
 from ebraille_sim.estimation.blockmodels import BlockModel
 from ebraille_sim.estimation.resample import resample, split_rate
 
-__all__ = ["load_estimator", "cached_model", "delay_of", "with_delay", "delay_readings"]
+__all__ = ["load_estimator", "cached_model", "plant_model", "delay_of", "with_delay", "delay_readings"]
 
 _DELAY_SUFFIXES = ("nk0", "nk1")
 """Suffixes of a paper model name that choose the input delay (samples): the paper's two readings."""
@@ -119,3 +119,11 @@ def _load_base(spec: str, base_dir=None):
 def cached_model(spec: str):
     """The estimator model named ``spec``, loaded once per process (treat as read-only)."""
     return load_estimator(spec)
+
+
+def plant_model(spec: str):
+    """The model a plant packs for ``spec``: a paper model, a pure function of its name, from the
+    process's cache (:func:`cached_model`; resampling the 1 kHz model costs about 3 ms), a model
+    file loaded afresh (its path is read from the working folder now, and the file may have been
+    refitted since)."""
+    return cached_model(spec) if spec.startswith("paper:") else load_estimator(spec)

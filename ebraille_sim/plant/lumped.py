@@ -32,7 +32,7 @@ from ebraille_sim.estimation.blockmodels import pwl_eval
 from ebraille_sim.estimation.firmware import (CALIBRATION_TABLE_POINTS, FIRMWARE_FSR, HYSTERESIS_MEDIAN, firmware_fsr,
                                               table_calibrated_n)
 from ebraille_sim.estimation.calibration import measured_hysteresis_fraction
-from ebraille_sim.estimation.registry import load_estimator
+from ebraille_sim.estimation.registry import plant_model
 from ebraille_sim.physics.drivetrain import (mesh_damping_n_s_per_m, reflected_force_n, reflected_inertia_kg,
                                              shaft_to_rack_per_m)
 from ebraille_sim.physics.fingertip import prony_coefficients, tangent_stiffness_n_per_m
@@ -111,7 +111,7 @@ def _unseeded_params(device: DeviceParams, model=None) -> np.ndarray:
                            device.estimator, device.rates)
     check_step(device)
     if model is None:
-        model = load_estimator(e.model)
+        model = plant_model(e.model)
     ratio = check_sensor_rates(device, model)
     p = np.zeros(N_PARAM)
     h = 1.0 / r.physics_rate_hz
@@ -531,7 +531,7 @@ def pack_devices(devices, seeds, board_pos_m=None, models=None):
         if model is None:
             key = dvc.estimator.model
             if key not in cache:
-                cache[key] = load_estimator(key)
+                cache[key] = plant_model(key)
             model = cache[key]
         p, st = _device_rows(dvc, seed, model, board_pos_m)
         params.append(p)

@@ -552,8 +552,7 @@ def _calibrated(src, device: _params.DeviceParams, dev: dict, given: dict) -> _p
     if "r2_ohm" in dev.get("circuit_overrides", {}):
         raise ScenarioError(f"{src}: [device.circuit_overrides] r2_ohm is set by the bench calibration; "
                             f"set [device] calibrate = false to run a unit with a given R2")
-    from ebraille_sim.estimation.calibration import (BENCH_R2_RANGE_OHM, bench_calibrate_device, calibrate_device,
-                                                     with_calibration_table)
+    from ebraille_sim.estimation.calibration import BENCH_R2_RANGE_OHM, bench_calibrate_device, calibrate_device
     out = calibrate_device(device)
     if out is device:                                 # no R2 of the range reads 1 N on this unit
         out, inside = bench_calibrate_device(device)
@@ -562,8 +561,16 @@ def _calibrated(src, device: _params.DeviceParams, dev: dict, given: dict) -> _p
         warnings.warn(f"{src}: no R2 in {lo:g}-{hi:g} ohm makes this FSR unit read 1 N on its estimator; the divider "
                       f"gets R2 = {out.circuit.r2_ohm:.4g} ohm, {where}, and the unit reads off",
                       ScenarioWarning, stacklevel=4)
-    out = with_calibration_table(out)
+    out = _bench_tabled(out)
     return dataclasses.replace(out, estimator=_params.replace_checked(out.estimator, **given)) if given else out
+
+
+@functools.lru_cache(maxsize=64)
+def _bench_tabled(device: _params.DeviceParams) -> _params.DeviceParams:
+    """:func:`ebraille_sim.estimation.calibration.with_calibration_table` of a scenario unit, once
+    per unit and process: the bench is a pure function of the unit (0.9 ms a scenario load)."""
+    from ebraille_sim.estimation.calibration import with_calibration_table
+    return with_calibration_table(device)
 
 
 def _check_rates(device: _params.DeviceParams) -> None:
