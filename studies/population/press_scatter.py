@@ -15,16 +15,15 @@ film's resistance by a draw that holds for the whole press.  This study prints:
 """
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
 
 import numpy as np
 
 from ebraille_sim.estimation.calibration import calibrate_drive
-from ebraille_sim.scenarios.population import PopulationSpec, sample_devices
 from ebraille_sim.scenarios.runner import run_batch, run_scenario
 from ebraille_sim.scenarios.spec import load_scenario
+from shares import drawn_runs, reader_args
 
 SETTLED_S = 3.0
 """Samples after this time are the held force (the onset settles within 1 s of the 1.5 s start)."""
@@ -37,12 +36,8 @@ def held(trace) -> tuple[float, float]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--readers", type=int, default=30)
-    ap.add_argument("--seed", type=int, default=777)
-    a = ap.parse_args(argv)
-    if not 1 <= a.readers <= 1000:
-        print(f"error: --readers must be 1-1000, got {a.readers}", file=sys.stderr)
+    a = reader_args(__doc__.splitlines()[0], 30, 777, argv, most=1000)
+    if a is None:
         return 2
     spec = load_scenario("steady_90wpm")
     rows = [held(run_scenario(spec, seed=s).trace) for s in range(1, 13)]
@@ -57,9 +52,7 @@ def main(argv=None) -> int:
     f, e = held(r.trace)
     print(f"  the file's run without the press scatter: held force {f:.4f} N, estimate {e:.4f} N, "
           f"force RMSE {r.metrics['force_rmse_n']:.4f} N")
-    devs = sample_devices(a.seed, a.readers, PopulationSpec(), base=dev)
-    runs = [{"scenario": spec, "seed": spec.seed + 7 * i, "duration_s": 12.0, "device": d}
-            for i, d in enumerate(devs)]
+    devs, runs = drawn_runs(spec, a.readers, a.seed, 12.0)
     cur, est = [], []
     for d, res in zip(devs, run_batch(runs, keep_traces=True)):
         cal = calibrate_drive(d)

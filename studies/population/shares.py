@@ -29,6 +29,28 @@ from ebraille_sim.scenarios.spec import load_scenario
 from ebraille_sim.tools.benchmark import sensor_bound_metrics
 
 
+def reader_args(description: str, readers: int, seed: int, argv=None, most: int = 10000):
+    """``--readers`` and ``--seed`` of a population study (defaults given); None after a one-line
+    error when the readers are not 1 to ``most``."""
+    ap = argparse.ArgumentParser(description=description)
+    ap.add_argument("--readers", type=int, default=readers)
+    ap.add_argument("--seed", type=int, default=seed)
+    a = ap.parse_args(argv)
+    if not 1 <= a.readers <= most:
+        print(f"error: --readers must be 1-{most}, got {a.readers}", file=sys.stderr)
+        return None
+    return a
+
+
+def drawn_runs(spec, readers: int, seed: int, duration_s: float | None = None) -> tuple[list, list]:
+    """``(devices, runs)``: readers drawn around ``spec``'s device, each unit calibrated as drawn
+    units are, and their :func:`run_batch` runs (episode seeds ``spec.seed + 7 i``)."""
+    devs = sample_devices(seed, readers, PopulationSpec(), base=spec.device)
+    runs = [{"scenario": spec, "seed": spec.seed + 7 * i, "device": d,
+             **({} if duration_s is None else {"duration_s": duration_s})} for i, d in enumerate(devs)]
+    return devs, runs
+
+
 def cvar_low(x, alpha=0.1):
     x = np.sort(np.asarray(x, float))
     k = max(1, int(np.ceil(alpha * len(x))))

@@ -1,34 +1,28 @@
 """Supervisor events on strap_slip over drawn readers, for the scenario's whole duration.
 
-    python studies/safety/strap_slip_events.py --readers 300 --seed 8675309
+    python studies/population/strap_slip_events.py --readers 300 --seed 8675309
 
 Prints the readers with any supervisor event (a contact loss, a re-approach, a latch), the
 events by kind, the readers with a counted contact loss and the share at >= 0.9 in band.
 """
 from __future__ import annotations
 
-import argparse
 import collections
 import sys
 
 import numpy as np
 
-from ebraille_sim.scenarios.population import PopulationSpec, sample_devices
 from ebraille_sim.scenarios.runner import run_batch
 from ebraille_sim.scenarios.spec import load_scenario
+from shares import drawn_runs, reader_args
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--readers", type=int, default=300)
-    ap.add_argument("--seed", type=int, default=8675309)
-    a = ap.parse_args(argv)
-    if not 1 <= a.readers <= 10000:
-        print(f"error: --readers must be 1-10000, got {a.readers}", file=sys.stderr)
+    a = reader_args(__doc__.splitlines()[0], 300, 8675309, argv)
+    if a is None:
         return 2
     spec = load_scenario("strap_slip")
-    devs = sample_devices(a.seed, a.readers, PopulationSpec(), base=spec.device)
-    runs = [{"scenario": spec, "seed": spec.seed + 7 * i, "device": d} for i, d in enumerate(devs)]
+    _, runs = drawn_runs(spec, a.readers, a.seed)
     res = run_batch(runs, keep_traces=False)
     kinds: collections.Counter = collections.Counter()
     with_events = 0
