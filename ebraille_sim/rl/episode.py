@@ -212,11 +212,11 @@ class Episode:
     char_index: np.ndarray
 
 
-@functools.lru_cache(maxsize=4)
 def estimator_model(spec: str):
-    """The estimator model named ``spec``, loaded once per process."""
-    from ebraille_sim.estimation.registry import load_estimator
-    return load_estimator(spec)
+    """The estimator model named ``spec``, loaded once per process (the registry's cache,
+    :func:`ebraille_sim.estimation.registry.cached_model`, shared with the scenario runner)."""
+    from ebraille_sim.estimation.registry import cached_model
+    return cached_model(spec)
 
 
 def validate_options(options, safe_force_n: float) -> dict:
