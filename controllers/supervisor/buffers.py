@@ -29,11 +29,11 @@ def _at(sv, cfg, head, base, i):
 
 
 @njit(cache=True, inline="always")
-def _put(sv, head, first, cap, n, t, x):
-    """Append ``(t, x)`` behind the ``n`` entries of the ring at state slot ``head``."""
+def _put(sv, head, first, cap, h, n, t, x):
+    """Append ``(t, x)`` behind the ``n`` entries of the ring at state slot ``head`` (its head ``h``)."""
     if n >= cap:
         raise ValueError("supervisor window full: the control period is below the shortest it was sized for")
-    k = _slot(first, cap, int(sv[head]), n)
+    k = _slot(first, cap, h, n)
     sv[k] = t
     sv[k + 1] = x
     sv[head + 1] = n + 1
@@ -41,7 +41,7 @@ def _put(sv, head, first, cap, n, t, x):
 
 @njit(cache=True, inline="always")
 def _append(sv, cfg, head, base, t, x):
-    _put(sv, head, int(cfg[base]), int(cfg[base + 1]), int(sv[head + 1]), t, x)
+    _put(sv, head, int(cfg[base]), int(cfg[base + 1]), int(sv[head]), int(sv[head + 1]), t, x)
 
 
 @njit(cache=True, inline="always")
@@ -72,9 +72,8 @@ def _cut_front(sv, head, first, cap, cut):
 def _slide(sv, cfg, head, base, t, x, span):
     """Append ``(t, x)`` to the queue at slots ``head``/``base`` and drop the front entries older
     than ``t - span``; the index in ``sv`` of the time of the front entry left."""
-    first, cap = int(cfg[base]), int(cfg[base + 1])
-    _put(sv, head, first, cap, int(sv[head + 1]), t, x)
-    h = int(sv[head])
+    first, cap, h = int(cfg[base]), int(cfg[base + 1]), int(sv[head])
+    _put(sv, head, first, cap, h, int(sv[head + 1]), t, x)
     k = first + 2 * h
     if sv[k] < t - span:
         n = int(sv[head + 1])
@@ -117,8 +116,8 @@ def _win_push(sv, cfg, w, wc, t, x, keep_min):
             hi_n -= 1
         sv[hi + 1] = hi_n
         if keep_min:
-            _put(sv, lo, lo_first, lo_cap, lo_n, t, x)
-        _put(sv, hi, hi_first, hi_cap, hi_n, t, x)
+            _put(sv, lo, lo_first, lo_cap, lo_head, lo_n, t, x)
+        _put(sv, hi, hi_first, hi_cap, hi_head, hi_n, t, x)
     cut = t - cfg[wc]
     if keep_min:
         _cut_front(sv, lo, lo_first, lo_cap, cut)
