@@ -42,7 +42,7 @@ def _replay(kind, cstate, cparams, supervised, sv, cfg, f_in, sp, cur_in, dt_s, 
 
     Compiled without Numba's reference counting, as the loop engine's :func:`~ebraille_sim.plant.engine.run`
     is: with it, each period would also count references to the arrays it hands on (atomic
-    operations that the run does not make and that took about half of the replay's time)."""
+    operations that the run does not make: 42 % of a profile's samples of the supervised replay)."""
     for k in range(f_in.shape[0]):
         out[k] = command(kind, cstate, cparams, 0.0, supervised, sv, cfg, f_in[k], sp[k], dt_s, cur_in[k])
 
