@@ -5,7 +5,8 @@ from __future__ import annotations
 import math
 
 from controllers.compiled import py_max as _pymax, py_min as _pymin
-from controllers.supervisor.buffers import _append, _at, _pop_front, _win_full, _win_lo, _win_push, _win_range
+from controllers.supervisor.buffers import (_append, _at, _pop_front, _slide, _win_full, _win_lo, _win_push,
+                                           _win_range)
 from controllers.supervisor.detectors import _detect, _envelope_cap, _event, _motion, _safe, _slew, _trip
 from controllers.supervisor.layout import CF, EVENT, FAULT, MODE, SV
 from ebraille_sim.base.compiled import njit
@@ -92,10 +93,7 @@ def supervise_begin(sv, cfg, f, sp, dt, cur):
             _trip(sv, cfg, cause)
             return 0, _safe(sv, cfg, cur, dt), math.nan
     # contact tracking
-    _append(sv, cfg, SV.drop_hist_head, CF.drop_hist_base, t, f)
-    while sv[_at(sv, cfg, SV.drop_hist_head, CF.drop_hist_base, 0)] < t - cfg[CF.drop_window_s]:
-        _pop_front(sv, cfg, SV.drop_hist_head, CF.drop_hist_base)
-    f_then = sv[_at(sv, cfg, SV.drop_hist_head, CF.drop_hist_base, 0) + 1]
+    f_then = sv[_slide(sv, cfg, SV.drop_hist_head, CF.drop_hist_base, t, f, cfg[CF.drop_window_s]) + 1]
     if sv[SV.mode] == MODE.run:
         if f > cfg[CF.contact_on_n]:
             sv[SV.in_contact] = 1.0
