@@ -78,7 +78,7 @@ class EnvConfig:
         object.__setattr__(self, "device_pool",
                            check_number("device_pool", self.device_pool, 0, MAX_DEVICE_POOL, integer=True))
         object.__setattr__(self, "device_pool_seed",
-                           check_number("device_pool_seed", self.device_pool_seed, lo=0, integer=True))
+                           check_number("device_pool_seed", self.device_pool_seed, 0, 2 ** 63 - 1, integer=True))
         if self.device_pool and not self.randomize_device:
             raise ValueError("device_pool draws its units from the device population: it needs randomize_device=True")
         check_range("effort_weight", self.effort_weight, 0.0, 100.0)
