@@ -43,6 +43,7 @@ the bench's load cycle, the averaged conversions, the R2 root and the noises' FF
 NumPy's), the least a reset costs with the bench protocols as written.
 
 Run:  python benchmarks/bench_env.py [--seconds 3] [--envs 1024] [--json FILE] [--only-single | --only-resets] [--repeat 3]
+      [--device-pool N]
 """
 from __future__ import annotations
 
@@ -123,7 +124,7 @@ def reset_cost_in_steps(seconds: float, seed: int = 0, **kwargs) -> tuple[float,
     """(mean reset time in s, mean step time in s, their ratio) of one unwrapped scalar env,
     steps and resets interleaved in the same loop so both see the same machine load."""
     from ebraille_sim.rl.env import ContactForceEnv
-    env = ContactForceEnv(**kwargs)
+    env = fill_pool(ContactForceEnv(**kwargs))
     env.reset(seed=seed)
     for _ in range(20):
         env.step(np.zeros(1, np.float32))
@@ -399,10 +400,27 @@ def kernel_replay_substeps_per_s(n_envs: int, seconds: float, periods: int = 200
             return calls * n_envs * sub / dt
 
 
-def only_resets(seconds: float, n_envs: int, repeat: int) -> dict:
+def fill_pool(env):
+    """``env`` (wrapped or not) with every unit of its device pool drawn (none without a pool):
+    a long training run meets each unit many times, so a reset's steady cost is that of a
+    unit already drawn."""
+    dist = env.unwrapped.config.distribution()
+    for k in range(dist.device_pool):
+        dist.pool_device(k)
+    return env
+
+
+def only_resets(seconds: float, n_envs: int, repeat: int, device_pool: int = 0) -> dict:
     """The reset figures (medians of ``repeat`` timings): the scalar env's reset in ms and in
-    env steps, and the vector env's env-steps/s with autoresets and without (one thread)."""
+    env steps, and the vector env's env-steps/s with autoresets and without (one thread);
+    with ``device_pool`` also the scalar env's reset with that pool (its units drawn first)."""
     scalar = [reset_cost_in_steps(seconds) for _ in range(repeat)]
+    if device_pool:
+        pooled = [reset_cost_in_steps(seconds, device_pool=device_pool) for _ in range(repeat)]
+        print(f"scalar env reset with device_pool={device_pool} (every unit drawn first): "
+              f"{statistics.median(x[0] for x in pooled) * 1e3:.3f} ms, "
+              f"{statistics.median(x[2] for x in pooled):.1f} env steps (runs: "
+              f"{', '.join(f'{x[2]:.1f}' for x in pooled)})", flush=True)
     mixed, plain, ends = [], [], []
     for _ in range(repeat):
         rate, n_ends, _ = vector_steps_per_s(seconds, n_envs, True, parallel=False)
@@ -418,6 +436,10 @@ def only_resets(seconds: float, n_envs: int, repeat: int) -> dict:
            "vector_no_resets_env_steps_per_s": statistics.median(plain),
            "episode_ends": statistics.median(ends)}
     out["ratio_autoresets_to_no_resets"] = out["vector_autoresets_env_steps_per_s"] / out["vector_no_resets_env_steps_per_s"]
+    if device_pool:
+        out["device_pool"] = {"units": device_pool, "reset_s": statistics.median(x[0] for x in pooled),
+                              "reset_in_steps": statistics.median(x[2] for x in pooled),
+                              "reset_in_steps_runs": [x[2] for x in pooled]}
     print(f"scalar env reset: {r * 1e3:.3f} ms, step {s * 1e3:.4f} ms (200 Hz), median of {repeat} "
           f"(runs: {', '.join(f'{x[2]:.1f}' for x in scalar)} steps)")
     print(f"vector env {n_envs} envs, one thread: autoresets {out['vector_autoresets_env_steps_per_s']:10.0f} "
@@ -496,14 +518,16 @@ def step_breakdown(seconds: float, chunk: int = 500, **kwargs) -> dict:
     return out
 
 
-def only_single(seconds: float, repeat: int) -> dict:
+def only_single(seconds: float, repeat: int, device_pool: int = 0) -> dict:
     """The single env against Pendulum-v1, with wrappers and unwrapped: ``repeat`` rounds of
     the two envs stepped interleaved (:func:`interleaved_steps_per_s`), and the medians of the
-    rounds' ratios ours / Pendulum."""
+    rounds' ratios ours / Pendulum; ``device_pool`` > 0 gives our env that device pool, its
+    units drawn before the clock starts (:func:`fill_pool`)."""
     rounds = []
+    opts = {"device_pool": device_pool} if device_pool else {}
     for i in range(repeat):
-        ours, pend = interleaved_steps_per_s([gym.make(ENV_ID), gym.make("Pendulum-v1")], seconds)
-        ours_raw, pend_raw = interleaved_steps_per_s([gym.make(ENV_ID).unwrapped,
+        ours, pend = interleaved_steps_per_s([fill_pool(gym.make(ENV_ID, **opts)), gym.make("Pendulum-v1")], seconds)
+        ours_raw, pend_raw = interleaved_steps_per_s([fill_pool(gym.make(ENV_ID, **opts)).unwrapped,
                                                       gym.make("Pendulum-v1").unwrapped], seconds)
         row = {"pendulum_steps_per_s": pend, "ours_steps_per_s": ours,
                "pendulum_unwrapped_steps_per_s": pend_raw, "ours_unwrapped_steps_per_s": ours_raw}
@@ -519,7 +543,7 @@ def only_single(seconds: float, repeat: int) -> dict:
         out[key] = statistics.median(r[key] for r in rounds)
     runs = ", ".join(f"{r['ratio']:.2f}" for r in rounds)
     runs_raw = ", ".join(f"{r['ratio_unwrapped']:.2f}" for r in rounds)
-    print(f"single env / Pendulum-v1, median of {repeat} rounds: with wrappers {out['ratio']:5.2f} "
+    print(f"single env{f' (device_pool={device_pool})' if device_pool else ''} / Pendulum-v1, median of {repeat} rounds: with wrappers {out['ratio']:5.2f} "
           f"(runs: {runs}), unwrapped {out['ratio_unwrapped']:5.2f} (runs: {runs_raw})")
     from ebraille_sim.physics.params import DeviceParams, RateParams
     for label, kwargs in (("breakdown", {}),
@@ -542,18 +566,23 @@ def main(argv=None):
                     help="only the reset cost (ms and env steps) and the vector env with and without autoresets")
     ap.add_argument("--only-single", action="store_true",
                     help="only the single env against Pendulum-v1, with wrappers and unwrapped (rounds, medians)")
+    ap.add_argument("--device-pool", type=int, default=0,
+                    help="with --only-single or --only-resets: also (resets) or instead (single) measure the env "
+                         "with this device pool, its units drawn before the clock starts")
     ap.add_argument("--repeat", type=int, default=3,
                     help="timings per figure (rounds with --only-single) with --only-resets or --only-single (median)")
     a = ap.parse_args(argv)
     if a.repeat < 1:
         ap.error(f"--repeat must be at least 1, got {a.repeat}")
+    if a.device_pool < 0:
+        ap.error(f"--device-pool must be at least 0, got {a.device_pool}")
     if a.only_single and a.only_resets:
         ap.error("--only-single and --only-resets exclude each other")
     if a.only_single:
         res = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                            "processor": platform.machine(), "load_average_1min_at_start": os.getloadavg()[0]},
                "seconds_per_figure": a.seconds}
-        res["single"] = only_single(a.seconds, a.repeat)
+        res["single"] = only_single(a.seconds, a.repeat, a.device_pool)
         res["machine"]["load_average_1min_at_end"] = os.getloadavg()[0]
         if a.json:
             with open(a.json, "w", encoding="utf-8") as fh:
@@ -563,7 +592,7 @@ def main(argv=None):
         res = {"machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
                            "processor": platform.machine(), "load_average_1min_at_start": os.getloadavg()[0]},
                "seconds_per_figure": a.seconds}
-        res["resets"] = only_resets(a.seconds, a.envs, a.repeat)
+        res["resets"] = only_resets(a.seconds, a.envs, a.repeat, a.device_pool)
         res["machine"]["load_average_1min_at_end"] = os.getloadavg()[0]
         if a.json:
             with open(a.json, "w", encoding="utf-8") as fh:

@@ -127,6 +127,20 @@ tremor RMS is the amplitude over sqrt 2, as for a sine), ``supply_fraction`` [0.
 (driver supply as a fraction of the device's, no battery), ``disturbances`` (False: no
 drift, tremor, sag or battery).
 
+## Device pool
+
+By default every episode draws a new device (reader, FSR unit, motor, drive train, board) and
+calibrates it as a technician would: the unit's bench (its divider trim, calibration table,
+creep and loop) and the drive's current calibration are most of a reset's cost.  With
+``device_pool=N`` the episodes share N units instead: unit ``k`` is
+``sample_devices(device_pool_seed, N)[k]`` (:func:`ebraille_sim.scenarios.population.sample_devices`),
+drawn and calibrated the first time an episode takes it and kept; each episode takes a unit
+uniformly from its own device stream and draws everything else (reading, setpoint, gap,
+disturbances, run seed) afresh.  A reset that reuses a unit costs about 0.6 of a fresh draw
+(``benchmarks/bench_env.py --only-resets``).  The policy then trains on N readers and units
+rather than on the population: hold out readers it never met when evaluating it
+(``device_pool_seed`` of another value, or the default ``device_pool=0``).
+
 ## Safety layer
 
 With ``safety=True`` (the default; ``safety=False`` is the explicit opt-out) every
@@ -161,6 +175,8 @@ trained with the layer on is therefore evaluated with it on, as in a scenario ru
 | `backend`              | str   | "lumped"  | plant model for :func:`ebraille_sim.plant.backends.make_plant`|
 | `base_device`          | DeviceParams | nominal | centre of the population                        |
 | `safety`               | bool  | True      | safety layer: the supervisor shapes every command      |
+| `device_pool`          | int   | 0         | 0: a new device every episode; N: episodes share N drawn units (below) |
+| `device_pool_seed`     | int   | 0         | seed of the pool's units                               |
 
 Examples
 --------
@@ -459,7 +475,8 @@ class ContactForceEnv(RenderedEnv, gym.Env):
                  safe_force_n: float = TACTILE_FORCE_MAX_N, warn_force_n: float = 2.0, episode_characters: int = 30,
                  reading_start_s: float = 1.0, wpm_range=(60.0, 120.0), setpoint_range_n=(0.3, 1.5),
                  randomize_device: bool = True, disturbances: bool = True, effort_weight: float = 0.1,
-                 violation_weight: float = 1.0, backend: str = "lumped", base_device=None, safety: bool = True):
+                 violation_weight: float = 1.0, backend: str = "lumped", base_device=None, safety: bool = True,
+                 device_pool: int = 0, device_pool_seed: int = 0):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode {render_mode!r} is not supported; allowed: None, "
                              f"{', '.join(self.metadata['render_modes'])}")
@@ -470,7 +487,7 @@ class ContactForceEnv(RenderedEnv, gym.Env):
                                 setpoint_range_n=setpoint_range_n, randomize_device=randomize_device,
                                 disturbances=disturbances, effort_weight=effort_weight,
                                 violation_weight=violation_weight, backend=backend, base_device=base_device,
-                                safety=safety)
+                                safety=safety, device_pool=device_pool, device_pool_seed=device_pool_seed)
         from ebraille_sim.plant.backends import PLANT_BACKENDS
         if backend not in PLANT_BACKENDS:
             raise ValueError(f"unknown backend {backend!r}; available: {', '.join(sorted(PLANT_BACKENDS))}")

@@ -57,6 +57,8 @@ class EnvConfig:
     backend: str = "lumped"
     base_device: object = None
     safety: bool = True
+    device_pool: int = 0
+    device_pool_seed: int = 0
 
     def __post_init__(self):
         from ebraille_sim.physics.params import DeviceParams, RateParams
@@ -72,6 +74,13 @@ class EnvConfig:
         check_bool("randomize_device", self.randomize_device)
         check_bool("disturbances", self.disturbances)
         check_bool("safety", self.safety)
+        from ebraille_sim.scenarios.episodes import MAX_DEVICE_POOL
+        object.__setattr__(self, "device_pool",
+                           check_number("device_pool", self.device_pool, 0, MAX_DEVICE_POOL, integer=True))
+        object.__setattr__(self, "device_pool_seed",
+                           check_number("device_pool_seed", self.device_pool_seed, 0, 2 ** 63 - 1, integer=True))
+        if self.device_pool and not self.randomize_device:
+            raise ValueError("device_pool draws its units from the device population: it needs randomize_device=True")
         check_range("effort_weight", self.effort_weight, 0.0, 100.0)
         check_range("violation_weight", self.violation_weight, 0.0, 100.0)
         check_range("rate_filter_s", self.rate_filter_s, 0.0, 10.0)
@@ -154,7 +163,8 @@ def _distribution(cfg: EnvConfig):
         return EpisodeDistribution(
             base_device=cfg.base_device, population=PopulationSpec() if cfg.randomize_device else None,
             episode_characters=cfg.episode_characters, reading_start_s=cfg.reading_start_s,
-            wpm_range=cfg.wpm_range, setpoint_range_n=cfg.setpoint_range_n, disturbances=cfg.disturbances)
+            wpm_range=cfg.wpm_range, setpoint_range_n=cfg.setpoint_range_n, disturbances=cfg.disturbances,
+            device_pool=cfg.device_pool, device_pool_seed=cfg.device_pool_seed)
     except ValueError as exc:
         raise ValueError(f"control_rate_hz {cfg.control_rate_hz:g}: {exc}") from None
 

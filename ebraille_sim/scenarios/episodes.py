@@ -70,7 +70,7 @@ from ebraille_sim.scenarios.draws import episode_numbers
 from ebraille_sim.scenarios.population import PopulationSpec
 from ebraille_sim.scenarios.spec import ControllerSpec, FingerSpec, ReadingSpec, ScenarioSpec, SetpointSpec
 
-__all__ = ["EPISODE_SOURCE", "FIXED_KEYS", "EpisodeDistribution", "passage_word_starts"]
+__all__ = ["EPISODE_SOURCE", "FIXED_KEYS", "MAX_DEVICE_POOL", "EpisodeDistribution", "passage_word_starts"]
 
 EPISODE_SOURCE = "episode"
 """``source`` of a drawn spec (the prefix of its error messages)."""
@@ -169,6 +169,11 @@ def _validated_kind(name: str, fixed: tuple):
                                                     for k, v in fixed}})[name]
 
 
+MAX_DEVICE_POOL = 10000
+"""Most units of :attr:`EpisodeDistribution.device_pool` (a drawn device and what its bench
+measured take about 3.3 kB, so a full pool about 33 MB; the pool holds every unit it has drawn)."""
+
+
 @dataclass(frozen=True)
 class EpisodeDistribution:
     """Ranges of the episodes an environment trains on (module docstring: the draws).
@@ -207,6 +212,16 @@ class EpisodeDistribution:
         State of charge of that cell at the start.
     disturbances : bool
         False: no tremor, drift, sag or battery.
+    device_pool : int
+        0 (the default): every episode draws a new device from ``population``.  N > 0: the
+        episodes share a pool of N devices, unit ``k`` being
+        ``sample_devices(device_pool_seed, N)[k]`` of the population (reader, FSR unit, motor,
+        drive train and board, calibrated on its bench once, when first drawn, and kept for
+        the distribution's life); each episode takes unit ``k`` from its own device stream,
+        uniform over the pool.  A reset that reuses a unit skips its bench and the caches keyed
+        on its parts hit (:data:`MAX_DEVICE_POOL` units at most).
+    device_pool_seed : int
+        Seed of the pool's units (the pool is the same for every env seed).
     """
     base_device: DeviceParams = field(default_factory=DeviceParams)
     population: PopulationSpec | None = field(default_factory=PopulationSpec)
@@ -226,6 +241,8 @@ class EpisodeDistribution:
     battery_probability: float = 0.25
     battery_soc_range: tuple = (0.05, 1.0)
     disturbances: bool = True
+    device_pool: int = 0
+    device_pool_seed: int = 0
 
     def __post_init__(self):
         from ebraille_sim.scenarios.passages import list_passages
@@ -262,8 +279,32 @@ class EpisodeDistribution:
         _number("battery_probability", self.battery_probability, 0.0, 1.0)
         if not isinstance(self.disturbances, bool):
             raise ValueError(f"disturbances must be True or False, got {self.disturbances!r}")
+        for name, hi in (("device_pool", MAX_DEVICE_POOL), ("device_pool_seed", 2 ** 63 - 1)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 <= v <= hi:
+                raise ValueError(f"{name} must be an integer in [0, {hi}], got {v!r}")
+            object.__setattr__(self, name, int(v))
+        if self.device_pool and self.population is None:
+            raise ValueError("device_pool draws its units from the population: it needs a population "
+                             "(randomize_device=True)")
+        object.__setattr__(self, "_pool", {})          # unit k of the pool, once drawn (not a field)
 
     # -------------------------------------------------------------------------------------
+    def pool_device(self, k: int) -> DeviceParams:
+        """Unit ``k`` of the device pool (``device_pool`` > 0): device ``k`` of
+        :func:`ebraille_sim.scenarios.population.sample_devices` of ``device_pool_seed`` under the
+        population, drawn and calibrated the first time it is asked for and kept."""
+        if not 0 <= k < self.device_pool:
+            raise ValueError(f"pool unit {k!r} is out of range [0, {self.device_pool - 1}] "
+                             f"(device_pool = {self.device_pool})")
+        dev = self._pool.get(k)
+        if dev is None:
+            from ebraille_sim.base.seeds import SeedNode
+            from ebraille_sim.scenarios.population import sample_device
+            dev = sample_device(SeedNode(self.device_pool_seed, spawn_key=(k,)), self.population, self.base_device)
+            self._pool[k] = dev
+        return dev
+
     def max_duration_s(self) -> float:
         """Longest episode: the onset and every cell at the slowest rate, s."""
         from ebraille_sim.scenarios.reading import mean_dwell_s
@@ -306,6 +347,8 @@ class EpisodeDistribution:
         base = self.base_device
         if "device" in opt:
             dev = dataclasses.replace(opt["device"], rates=base.rates)
+        elif self.device_pool:
+            dev = self.pool_device(_index(u_dev[0], self.device_pool))
         elif self.population is not None:
             dev = device_from_variates(u_dev, z_dev, self.population, base)
         else:
